@@ -1,0 +1,7 @@
+"""warpworm: batched multiphysics simulation of magnetically actuated origami worm robots on NVIDIA Warp.
+
+SI units everywhere (m, kg, s, N, A·m², T, rad). Rotations are 3x3 matrices on the host; inside kernels
+they are ``wp.quat`` in Warp's (x, y, z, w) order.
+"""
+
+__version__ = "0.1.0"

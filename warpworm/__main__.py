@@ -1,0 +1,5 @@
+import sys
+
+from warpworm.cli import main
+
+sys.exit(main())

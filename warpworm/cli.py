@@ -1,0 +1,63 @@
+"""The ``warpworm`` command line: one subcommand per module in :mod:`warpworm.commands`.
+
+Each command module defines ``HELP`` (one line), ``add_arguments(parser)`` and ``main(args) -> int``.
+Modules are imported lazily so that ``warpworm --help`` stays fast and one broken command cannot
+take the others down.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+# subcommand name -> module under warpworm.commands
+COMMANDS = {
+    "demo": "demo",
+    "field": "field",
+    "calibrate": "calibrate",
+    "simulate": "simulate",
+    "experiment": "experiment",
+    "render": "render",
+    "generate": "generate",
+    "export-bop": "export_bop",
+    "export-usd": "export_usd",
+}
+
+
+def _load(module_name: str):
+    try:
+        return importlib.import_module(f"warpworm.commands.{module_name}")
+    except ModuleNotFoundError as exc:
+        if exc.name == f"warpworm.commands.{module_name}":
+            return None
+        raise
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from warpworm import __version__
+
+    parser = argparse.ArgumentParser(prog="warpworm", description="Batched simulation of magnetically actuated origami worms, and labeled datasets from it.")
+    parser.add_argument("--version", action="version", version=f"warpworm {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name, module_name in COMMANDS.items():
+        module = _load(module_name)
+        if module is None:
+            continue
+        p = sub.add_parser(name, help=module.HELP, description=module.HELP)
+        module.add_arguments(p)
+        p.set_defaults(_main=module.main)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "_main", None):
+        parser.print_help()
+        return 2
+    return int(args._main(args) or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

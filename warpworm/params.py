@@ -1,0 +1,113 @@
+"""Physical parameters of a batch of worm worlds: the contract between configs, randomization and the solver.
+
+Every per-world field is either one float (shared by all worlds) or an array of shape ``(num_worlds,)``;
+:func:`per_world` broadcasts either to ``(num_worlds,)``. Vector fields take ``(3,)`` or ``(num_worlds, 3)``.
+Defaults follow the paper (Swaminathan et al., RA-L 2021) and ``shared/DESIGN-NOTES.md``. SI units.
+
+Frames: world z is up, the floor is z = 0 (tilted by ``floor_incline`` about world y), the worm lies along +x with
+its tail at the smaller x. Magnet slots in every world: 0 = EPM, 1 = tail IPM, 2 = centre IPM, 3 = head IPM.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+
+import numpy as np
+
+N52_MOMENT_PER_VOLUME = 0.9e6
+"""Fitted magnetization of the paper's N52 magnets: 0.9 A·m² per cm³ = 0.9e6 A/m (DESIGN-NOTES)."""
+
+MAGNET_SLOTS = ("epm", "ipm_tail", "ipm_centre", "ipm_head")
+EPM, IPM_TAIL, IPM_CENTRE, IPM_HEAD = range(4)
+
+GAITS = ("peristaltic", "omega", "inchworm")
+MAGNET_MODELS = ("dipoles", "analytic")
+
+
+@dataclass
+class WormParams:
+    """Per-world parameters of the worm, its magnets, the floor and the EPM path."""
+
+    # --- geometry (shared topology: n_units is one int for the whole batch) ---
+    n_units: int = 6
+    """Number of prism units along the worm, shared by all worlds (topology), int."""
+    a: float | np.ndarray = 0.020
+    """Side of the triangular cross-section [m], shape () or (W,)."""
+    b: float | np.ndarray = 0.008
+    """Length of each of the two panels of a unit along the worm, unfolded [m], shape () or (W,)."""
+    l0: float | np.ndarray = 0.080
+    """Rest length of the whole worm [m]; sets the rest fold angle by eq. (7), shape () or (W,)."""
+
+    # --- sheet and creases ---
+    sheet_density: float | np.ndarray = 0.15
+    """Areal density of the sheet [kg/m²] (mineral paper ≈ 0.15), shape () or (W,)."""
+    hinge_stiffness: float | np.ndarray = 0.02
+    """Crease stiffness k_α per metre of crease [N·m/rad/m = N/rad], shape () or (W,)."""
+    bar_stiffness: float | np.ndarray = 1.0e4
+    """Axial rigidity EA of every bar [N] (force per unit Cauchy strain), shape () or (W,)."""
+    damping: float | np.ndarray = 2.0
+    """Linear velocity damping rate [1/s], shape () or (W,)."""
+
+    # --- floor ---
+    mu_static: float | np.ndarray = 0.268
+    """Static friction coefficient (paper's slope test), shape () or (W,)."""
+    mu_kinetic: float | np.ndarray = 0.24
+    """Kinetic friction coefficient, <= mu_static, shape () or (W,)."""
+    floor_incline: float | np.ndarray = 0.0
+    """Floor slope about world +y [rad]; positive raises the floor toward +x (the worm climbs going forward)."""
+    gravity: float | np.ndarray = 9.81
+    """Gravitational acceleration magnitude [m/s²], along −z, shape () or (W,)."""
+
+    # --- magnets ---
+    magnet_model: str = "dipoles"
+    """'dipoles' (paper's aggregation) or 'analytic' (exact fields), shared by the batch."""
+    dipole_density: float | np.ndarray = 64e6
+    """Dipoles per m³ for the 'dipoles' model (64 per cm³), shape () or (W,)."""
+    magnet_mass_density: float | np.ndarray = 7500.0
+    """Mass density of the magnets [kg/m³] (NdFeB ≈ 7.5 g/cm³), shape () or (W,)."""
+    epm_size: np.ndarray = field(default_factory=lambda: np.array([0.010, 0.010, 0.040]))
+    """EPM cuboid extents (x, y, z) in its own frame [m]; magnetized along its own +z, shape (3,) or (W, 3)."""
+    epm_moment: float | np.ndarray = 0.9e6 * 4e-6
+    """EPM dipole moment magnitude [A·m²] (0.9 A·m²/cm³ × 4 cm³), shape () or (W,)."""
+    ipm_diameter: float | np.ndarray = 0.010
+    """IPM disk diameter [m], shape () or (W,)."""
+    ipm_thickness: float | np.ndarray = 0.001
+    """IPM disk thickness [m], shape () or (W,)."""
+    ipm_moment: np.ndarray = field(
+        default_factory=lambda: np.full(3, 0.9e6 * np.pi * 0.005**2 * 0.001)
+    )
+    """Moment magnitudes of the (tail, centre, head) IPMs [A·m²], axial, shape (3,) or (W, 3)."""
+
+    # --- EPM path (paper §IV-C) ---
+    gait: str = "peristaltic"
+    """One of GAITS; fixes the EPM orientation and placement (shared by the batch)."""
+    backward: bool = False
+    """Drive the worm toward −x instead of +x (shared by the batch)."""
+    wavelength: float | np.ndarray = 0.02
+    """EPM path wavelength w [m]: distance the EPM advances per cycle, shape () or (W,)."""
+    amplitude: float | np.ndarray = 0.03
+    """EPM path amplitude a [m]: vertical swing above the closest approach, shape () or (W,)."""
+    closest_approach: float | np.ndarray = 0.03
+    """EPM closest approach h [m]: lowest height of the EPM's centre above the floor, shape () or (W,)."""
+    orientation: float | np.ndarray = float("nan")
+    """EPM moment angle θ in the x–z plane from +x toward +z [rad]; NaN takes the gait preset's value."""
+    cycle_period: float | np.ndarray = 1.0
+    """Duration of one EPM cycle [s], shape () or (W,)."""
+
+    def names(self) -> list[str]:
+        return [f.name for f in fields(self)]
+
+
+def per_world(value, num_worlds: int, inner_shape: tuple[int, ...] = ()) -> np.ndarray:
+    """Broadcast a shared value or a per-world array to ``(num_worlds, *inner_shape)`` float64.
+
+    Raises ``ValueError`` naming the shapes when the value fits neither form.
+    """
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.shape == inner_shape:
+        return np.broadcast_to(arr, (num_worlds,) + inner_shape).copy()
+    if arr.shape == (num_worlds,) + inner_shape:
+        return arr.copy()
+    raise ValueError(
+        f"expected shape {inner_shape} (shared) or {(num_worlds,) + inner_shape} (per world), got {arr.shape}"
+    )
