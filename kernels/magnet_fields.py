@@ -1,0 +1,637 @@
+"""Magnetic field, force and torque building blocks as ``@wp.func``s (no kernels, no host code).
+
+Two families:
+
+- **Point dipoles** (float32): the field of a point dipole and the force / torque between two point dipoles. This is
+  the d -> 0 limit of the paper's pair of ±q charges d = 1 µm apart; the charge-pair form cancels catastrophically
+  in float32 (DESIGN-NOTES), the limit form is accurate to ~2e-7 relative.
+- **Closed-form fields of uniformly magnetized solids** (float64 inside): cuboid (Yang 1990 / Engel-Herbert 2005,
+  evaluated in the "bottom quadrant" after Cichon 2019 to avoid indeterminate logs on edge extensions), axially
+  magnetized cylinder (Derby 2010, Bulirsch's ``cel``) and diametrally magnetized cylinder (Caciagli 2018 with the
+  small-radius Taylor branch of magpylib). They are sums of O(1) terms whose result decays like (size/r)^3, so in
+  float32 the far field would lose (r/size)^3 * 1e-7 relative; they run in float64 (inputs and outputs of the
+  kernels stay float32). Every closed form takes the observer in the *source's own frame* (centre at the origin,
+  edges / axis along the coordinate axes).
+
+Units: SI. Moments m [A·m²], polarization J = mu0 M [T], magnetization M [A/m], B [T], F [N], T [N·m].
+"""
+
+from __future__ import annotations
+
+import warp as wp
+
+MU0_OVER_4PI = wp.constant(1.0e-7)
+"""mu0 / (4 pi) [T·m/A] (float32)."""
+
+F64_0 = wp.constant(wp.float64(0.0))
+F64_HALF = wp.constant(wp.float64(0.5))
+F64_1 = wp.constant(wp.float64(1.0))
+F64_2 = wp.constant(wp.float64(2.0))
+F64_4 = wp.constant(wp.float64(4.0))
+F64_PI = wp.constant(wp.float64(3.141592653589793))
+F64_INV_4PI = wp.constant(wp.float64(0.07957747154594767))
+
+SHAPE_CUBOID = wp.constant(0)
+SHAPE_CYLINDER = wp.constant(1)
+
+
+# ----------------------------------------------------------------------------------------------------------------------
+# Point dipoles (float32)
+# ----------------------------------------------------------------------------------------------------------------------
+
+
+@wp.func
+def dipole_field(m: wp.vec3, r: wp.vec3) -> wp.vec3:
+    """B [T] of a point dipole ``m`` [A·m²] at offset ``r`` = observer − dipole [m]."""
+    inv_r = 1.0 / wp.length(r)
+    rh = r * inv_r
+    # scale (mu0/4pi)/r^3 before combining: keeps float32 far from under/overflow for r ~ 1e-4..1 m
+    s = MU0_OVER_4PI * inv_r * inv_r * inv_r
+    return s * (3.0 * wp.dot(m, rh) * rh - m)
+
+
+@wp.func
+def dipole_force(m_s: wp.vec3, m_t: wp.vec3, r: wp.vec3) -> wp.vec3:
+    """Force [N] on point dipole ``m_t`` from point dipole ``m_s``, ``r`` = x_t − x_s [m].
+
+    F = 3 mu0 / (4 pi r^4) [ (r̂·m_t) m_s + (r̂·m_s) m_t + (m_s·m_t) r̂ − 5 (r̂·m_s)(r̂·m_t) r̂ ]
+    (the gradient of m_t·B_s; antisymmetric under swapping the two dipoles, so Newton's third law holds exactly).
+    """
+    inv_r = 1.0 / wp.length(r)
+    rh = r * inv_r
+    s = 3.0 * MU0_OVER_4PI * inv_r * inv_r * inv_r * inv_r
+    a = wp.dot(rh, m_s)
+    b = wp.dot(rh, m_t)
+    return s * (b * m_s + a * m_t + wp.dot(m_s, m_t) * rh - 5.0 * a * b * rh)
+
+
+# ----------------------------------------------------------------------------------------------------------------------
+# Dipole grids of the 'dipoles' model: generated on the fly from (shape, size, density)
+# ----------------------------------------------------------------------------------------------------------------------
+
+
+@wp.func
+def dipole_grid_dims(shape: int, size: wp.vec3, density: float) -> wp.vec3i:
+    """Grid points per axis for a magnet of ``size`` [m] at ``density`` [dipoles/m³].
+
+    n_i = max(1, round(size_i * density^(1/3))). A cylinder (size = (d, d, h)) uses the n_x × n_x square lattice
+    and keeps only the points inside its disk (see :func:`dipole_grid_point`).
+    """
+    per_m = wp.pow(density, 1.0 / 3.0)
+    nx = wp.max(1, int(wp.round(size[0] * per_m)))
+    ny = wp.max(1, int(wp.round(size[1] * per_m)))
+    nz = wp.max(1, int(wp.round(size[2] * per_m)))
+    if shape == SHAPE_CYLINDER:
+        ny = nx
+    return wp.vec3i(nx, ny, nz)
+
+
+@wp.func
+def dipole_grid_point(shape: int, size: wp.vec3, n: wp.vec3i, i: int, j: int, k: int):
+    """Cell-centred grid point (i, j, k) in the magnet's frame [m] and whether it belongs to the magnet."""
+    x = size[0] * ((float(i) + 0.5) / float(n[0]) - 0.5)
+    y = size[1] * ((float(j) + 0.5) / float(n[1]) - 0.5)
+    z = size[2] * ((float(k) + 0.5) / float(n[2]) - 0.5)
+    inside = True
+    if shape == SHAPE_CYLINDER:
+        rad = 0.5 * size[0]
+        # a hair of slack so that points exactly on the rim (n = 1, 2 lattices of some sizes) count as inside
+        inside = x * x + y * y <= rad * rad * (1.0 + 1.0e-5)
+    return wp.vec3(x, y, z), inside
+
+
+@wp.func
+def dipole_grid_count(shape: int, size: wp.vec3, n: wp.vec3i) -> int:
+    """Number of grid dipoles of a magnet (>= 1)."""
+    if shape != SHAPE_CYLINDER:
+        return n[0] * n[1] * n[2]
+    count = int(0)
+    for i in range(n[0]):
+        for j in range(n[1]):
+            p, inside = dipole_grid_point(shape, size, n, i, j, 0)
+            if inside:
+                count += 1
+    return wp.max(1, count * n[2])
+
+
+@wp.func
+def dipoles_field_local(shape: int, size: wp.vec3, m: wp.vec3, density: float, p: wp.vec3) -> wp.vec3:
+    """B [T] at ``p`` (source frame) [m] of the dipole-grid model of a magnet with total moment ``m`` [A·m²]."""
+    n = dipole_grid_dims(shape, size, density)
+    m_each = m / float(dipole_grid_count(shape, size, n))
+    b = wp.vec3(0.0)
+    for i in range(n[0]):
+        for j in range(n[1]):
+            for k in range(n[2]):
+                x, inside = dipole_grid_point(shape, size, n, i, j, k)
+                if inside:
+                    b += dipole_field(m_each, p - x)
+    return b
+
+
+@wp.func
+def dipoles_pair_wrench(
+    s_shape: int,
+    s_size: wp.vec3,
+    s_m: wp.vec3,
+    t_shape: int,
+    t_size: wp.vec3,
+    t_m: wp.vec3,
+    r_rel: wp.mat33,
+    t_rel: wp.vec3,
+    density: float,
+):
+    """Force [N] and torque about the target centre [N·m] on a target magnet from a source, 'dipoles' model.
+
+    Everything is in the *source's* frame: ``s_m`` and ``t_m`` are the total moments [A·m²] in their own frames,
+    ``r_rel`` rotates target-frame vectors into the source frame, ``t_rel`` is the target centre in the source frame.
+    Sum over all source-dipole / target-dipole pairs of the point-dipole force; the torque on each target dipole is
+    lever × F + m × B (eq. (4)–(5) of the paper in the d -> 0 limit).
+    """
+    ns = dipole_grid_dims(s_shape, s_size, density)
+    nt = dipole_grid_dims(t_shape, t_size, density)
+    ms = s_m / float(dipole_grid_count(s_shape, s_size, ns))
+    mt = (r_rel * t_m) / float(dipole_grid_count(t_shape, t_size, nt))
+    force = wp.vec3(0.0)
+    torque = wp.vec3(0.0)
+    for it in range(nt[0]):
+        for jt in range(nt[1]):
+            for kt in range(nt[2]):
+                yt, t_in = dipole_grid_point(t_shape, t_size, nt, it, jt, kt)
+                if t_in:
+                    lever = r_rel * yt
+                    pt = t_rel + lever
+                    f = wp.vec3(0.0)
+                    b = wp.vec3(0.0)
+                    for i in range(ns[0]):
+                        for j in range(ns[1]):
+                            for k in range(ns[2]):
+                                xs, s_in = dipole_grid_point(s_shape, s_size, ns, i, j, k)
+                                if s_in:
+                                    r = pt - xs
+                                    f += dipole_force(ms, mt, r)
+                                    b += dipole_field(ms, r)
+                    force += f
+                    torque += wp.cross(lever, f) + wp.cross(mt, b)
+    return force, torque
+
+
+# ----------------------------------------------------------------------------------------------------------------------
+# Closed-form fields (float64)
+# ----------------------------------------------------------------------------------------------------------------------
+
+
+@wp.func
+def cel(kc: wp.float64, p: wp.float64, c: wp.float64, s: wp.float64) -> wp.float64:
+    """Bulirsch's complete elliptic integral cel(kc, p, c, s) (Numer. Math. 13, 1969), kc != 0.
+
+    K(m) = cel(sqrt(1-m), 1, 1, 1), E(m) = cel(sqrt(1-m), 1, 1, 1-m), Pi(n, m) = cel(sqrt(1-m), 1-n, 1, 1).
+    """
+    pp = p
+    cc = c
+    ss = s
+    if pp > F64_0:
+        pp = wp.sqrt(pp)
+        ss = ss / pp
+    else:
+        f = kc * kc
+        q = F64_1 - f
+        g = F64_1 - pp
+        f = f - pp
+        q = q * (ss - cc * pp)
+        pp = wp.sqrt(f / g)
+        cc = (cc - ss) / g
+        ss = -q / (g * g * pp) + cc * pp
+    em = F64_1
+    qc = wp.abs(kc)
+    kk = qc
+    # quadratic convergence: 1e-12 is reached in <= 6 iterations for kc in [1e-8, 1e8]
+    for _it in range(40):
+        g = kk / pp
+        c_new = cc + ss / pp
+        ss = F64_2 * (ss + cc * g)
+        cc = c_new
+        pp = pp + g
+        g = em
+        em = em + qc
+        if wp.abs(g - qc) <= g * wp.float64(1.0e-12):
+            break
+        qc = F64_2 * wp.sqrt(kk)
+        kk = em * qc
+    return F64_HALF * F64_PI * (ss + cc * em) / (em * (em + pp))
+
+
+@wp.func
+def cuboid_field(J: wp.vec3d, dim: wp.vec3d, p: wp.vec3d) -> wp.vec3d:
+    """B [T] at ``p`` [m] (cuboid frame, centre at origin) of a cuboid with extents ``dim`` [m], polarization ``J`` [T].
+
+    Surface-charge closed form (Yang 1990, Engel-Herbert 2005), valid inside and outside. The observer is first
+    reflected into the octant x >= 0, y <= 0, z <= 0, where no log argument can vanish off the magnet's edges
+    (Cichon 2019, as magpylib); the reflection S = diag(sx, sy, sz) acts as B(p) = S B'(S p) with J' = S J.
+    """
+    a = F64_HALF * dim[0]
+    b = F64_HALF * dim[1]
+    c = F64_HALF * dim[2]
+    x = p[0]
+    y = p[1]
+    z = p[2]
+    sx = F64_1
+    sy = F64_1
+    sz = F64_1
+    if x < F64_0:
+        x = -x
+        sx = -F64_1
+    if y > F64_0:
+        y = -y
+        sy = -F64_1
+    if z > F64_0:
+        z = -z
+        sz = -F64_1
+    jx = J[0] * sx
+    jy = J[1] * sy
+    jz = J[2] * sz
+
+    xma = x - a
+    xpa = x + a
+    ymb = y - b
+    ypb = y + b
+    zmc = z - c
+    zpc = z + c
+    xma2 = xma * xma
+    xpa2 = xpa * xpa
+    ymb2 = ymb * ymb
+    ypb2 = ypb * ypb
+    zmc2 = zmc * zmc
+    zpc2 = zpc * zpc
+
+    mmm = wp.sqrt(xma2 + ymb2 + zmc2)
+    pmp = wp.sqrt(xpa2 + ymb2 + zpc2)
+    pmm = wp.sqrt(xpa2 + ymb2 + zmc2)
+    mmp = wp.sqrt(xma2 + ymb2 + zpc2)
+    mpm = wp.sqrt(xma2 + ypb2 + zmc2)
+    ppp = wp.sqrt(xpa2 + ypb2 + zpc2)
+    ppm = wp.sqrt(xpa2 + ypb2 + zmc2)
+    mpp = wp.sqrt(xma2 + ypb2 + zpc2)
+
+    ff2x = wp.log((xma + mmm) * (xpa + ppm) * (xpa + pmp) * (xma + mpp)) - wp.log(
+        (xpa + pmm) * (xma + mpm) * (xma + mmp) * (xpa + ppp)
+    )
+    ff2y = wp.log((-ymb + mmm) * (-ypb + ppm) * (-ymb + pmp) * (-ypb + mpp)) - wp.log(
+        (-ymb + pmm) * (-ypb + mpm) * (ymb - mmp) * (ypb - ppp)
+    )
+    ff2z = wp.log((-zmc + mmm) * (-zmc + ppm) * (-zpc + pmp) * (-zpc + mpp)) - wp.log(
+        (-zmc + pmm) * (zmc - mpm) * (-zpc + mmp) * (zpc - ppp)
+    )
+
+    ff1x = (
+        wp.atan2(ymb * zmc, xma * mmm)
+        - wp.atan2(ymb * zmc, xpa * pmm)
+        - wp.atan2(ypb * zmc, xma * mpm)
+        + wp.atan2(ypb * zmc, xpa * ppm)
+        - wp.atan2(ymb * zpc, xma * mmp)
+        + wp.atan2(ymb * zpc, xpa * pmp)
+        + wp.atan2(ypb * zpc, xma * mpp)
+        - wp.atan2(ypb * zpc, xpa * ppp)
+    )
+    ff1y = (
+        wp.atan2(xma * zmc, ymb * mmm)
+        - wp.atan2(xpa * zmc, ymb * pmm)
+        - wp.atan2(xma * zmc, ypb * mpm)
+        + wp.atan2(xpa * zmc, ypb * ppm)
+        - wp.atan2(xma * zpc, ymb * mmp)
+        + wp.atan2(xpa * zpc, ymb * pmp)
+        + wp.atan2(xma * zpc, ypb * mpp)
+        - wp.atan2(xpa * zpc, ypb * ppp)
+    )
+    ff1z = (
+        wp.atan2(xma * ymb, zmc * mmm)
+        - wp.atan2(xpa * ymb, zmc * pmm)
+        - wp.atan2(xma * ypb, zmc * mpm)
+        + wp.atan2(xpa * ypb, zmc * ppm)
+        - wp.atan2(xma * ymb, zpc * mmp)
+        + wp.atan2(xpa * ymb, zpc * pmp)
+        + wp.atan2(xma * ypb, zpc * mpp)
+        - wp.atan2(xpa * ypb, zpc * ppp)
+    )
+
+    bx = jx * ff1x + jy * ff2z + jz * ff2y
+    by = jx * ff2z + jy * ff1y - jz * ff2x
+    bz = jx * ff2y - jy * ff2x + jz * ff1z
+    return wp.vec3d(sx * bx, sy * by, sz * bz) * F64_INV_4PI
+
+
+@wp.func
+def cylinder_axial_field_rz(z0: wp.float64, r: wp.float64, z: wp.float64):
+    """(B_r, B_z) for unit axial polarization (Derby 2010); lengths in units of the radius, z0 = half height."""
+    zph = z + z0
+    zmh = z - z0
+    dpr = F64_1 + r
+    dmr = F64_1 - r
+    sq0 = wp.sqrt(zmh * zmh + dpr * dpr)
+    sq1 = wp.sqrt(zph * zph + dpr * dpr)
+    k1 = wp.sqrt((zph * zph + dmr * dmr) / (zph * zph + dpr * dpr))
+    k0 = wp.sqrt((zmh * zmh + dmr * dmr) / (zmh * zmh + dpr * dpr))
+    gamma = dmr / dpr
+    br = (cel(k1, F64_1, F64_1, -F64_1) / sq1 - cel(k0, F64_1, F64_1, -F64_1) / sq0) / F64_PI
+    bz = (
+        (zph * cel(k1, gamma * gamma, F64_1, gamma) / sq1 - zmh * cel(k0, gamma * gamma, F64_1, gamma) / sq0)
+        / (dpr * F64_PI)
+    )
+    return br, bz
+
+
+@wp.func
+def cylinder_diametral_field_cyl(z0: wp.float64, r: wp.float64, z: wp.float64, phi: wp.float64) -> wp.vec3d:
+    """(H_r, H_phi, H_z) for unit diametral magnetization along phi = 0 (Caciagli 2018; small-r Taylor branch from
+    magpylib); lengths in units of the radius, z0 = half height. Multiply by |J_perp| for B outside the magnet."""
+    zp = z + z0
+    zm = z - z0
+    zp2 = zp * zp
+    zm2 = zm * zm
+    r2 = r * r
+    hr = F64_0
+    hphi = F64_0
+    hz = F64_0
+    if r < wp.float64(0.05):
+        # the general form loses digits near the axis; 5th-order Taylor series in r
+        zpp = zp2 + F64_1
+        zmm = zm2 + F64_1
+        sqrt_p = wp.sqrt(zpp)
+        sqrt_m = wp.sqrt(zmm)
+        frac1 = zp / sqrt_p
+        frac2 = zm / sqrt_m
+        r3 = r2 * r
+        r4 = r3 * r
+        r5 = r4 * r
+        term1 = frac1 - frac2
+        term2 = (frac1 / (zpp * zpp) - frac2 / (zmm * zmm)) * r2 / wp.float64(8.0)
+        zpp4 = zpp * zpp * zpp * zpp
+        zmm4 = zmm * zmm * zmm * zmm
+        term3 = (
+            ((wp.float64(3.0) - F64_4 * zp2) * frac1 / zpp4 - (wp.float64(3.0) - F64_4 * zm2) * frac2 / zmm4)
+            / wp.float64(64.0)
+            * r4
+        )
+        hr = -wp.cos(phi) / F64_4 * (term1 + wp.float64(9.0) * term2 + wp.float64(25.0) * term3)
+        hphi = wp.sin(phi) / F64_4 * (term1 + wp.float64(3.0) * term2 + wp.float64(5.0) * term3)
+        zpp3 = zpp * zpp * zpp
+        zmm3 = zmm * zmm * zmm
+        zpp5 = zpp3 * zpp * zpp
+        zmm5 = zmm3 * zmm * zmm
+        hz = (
+            -wp.cos(phi)
+            / F64_4
+            * (
+                r * (F64_1 / zpp / sqrt_p - F64_1 / zmm / sqrt_m)
+                + wp.float64(0.375)
+                * r3
+                * ((F64_1 - F64_4 * zp2) / zpp3 / sqrt_p - (F64_1 - F64_4 * zm2) / zmm3 / sqrt_m)
+                + wp.float64(0.234375)
+                * r5
+                * (
+                    (F64_1 - wp.float64(12.0) * zp2 + wp.float64(8.0) * zp2 * zp2) / zpp5 / sqrt_p
+                    - (F64_1 - wp.float64(12.0) * zm2 + wp.float64(8.0) * zm2 * zm2) / zmm5 / sqrt_m
+                )
+            )
+        )
+    else:
+        rp = r + F64_1
+        rm = r - F64_1
+        rp2 = rp * rp
+        rm2 = rm * rm
+        ap2 = zp2 + rm2
+        am2 = zm2 + rm2
+        ap = wp.sqrt(ap2)
+        am = wp.sqrt(am2)
+        argp = -F64_4 * r / ap2
+        argm = -F64_4 * r / am2
+        argc = wp.float64(1.0e16)
+        one_over_rm = F64_0
+        if rm != F64_0:
+            argc = -F64_4 * r / rm2
+            one_over_rm = F64_1 / rm
+        kcp = wp.sqrt(F64_1 - argp)
+        kcm = wp.sqrt(F64_1 - argm)
+        elle_p = cel(kcp, F64_1, F64_1, F64_1 - argp)
+        elle_m = cel(kcm, F64_1, F64_1, F64_1 - argm)
+        ellk_p = cel(kcp, F64_1, F64_1, F64_1)
+        ellk_m = cel(kcm, F64_1, F64_1, F64_1)
+        ellpi_p = cel(kcp, F64_1 - argc, F64_1, F64_1)
+        ellpi_m = cel(kcm, F64_1 - argc, F64_1, F64_1)
+        hr = (
+            -wp.cos(phi)
+            / (F64_4 * F64_PI * r2)
+            * (
+                -zm * am * elle_m
+                + zp * ap * elle_p
+                + zm / am * (F64_2 + zm2) * ellk_m
+                - zp / ap * (F64_2 + zp2) * ellk_p
+                + (zm / am * ellpi_m - zp / ap * ellpi_p) * rp * (r2 + F64_1) * one_over_rm
+            )
+        )
+        hphi = (
+            wp.sin(phi)
+            / (F64_4 * F64_PI * r2)
+            * (
+                zm * am * elle_m
+                - zp * ap * elle_p
+                - zm / am * (F64_2 + zm2 + F64_2 * r2) * ellk_m
+                + zp / ap * (F64_2 + zp2 + F64_2 * r2) * ellk_p
+                + zm / am * rp2 * ellpi_m
+                - zp / ap * rp2 * ellpi_p
+            )
+        )
+        hz = (
+            -wp.cos(phi)
+            / (F64_2 * F64_PI * r)
+            * (am * elle_m - ap * elle_p - (F64_1 + zm2 + r2) / am * ellk_m + (F64_1 + zp2 + r2) / ap * ellk_p)
+        )
+    return wp.vec3d(hr, hphi, hz)
+
+
+@wp.func
+def cylinder_field(J: wp.vec3d, diameter: wp.float64, height: wp.float64, p: wp.vec3d) -> wp.vec3d:
+    """B [T] at ``p`` [m] (cylinder frame: centre at origin, axis +z) of a cylinder with polarization ``J`` [T]."""
+    r0 = F64_HALF * diameter
+    rho = wp.sqrt(p[0] * p[0] + p[1] * p[1])
+    phi = wp.atan2(p[1], p[0])
+    r = rho / r0
+    z = p[2] / r0
+    z0 = F64_HALF * height / r0
+    cphi = wp.cos(phi)
+    sphi = wp.sin(phi)
+    b = wp.vec3d(F64_0, F64_0, F64_0)
+    if J[2] != F64_0:
+        br, bz = cylinder_axial_field_rz(z0, r, z)
+        b = b + wp.vec3d(br * cphi * J[2], br * sphi * J[2], bz * J[2])
+    jt = wp.sqrt(J[0] * J[0] + J[1] * J[1])
+    if jt > F64_0:
+        theta = wp.atan2(J[1], J[0])
+        h = cylinder_diametral_field_cyl(z0, r, z, phi - theta) * jt
+        b = b + wp.vec3d(h[0] * cphi - h[1] * sphi, h[0] * sphi + h[1] * cphi, h[2])
+        if r <= F64_1 and wp.abs(z) <= z0:
+            # the diametral closed form is mu0 H; B = mu0 H + J inside the magnet
+            b = b + wp.vec3d(J[0], J[1], F64_0)
+    return b
+
+
+@wp.func
+def magnet_field_local(shape: int, size: wp.vec3d, J: wp.vec3d, p: wp.vec3d) -> wp.vec3d:
+    """B [T] at ``p`` [m] in the magnet's frame; ``size`` = cuboid extents or (d, d, h) for a cylinder."""
+    if shape == SHAPE_CYLINDER:
+        return cylinder_field(J, size[0], size[2], p)
+    return cuboid_field(J, size, p)
+
+
+# ----------------------------------------------------------------------------------------------------------------------
+# 'analytic' model: exact source field, surface-charge integral over the target
+# ----------------------------------------------------------------------------------------------------------------------
+
+
+@wp.func
+def box_gap(half: wp.vec3d, p: wp.vec3d) -> wp.float64:
+    """Distance [m] from point ``p`` to the axis-aligned box of half extents ``half`` centred at the origin."""
+    dx = wp.max(wp.abs(p[0]) - half[0], F64_0)
+    dy = wp.max(wp.abs(p[1]) - half[1], F64_0)
+    dz = wp.max(wp.abs(p[2]) - half[2], F64_0)
+    return wp.sqrt(dx * dx + dy * dy + dz * dz)
+
+
+@wp.func
+def panel_count(extent: wp.float64, gap: wp.float64, max_panels: int) -> int:
+    """Composite quadrature panels along a face side of ``extent`` [m] whose nearest source singularity is at least
+    ``gap`` [m] away: panel size <= gap keeps the Gauss-Legendre error below ~rho^(-2n) with rho >= 3.4."""
+    if gap <= extent / wp.float64(max_panels):
+        return max_panels
+    return wp.min(max_panels, wp.max(1, int(wp.ceil(extent / gap))))
+
+
+@wp.func
+def col(m: wp.mat33d, k: int) -> wp.vec3d:
+    return wp.vec3d(m[0, k], m[1, k], m[2, k])
+
+
+@wp.func
+def analytic_pair_wrench(
+    s_shape: int,
+    s_size: wp.vec3d,
+    s_J: wp.vec3d,
+    t_shape: int,
+    t_size: wp.vec3d,
+    t_M: wp.vec3d,
+    r_rel: wp.mat33d,
+    t_rel: wp.vec3d,
+    gl_x: wp.array(dtype=wp.float64),
+    gl_w: wp.array(dtype=wp.float64),
+    max_panels: int,
+):
+    """Force [N] and torque about the target centre [N·m] on a uniformly magnetized target, 'analytic' model.
+
+    The target's magnetization M [A/m] (target frame) is replaced by its surface charge sigma = M·n; then
+    F = ∮ sigma B_s dA and T = ∮ (r − c) × sigma B_s dA, exact for a uniformly magnetized rigid body in the field of
+    a source that does not overlap it. Each face is integrated with composite Gauss-Legendre (``gl_x``, ``gl_w``:
+    one rule on [-1, 1]); the number of panels per side grows as the face comes closer to the source
+    (:func:`panel_count`), so far pairs cost one panel per face and touching pairs ``max_panels``².
+    Cylinder faces: radial Gauss-Legendre × trapezoidal azimuth (periodic, spectrally accurate); the lateral face
+    only carries charge for a transverse magnetization.
+
+    Frames: everything in the source's frame, as in :func:`dipoles_pair_wrench`. ``s_J`` is the source
+    polarization [T], ``t_M`` the target magnetization [A/m] in the target's frame.
+    """
+    nq = gl_x.shape[0]
+    s_half = F64_HALF * s_size
+    if s_shape == SHAPE_CYLINDER:
+        s_half = wp.vec3d(F64_HALF * s_size[0], F64_HALF * s_size[0], F64_HALF * s_size[2])
+    force = wp.vec3d(F64_0, F64_0, F64_0)
+    torque = wp.vec3d(F64_0, F64_0, F64_0)
+
+    if t_shape == SHAPE_CUBOID:
+        for k in range(3):
+            mk = t_M[k]
+            if mk != F64_0:
+                u = (k + 1) % 3
+                v = (k + 2) % 3
+                ek = col(r_rel, k)
+                eu = col(r_rel, u)
+                ev = col(r_rel, v)
+                lu = t_size[u]
+                lv = t_size[v]
+                half_diag = F64_HALF * wp.sqrt(lu * lu + lv * lv)
+                for side in range(2):
+                    sign = F64_1
+                    if side == 1:
+                        sign = -F64_1
+                    sigma = sign * mk
+                    centre = ek * (sign * F64_HALF * t_size[k])
+                    gap = box_gap(s_half, t_rel + centre) - half_diag
+                    nu = panel_count(lu, gap, max_panels)
+                    nv = panel_count(lv, gap, max_panels)
+                    du = lu / wp.float64(nu)
+                    dv = lv / wp.float64(nv)
+                    for pu in range(nu):
+                        for pv in range(nv):
+                            cu = -F64_HALF * lu + (wp.float64(pu) + F64_HALF) * du
+                            cv = -F64_HALF * lv + (wp.float64(pv) + F64_HALF) * dv
+                            for a in range(nq):
+                                for b in range(nq):
+                                    lever = (
+                                        centre
+                                        + eu * (cu + F64_HALF * du * gl_x[a])
+                                        + ev * (cv + F64_HALF * dv * gl_x[b])
+                                    )
+                                    w = sigma * gl_w[a] * gl_w[b] * F64_HALF * du * F64_HALF * dv
+                                    f = magnet_field_local(s_shape, s_size, s_J, t_rel + lever) * w
+                                    force = force + f
+                                    torque = torque + wp.cross(lever, f)
+    else:
+        radius = F64_HALF * t_size[0]
+        height = t_size[2]
+        ex = col(r_rel, 0)
+        ey = col(r_rel, 1)
+        ez = col(r_rel, 2)
+        # end caps: sigma = ±M_z
+        if t_M[2] != F64_0:
+            for side in range(2):
+                sign = F64_1
+                if side == 1:
+                    sign = -F64_1
+                sigma = sign * t_M[2]
+                centre = ez * (sign * F64_HALF * height)
+                gap = box_gap(s_half, t_rel + centre) - radius
+                nr = panel_count(radius, gap, max_panels)
+                nphi = 4 * nq * panel_count(F64_2 * radius, gap, max_panels)
+                dr = radius / wp.float64(nr)
+                dphi = F64_2 * F64_PI / wp.float64(nphi)
+                for ip in range(nphi):
+                    phi = (wp.float64(ip) + F64_HALF) * dphi
+                    dirv = ex * wp.cos(phi) + ey * wp.sin(phi)
+                    for pr in range(nr):
+                        for a in range(nq):
+                            rr = (wp.float64(pr) + F64_HALF + F64_HALF * gl_x[a]) * dr
+                            lever = centre + dirv * rr
+                            w = sigma * gl_w[a] * F64_HALF * dr * rr * dphi
+                            f = magnet_field_local(s_shape, s_size, s_J, t_rel + lever) * w
+                            force = force + f
+                            torque = torque + wp.cross(lever, f)
+        # lateral face: sigma = M_x cos(phi) + M_y sin(phi)
+        if t_M[0] != F64_0 or t_M[1] != F64_0:
+            gap = box_gap(s_half, t_rel) - wp.sqrt(radius * radius + F64_HALF * F64_HALF * height * height)
+            nz = panel_count(height, gap, max_panels)
+            nphi = 4 * nq * panel_count(F64_2 * radius, gap, max_panels)
+            dz = height / wp.float64(nz)
+            dphi = F64_2 * F64_PI / wp.float64(nphi)
+            for ip in range(nphi):
+                phi = (wp.float64(ip) + F64_HALF) * dphi
+                cphi = wp.cos(phi)
+                sphi = wp.sin(phi)
+                sigma = t_M[0] * cphi + t_M[1] * sphi
+                dirv = (ex * cphi + ey * sphi) * radius
+                for pz in range(nz):
+                    for a in range(nq):
+                        zz = -F64_HALF * height + (wp.float64(pz) + F64_HALF + F64_HALF * gl_x[a]) * dz
+                        lever = dirv + ez * zz
+                        w = sigma * gl_w[a] * F64_HALF * dz * radius * dphi
+                        f = magnet_field_local(s_shape, s_size, s_J, t_rel + lever) * w
+                        force = force + f
+                        torque = torque + wp.cross(lever, f)
+    return force, torque
