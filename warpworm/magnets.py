@@ -419,3 +419,24 @@ __all__ = [
     "world_wrenches",
     "wrench",
 ]
+
+
+def dipole_grid(magnet: Magnet, density: float = DEFAULT_DENSITY) -> np.ndarray:
+    """The 'dipoles' model's grid of ``magnet`` at ``density`` [1/m³]: points (N, 3) [m] in the magnet frame.
+
+    Mirrors the kernels' on-the-fly generation (``kernels/magnet_fields.py``: ``dipole_grid_*``); each point
+    carries ``magnet.moment / N``.
+    """
+    per_m = float(np.float32(density)) ** (1.0 / 3.0)
+    n = np.maximum(1, np.round(magnet.size * per_m).astype(int))
+    if magnet.shape == SHAPE_CYLINDER:
+        n[1] = n[0]
+    axes = [magnet.size[k] * ((np.arange(n[k]) + 0.5) / n[k] - 0.5) for k in range(3)]
+    pts = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    if magnet.shape == SHAPE_CYLINDER:
+        rad = 0.5 * magnet.size[0]
+        pts = pts[pts[:, 0] ** 2 + pts[:, 1] ** 2 <= rad * rad * (1 + 1e-5)]
+    return pts
+
+
+__all__.append("dipole_grid")
