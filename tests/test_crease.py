@@ -285,3 +285,25 @@ def test_export_glb_and_ply_reload(worm, tmp_path):
     bare = cr.export_mesh(worm, tmp_path / "bare.ply", creases=False)
     p2 = cr.load_pattern(bare)
     assert np.array_equal(p2.hinges, worm.hinges) and np.array_equal(p2.edge_label, worm.edge_label)
+
+
+def test_axial_compression_needs_only_the_valley_bars_to_stretch(worm):
+    # Independent rigidity matrix: one row per bar, d(length)/d(positions).
+    x, E = worm.vertices, worm.edges
+    d = (x[E[:, 1]] - x[E[:, 0]]) / worm.edge_rest_length[:, None]
+    C = np.zeros((len(E), worm.num_vertices, 3))
+    np.add.at(C, (np.arange(len(E)), E[:, 1]), d)
+    np.add.at(C, (np.arange(len(E)), E[:, 0]), -d)
+    C = C.reshape(len(E), -1)
+    assert np.allclose(C, cr.rigidity_matrix(x, E))
+    # All bars kept: isostatic (only the 6 rigid motions), so shortening the worm must strain bars.
+    assert np.linalg.matrix_rank(C) == 3 * worm.num_vertices - 6
+    _, strain, energy = cr.compression_mode(worm)
+    assert energy > 1.0
+    # Without the valley (unit-middle ring) bars: a mechanism; every other bar keeps its length to first order.
+    valley = worm.edge_label == cr.VALLEY
+    assert np.linalg.matrix_rank(C[~valley]) == 3 * worm.num_vertices - 6 - valley.sum()
+    u, strain, energy = cr.compression_mode(worm, released=valley)
+    assert energy < 1e-18 and np.abs(strain[~valley]).max() < 1e-9
+    kp = worm.keypoints(worm.vertices + 1e-6 * u)
+    assert kp[6, 0] - kp[5, 0] == pytest.approx(L0 - 1e-6, abs=1e-12)  # it does shorten the worm
