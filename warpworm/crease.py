@@ -34,6 +34,16 @@ Hinge stencil ``(i, j, k, l)``: shared edge j–k; wing ``i`` belongs to the tri
 ψ > 0 (valley) when the wings fold toward the side their outward normals point to, i.e. ``n1 · (x_l − x_j) > 0``;
 ψ < 0 is a mountain. In MERLIN's notation (r_ij = x_i − x_j, r_kj = x_k − x_j, r_kl = x_k − x_l, same node order)
 ψ = π − θ_MERLIN, so ∂ψ/∂x_i = |e| n1 / |n1|², ∂ψ/∂x_l = |e| n2 / |n2|² (see :func:`dihedral_gradients`).
+
+Foldability (what the dynamics must know)
+-----------------------------------------
+Any triangulated tube whose open ends are triangles has E = 3V − 6 bars: generically isostatic, and this one is
+(rank of the rigidity matrix = 3V − 6). With every bar stiff, squashing the worm strains bars: at EA = 1e4 N its
+axial stiffness is ≈ 4.3e4 N/m (:func:`compression_mode`), far beyond what the IPMs can push. The VALLEY bars (the
+rings at the unit middles, 3 per unit) are the minimal set that must give: without them the tube has 3 n internal
+mechanisms, axial shortening among them, with every other bar at zero strain to first order (finite check: 20 %
+shortening with the other bars under 4e-6 strain, the valley rings at −10 … +6 %). Physically that is the paper's
+faces bending near the mid creases. So the solver should give the VALLEY-labelled bars a much lower axial stiffness.
 """
 
 from __future__ import annotations
@@ -640,18 +650,18 @@ def load_pattern(path, labels=None, **kwargs) -> CreasePattern:
     loaded = trimesh.load(str(path), process=False)
     if isinstance(loaded, trimesh.Scene):
         geoms = loaded.geometry
+        meshes = [name for name, g in geoms.items() if isinstance(g, trimesh.Trimesh)]
         if "surface" in geoms:
-            mesh = geoms["surface"]
+            name = "surface"
+        elif len(meshes) == 1:
+            name = meshes[0]
         else:
-            meshes = [g for g in geoms.values() if isinstance(g, trimesh.Trimesh)]
-            if len(meshes) != 1:
-                raise ValueError(f"load_pattern: {path} holds {len(meshes)} meshes and none is named 'surface'")
-            mesh = meshes[0]
-        # A GLB node may carry a transform; take the mesh in scene coordinates.
-        node = next((n for n in loaded.graph.nodes_geometry if loaded.graph[n][1] == mesh.metadata.get("name")), None)
-        if node is not None:
-            mesh = mesh.copy()
-            mesh.apply_transform(loaded.graph[node][0])
+            raise ValueError(f"load_pattern: {path} holds {len(meshes)} meshes and none is named 'surface'")
+        mesh = geoms[name].copy()
+        # A glTF node may carry a transform: take the mesh in scene coordinates.
+        nodes = loaded.graph.geometry_nodes.get(name, [])
+        if nodes:
+            mesh.apply_transform(loaded.graph[nodes[0]][0])
     else:
         mesh = loaded
     return CreasePattern.from_trimesh(mesh, labels, **kwargs)
