@@ -15,7 +15,7 @@ Two models of the interaction (``warpworm.params.MAGNET_MODELS``):
     Exact closed-form source fields (cuboid: Yang / Engel-Herbert; cylinder: Derby axial, Caciagli diametral — both
     closed forms, in float64 inside the kernel) and the exact surface-charge integral over the target
     (F = ∮ σ B dA, T = ∮ (r − c) × σ B dA, σ = M·n), by composite Gauss-Legendre quadrature whose panel count grows
-    as faces come close to the source. Default: 6 points per panel side, at most 8 panels per side.
+    as faces come close to the source. Default: 4 points per panel side, at most 8 panels per side.
 
 Units: SI. Poses: position (3,) [m] and rotation (3, 3) magnet → world, or batches (N, 3), (N, 3, 3).
 """
@@ -42,7 +42,7 @@ SHAPE_CYLINDER = 1
 DEFAULT_DENSITY = 64e6
 """Default dipole density of the 'dipoles' model: 64 per cm³ [1/m³]."""
 
-DEFAULT_QUAD_ORDER = 6
+DEFAULT_QUAD_ORDER = 4
 """Gauss-Legendre points per panel side of the 'analytic' surface integral (see docs/magnets.md for the study)."""
 
 DEFAULT_MAX_PANELS = 8

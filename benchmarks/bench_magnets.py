@@ -1,0 +1,185 @@
+"""Magnet wrenches for W worlds of the worm (one EPM bar + three IPM disks, all pairs), both models, vs magpylib.
+
+Each world: EPM 10×10×40 mm cuboid (3.6 A·m²) above three 10 mm × 1 mm axial disks (0.0707 A·m²), the worm's
+layout with small random perturbations; the net force and torque on all four magnets from the other three
+(12 ordered pair wrenches per world), by one ``launch_world_wrenches`` call.
+
+Columns: ``ms_per_call`` (median of repeats, after a warm-up that includes compilation), ``us_per_world``,
+``pairs_per_s`` (point-dipole pair interactions per second, 'dipoles' model: 19,296 per world at 64/cm³; compare
+the simple n-body kernel of DESIGN-NOTES, 2.6e8/s on this machine), ``field_evals_per_s`` ('analytic': closed-form
+source-field evaluations at quadrature points). magpylib rows run ``getFT`` for the same 12 pair wrenches per world
+(meshing 1000 cells per target, ~1e-4 agreement) for small W only; ``magpylib_est`` rows extrapolate that
+per-world cost linearly to larger W and are labelled as estimates.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import warp as wp
+
+NBODY_PAIRS_PER_S = 2.6e8
+NOTES = ("pairs_per_s: point-dipole pair interactions/s ('dipoles', 19,296 per world at 64/cm³); DESIGN-NOTES n-body "
+         "reference on this machine: 2.6e8/s. magpylib_est rows are linear extrapolations of the measured magpylib "
+         "per-world cost, not measurements.")
+
+
+def _worlds(W, seed=0):
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(seed)
+    pos = np.zeros((W, 4, 3))
+    rot = np.zeros((W, 4, 3, 3))
+    theta = rng.uniform(0, np.pi, W)
+    pos[:, 0] = np.stack([rng.uniform(-0.02, 0.02, W), rng.uniform(-0.005, 0.005, W), rng.uniform(0.04, 0.06, W)], 1)
+    rot[:, 0] = Rotation.from_euler("y", (np.pi / 2 - theta)[:, None]).as_matrix()
+    for s, sign in ((1, -1), (2, 1), (3, -1)):
+        pos[:, s] = np.stack([(s - 2) * 0.027 + rng.normal(size=W) * 1e-3, rng.normal(size=W) * 1e-3,
+                              np.full(W, 0.008)], 1)
+        tilt = Rotation.from_euler("xyz", rng.normal(size=(W, 3)) * 0.2)
+        rot[:, s] = (tilt * Rotation.from_euler("y", sign * np.pi / 2)).as_matrix()
+    return pos, rot
+
+
+def _magnets():
+    from warpworm import magnets as mg
+
+    epm = mg.Cuboid((0.01, 0.01, 0.04), moment=3.6)
+    ipm = mg.Cylinder(0.01, 0.001, moment=0.9e6 * np.pi * 0.005**2 * 0.001)
+    return [epm, ipm, ipm, ipm]
+
+
+def _time(fn, repeats):
+    fn()  # warm-up (compiles on first use)
+    ts = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        ts.append(time.perf_counter() - t0)
+    return float(np.median(ts))
+
+
+def _dipole_pairs_per_world(magnets, density):
+    from warpworm import magnets as mg
+
+    n = [len(mg.dipole_grid(m, density)) for m in magnets]
+    return sum(n[i] * n[j] for i in range(4) for j in range(4) if i != j)
+
+
+def _analytic_evals_per_world(pos, rot, magnets, quad_order, max_panels):
+    """Field evaluations the 'analytic' kernel makes in world 0 (mirrors the panel rule of magnet_fields.py)."""
+    total = 0
+    for i in range(4):
+        for j in range(4):
+            if i == j:
+                continue
+            s, t = magnets[j], magnets[i]
+            Rrel = rot[0, j].T @ rot[0, i]
+            trel = rot[0, j].T @ (pos[0, i] - pos[0, j])
+            half = 0.5 * s.size if s.shape == 0 else np.array([s.size[0] / 2, s.size[0] / 2, s.size[2] / 2])
+
+            def gap(p, hd):
+                return np.linalg.norm(np.maximum(np.abs(p) - half, 0)) - hd
+
+            def panels(ext, g):
+                return max_panels if g <= ext / max_panels else min(max_panels, max(1, int(np.ceil(ext / g))))
+
+            if t.shape == 0:
+                for k in range(3):
+                    if t.moment[k] == 0:
+                        continue
+                    u, v = (k + 1) % 3, (k + 2) % 3
+                    for sign in (1, -1):
+                        g = gap(trel + Rrel[:, k] * sign * t.size[k] / 2, 0.5 * np.hypot(t.size[u], t.size[v]))
+                        total += panels(t.size[u], g) * panels(t.size[v], g) * quad_order**2
+            else:
+                R = t.size[0] / 2
+                for sign in (1, -1):
+                    g = gap(trel + Rrel[:, 2] * sign * t.size[2] / 2, R)
+                    total += panels(R, g) * quad_order * 4 * quad_order * panels(2 * R, g)
+    return total
+
+
+def _magpylib_world(magnets, pos, rot, meshing=1000):
+    import magpylib as magpy
+    from scipy.spatial.transform import Rotation
+
+    def make(m, p, R):
+        o = Rotation.from_matrix(R)
+        if m.shape == 1:
+            return magpy.magnet.Cylinder(polarization=m.polarization, dimension=(m.size[0], m.size[2]), position=p,
+                                         orientation=o)
+        return magpy.magnet.Cuboid(polarization=m.polarization, dimension=m.size, position=p, orientation=o)
+
+    for w in range(len(pos)):
+        objs = [make(m, pos[w, k], rot[w, k]) for k, m in enumerate(magnets)]
+        for i in range(4):
+            # the force on target i from the three others, as one getFT call (sums over sources)
+            sources = [objs[j] for j in range(4) if j != i]
+            magpy.getFT(sources, objs[i], pivot="centroid", meshing=meshing)
+
+
+def run(quick: bool = False) -> list[dict]:
+    from warpworm import magnets as mg
+
+    wp.config.quiet = True
+    wp.init()
+    device = wp.get_device("cpu")
+    sizes = [1, 16, 256] if quick else [1, 16, 256, 1024, 4096]
+    magnets = _magnets()
+    density = 64e6
+    pairs_per_world = _dipole_pairs_per_world(magnets, density)
+    rows = []
+    for model in ("dipoles", "analytic"):
+        for W in sizes:
+            pos, rot = _worlds(W)
+            from warpworm.transforms import matrix_to_quat_wxyz, quat_wxyz_to_xyzw
+
+            q = quat_wxyz_to_xyzw(matrix_to_quat_wxyz(rot.reshape(-1, 3, 3))).reshape(W, 4, 4)
+            arrays = dict(
+                shape=wp.array(np.array([[m.shape for m in magnets]], np.int32), dtype=wp.int32, device=device),
+                size=wp.array(np.array([[m.size for m in magnets]], np.float32), dtype=wp.vec3, device=device),
+                moment=wp.array(np.array([[m.moment for m in magnets]], np.float32), dtype=wp.vec3, device=device),
+                pos=wp.array(pos.astype(np.float32), dtype=wp.vec3, device=device),
+                rot=wp.array(q.astype(np.float32), dtype=wp.quat, device=device),
+                force_out=wp.zeros((W, 4), dtype=wp.vec3, device=device),
+                torque_out=wp.zeros((W, 4), dtype=wp.vec3, device=device),
+                density=wp.array([density], dtype=wp.float32, device=device),
+            )
+            model_arr = wp.array([mg.MODELS[model]], dtype=wp.int32, device=device)
+
+            def call():
+                mg.launch_world_wrenches(model_arr, device=device, **arrays)
+                wp.synchronize_device(device)
+
+            work = W * 12
+            repeats = 3 if work * (1 if model == "dipoles" else 1) > 3000 else 10
+            t = _time(call, repeats)
+            row = {"impl": "warpworm", "model": model, "W": W, "ms_per_call": 1e3 * t, "us_per_world": 1e6 * t / W,
+                   "pair_wrenches_per_s": 12 * W / t}
+            if model == "dipoles":
+                row["pairs_per_s"] = pairs_per_world * W / t
+                row["vs_nbody"] = row["pairs_per_s"] / NBODY_PAIRS_PER_S
+            else:
+                row["field_evals_per_s"] = (
+                    _analytic_evals_per_world(pos, rot, magnets, mg.DEFAULT_QUAD_ORDER, mg.DEFAULT_MAX_PANELS) * W / t
+                )
+            rows.append(row)
+    # magpylib: the same 12 pair wrenches per world, measured at small W
+    try:
+        import magpylib  # noqa: F401
+    except ImportError:
+        return rows
+    measured = [1, 16] if not quick else [1, 4]
+    per_world = None
+    for W in measured:
+        pos, rot = _worlds(W)
+        t = _time(lambda: _magpylib_world(magnets, pos, rot), 1 if W > 1 else 3)
+        per_world = t / W
+        rows.append({"impl": "magpylib getFT", "model": "exact (mesh 1000)", "W": W, "ms_per_call": 1e3 * t,
+                     "us_per_world": 1e6 * t / W, "pair_wrenches_per_s": 12 * W / t})
+    for W in [s for s in sizes if s > max(measured)]:
+        rows.append({"impl": "magpylib_est", "model": "exact (mesh 1000)", "W": W, "ms_per_call": 1e3 * per_world * W,
+                     "us_per_world": 1e6 * per_world, "pair_wrenches_per_s": 12 / per_world})
+    return rows
