@@ -53,6 +53,10 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    # Warp's banner and module-load lines go to stdout; keep stdout for results (e.g. `--json`).
+    import warp as wp
+
+    wp.config.quiet = True
     if not getattr(args, "_main", None):
         parser.print_help()
         return 2
