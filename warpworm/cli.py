@@ -51,12 +51,16 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
     # Warp's banner and module-load lines go to stdout; keep stdout for results (e.g. `--json`).
+    # Set before any command module imports (and so initialises) Warp.
     import warp as wp
 
-    wp.config.quiet = True
+    if hasattr(wp, "LOG_WARNING"):  # Warp >= 1.12: leveled logging
+        wp.config.log_level = wp.LOG_WARNING
+    else:
+        wp.config.quiet = True
+    parser = build_parser()
+    args = parser.parse_args(argv)
     if not getattr(args, "_main", None):
         parser.print_help()
         return 2
