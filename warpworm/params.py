@@ -47,6 +47,9 @@ class WormParams:
     """Axial rigidity EA of every bar [N] (force per unit Cauchy strain), shape () or (W,)."""
     damping: float | np.ndarray = 2.0
     """Linear velocity damping rate [1/s], shape () or (W,)."""
+    hinge_damping: float | np.ndarray = 0.0
+    """Crease damping c_α per metre of crease [N·m·s/rad/m]: a hinge resists folding speed with c_α L dψ/dt,
+    shape () or (W,)."""
 
     # --- floor ---
     mu_static: float | np.ndarray = 0.268

@@ -1,0 +1,152 @@
+"""EPM paths: the paper's sinusoidal path (§IV-C), keyframed paths, and the gait presets (§III-A–C).
+
+The EPM is kinematic: its pose is a function of time evaluated on the device each step
+(:func:`warpworm.kernels.xpbd.epm_sine_pose` / ``epm_keyframe_pose``).
+
+Sinusoidal path (per world; s = t / period + phase, in cycles)::
+
+    x(t) = x0 + direction · w · s                  advances one wavelength w per cycle
+    z(t) = h + a · (1 + cos 2πs) / 2               starts high (h + a), closest approach h at s = 1/2
+    moment direction = (cos θ, 0, sin θ)           θ from +x toward +z, in the x–z plane
+
+``h`` is the height of the EPM's *centre* above the floor (``WormParams.closest_approach``); ``a`` the vertical
+swing above it. x0 is chosen so that the first closest approach (s = 1/2) happens at the gait's placement point.
+
+Gait presets (IPM moments: tail −x, centre +x, head −x; forward = +x):
+
+=============  ======================================  =====================================  ==================
+gait           forward: EPM orientation                placement                              backward
+=============  ======================================  =====================================  ==================
+peristaltic    vertical, south pole down (θ = +π/2)    between centre and head IPMs, nearer   north pole down
+                                                       the centre                             (θ = −π/2), between
+                                                                                              centre and tail
+omega          flat, north pole forward (θ = 0)        over the centre IPM                    north pole backward
+                                                                                              (θ = π)
+inchworm       north pole down (θ = −π/2)              between centre and head, nearer the    south pole down
+                                                       centre                                 (θ = +π/2), between
+                                                                                              centre and tail
+=============  ======================================  =====================================  ==================
+
+:func:`preset_params` returns :class:`~warpworm.params.WormParams` with a gait's tuned path (w, a, h, period) and
+crease parameters; the tuning (a small grid search, as the paper did) is documented in ``docs/dynamics.md``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from .params import GAITS, WormParams, per_world
+
+SINE_FIELDS = ("start_x", "start_y", "wavelength", "amplitude", "closest", "theta", "period", "direction", "phase")
+"""Order of the sinusoidal path's per-world arrays as the kernel takes them."""
+
+# theta (forward, backward) and where the first closest approach is, as a fraction of the way from the centre IPM
+# toward the head IPM (forward) or toward the tail IPM (backward); 0 = over the centre IPM.
+GAIT_ORIENTATION = {
+    "peristaltic": (0.5 * np.pi, -0.5 * np.pi),
+    "omega": (0.0, np.pi),
+    "inchworm": (-0.5 * np.pi, 0.5 * np.pi),
+}
+GAIT_PLACEMENT = {"peristaltic": 0.4, "omega": 0.0, "inchworm": 0.4}
+
+# Tuned path and crease parameters per gait (docs/dynamics.md: grid search over w, a, h, period).
+GAIT_PRESETS = {
+    "peristaltic": dict(wavelength=0.010, amplitude=0.03, closest_approach=0.045, cycle_period=1.0),
+    "omega": dict(wavelength=0.010, amplitude=0.03, closest_approach=0.035, cycle_period=1.0),
+    "inchworm": dict(wavelength=0.010, amplitude=0.03, closest_approach=0.045, cycle_period=1.0),
+}
+
+
+@dataclass
+class EpmPath:
+    """A kinematic EPM path for W worlds.
+
+    ``kind == "sine"``: the fields of :data:`SINE_FIELDS`, each shape (1,) or (W,) [m, rad, s; direction ±1;
+    phase in cycles]. ``kind == "keyframes"``: ``key_time (K,)`` [s] ascending, ``key_pos (K, 3)`` or (W, K, 3) [m],
+    ``key_rot (K, 3, 3)`` or (W, K, 3, 3) (magnet -> world); linear / slerp between keys, held outside.
+    """
+
+    kind: str = "sine"
+    start_x: np.ndarray = field(default_factory=lambda: np.zeros(1))
+    start_y: np.ndarray = field(default_factory=lambda: np.zeros(1))
+    wavelength: np.ndarray = field(default_factory=lambda: np.full(1, 0.02))
+    amplitude: np.ndarray = field(default_factory=lambda: np.full(1, 0.03))
+    closest: np.ndarray = field(default_factory=lambda: np.full(1, 0.05))
+    theta: np.ndarray = field(default_factory=lambda: np.zeros(1))
+    period: np.ndarray = field(default_factory=lambda: np.ones(1))
+    direction: np.ndarray = field(default_factory=lambda: np.ones(1))
+    phase: np.ndarray = field(default_factory=lambda: np.zeros(1))
+    key_time: np.ndarray | None = None
+    key_pos: np.ndarray | None = None
+    key_rot: np.ndarray | None = None
+
+    def sine_pose(self, t) -> tuple[np.ndarray, np.ndarray]:
+        """Host evaluation of a sinusoidal path at times ``t`` (scalar or (W,)): pos (W, 3), rot (W, 3, 3)."""
+        f = {k: np.atleast_1d(np.asarray(getattr(self, k), np.float64)) for k in SINE_FIELDS}
+        s = np.asarray(t, np.float64) / f["period"] + f["phase"]
+        x = f["start_x"] + f["direction"] * f["wavelength"] * s
+        z = f["closest"] + f["amplitude"] * 0.5 * (1.0 + np.cos(2 * np.pi * s))
+        x, y, z = np.broadcast_arrays(x, f["start_y"], z)
+        phi = 0.5 * np.pi - f["theta"]
+        c, sn = np.cos(phi), np.sin(phi)
+        R = np.zeros(np.shape(phi) + (3, 3))
+        R[..., 0, 0], R[..., 0, 2], R[..., 1, 1], R[..., 2, 0], R[..., 2, 2] = c, sn, 1.0, -sn, c
+        R = np.broadcast_to(R, x.shape + (3, 3))
+        return np.stack([x, y, z], -1), R
+
+
+def keyframe_path(times, positions, rotations) -> EpmPath:
+    """A keyframed EPM path: times (K,) [s], positions (K, 3) or (W, K, 3) [m], rotations (K, 3, 3) or (W, K, 3, 3)."""
+    t = np.asarray(times, np.float64).reshape(-1)
+    if len(t) < 1 or np.any(np.diff(t) < 0):
+        raise ValueError("keyframe_path: need at least one key and ascending times")
+    return EpmPath(kind="keyframes", key_time=t, key_pos=np.asarray(positions, np.float64),
+                   key_rot=np.asarray(rotations, np.float64))
+
+
+def gait_theta(gait: str, backward: bool) -> float:
+    """EPM moment angle θ [rad] of a gait preset (from +x toward +z)."""
+    if gait not in GAITS:
+        raise ValueError(f"gait must be one of {GAITS}, got {gait!r}")
+    return float(GAIT_ORIENTATION[gait][1 if backward else 0])
+
+
+def sine_path(params: WormParams, ipm_x: np.ndarray, num_worlds: int) -> EpmPath:
+    """The sinusoidal EPM path of ``params`` (gait, backward, w, a, h, θ, period) placed on each world's worm.
+
+    Args:
+        params: the batch parameters; ``orientation`` NaN takes the gait preset's θ.
+        ipm_x: x of the (tail, centre, head) IPM centres at rest [m], shape (W, 3).
+        num_worlds: W.
+    """
+    W = num_worlds
+    ipm_x = np.broadcast_to(np.asarray(ipm_x, np.float64), (W, 3))
+    theta = per_world(params.orientation, W)
+    theta = np.where(np.isnan(theta), gait_theta(params.gait, params.backward), theta)
+    frac = GAIT_PLACEMENT[params.gait]
+    end = ipm_x[:, 0] if params.backward else ipm_x[:, 2]
+    place = ipm_x[:, 1] + frac * (end - ipm_x[:, 1])
+    direction = -1.0 if params.backward else 1.0
+    w = per_world(params.wavelength, W)
+    return EpmPath(
+        kind="sine",
+        start_x=place - direction * 0.5 * w,
+        start_y=np.zeros(W),
+        wavelength=w,
+        amplitude=per_world(params.amplitude, W),
+        closest=per_world(params.closest_approach, W),
+        theta=theta,
+        period=per_world(params.cycle_period, W),
+        direction=np.full(W, direction),
+        phase=np.zeros(W),
+    )
+
+
+def preset_params(gait: str, backward: bool = False, base: WormParams | None = None, **overrides) -> WormParams:
+    """``base`` (default ``WormParams()``) with the gait, direction and the gait's tuned path parameters set."""
+    if gait not in GAITS:
+        raise ValueError(f"gait must be one of {GAITS}, got {gait!r}")
+    p = replace(base or WormParams(), gait=gait, backward=bool(backward), **GAIT_PRESETS[gait])
+    return replace(p, **overrides) if overrides else p

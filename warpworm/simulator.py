@@ -1,0 +1,241 @@
+"""Batched XPBD simulator of magnetically actuated origami worms (host orchestration of :mod:`warpworm.kernels.xpbd`).
+
+One :meth:`Simulator.step` = one magnetic-wrench evaluation (EPM pose from its path, IPM poses from their mounts,
+net force and torque on every magnet from :func:`warpworm.magnets.launch_world_wrenches`, distributed onto the
+mount vertices) followed by ``substeps`` XPBD substeps of three kernel launches each (predict, constraints,
+corrections + contact). All worlds are in every launch; nothing loops over worlds on the host.
+
+The wrench is held constant over a step's substeps: it varies on the time scale of the magnets' motion (ms), not
+of the substep, and it is the most expensive kernel (see ``docs/dynamics.md`` for the profile and the dt study).
+Pass ``magnet_every_substep=True`` to evaluate it every substep instead.
+
+Typical use::
+
+    model = Model.from_params(gaits.preset_params("peristaltic"), num_worlds=16, device="cpu")
+    sim = Simulator(model, dt=2e-3, substeps=8)
+    state = sim.initial_state()
+    sim.settle(state, 0.3)            # EPM absent, worm settles under gravity; resets t to 0
+    sim.step(state, 500)              # 1 s
+    out = sim.snapshot(state)         # dict of NumPy arrays
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from .model import Model, State
+from .transforms import quat_wxyz_to_matrix, quat_xyzw_to_wxyz
+
+
+def launch_world_wrenches(model: Model, state: State, moment: wp.array) -> None:
+    """Net magnetic force and torque on every magnet of every world (the one place the magnet API is called)."""
+    from .magnets import launch_world_wrenches as _launch
+
+    _launch(
+        model.magnet_model,
+        model.magnet_shape,
+        model.magnet_size,
+        moment,
+        state.magnet_pos,
+        state.magnet_rot,
+        state.magnet_force,
+        state.magnet_torque,
+        model.dipole_density,
+        model.device,
+    )
+
+
+class Simulator:
+    """XPBD integrator for a :class:`~warpworm.model.Model` (all worlds at once, CPU or CUDA).
+
+    Args:
+        model: the batch.
+        dt: step [s]: the magnetic wrench and the EPM pose are refreshed once per step.
+        substeps: XPBD substeps per step (one constraint iteration each); the substep is ``dt / substeps``.
+        magnet_every_substep: re-evaluate the magnetic wrench every substep (slower; for dt studies).
+        strain_limit: a bar strained beyond this |ΔL/L0| flags its world unstable.
+        speed_limit: a vertex faster than this [m/s] (or non-finite) flags its world unstable.
+        use_graph: capture a step as a CUDA graph (default: on CUDA devices); ignored on CPU.
+    """
+
+    def __init__(
+        self,
+        model: Model,
+        dt: float = 2.0e-3,
+        substeps: int = 8,
+        *,
+        magnet_every_substep: bool = False,
+        strain_limit: float = 0.5,
+        speed_limit: float = 20.0,
+        use_graph: bool | None = None,
+    ):
+        from .kernels import xpbd
+
+        self._k = xpbd
+        self.model = model
+        self.dt = float(dt)
+        self.substeps = int(substeps)
+        if self.dt <= 0 or self.substeps < 1:
+            raise ValueError("dt must be > 0 and substeps >= 1")
+        self.dt_sub = self.dt / self.substeps
+        self.magnet_every_substep = bool(magnet_every_substep)
+        self.strain_limit = float(strain_limit)
+        self.speed_limit = float(speed_limit)
+        self.use_graph = model.device.is_cuda if use_graph is None else bool(use_graph and model.device.is_cuda)
+        self._cmds = {}
+        self._graphs = {}
+
+    # ------------------------------------------------------------------------------------------------------------
+    def initial_state(self) -> State:
+        """Every world at its rest shape on its floor, at rest, t = 0, magnet poses evaluated."""
+        state = self.model.state()
+        self._magnet_poses(state)
+        return state
+
+    @property
+    def launches_per_substep(self) -> float:
+        """Kernel launches per substep (3 per substep + 4 per step: EPM pose, IPM poses, wrench, distribution)."""
+        per_step = 5  # epm pose, ipm poses, wrench, zero f_ext, distribute
+        if self.magnet_every_substep:
+            return 3.0 + per_step
+        return 3.0 + per_step / self.substeps
+
+    # ------------------------------------------------------------------------------------------------------------
+    def _magnet_poses(self, state: State) -> None:
+        m, k = self.model, self._k
+        W = m.num_worlds
+        if m.path.kind == "sine":
+            wp.launch(k.epm_sine_pose, dim=W, inputs=[*m.path_arrays, self.dt_sub, state.step_count],
+                      outputs=[state.magnet_pos, state.magnet_rot], device=m.device)
+        else:
+            wp.launch(k.epm_keyframe_pose, dim=W, inputs=[*m.path_arrays, self.dt_sub, state.step_count],
+                      outputs=[state.magnet_pos, state.magnet_rot], device=m.device)
+        wp.launch(k.ipm_poses, dim=(W, 3), inputs=[m.mount_vertices, m.mount_local_pos, m.mount_local_rot,
+                                                    state.positions],
+                  outputs=[state.magnet_pos, state.magnet_rot], device=m.device)
+
+    def _wrench(self, state: State, moment: wp.array) -> None:
+        m = self.model
+        self._magnet_poses(state)
+        launch_world_wrenches(m, state, moment)
+        state.external_force.zero_()
+        wp.launch(self._k.distribute_wrench, dim=(m.num_worlds, 3),
+                  inputs=[m.mount_vertices, state.positions, state.magnet_pos, state.magnet_force,
+                          state.magnet_torque],
+                  outputs=[state.external_force], device=m.device)
+
+    def _substep_cmds(self, state: State):
+        """The three substep launches, recorded once per state (a recorded launch costs ~3 µs instead of ~16 µs)."""
+        key = id(state)
+        cmds = self._cmds.get(key)
+        if cmds is not None and cmds[0] is state:
+            return cmds[1]
+        m, k, dt = self.model, self._k, self.dt_sub
+        W, V = m.num_worlds, m.num_vertices
+        n_elem = m.num_edges + m.num_hinges + m.num_anchors
+        c1 = wp.launch(k.integrate_vertices, dim=(W, V),
+                       inputs=[m.inv_mass, m.gravity, m.damping, dt, state.external_force, state.unstable],
+                       outputs=[state.positions, state.velocities, state.prev_positions],
+                       device=m.device, record_cmd=True)
+        c2 = wp.launch(k.solve_constraints, dim=(W, n_elem),
+                       inputs=[m.inv_mass, m.split, m.split_hinge, m.edges, m.rest_length, m.bar_stiffness, m.hinges,
+                               m.hinge_rest_angle, m.hinge_length, m.hinge_label, m.hinge_stiffness,
+                               m.hinge_damping, m.anchor_vertex, m.anchor_stiffness, dt, self.strain_limit,
+                               state.positions, state.prev_positions, state.anchor_target],
+                       outputs=[state.delta, state.bar_strain, state.crease_angle, state.unstable],
+                       device=m.device, record_cmd=True)
+        c3 = wp.launch(k.apply_corrections, dim=(W, V),
+                       inputs=[m.floor_incline, m.mu_static, m.mu_kinetic, dt, self.speed_limit,
+                               state.prev_positions],
+                       outputs=[state.delta, state.positions, state.velocities, state.contact, state.unstable,
+                                state.step_count],
+                       device=m.device, record_cmd=True)
+        cmds = (c1, c2, c3)
+        self._cmds[key] = (state, cmds)
+        return cmds
+
+    def _one_step(self, state: State, moment: wp.array) -> None:
+        cmds = self._substep_cmds(state)
+        for s in range(self.substeps):
+            if s == 0 or self.magnet_every_substep:
+                self._wrench(state, moment)
+            for c in cmds:
+                c.launch()
+
+    # ------------------------------------------------------------------------------------------------------------
+    def step(self, state: State, num_steps: int = 1, *, epm: bool = True) -> State:
+        """Advance every world by ``num_steps`` steps of ``dt`` (in place; returns ``state``).
+
+        ``epm=False`` runs with the EPM absent (its moment zeroed), as :meth:`settle` does.
+        """
+        moment = self.model.magnet_moment if epm else self.model.magnet_moment_parked
+        if self.use_graph:
+            key = (id(state), epm)
+            g = self._graphs.get(key)
+            if g is None or g[0] is not state:
+                self._substep_cmds(state)
+                with wp.ScopedCapture(device=self.model.device) as capture:
+                    self._one_step(state, moment)
+                g = (state, capture.graph)
+                self._graphs[key] = g
+            for _ in range(int(num_steps)):
+                wp.capture_launch(g[1])
+            return state
+        for _ in range(int(num_steps)):
+            self._one_step(state, moment)
+        return state
+
+    def settle(self, state: State, duration: float = 0.3, *, reset_time: bool = True) -> State:
+        """Let every world settle under gravity with the EPM absent (parked far away) for ``duration`` [s].
+
+        With ``reset_time`` the clock (and so the EPM path) restarts at t = 0 afterwards and velocities are zeroed,
+        so a gait starts from a settled worm.
+        """
+        self.step(state, int(round(duration / self.dt)), epm=False)
+        if reset_time:
+            state.step_count.zero_()
+            state.velocities.zero_()
+        self._magnet_poses(state)
+        return state
+
+    # ------------------------------------------------------------------------------------------------------------
+    def snapshot(self, state: State) -> dict:
+        """Host copies (NumPy) of the state, keyed as in docs/architecture.md.
+
+        Returns ``positions (W, V, 3)``, ``velocities (W, V, 3)`` [m, m/s]; ``magnet_pos (W, 4, 3)`` [m],
+        ``magnet_rot (W, 4, 3, 3)`` (magnet -> world; slots EPM, tail, centre, head); ``magnet_force``,
+        ``magnet_torque (W, 4, 3)`` [N, N·m]; ``crease_angle (W, H)`` [rad]; ``bar_strain (W, E)``;
+        ``anchor_force (W, A, 3)`` [N] = strength × (x − target), the pull of the worm on the anchor (force plate);
+        ``contact (W, V)`` bool; ``unstable (W,)`` bool; ``time (W,)`` [s].
+        """
+        m = self.model
+        self._magnet_poses(state)  # poses at the current time (the wrench kept the step's starting ones)
+        x = state.positions.numpy()
+        q = state.magnet_rot.numpy()
+        A = m.num_anchors
+        if A:
+            ak = np.broadcast_to(m.anchor_stiffness.numpy(), (m.num_worlds, A))
+            anchor_force = ak[..., None] * (x[:, m.anchor_vertex.numpy()] - state.anchor_target.numpy())
+        else:
+            anchor_force = np.zeros((m.num_worlds, 0, 3), np.float32)
+        return {
+            "positions": x,
+            "velocities": state.velocities.numpy(),
+            "magnet_pos": state.magnet_pos.numpy(),
+            "magnet_rot": quat_wxyz_to_matrix(quat_xyzw_to_wxyz(q)).astype(np.float32),
+            "magnet_force": state.magnet_force.numpy(),
+            "magnet_torque": state.magnet_torque.numpy(),
+            "crease_angle": state.crease_angle.numpy(),
+            "bar_strain": state.bar_strain.numpy(),
+            "anchor_force": anchor_force.astype(np.float32),
+            "contact": state.contact.numpy().astype(bool),
+            "unstable": state.unstable.numpy().astype(bool),
+            "time": (state.step_count.numpy().astype(np.float64) * self.dt_sub),
+        }
+
+    def set_anchor_targets(self, state: State, targets) -> None:
+        """Set anchor targets [m], shape (A, 3) (all worlds) or (W, A, 3)."""
+        m = self.model
+        t = np.broadcast_to(np.asarray(targets, np.float32), (m.num_worlds, m.num_anchors, 3))
+        state.anchor_target.assign(wp.array(np.ascontiguousarray(t), dtype=wp.vec3, device=m.device))
