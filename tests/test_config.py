@@ -1,0 +1,108 @@
+"""Config loading: every mistake stops before any work with a message naming the key path, the value and what was
+expected; overrides; packaged configs."""
+
+import os
+import subprocess
+import sys
+
+import pytest
+
+from warpworm.config import ConfigError, check_output_dir, config_packaged_names, load_config
+from warpworm.randomize import Uniform
+
+GOOD = {"num_samples": 8, "shard_size": 4, "sim": {"frame_times": [0.1, 0.2]}}
+
+
+def _err(raw, overrides=()):
+    with pytest.raises(ConfigError) as e:
+        load_config(raw, list(overrides))
+    return str(e.value)
+
+
+@pytest.mark.parametrize("raw, must", [
+    ({"bogus": 1}, ["bogus", "unknown key", "num_samples"]),
+    ({"sim": {"substepz": 3}}, ["sim.substepz", "unknown key", "substeps"]),
+    ({"sim": {"substeps": "many"}}, ["sim.substeps", "'many'", "integer"]),
+    ({"sim": {"dt": "0.1"}}, ["sim.dt", "'0.1'", "number"]),
+    ({"render": {"camera_per_frame": "yes"}}, ["render.camera_per_frame", "'yes'", "true or false"]),
+    ({"num_samples": -5}, ["num_samples", "-5", ">= 1"]),
+    ({"shard_size": 0}, ["shard_size", "0", ">= 1"]),
+    ({"sim": {"worlds": -1}}, ["sim.worlds", "-1", ">= 1"]),
+    ({"sim": {"dt": 0}}, ["sim.dt", "0", "> 0"]),
+    ({"render": {"width": -64}}, ["render.width", "-64", ">= 8"]),
+    ({"randomize": {"worm": {"mu_static": {"uniform": [0.3, 0.2]}}}}, ["randomize.worm.mu_static", "0.3", "low <= high"]),
+    ({"randomize": {"camera": {"distance": {"loguniform": [0.5, 0.1]}}}}, ["randomize.camera.distance", "low <= high"]),
+    ({"randomize": {"worm": {"gait": "crawl"}}}, ["randomize.worm.gait", "'crawl'", "peristaltic"]),
+    ({"randomize": {"worm": {"gait": {"choice": ["omega", "slither"]}}}}, ["randomize.worm.gait", "'slither'", "omega"]),
+    ({"randomize": {"worm": {"magnet_model": "magic"}}}, ["randomize.worm.magnet_model", "'magic'", "analytic"]),
+    ({"randomize": {"worm": {"kalpha": 1.0}}}, ["randomize.worm.kalpha", "unknown parameter", "hinge_stiffness"]),
+    ({"randomize": {"weather": {}}}, ["randomize.weather", "unknown group", "camera"]),
+    ({"randomize": {"worm": {"a": -0.01}}}, ["randomize.worm.a", "-0.01", "> 0"]),
+    ({"randomize": {"worm": {"a": {"gauss": [1, 2]}}}}, ["randomize.worm.a", "gauss", "uniform"]),
+    ({"randomize": {"worm": {"a": {"normal": {"mean": 0.02}}}}}, ["randomize.worm.a", "normal", "std"]),
+    ({"randomize": {"camera": {"fov_y": {"normal": {"mean": 0.7, "std": 0.1, "low": 0.9, "high": 0.5}}}}},
+     ["randomize.camera.fov_y", "low <= high"]),
+    ({"sim": {"frame_times": [0.5, 0.2]}}, ["sim.frame_times", "increasing"]),
+    ({"sim": {"frame_times": [0.1, 0.2, 0.3]}, "shard_size": 4}, ["shard_size", "4", "multiple"]),
+    ({"output": {"compression": "zstd"}}, ["output.compression", "'zstd'", "lzf"]),
+    ({"sim": [1, 2]}, ["sim", "mapping"]),
+])
+def test_bad_config_names_path_value_and_expectation(raw, must):
+    msg = _err({**GOOD, **raw})
+    for m in must:
+        assert m in msg, (m, msg)
+
+
+def test_all_errors_reported_at_once():
+    msg = _err({"bogus": 1, "sim": {"dt": -1}, "randomize": {"worm": {"gait": "crawl"}}})
+    assert "bogus" in msg and "sim.dt" in msg and "randomize.worm.gait" in msg
+
+
+def test_dotted_overrides_and_yaml_values():
+    cfg = load_config(GOOD, ["sim.substeps=20", "randomize.worm.mu_static={uniform: [0.2, 0.3]}", "name=x"])
+    assert cfg.sim.substeps == 20 and cfg.name == "x"
+    assert cfg.randomize["worm"]["mu_static"] == Uniform(0.2, 0.3)
+    assert "sim.substepz" in _err(GOOD, ["sim.substepz=3"])
+    assert "expected key.path=value" in _err(GOOD, ["sim.substeps"])
+
+
+def test_resolved_config_round_trips_through_yaml():
+    import yaml
+
+    cfg = load_config("default")
+    again = load_config(yaml.safe_load(cfg.to_yaml()))
+    assert again.to_dict() == cfg.to_dict() or yaml.safe_dump(again.to_dict()) == yaml.safe_dump(cfg.to_dict())
+
+
+def test_packaged_configs_all_validate():
+    names = config_packaged_names()
+    assert "default" in names and len(names) >= 6
+    for n in names:
+        load_config(n)
+    assert "expected a YAML file path or a packaged name" in _err("no_such_config")
+
+
+def test_output_folder_checks(tmp_path):
+    (tmp_path / "full").mkdir()
+    (tmp_path / "full" / "x").write_text("1")
+    with pytest.raises(ConfigError, match="not empty"):
+        check_output_dir(tmp_path / "full", resume=False)
+    check_output_dir(tmp_path / "full", resume=True)
+    check_output_dir(tmp_path / "new" / "deeper", resume=False)
+    assert not (tmp_path / "new").exists()  # checking writes nothing
+    # /proc is read-only for everyone, root included (chmod is not, for root)
+    with pytest.raises(ConfigError, match="writable"):
+        check_output_dir("/proc/warpworm-out", resume=False)
+
+
+def test_cli_bad_config_exits_2_and_writes_nothing(tmp_path):
+    out = tmp_path / "o"
+    r = subprocess.run([sys.executable, "-m", "warpworm", "generate", "default", "--out", str(out), "sim.dt=-1",
+                        "randomize.worm.gait=crawl"], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2
+    assert "sim.dt: got -1; expected > 0" in r.stderr and "randomize.worm.gait: got 'crawl'" in r.stderr
+    assert not out.exists()
+    r = subprocess.run([sys.executable, "-m", "warpworm", "generate", "default", "--out", "/proc/ww"],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "--out" in r.stderr and "writable" in r.stderr
+    assert os.environ.get("X") is None

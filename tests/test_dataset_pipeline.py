@@ -1,0 +1,259 @@
+"""Pipeline I/O machinery against the deterministic fake stages (tests/test_dataset_fakes.py): determinism across
+shard sizes and worker counts, schema, readers, unstable-world replacement, crash-and-resume, refusals, write errors."""
+
+import errno
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+import yaml
+
+from warpworm import dataset as ds
+from warpworm.config import ConfigError, load_config
+from warpworm.pipeline import generate
+
+FAKE = "test_dataset_fakes:FakeStages"
+TESTS = Path(__file__).parent
+
+
+def tiny(**over):
+    raw = {"num_samples": 22, "shard_size": 6, "seed": 7,
+           "sim": {"worlds": 2, "frame_times": [0.1, 0.3]}, "render": {"width": 24, "height": 16},
+           "output": {"preview": False},
+           # the fake reports worlds with k_alpha > 0.9 unstable: about 1 in 5 is dropped and redrawn
+           "randomize": {"worm": {"hinge_stiffness": {"uniform": [0.5, 1.0]}}}}
+    for k, v in over.items():
+        if isinstance(v, dict):
+            raw[k] = {**raw.get(k, {}), **v}
+        else:
+            raw[k] = v
+    return load_config(raw)
+
+
+def run(cfg, out, **kw):
+    kw.setdefault("progress", False)
+    return generate(cfg, out, stages=FAKE, **kw)
+
+
+def everything(root):
+    r = ds.open(root)
+    return {k: r.read(k) for k in r.keys()}, r
+
+
+def assert_same(a, b):
+    assert set(a) == set(b)
+    for k in a:
+        assert a[k].dtype == b[k].dtype and np.array_equal(a[k], b[k], equal_nan=a[k].dtype.kind == "f"), k
+
+
+def test_same_seed_same_arrays_and_seed_matters(tmp_path):
+    run(tiny(), tmp_path / "a")
+    run(tiny(), tmp_path / "b")
+    run(tiny(seed=8), tmp_path / "c")
+    a, _ = everything(tmp_path / "a")
+    b, _ = everything(tmp_path / "b")
+    c, _ = everything(tmp_path / "c")
+    assert_same(a, b)
+    assert not np.array_equal(a["rgb"], c["rgb"])
+    assert not np.array_equal(a["params/worm.hinge_stiffness"], c["params/worm.hinge_stiffness"])
+
+
+def test_shards_workers_and_batch_size_do_not_change_samples(tmp_path):
+    run(tiny(), tmp_path / "s6")  # 4 shards of 6 (last one 4)
+    run(tiny(shard_size=22, sim={"worlds": 5}), tmp_path / "s22")  # 1 shard, other batches
+    run(tiny(), tmp_path / "w2", workers=2)  # 2 spawned worker processes
+    a, ra = everything(tmp_path / "s6")
+    assert len(ra.shard_paths) == 4 and len(ra) == 22
+    b, rb = everything(tmp_path / "s22")
+    assert len(rb.shard_paths) == 1
+    c, _ = everything(tmp_path / "w2")
+    assert_same(a, b)
+    assert_same(a, c)
+
+
+def test_schema_attributes_and_readers(tmp_path):
+    cfg = tiny()
+    summary = run(cfg, tmp_path / "d")
+    data, r = everything(tmp_path / "d")
+    N, H, W = 22, 16, 24
+    P = len(json.loads(r.attrs["keypoint_names"]))
+    expect = {"rgb": ((N, H, W, 3), np.uint8), "depth": ((N, H, W), np.float32), "segmentation": ((N, H, W), np.uint8),
+              "camera/K": ((N, 3, 3), None), "camera/R": ((N, 3, 3), None), "camera/t": ((N, 3), None),
+              "poses/body": ((N, 4, 4), None), "poses/ipm": ((N, 3, 4, 4), None), "poses/epm": ((N, 4, 4), None),
+              "keypoints/world": ((N, P, 3), None), "keypoints/pixel": ((N, P, 2), None),
+              "keypoints/visibility": ((N, P), None), "sample_id": ((N,), None), "seed": ((N,), None)}
+    for k, (shape, dtype) in expect.items():
+        assert data[k].shape == shape, k
+        if dtype is not None:
+            assert data[k].dtype == dtype, k
+    assert data["creases/angle"].ndim == 2 and data["creases/angle"].shape[0] == N
+    assert set(np.unique(data["keypoints/visibility"])) <= {0, 1, 2}
+    assert np.array_equal(data["sample_id"], np.arange(N))
+    assert len(np.unique(data["seed"])) == N
+    # camera matrices: positive focal lengths, proper rotations
+    assert np.all(data["camera/K"][:, 0, 0] > 0) and np.all(data["camera/K"][:, 1, 1] > 0)
+    assert np.allclose(np.linalg.det(data["camera/R"]), 1)
+    # every randomized value is stored
+    names = json.loads(r.attrs["params_names"])
+    assert names == sorted(cfg.flat_distributions())
+    for n in names:
+        assert data[f"params/{n}"].shape == (N,)
+    # root attributes
+    a = r.attrs
+    for key in ("config_yaml", "schema_version", "warpworm_version", "warp_version", "units", "keypoint_names",
+                "crease_order", "segmentation_ids", "quaternion_order"):
+        assert key in a, key
+    assert a["quaternion_order"] == "wxyz"
+    assert load_config(yaml.safe_load(a["config_yaml"])).to_yaml() == cfg.to_yaml()  # (NaN != NaN in dicts)
+    with h5py.File(r.shard_paths[0]) as f:
+        assert f["depth"].attrs["unit"] == "m" and f["rgb"].compression == "lzf" and f["rgb"].chunks == (1, H, W, 3)
+    # manifest
+    m = json.loads((tmp_path / "d" / "manifest.json").read_text())
+    assert m["complete"] and m["samples_written"] == N and len(m["shards"]) == 4
+    assert yaml.safe_dump(m["config"]) == yaml.safe_dump(cfg.to_dict()) and "warp" in m["versions"]
+    # random access == bulk read; the torch-style dataset
+    for i in (0, 5, 6, 21, -1):
+        s = r[i]
+        for k in ("rgb", "sample_id", "poses/ipm", "params/worm.gait"):
+            assert np.array_equal(s[k], data[k][i]), (i, k)
+    assert np.array_equal(r.read("rgb", [21, 0, 7]), data["rgb"][[21, 0, 7]])
+    wd = ds.WormDataset(str(tmp_path / "d"), keys=("rgb", "sample_id"), transform=lambda s: {**s, "x": 1})
+    assert len(wd) == N and wd[13]["sample_id"] == 13 and wd[13]["x"] == 1
+    import pickle
+
+    wd2 = pickle.loads(pickle.dumps(ds.WormDataset(str(tmp_path / "d"))))  # DataLoader workers get a pickled copy
+    assert np.array_equal(wd2[3]["rgb"], data["rgb"][3])
+    assert summary.new_samples == N
+
+
+def test_unstable_worlds_are_replaced_deterministically_and_counted(tmp_path):
+    s = run(tiny(num_samples=60, shard_size=12), tmp_path / "u")
+    data, _ = everything(tmp_path / "u")
+    assert s.replaced_worlds > 0
+    assert np.all(data["params/worm.hinge_stiffness"] <= 0.9)  # no unstable world kept
+    assert int((data["attempt"][data["frame"] == 0] > 0).sum()) <= s.replaced_worlds
+    m = json.loads((tmp_path / "u" / "manifest.json").read_text())
+    assert m["summary"]["replaced_worlds"] == s.replaced_worlds
+
+
+def test_non_empty_folder_refused_and_config_change_refused_on_resume(tmp_path):
+    run(tiny(), tmp_path / "d")
+    with pytest.raises(ConfigError, match="not empty"):
+        run(tiny(), tmp_path / "d")
+    with pytest.raises(ConfigError, match="seed"):
+        run(tiny(seed=99), tmp_path / "d", resume=True)
+    s = run(tiny(), tmp_path / "d", resume=True)  # nothing left to do
+    assert s.shards_written == 0 and s.shards_done_before == 4
+
+
+def _cli(out, *extra, env_extra=None):
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(TESTS), os.environ.get("PYTHONPATH", "")]))
+    env.update(env_extra or {})
+    args = [sys.executable, "-m", "warpworm", "generate", "default", "--out", str(out), "--stages", FAKE,
+            "--no-progress", "--num", "22", "--seed", "7", "shard_size=6", "sim.worlds=2", "sim.frame_times=[0.1, 0.3]",
+            "render.width=24", "render.height=16", "output.preview=false",
+            "randomize.worm.hinge_stiffness={uniform: [0.5, 1.0]}", *extra]
+    return args, env
+
+
+def _wait_for_temp(out, proc, timeout=60):
+    t0 = time.time()
+    while time.time() - t0 < timeout:
+        tmps = list(Path(out).glob(".shard-*.tmp-*")) if Path(out).exists() else []
+        if tmps:
+            return tmps
+        assert proc.poll() is None, proc.communicate()
+        time.sleep(0.02)
+    raise AssertionError("no shard was started")
+
+
+def _reference(tmp_path):
+    # The same job as _cli's, uninterrupted, in this process (the default.yaml randomization + the overrides).
+    cfg = load_config("default", ["shard_size=6", "sim.worlds=2", "sim.frame_times=[0.1, 0.3]", "render.width=24",
+                                  "render.height=16", "output.preview=false",
+                                  "randomize.worm.hinge_stiffness={uniform: [0.5, 1.0]}"], num_samples=22, seed=7)
+    run(cfg, tmp_path / "ref")
+    return everything(tmp_path / "ref")[0]
+
+
+def _check_complete_and_equal(out, ref):
+    assert not list(Path(out).glob(".*.tmp-*"))
+    data, r = everything(out)
+    assert len(r) == 22 and np.array_equal(np.sort(data["sample_id"]), np.arange(22))
+    assert json.loads((Path(out) / "manifest.json").read_text())["complete"]
+    for p in r.shard_paths:
+        with h5py.File(p) as f:
+            assert f.attrs["complete"]
+    assert_same(data, ref)
+
+
+def test_worker_killed_mid_shard_then_resume(tmp_path):
+    out = tmp_path / "job"
+    args, env = _cli(out, "--workers", "2", env_extra={"WARPWORM_FAKE_SLEEP": "0.15"})
+    proc = subprocess.Popen(args, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    tmp = _wait_for_temp(out, proc)[0]
+    victim = int(tmp.name.rsplit("-", 1)[1])  # the worker writing that shard
+    os.kill(victim, signal.SIGKILL)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 1 and "--resume" in err, err
+    done = sorted(p.name for p in out.glob("shard-*.h5"))
+    assert len(done) < 4  # the killed worker's shard is missing
+    args, env = _cli(out, "--resume", "--workers", "2")
+    r = subprocess.run(args, env=env, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    _check_complete_and_equal(out, _reference(tmp_path))
+
+
+def test_whole_job_killed_then_resume(tmp_path):
+    out = tmp_path / "job"
+    args, env = _cli(out, "--workers", "2", env_extra={"WARPWORM_FAKE_SLEEP": "0.15"})
+    proc = subprocess.Popen(args, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    tmps = _wait_for_temp(out, proc)
+    proc.kill()  # kill -9 of the job's main process
+    proc.wait(timeout=30)
+    for t in tmps:  # orphaned workers notice and exit (watchdog), so nothing keeps writing
+        pid = int(t.name.rsplit("-", 1)[1])
+        for _ in range(100):
+            try:
+                os.kill(pid, 0)
+            except ProcessLookupError:
+                break
+            time.sleep(0.05)
+        else:
+            raise AssertionError(f"worker {pid} outlived its parent")
+    args, env = _cli(out, "--resume")
+    r = subprocess.run(args, env=env, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    _check_complete_and_equal(out, _reference(tmp_path))
+
+
+def test_disk_full_gives_clear_error_and_keeps_completed_shards(tmp_path, monkeypatch):
+    real_write = ds.ShardWriter.write
+
+    def write(self, row, batch, step=1):
+        if self.index == 2:  # the disk fills up while shard 2 is written
+            raise ds.DatasetWriteError(errno.ENOSPC, f"write to {self.tmp} failed: No space left on device")
+        return real_write(self, row, batch, step)
+
+    monkeypatch.setattr(ds.ShardWriter, "write", write)
+    with pytest.raises(ds.DatasetWriteError, match="No space left"):
+        run(tiny(), tmp_path / "d")
+    names = sorted(p.name for p in (tmp_path / "d").iterdir())
+    assert names == ["manifest.json", "shard-00000.h5", "shard-00001.h5"]
+    m = json.loads((tmp_path / "d" / "manifest.json").read_text())
+    assert not m["complete"] and [s["index"] for s in m["shards"]] == [0, 1]
+    monkeypatch.setattr(ds.ShardWriter, "write", real_write)
+    run(tiny(), tmp_path / "d", resume=True)
+    assert len(ds.open(tmp_path / "d")) == 22
+
+
+def test_read_only_folder_refused_before_work(tmp_path):
+    with pytest.raises(ConfigError, match="writable"):
+        run(tiny(), "/proc/warpworm-dataset")

@@ -1,0 +1,595 @@
+"""Dataset generation: batch of W worlds -> settle -> drive the EPM paths -> frames -> render -> write, shard by shard.
+
+Sample ids and what determines them (so that any shard size, worker count, engine or device gives the same samples):
+
+* sample ``i`` is frame ``i % F`` of trajectory ``i // F`` (F = ``len(sim.frame_times)``);
+* trajectory ``j``'s physical parameters are drawn from the counter-based generator keyed by (seed, j, attempt);
+  attempt starts at 0 and a world that goes unstable is redrawn with attempt + 1 (dropped, replaced, counted);
+* its camera is keyed by (seed, j) (or by (seed, i) with ``render.camera_per_frame``), its appearance by (seed, j) and
+  its sensor noise by (seed, i);
+* shard k holds ids [k·S, min((k+1)·S, N)): resuming a killed job means redoing the missing shards.
+
+The pipeline is independent of the physics and the renderer: it calls a *stages* object (see :class:`Stages`) given as
+``"module:attribute"`` so that worker processes can import it. The default, :class:`WarpStages`, is warpworm's
+simulator and renderer.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import importlib
+import json
+import math
+import os
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+import yaml
+
+from . import dataset as ds
+from . import randomize as rnd
+from .config import BATCH_SHARED, ConfigError, DatasetConfig, check_output_dir, config_from_dict
+from .params import WormParams
+
+DEFAULT_STAGES = "warpworm.pipeline:WarpStages"
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# Stage interface
+@dataclass
+class SimResult:
+    """What :meth:`Stages.simulate_batch` returns for B worlds.
+
+    frames: one snapshot dict per ``sim.frame_times`` entry, each with at least ``positions (B,V,3)``,
+        ``magnet_pos (B,4,3)``, ``magnet_rot (B,4,3,3)``, ``crease_angle (B,H)``, ``bar_strain (B,E)`` [SI].
+    unstable: (B,) bool: the world went unstable at some point (it is dropped and redrawn).
+    """
+
+    frames: list[dict[str, np.ndarray]]
+    unstable: np.ndarray
+
+
+@dataclass
+class Cameras:
+    """Pinhole cameras for B images (OpenCV: +z forward, +y down, x_cam = R x_world + t).
+
+    K (B,3,3) [px]; R (B,3,3); t (B,3) [m]; width, height [px].
+    """
+
+    K: np.ndarray
+    R: np.ndarray
+    t: np.ndarray
+    width: int
+    height: int
+
+
+class Stages(Protocol):
+    """The two heavy stages of the pipeline (simulation, rendering), pluggable for tests and other engines."""
+
+    def metadata(self, cfg: DatasetConfig) -> dict:
+        """Static per-dataset facts: ``keypoint_names`` (P,), ``triangles (T,3)``, ``triangle_segment (T,)``,
+        ``hinges (H,4)``, ``hinge_label (H,)``, ``edges (E,2)``, ``num_vertices``."""
+
+    def simulate_batch(self, params: WormParams, num_worlds: int, cfg: DatasetConfig) -> SimResult:
+        """Settle for ``sim.settle_time`` then drive the EPM paths; snapshots at ``sim.frame_times``."""
+
+    def render_batch(self, frame: dict[str, np.ndarray], params: WormParams, cameras: Cameras,
+                     appearance: dict[str, np.ndarray], seeds: np.ndarray, cfg: DatasetConfig) -> dict[str, np.ndarray]:
+        """Render B images of one snapshot per world and compute their labels.
+
+        Returns name -> (B, ...) arrays for the image and label datasets of :data:`warpworm.dataset.SCHEMA`
+        (rgb, depth, segmentation, poses/*, keypoints/*, creases/angle, bars/strain, worm/vertices, labels/*).
+        ``appearance`` holds the drawn ``light.*``, ``color.*``, ``texture.*``, ``sensor.*`` values, (B,) each;
+        ``seeds`` (B,) int64 seeds all pixel noise must derive from.
+        """
+
+
+def load_stages(spec: str | Any) -> Any:
+    """``"package.module:attr"`` -> a stages instance (attr is instantiated if it is a class or factory)."""
+    if not isinstance(spec, str):
+        return spec
+    mod, _, attr = spec.partition(":")
+    obj = getattr(importlib.import_module(mod), attr or "Stages")
+    return obj() if callable(obj) else obj
+
+
+class WarpStages:
+    """warpworm's own simulator (``warpworm.simulator``) and rasterizer (``warpworm.render``)."""
+
+    def __init__(self):
+        from . import stages_warp  # noqa: F401 - imported lazily: needs the simulator and renderer modules
+
+        self._impl = stages_warp.WarpStagesImpl()
+
+    def metadata(self, cfg):
+        return self._impl.metadata(cfg)
+
+    def simulate_batch(self, params, num_worlds, cfg):
+        return self._impl.simulate_batch(params, num_worlds, cfg)
+
+    def render_batch(self, frame, params, cameras, appearance, seeds, cfg):
+        return self._impl.render_batch(frame, params, cameras, appearance, seeds, cfg)
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# Parameters
+_WORM_VECTOR = {"epm_size": ("epm_size_x", "epm_size_y", "epm_size_z"),
+                "ipm_moment": ("ipm_moment_tail", "ipm_moment_centre", "ipm_moment_head")}
+_WORM_SHARED = {"gait", "backward", "magnet_model"}
+
+
+def draw_worm(cfg: DatasetConfig, traj: np.ndarray, attempt: np.ndarray) -> rnd.Draws:
+    """Draw the ``worm.*`` parameters of trajectories ``traj`` (n,) at ``attempt`` (n,)."""
+    dists = {f"worm.{k}": v for k, v in cfg.randomize["worm"].items()}
+    d = rnd.draw(dists, cfg.seed, traj, attempt)
+    # kinetic friction can't exceed static: clip per sample (and record the clipped value).
+    d.values["worm.mu_kinetic"] = np.minimum(d["worm.mu_kinetic"], d["worm.mu_static"])
+    return d
+
+
+def worm_params(cfg: DatasetConfig, draws: rnd.Draws, sel: np.ndarray | slice = slice(None)) -> WormParams:
+    """WormParams for the selected worlds of ``draws`` (the batch-shared fields must be equal over ``sel``)."""
+    p = WormParams(n_units=cfg.sim.n_units)
+    for name, arr in draws.values.items():
+        group, key = name.split(".", 1)
+        if group != "worm":
+            continue
+        a = arr[sel]
+        if key in _WORM_SHARED:
+            setattr(p, key, bool(a[0]) if key == "backward" else str(a[0]))
+        elif not any(key in comps for comps in _WORM_VECTOR.values()):
+            setattr(p, key, np.asarray(a, dtype=np.float64))
+    for vec, comps in _WORM_VECTOR.items():
+        setattr(p, vec, np.stack([np.asarray(draws[f"worm.{c}"][sel], dtype=np.float64) for c in comps], axis=1))
+    return p
+
+
+def draw_group(cfg: DatasetConfig, group: str, index: np.ndarray) -> rnd.Draws:
+    return rnd.draw({f"{group}.{k}": v for k, v in cfg.randomize[group].items()}, cfg.seed, index)
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# Cameras
+def look_at_cameras(cfg: DatasetConfig, target: np.ndarray, cam: rnd.Draws, keys: np.ndarray) -> Cameras:
+    """Cameras on a shell around ``target`` (B,3) from drawn camera.* values (B,); vectorized over B.
+
+    Position = target + jitter + distance * (cos el cos az, cos el sin az, sin el); optical axis toward the jittered
+    target; image x axis horizontal before ``roll``. Square pixels, principal point at the image centre.
+    """
+    w, h = cfg.render.width, cfg.render.height
+    # jitter direction: 3 more uniforms from the same keys -> a random unit vector (Gaussian via inverse CDF)
+    g = np.stack([rnd.norm_ppf(rnd.uniform01(keys, "camera.lookat_dir", k)) for k in range(3)], axis=1)
+    g /= np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-12)
+    tgt = target + g * cam["camera.lookat_jitter"][:, None]
+    el, az, dist = cam["camera.elevation"], cam["camera.azimuth"], cam["camera.distance"]
+    offset = np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], axis=1)
+    C = tgt + dist[:, None] * offset
+    fwd = -offset
+    up = np.array([0.0, 0.0, 1.0])
+    right = np.cross(fwd, up)
+    right /= np.maximum(np.linalg.norm(right, axis=1, keepdims=True), 1e-12)
+    down = np.cross(fwd, right)
+    c, s = np.cos(cam["camera.roll"])[:, None], np.sin(cam["camera.roll"])[:, None]
+    right, down = c * right + s * down, -s * right + c * down
+    R = np.stack([right, down, fwd], axis=1)  # rows: camera axes in world -> world->camera rotation
+    t = -np.einsum("bij,bj->bi", R, C)
+    f = 0.5 * h / np.tan(0.5 * cam["camera.fov_y"])
+    K = np.zeros((len(f), 3, 3))
+    K[:, 0, 0] = f
+    K[:, 1, 1] = f
+    K[:, 0, 2] = 0.5 * w
+    K[:, 1, 2] = 0.5 * h
+    K[:, 2, 2] = 1.0
+    return Cameras(K=K, R=R, t=t, width=w, height=h)
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+@dataclass
+class ShardStats:
+    """What one shard cost and produced."""
+
+    index: int
+    count: int
+    trajectories: int = 0
+    replaced: int = 0
+    sim_s: float = 0.0
+    render_s: float = 0.0
+    write_s: float = 0.0
+    total_s: float = 0.0
+    file: str = ""
+    bytes: int = 0
+
+
+def _take(d: dict, sel) -> dict:
+    return {k: v[sel] for k, v in d.items()}
+
+
+def _simulate_with_replacement(stages, cfg: DatasetConfig, traj: np.ndarray, stats: ShardStats):
+    """Simulate trajectories ``traj`` (B,); unstable worlds are redrawn with attempt + 1 until stable.
+
+    Returns (frames: list of dicts (B, ...), draws of the accepted attempt, attempt (B,)).
+    """
+    B = len(traj)
+    attempt = np.zeros(B, dtype=np.int64)
+    frames: list[dict] | None = None
+    draws_out: dict[str, np.ndarray] = {}
+    todo = np.arange(B)
+    while todo.size:
+        if attempt[todo[0]] >= cfg.sim.max_attempts:
+            bad = traj[todo]
+            raise RuntimeError(f"trajectories {bad[:8].tolist()} were unstable in all {cfg.sim.max_attempts} attempts; "
+                               "narrow the randomization ranges, lower sim.dt or raise sim.substeps")
+        d = draw_worm(cfg, traj[todo], attempt[todo])
+        # split by the batch-shared fields (gait, direction, magnet model): one solver batch per combination
+        keys = np.stack([np.asarray(d[n], dtype=str) for n in BATCH_SHARED], axis=1)
+        _, group_of = np.unique(keys, axis=0, return_inverse=True)
+        group_of = group_of.reshape(-1)
+        unstable = np.zeros(todo.size, dtype=bool)
+        for g in np.unique(group_of):
+            sel = np.flatnonzero(group_of == g)
+            params = worm_params(cfg, d, sel)
+            t0 = time.perf_counter()
+            res = stages.simulate_batch(params, len(sel), cfg)
+            stats.sim_s += time.perf_counter() - t0
+            unstable[sel] = np.asarray(res.unstable, dtype=bool)
+            if frames is None:
+                frames = [{k: np.zeros((B,) + np.asarray(v).shape[1:], np.asarray(v).dtype) for k, v in f.items()}
+                          for f in res.frames]
+            ok = sel[~unstable[sel]]
+            for fi, f in enumerate(res.frames):
+                for k, v in f.items():
+                    frames[fi][k][todo[ok]] = np.asarray(v)[~unstable[sel]]
+        accepted = todo[~unstable]
+        for k, v in d.values.items():
+            if k not in draws_out:
+                draws_out[k] = np.empty(B, dtype=v.dtype)
+            draws_out[k][accepted] = v[~unstable]
+        stats.replaced += int(unstable.sum())
+        todo = todo[unstable]
+        attempt[todo] += 1
+    return frames, rnd.Draws(draws_out), attempt
+
+
+def root_attributes(cfg: DatasetConfig, meta: dict) -> dict:
+    """Root attributes every shard carries (and the manifest repeats)."""
+    import warpworm
+
+    return {
+        "format": "warpworm-dataset",
+        "schema_version": ds.SCHEMA_VERSION,
+        "warpworm_version": warpworm.__version__,
+        "warp_version": _warp_version(),
+        "config_yaml": cfg.to_yaml(),
+        "seed_master": cfg.seed,
+        "num_samples": cfg.num_samples,
+        "shard_size": cfg.shard_size,
+        "frame_times": np.asarray(cfg.sim.frame_times, dtype=np.float64),
+        "units": json.dumps(ds.UNITS),
+        "quaternion_order": ds.QUATERNION_ORDER,
+        "segmentation_ids": json.dumps(ds.SEGMENTATION_IDS),
+        "keypoint_names": json.dumps(list(meta["keypoint_names"])),
+        "crease_order": "creases/angle[c] is hinge c of the crease pattern: stencil crease_hinges[c] = (i, j, k, l), "
+                        "shared edge j-k; crease_labels[c]: 0 flat, 1 mountain, 2 valley",
+        "crease_hinges": np.asarray(meta["hinges"], dtype=np.int32),
+        "crease_labels": np.asarray(meta["hinge_label"], dtype=np.int8),
+        "bar_edges": np.asarray(meta["edges"], dtype=np.int32),
+        "mesh_triangles": np.asarray(meta["triangles"], dtype=np.int32),
+        "mesh_triangle_segment": np.asarray(meta["triangle_segment"], dtype=np.int32),
+        "params_names": json.dumps(sorted(cfg.flat_distributions())),
+    }
+
+
+@functools.lru_cache(maxsize=None)
+def _warp_version() -> str:
+    try:
+        import warp
+
+        return str(warp.__version__)
+    except Exception:  # noqa: BLE001 - the fake stages in tests do not need Warp
+        return "unavailable"
+
+
+def run_shard(cfg: DatasetConfig, out_dir, k: int, stages, progress=None) -> ShardStats:
+    """Produce and commit shard ``k``; the written content depends only on (cfg, k)."""
+    t_start = time.perf_counter()
+    stages = load_stages(stages)
+    start, stop = cfg.shard_range(k)
+    F = cfg.frames_per_trajectory
+    stats = ShardStats(index=k, count=stop - start)
+    meta = stages.metadata(cfg)
+    writer = ds.ShardWriter(out_dir, k, start, stop - start, root_attributes(cfg, meta),
+                            cfg.output.compression, cfg.output.compression_level)
+    try:
+        t_first, t_last = start // F, -(-stop // F)
+        W = cfg.sim.worlds
+        for c0 in range(t_first, t_last, W):
+            traj = np.arange(c0, min(c0 + W, t_last), dtype=np.int64)
+            frames, wdraws, attempt = _simulate_with_replacement(stages, cfg, traj, stats)
+            stats.trajectories += len(traj)
+            appearance = {}
+            for g in ("light", "color", "texture", "sensor"):
+                appearance.update(draw_group(cfg, g, traj).values)
+            targets = None
+            if not cfg.render.camera_per_frame:
+                # one camera per trajectory: aim at the worm's mean position over the frames
+                targets = np.mean([f["positions"].mean(axis=1) for f in frames], axis=0)
+                cams_traj = look_at_cameras(cfg, targets, draw_group(cfg, "camera", traj),
+                                            rnd.sample_keys(cfg.seed, traj))
+            for fi, frame in enumerate(frames):
+                sid = traj * F + fi
+                keep = sid < stop
+                if not keep.any():
+                    continue
+                sel = np.flatnonzero(keep)
+                sid = sid[sel]
+                fr = _take(frame, sel)
+                skeys = rnd.sample_keys(cfg.seed, sid)
+                if cfg.render.camera_per_frame:
+                    cams = look_at_cameras(cfg, fr["positions"].mean(axis=1), draw_group(cfg, "camera", sid), skeys)
+                    cam_draws = draw_group(cfg, "camera", sid).values
+                else:
+                    cams = Cameras(cams_traj.K[sel], cams_traj.R[sel], cams_traj.t[sel], cfg.render.width,
+                                   cfg.render.height)
+                    cam_draws = _take(draw_group(cfg, "camera", traj).values, sel)
+                seeds = rnd.derived_seed(skeys)
+                params = worm_params(cfg, wdraws, sel)
+                app = _take(appearance, sel)
+                t0 = time.perf_counter()
+                out = stages.render_batch(fr, params, cams, app, seeds, cfg)
+                stats.render_s += time.perf_counter() - t0
+                t0 = time.perf_counter()
+                rows = {
+                    **out,
+                    "camera/K": cams.K, "camera/R": cams.R, "camera/t": cams.t,
+                    "camera/position": -np.einsum("bji,bj->bi", cams.R, cams.t),
+                    "time": np.full(len(sel), cfg.sim.frame_times[fi], dtype=np.float32),
+                    "trajectory": traj[sel], "frame": np.full(len(sel), fi, dtype=np.int32),
+                    "attempt": attempt[sel].astype(np.int32), "sample_id": sid, "seed": seeds,
+                }
+                for name, v in {**_take(wdraws.values, sel), **app, **cam_draws}.items():
+                    rows[f"params/{name}"] = v
+                # rows of this frame: (traj - t_first) * F + fi  -> a strided slice (one hyperslab per dataset)
+                r0 = int((traj[sel[0]] - t_first) * F + fi)
+                _write_strided(writer, r0, F, rows)
+                stats.write_s += time.perf_counter() - t0
+            if progress is not None:
+                progress(int(np.minimum(traj * F + F, stop).sum() - np.minimum(traj * F, stop).sum()))
+        t0 = time.perf_counter()
+        final = writer.commit()
+        stats.write_s += time.perf_counter() - t0
+    except BaseException:
+        writer.abort()
+        raise
+    stats.file = final.name
+    stats.bytes = final.stat().st_size
+    stats.total_s = time.perf_counter() - t_start
+    return stats
+
+
+def _write_strided(writer: ds.ShardWriter, r0: int, step: int, rows: dict):
+    writer.write(r0, rows, step=step)
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+@dataclass
+class Summary:
+    """End-of-job summary (also stored in manifest.json)."""
+
+    out: str
+    num_samples: int
+    shards_total: int
+    shards_done_before: int
+    shards_written: int
+    replaced_worlds: int
+    wall_s: float
+    sim_s: float
+    render_s: float
+    write_s: float
+    workers: int
+    engine: str
+    new_samples: int = 0
+
+    @property
+    def samples_per_s(self) -> float:
+        """Samples written by this run per wall-clock second (whole job, previews excluded)."""
+        return self.new_samples / self.wall_s if self.wall_s > 0 else float("nan")
+
+    def text(self) -> str:
+        return (f"wrote {self.shards_written} shard(s) ({self.new_samples} samples; {self.shards_done_before} shard(s) "
+                f"were already complete) to {self.out} in {self.wall_s:.1f} s = {self.samples_per_s:.1f} samples/s "
+                f"with {self.workers} worker(s) [{self.engine}]; unstable worlds dropped and replaced: "
+                f"{self.replaced_worlds}; stage time (all workers): sim {self.sim_s:.1f} s, render {self.render_s:.1f} s, "
+                f"write {self.write_s:.1f} s")
+
+
+@functools.lru_cache(maxsize=None)
+def _versions() -> dict:
+    import h5py
+
+    import warpworm
+
+    return {"warpworm": warpworm.__version__, "warp": _warp_version(), "numpy": np.__version__,
+            "h5py": h5py.__version__, "python": sys.version.split()[0]}
+
+
+def _manifest(cfg: DatasetConfig, done: dict[int, ShardStats | dict], complete: bool, summary=None) -> dict:
+    shards = []
+    for k in sorted(done):
+        s = done[k]
+        s = dataclasses.asdict(s) if isinstance(s, ShardStats) else s
+        a, b = cfg.shard_range(k)
+        shards.append({"index": k, "file": ds.shard_name(k), "first_sample": a, "count": b - a,
+                       "bytes": s.get("bytes", 0), "replaced": s.get("replaced", 0)})
+    return {
+        "format": "warpworm-dataset", "schema_version": ds.SCHEMA_VERSION, "complete": complete,
+        "num_samples": cfg.num_samples, "shard_size": cfg.shard_size, "num_shards": cfg.num_shards,
+        "samples_written": int(sum(s["count"] for s in shards)), "shards": shards,
+        "config": cfg.to_dict(), "versions": _versions(), "quaternion_order": ds.QUATERNION_ORDER,
+        "units": ds.UNITS, "segmentation_ids": ds.SEGMENTATION_IDS,
+        "summary": dataclasses.asdict(summary) if summary is not None else None,
+    }
+
+
+def _config_diff(a, b, path="") -> list[str]:
+    if isinstance(a, dict) and isinstance(b, dict):
+        out = []
+        for k in sorted(set(a) | set(b)):
+            out += _config_diff(a.get(k), b.get(k), f"{path}.{k}" if path else str(k))
+        return out
+    if isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b):
+        return []
+    return [] if a == b else [f"{path}: dataset has {a!r}, this run asks for {b!r}"]
+
+
+def plan(cfg: DatasetConfig, out_dir, resume: bool) -> tuple[list[int], dict[int, dict]]:
+    """Which shards to write. On resume: check the config matches, delete temporaries and invalid shards."""
+    out = Path(out_dir)
+    done: dict[int, dict] = {}
+    mpath = out / ds.MANIFEST
+    if resume and mpath.is_file():
+        old = json.loads(mpath.read_text())
+        # compare as JSON round trips (NaN and tuples normalised the same way)
+        diff = _config_diff(json.loads(json.dumps(old["config"])), json.loads(json.dumps(cfg.to_dict())))
+        if diff:
+            raise ConfigError(["--resume: the config differs from the dataset's (same config, --num and --seed "
+                               "are needed to resume):"] + diff[:20])
+    if resume:
+        ds.clean_temporaries(out)
+        for k in range(cfg.num_shards):
+            p = out / ds.shard_name(k)
+            if p.exists():
+                a, b = cfg.shard_range(k)
+                if ds.shard_is_valid(p, a, b - a):
+                    done[k] = {"bytes": p.stat().st_size}
+                else:
+                    p.unlink()  # cannot happen with rename-on-complete, but never trust a damaged file
+    todo = [k for k in range(cfg.num_shards) if k not in done]
+    return todo, done
+
+
+def generate(cfg: DatasetConfig, out_dir, *, workers: int = 1, resume: bool = False, stages: str = DEFAULT_STAGES,
+             engine: str = "local", address: str | None = None, progress: bool = True,
+             preview: bool | None = None) -> Summary:
+    """Run a dataset job; returns its :class:`Summary`. See module docstring for what determines each sample."""
+    t0 = time.perf_counter()
+    check_output_dir(out_dir, resume)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    todo, done = plan(cfg, out, resume)
+    done_before = len(done)
+    ds.atomic_write_json(out / ds.MANIFEST, _manifest(cfg, done, complete=not todo))
+
+    from tqdm import tqdm
+
+    total_new = sum(cfg.shard_range(k)[1] - cfg.shard_range(k)[0] for k in todo)
+    bar = tqdm(total=total_new, unit="sample", disable=not progress, dynamic_ncols=True, smoothing=0.1,
+               desc=f"generate {cfg.name}", file=sys.stderr)
+    written: dict[int, ShardStats] = {}
+
+    def on_shard(st: ShardStats):
+        written[st.index] = st
+        done[st.index] = dataclasses.asdict(st)
+        ds.atomic_write_json(out / ds.MANIFEST, _manifest(cfg, done, complete=False))
+
+    from . import workers as wk
+
+    try:
+        wk.run_shards(cfg, out, todo, stages, workers=workers, engine=engine, address=address,
+                      on_progress=bar.update, on_shard=on_shard)
+    finally:
+        bar.close()
+    wall = time.perf_counter() - t0
+    summary = Summary(out=str(out), num_samples=cfg.num_samples, shards_total=cfg.num_shards,
+                      shards_done_before=done_before, shards_written=len(written),
+                      replaced_worlds=sum(s.replaced for s in written.values()), wall_s=wall,
+                      sim_s=sum(s.sim_s for s in written.values()), render_s=sum(s.render_s for s in written.values()),
+                      write_s=sum(s.write_s for s in written.values()), workers=workers, engine=engine,
+                      new_samples=sum(s.count for s in written.values()))
+    ds.atomic_write_json(out / ds.MANIFEST, _manifest(cfg, done, complete=True, summary=summary))
+    if cfg.output.preview if preview is None else preview:
+        try:
+            write_previews(cfg, out, stages)
+        except Exception as exc:  # noqa: BLE001 - a preview must never fail a finished dataset
+            print(f"warning: preview not written: {exc}", file=sys.stderr)
+    return summary
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# Previews
+def _depth_colour(depth: np.ndarray) -> np.ndarray:
+    import cv2
+
+    valid = depth > 0
+    out = np.zeros(depth.shape + (3,), np.uint8)
+    if valid.any():
+        lo, hi = np.percentile(depth[valid], [1, 99])
+        norm = np.clip((depth - lo) / max(hi - lo, 1e-9), 0, 1)
+        out = cv2.applyColorMap((255 * (1 - norm)).astype(np.uint8), cv2.COLORMAP_TURBO)[..., ::-1]
+        out[~valid] = 0
+    return out
+
+
+_SEG_PALETTE = np.array([[0, 0, 0], [90, 90, 90], [230, 25, 75], [245, 130, 48], [255, 225, 25], [60, 180, 75],
+                         [70, 240, 240], [0, 130, 200], [145, 30, 180], [240, 50, 230], [255, 255, 255]], np.uint8)
+
+
+def contact_sheet(samples: list[dict], scale: int = 2) -> np.ndarray:
+    """One row per sample: RGB with keypoints (green visible, red occluded), depth colour map, segmentation overlay."""
+    import cv2
+
+    rows = []
+    for s in samples:
+        rgb = s["rgb"].copy()
+        seg = _SEG_PALETTE[np.minimum(s["segmentation"], len(_SEG_PALETTE) - 1)]
+        over = (0.5 * rgb + 0.5 * seg).astype(np.uint8)
+        tiles = [rgb, _depth_colour(s["depth"]), over]
+        tiles = [cv2.resize(t, None, fx=scale, fy=scale, interpolation=cv2.INTER_NEAREST) for t in tiles]
+        for t in (tiles[0], tiles[2]):
+            for (u, v), vis in zip(s["keypoints/pixel"], s["keypoints/visibility"]):
+                if vis > 0:
+                    col = (0, 255, 0) if vis == 2 else (255, 0, 0)
+                    cv2.circle(t, (int(round(u * scale)), int(round(v * scale))), 2 * scale, col, -1)
+        rows.append(np.concatenate(tiles, axis=1))
+    return np.concatenate(rows, axis=0)
+
+
+def write_previews(cfg: DatasetConfig, out, stages=DEFAULT_STAGES, max_rows: int = 8) -> list[Path]:
+    """``preview.png``: contact sheet of the first samples; ``preview.mp4``: the frames of trajectory 0, resimulated
+    at 20 fps over ``sim.frame_times`` with the same draws (one world, small)."""
+    import cv2
+
+    out = Path(out)
+    reader = ds.open(out)
+    n = min(len(reader), max_rows)
+    paths = []
+    if n:
+        sheet = contact_sheet([reader[i] for i in range(n)])
+        cv2.imwrite(str(out / "preview.png"), sheet[..., ::-1])
+        paths.append(out / "preview.png")
+    # video: trajectory 0 with a dense frame list (same parameters and camera as in the dataset)
+    T = cfg.sim.frame_times[-1]
+    dense = dataclasses.replace(cfg, sim=dataclasses.replace(cfg.sim, frame_times=list(np.linspace(0, T, max(
+        2, int(T * 20) + 1))), worlds=1), shard_size=max(2, int(T * 20) + 1) * 1, num_samples=max(2, int(T * 20) + 1))
+    stg = load_stages(stages)
+    frames, wdraws, _ = _simulate_with_replacement(stg, dense, np.array([0]), ShardStats(0, 0))
+    target = np.mean([f["positions"].mean(axis=1) for f in frames], axis=0)
+    traj = np.array([0])
+    cams = look_at_cameras(cfg, target, draw_group(cfg, "camera", traj), rnd.sample_keys(cfg.seed, traj))
+    app = {}
+    for g in ("light", "color", "texture", "sensor"):
+        app.update(draw_group(cfg, g, traj).values)
+    vw = cv2.VideoWriter(str(out / "preview.mp4"), cv2.VideoWriter_fourcc(*"mp4v"), 20,
+                         (cfg.render.width, cfg.render.height))
+    for f in frames:
+        img = stg.render_batch(f, worm_params(cfg, wdraws), cams, app, np.zeros(1, np.int64), cfg)["rgb"][0]
+        vw.write(np.ascontiguousarray(img[..., ::-1]))
+    vw.release()
+    paths.append(out / "preview.mp4")
+    reader.close()
+    return paths

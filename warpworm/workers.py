@@ -1,0 +1,152 @@
+"""Scale-out: shards run in worker processes (one per core, ``spawn``), or as Ray tasks on a cluster.
+
+Why processes: Warp runs CPU kernels on one thread, so P cores need P processes. Why ``spawn``: Warp and h5py hold
+native state that must not be forked. Each shard is an independent task whose output depends only on (config, k), so
+the engine and worker count never change the data.
+
+A worker that dies (SIGKILL, out of memory) breaks the local pool: the job stops with a clear error, finished shards stay
+committed, the half-written shard is a temporary file, and ``--resume`` redoes exactly the missing shards. A worker whose
+parent dies exits by itself (a watchdog thread), so a killed job leaves no orphan writing files.
+"""
+
+from __future__ import annotations
+
+import os
+import queue as queue_mod
+import threading
+import time
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from typing import Callable
+
+_progress_queue = None
+
+
+def _init_worker(q, parent_pid: int):
+    global _progress_queue
+    _progress_queue = q
+
+    def watchdog():
+        while True:
+            if os.getppid() != parent_pid:
+                os._exit(1)  # parent gone (killed): stop writing at once
+            time.sleep(0.5)
+
+    threading.Thread(target=watchdog, daemon=True, name="warpworm-parent-watchdog").start()
+
+
+def _report(n: int):
+    if _progress_queue is not None:
+        _progress_queue.put(n)
+
+
+def _run_shard_task(cfg, out, k, stages):
+    from .pipeline import run_shard
+
+    return run_shard(cfg, out, k, stages, progress=_report)
+
+
+class WorkerError(RuntimeError):
+    """A worker failed; completed shards are intact and ``--resume`` continues the job."""
+
+
+def run_shards(cfg, out, todo: list[int], stages, *, workers: int = 1, engine: str = "local",
+               address: str | None = None, on_progress: Callable[[int], None] = lambda n: None,
+               on_shard: Callable = lambda st: None) -> None:
+    """Run shards ``todo``; calls ``on_progress(samples)`` as batches finish and ``on_shard(stats)`` per shard."""
+    if not todo:
+        return
+    if engine == "ray":
+        return _run_ray(cfg, out, todo, stages, address, on_progress, on_shard)
+    if engine != "local":
+        raise ValueError(f"--engine: got {engine!r}; expected 'local' or 'ray'")
+    if workers <= 1:
+        from .pipeline import run_shard
+
+        for k in todo:
+            on_shard(run_shard(cfg, out, k, stages, progress=on_progress))
+        return
+    _run_local_pool(cfg, out, todo, stages, workers, on_progress, on_shard)
+
+
+def _run_local_pool(cfg, out, todo, stages, workers, on_progress, on_shard):
+    import multiprocessing as mp
+
+    ctx = mp.get_context("spawn")
+    q = ctx.Queue()
+    # one thread per process: BLAS/OpenMP pools would oversubscribe the cores the other workers use
+    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(var, "1")
+    stop = threading.Event()
+
+    def drain():
+        while not stop.is_set() or not q.empty():
+            try:
+                on_progress(q.get(timeout=0.1))
+            except queue_mod.Empty:
+                continue
+            except (EOFError, OSError):
+                return
+
+    t = threading.Thread(target=drain, daemon=True)
+    t.start()
+    pool = ProcessPoolExecutor(max_workers=min(workers, len(todo)), mp_context=ctx, initializer=_init_worker,
+                               initargs=(q, os.getpid()))
+    try:
+        pending = {pool.submit(_run_shard_task, cfg, str(out), k, stages): k for k in todo}
+        while pending:
+            finished, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in finished:
+                k = pending.pop(fut)
+                try:
+                    st = fut.result()
+                except Exception as exc:  # noqa: BLE001 - re-raised with the recovery advice
+                    for f in pending:
+                        f.cancel()
+                    raise WorkerError(f"shard {k} failed in a worker: {type(exc).__name__}: {exc}. Completed shards "
+                                      "are intact; rerun the same command with --resume to finish the job") from exc
+                on_shard(st)
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+        stop.set()
+        t.join(timeout=2)
+
+
+def _run_ray(cfg, out, todo, stages, address, on_progress, on_shard):
+    try:
+        import ray
+    except ImportError:
+        raise WorkerError("--engine ray needs Ray: pip install 'warpworm[ray]'") from None
+    ray.init(address=address, ignore_reinit_error=True, log_to_driver=False,
+             runtime_env={"env_vars": {"OMP_NUM_THREADS": "1"}})
+    task = ray.remote(num_cpus=1, max_retries=2)(_ray_shard)
+    refs = {task.remote(cfg, str(out), k, stages): k for k in todo}
+    while refs:
+        ready, _ = ray.wait(list(refs), num_returns=1)
+        k = refs.pop(ready[0])
+        try:
+            st = ray.get(ready[0])
+        except Exception as exc:  # noqa: BLE001
+            for r in refs:
+                ray.cancel(r)
+            raise WorkerError(f"shard {k} failed in a Ray task: {exc}. Completed shards are intact; rerun with "
+                              "--resume") from exc
+        on_progress(st.count)
+        on_shard(st)
+
+
+def _ray_shard(cfg, out, k, stages):
+    from .pipeline import run_shard
+
+    # Ray workers may not see the driver's sys.path (tests' fake stages): it travels with the task
+    return run_shard(cfg, out, k, stages)
+
+
+def default_workers() -> int:
+    """One worker per core available to this process."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        return os.cpu_count() or 1
+
+
+__all__ = ["run_shards", "default_workers", "WorkerError"]
