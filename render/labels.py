@@ -1,0 +1,253 @@
+"""Per-image labels: cameras, 6-DOF poses, keypoints with COCO visibility, boxes, deformation ratios.
+
+Everything is vectorised NumPy over worlds and images (no Python loop per image). Inputs are a snapshot-like dict of
+W worlds (``Simulator.snapshot()``), the :class:`Cameras` of N images (``cameras.world`` says which world each shows)
+and, for visibility and boxes, the renderer's output for those images.
+
+Body frame of the worm (right-handed, origin and axes recomputed from the deformed sheet in every state)::
+
+                  z (dorsal, up at rest)
+                  ^
+                  |      y (left)
+         tail     |     /                      head
+          |\\------|----/--------------------/|
+          | \\     |   /                    / |      x: unit vector tail keypoint -> head keypoint
+          |  >----o--------------------->  x  |      o: mean of the five segment centres seg0..seg4
+          | /                             \\  |      z: dorsal direction (below), made orthogonal to x
+          |/-------------------------------\\|      y = z × x
+        floor (ventral face rests on it at rest)
+
+The dorsal direction is ``u = Σ_v w_v p_v`` with ``w_v ∝ (z⁰_v − mean z⁰)``, the rest heights of the vertices
+(weights sum to 0, so u is translation-invariant; for a rigidly moved rest worm u is exactly the rotated rest +z).
+At rest on a flat floor the body frame is the world frame shifted to the worm's middle.
+
+Keypoints (names in :data:`KEYPOINT_NAMES`): the pattern's ``seg0..seg4`` (segment centres, on the tube's axis),
+``tail``, ``head`` (centres of the end sections), the three IPM centres, and six surface corners of the end sections
+(``tail_top``, ``tail_left``, ``tail_right``, ``head_top``, ...) which make the set non-collinear so that PnP is
+well posed (every other keypoint lies on the worm's axis at rest).
+
+COCO visibility per keypoint: 0 = outside the image (behind the camera, or the pixel ``round(u), round(v)`` outside),
+1 = occluded, 2 = visible. With ``z`` the keypoint's camera depth and ``D``, ``L`` the depth and segmentation id at
+its pixel: visible iff ``D == 0`` (nothing there), or ``z − D <= VIS_EPS`` (no surface more than 0.5 mm in front),
+or ``z − D <= tol_k`` and ``L`` is the keypoint's own object (the worm's ids 2..6 for worm keypoints, the magnet's id
+for an IPM centre). ``tol_k`` lets interior points show through their own surface: the tube's circumradius + 1 mm for
+axis points, the disk radius + 0.5 mm for IPM centres, ``VIS_EPS`` for surface corners.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from warpworm.render.camera import Cameras
+from warpworm.render.raster_kernels import LABEL_IPM_FIRST, LABEL_WORM_FIRST, LABEL_WORM_LAST
+from warpworm.transforms import matrix_to_quat_wxyz
+
+VIS_EPS = 5e-4
+"""Depth tolerance [m] of the visibility test for any surface in front of a keypoint."""
+
+CORNER_NAMES = ("tail_top", "tail_left", "tail_right", "head_top", "head_left", "head_right")
+IPM_NAMES = ("ipm_tail", "ipm_centre", "ipm_head")
+KEYPOINT_NAMES = ("seg0", "seg1", "seg2", "seg3", "seg4", "tail", "head") + IPM_NAMES + CORNER_NAMES
+"""Order of the keypoint axis of every keypoint array."""
+MAGNET_NAMES = ("epm", "ipm_tail", "ipm_centre", "ipm_head")
+
+
+@dataclass
+class WormBody:
+    """What the labels need from a crease pattern: keypoint stencils, dorsal weights, rest geometry."""
+
+    kp_vertices: np.ndarray
+    """Vertices of the 13 sheet keypoints (seg0..4, tail, head, 6 corners), shape (13, K), int."""
+    kp_weights: np.ndarray
+    """Their weights, shape (13, K); each row sums to 1."""
+    up_weights: np.ndarray
+    """Dorsal-direction weights per vertex (sum 0), shape (V,)."""
+    rest_vertices: np.ndarray
+    """Rest vertices [m], shape (V, 3)."""
+    axis_radius: float
+    """Largest rest distance of a vertex from the tube axis [m] (visibility tolerance of axis keypoints)."""
+
+    @classmethod
+    def from_pattern(cls, pattern) -> "WormBody":
+        """Build from a :class:`warpworm.crease.CreasePattern` with keypoints seg0..seg4, tail, head."""
+        names = list(pattern.keypoint_names)
+        order = [names.index(n) for n in ("seg0", "seg1", "seg2", "seg3", "seg4", "tail", "head")]
+        kv = pattern.keypoint_vertices[order]
+        kw = pattern.keypoint_weights[order]
+        x = pattern.vertices
+        corners = []
+        for end in (5, 6):  # tail, head: the surface corners of the end section
+            verts = np.unique(kv[end][kw[end] > 1e-9])
+            top = verts[np.argmax(x[verts, 2])]
+            rest = verts[verts != top]
+            corners += [top, rest[np.argmax(x[rest, 1])], rest[np.argmin(x[rest, 1])]]
+        K = kv.shape[1]
+        cv = np.repeat(np.array(corners)[:, None], K, axis=1)
+        cw = np.zeros((6, K))
+        cw[:, 0] = 1.0
+        zc = x[:, 2] - x[:, 2].mean()
+        up = zc / np.sum(zc * zc)
+        kp = np.einsum("pk,pkc->pc", kw, x[kv])
+        axis_pts = kp[:5]
+        # distance of every vertex from the polyline through the rest segment centres (the tube's axis)
+        a, b = axis_pts[0], axis_pts[-1]
+        d = (b - a) / np.linalg.norm(b - a)
+        rel = x - a
+        radial = rel - np.outer(rel @ d, d)
+        return cls(kp_vertices=np.concatenate([kv, cv]).astype(np.int32), kp_weights=np.concatenate([kw, cw]),
+                   up_weights=up, rest_vertices=x.copy(), axis_radius=float(np.linalg.norm(radial, axis=1).max()))
+
+    def sheet_keypoints(self, positions: np.ndarray) -> np.ndarray:
+        """The 13 sheet keypoints [m] for positions (..., V, 3) -> (..., 13, 3)."""
+        return np.einsum("pk,...pkc->...pc", self.kp_weights, positions[..., self.kp_vertices, :])
+
+    def body_frame(self, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Body frame for positions (..., V, 3): rotation (..., 3, 3) (body -> world, columns x, y, z), origin (..., 3)."""
+        kp = self.sheet_keypoints(positions)
+        origin = kp[..., 0:5, :].mean(axis=-2)
+        ex = kp[..., 6, :] - kp[..., 5, :]
+        ex = ex / np.linalg.norm(ex, axis=-1, keepdims=True)
+        up = np.einsum("v,...vc->...c", self.up_weights, positions)
+        ez = up - np.einsum("...c,...c->...", up, ex)[..., None] * ex
+        ez = ez / np.linalg.norm(ez, axis=-1, keepdims=True)
+        ey = np.cross(ez, ex)
+        return np.stack([ex, ey, ez], axis=-1), origin
+
+
+def _pose_block(prefix: str, R_world, t_world, cam_R, cam_t) -> dict:
+    """World and camera poses with quaternions (w, x, y, z); R (N, ..., 3, 3), t (N, ..., 3), cameras (N, ...)."""
+    extra = R_world.ndim - 3
+    cR = cam_R.reshape(cam_R.shape[:1] + (1,) * extra + (3, 3))
+    ct = cam_t.reshape(cam_t.shape[:1] + (1,) * extra + (3,))
+    R_cam = cR @ R_world
+    t_cam = np.einsum("...ij,...j->...i", cR, t_world) + ct
+    return {
+        f"{prefix}_R_world": R_world, f"{prefix}_t_world": t_world, f"{prefix}_q_world": matrix_to_quat_wxyz(R_world),
+        f"{prefix}_R_cam": R_cam, f"{prefix}_t_cam": t_cam, f"{prefix}_q_cam": matrix_to_quat_wxyz(R_cam),
+    }
+
+
+def _pixel_lookup(arr: np.ndarray, px: np.ndarray, py: np.ndarray) -> np.ndarray:
+    """arr (N, H, W) sampled at integer pixels (N, P) (already clipped)."""
+    n = np.arange(arr.shape[0])[:, None]
+    return arr[n, py, px]
+
+
+def _box_from_mask(mask: np.ndarray) -> np.ndarray:
+    """Inclusive integer pixel box (xmin, ymin, xmax, ymax) of every mask (N, H, W); -1s for empty masks."""
+    N, H, W = mask.shape
+    cols = mask.any(axis=1)
+    rows = mask.any(axis=2)
+    has = cols.any(axis=1)
+    xmin = np.argmax(cols, axis=1)
+    xmax = W - 1 - np.argmax(cols[:, ::-1], axis=1)
+    ymin = np.argmax(rows, axis=1)
+    ymax = H - 1 - np.argmax(rows[:, ::-1], axis=1)
+    box = np.stack([xmin, ymin, xmax, ymax], axis=1)
+    box[~has] = -1
+    return box
+
+
+def compute_labels(states: dict, body, cameras: Cameras, images: dict | None = None, *,
+                   rest_positions=None, ipm_diameter=0.010, ipm_thickness=0.001) -> dict:
+    """Labels of N images of W worlds.
+
+    Args:
+        states: snapshot dict with ``positions`` (W, V, 3), ``magnet_pos`` (W, 4, 3), ``magnet_rot`` (W, 4, 3, 3) and,
+            passed through when present, ``crease_angle`` (W, H), ``bar_strain`` (W, E).
+        body: a :class:`WormBody` or a crease pattern (converted with :meth:`WormBody.from_pattern`).
+        cameras: the images' cameras; ``cameras.world`` (N,) indexes the worlds.
+        images: :meth:`Renderer.render` output (``depth``, ``seg``, ``worm_mask``) for visibility, visible boxes and
+            the visible fraction; None skips those labels.
+        rest_positions: rest vertices (V, 3) or (W, V, 3) for the deformation ratios' rest distances
+            (default: the body's rest vertices; pass per-world rest geometry when a, b, l0 vary per world).
+        ipm_diameter, ipm_thickness: [m], () or (W,): visibility tolerance of the IPM centres.
+
+    Returns:
+        dict of arrays with a leading image axis N (float64 unless stated; poses as R (..., 3, 3), t (..., 3) [m] and
+        quaternions (w, x, y, z)):
+        ``K`` (N, 3, 3), ``R`` (N, 3, 3), ``t`` (N, 3) (world -> camera), ``world_index`` (N,) int32;
+        ``body_{R,t,q}_{world,cam}``: worm body frame; ``magnet_{R,t,q}_{world,cam}`` (N, 4, ...) in slot order
+        EPM, tail, centre, head IPM; ``keypoints_world``, ``keypoints_cam``, ``keypoints_body`` (N, P, 3),
+        ``keypoints_2d`` (N, P, 2) [px]; ``worm_box`` (N, 4) float (xmin, ymin, xmax, ymax) of all projected worm
+        vertices, unclipped; ``deformation_ratio`` (N, 4); ``crease_angle`` (N, H), ``bar_strain`` (N, E) when
+        present. With ``images``: ``keypoint_visibility`` (N, P) uint8, ``keypoint_depth_tol`` (N, P),
+        ``worm_box_visible`` (N, 4) int (inclusive pixels, -1 when hidden), ``worm_pixels_visible``,
+        ``worm_pixels_total`` (N,) int, ``visible_fraction`` (N,).
+    """
+    if not isinstance(body, WormBody):
+        body = WormBody.from_pattern(body)
+    wi = np.asarray(cameras.world, dtype=np.int64)
+    N = wi.shape[0]
+    pos = np.asarray(states["positions"], dtype=np.float64)
+    W = pos.shape[0]
+    mpos = np.asarray(states["magnet_pos"], dtype=np.float64)
+    mrot = np.asarray(states["magnet_rot"], dtype=np.float64)
+
+    # --- per world ---
+    Rb, ob = body.body_frame(pos)  # (W, 3, 3), (W, 3)
+    sheet = body.sheet_keypoints(pos)  # (W, 13, 3)
+    kp_world = np.concatenate([sheet[:, :7], mpos[:, 1:4], sheet[:, 7:]], axis=1)  # (W, 16, 3)
+    rest = body.rest_vertices if rest_positions is None else np.asarray(rest_positions, dtype=np.float64)
+    rest_seg = body.sheet_keypoints(rest)[..., 0:5, :]
+    seg = sheet[:, 0:5]
+    dist = np.linalg.norm(np.diff(seg, axis=1), axis=-1)
+    rest_dist = np.linalg.norm(np.diff(rest_seg, axis=-2), axis=-1)
+    ratio = dist / rest_dist  # (W, 4), rest broadcast
+
+    # --- per image ---
+    cR, ct = cameras.R, cameras.t
+    out = {"K": cameras.K.copy(), "R": cR.copy(), "t": ct.copy(), "world_index": wi.astype(np.int32)}
+    out.update(_pose_block("body", Rb[wi], ob[wi], cR, ct))
+    out.update(_pose_block("magnet", mrot[wi], mpos[wi], cR, ct))
+    kw = kp_world[wi]
+    uv, kc = cameras.project(kw)
+    out["keypoints_world"] = kw
+    out["keypoints_cam"] = kc
+    out["keypoints_body"] = np.einsum("nji,npj->npi", Rb[wi], kw - ob[wi][:, None])
+    out["keypoints_2d"] = uv
+    wuv, wc = cameras.project(pos[wi])
+    out["worm_box"] = np.concatenate([wuv.min(axis=1), wuv.max(axis=1)], axis=1)
+    out["deformation_ratio"] = ratio[wi]
+    for key in ("crease_angle", "bar_strain"):
+        if key in states:
+            out[key] = np.asarray(states[key])[wi]
+
+    if images is not None:
+        depth = images["depth"]
+        segm = images["seg"]
+        H, Wd = depth.shape[1:]
+        P = kw.shape[1]
+        z = kc[..., 2]
+        with np.errstate(invalid="ignore"):
+            px = np.rint(uv[..., 0])
+            py = np.rint(uv[..., 1])
+            inside = (z > 0) & (px >= 0) & (px < Wd) & (py >= 0) & (py < H)
+        pxi = np.where(inside, px, 0).astype(np.int64)
+        pyi = np.where(inside, py, 0).astype(np.int64)
+        D = _pixel_lookup(depth, pxi, pyi).astype(np.float64)
+        L = _pixel_lookup(segm, pxi, pyi).astype(np.int64)
+        # per-keypoint own labels and tolerances
+        d_ipm = np.broadcast_to(np.asarray(ipm_diameter, dtype=np.float64), (W,))[wi]
+        tol = np.full((N, P), VIS_EPS)
+        tol[:, 0:7] = body.axis_radius + 1e-3
+        tol[:, 7:10] = (0.5 * d_ipm + VIS_EPS)[:, None]
+        worm_kp = np.ones(P, bool)
+        worm_kp[7:10] = False
+        own = np.where(worm_kp[None], (L >= LABEL_WORM_FIRST) & (L <= LABEL_WORM_LAST),
+                       L == (LABEL_IPM_FIRST + np.arange(P) - 7)[None])
+        gap = z - D
+        visible = (D == 0) | (gap <= VIS_EPS) | ((gap <= tol) & own)
+        vis = np.where(inside, np.where(visible, 2, 1), 0).astype(np.uint8)
+        out["keypoint_visibility"] = vis
+        out["keypoint_depth_tol"] = tol
+        worm_vis = (segm >= LABEL_WORM_FIRST) & (segm <= LABEL_WORM_LAST)
+        out["worm_box_visible"] = _box_from_mask(worm_vis)
+        nv = worm_vis.sum(axis=(1, 2))
+        nt = images["worm_mask"].sum(axis=(1, 2))
+        out["worm_pixels_visible"] = nv
+        out["worm_pixels_total"] = nt
+        out["visible_fraction"] = np.where(nt > 0, nv / np.maximum(nt, 1), 0.0)
+    return out
