@@ -83,8 +83,8 @@ class FakeStages:
         uvw = np.einsum("bij,bvj->bvi", cameras.K, pc)
         uv = uvw[..., :2] / uvw[..., 2:3]
         lo, hi = uv.min(1), uv.max(1)
-        u = np.arange(W) + 0.5
-        v = np.arange(H) + 0.5
+        u = np.arange(W, dtype=float)  # pixel centres at integers, as in OpenCV
+        v = np.arange(H, dtype=float)
         mask = ((u[None, None, :] >= lo[:, 0, None, None]) & (u[None, None, :] <= hi[:, 0, None, None])
                 & (v[None, :, None] >= lo[:, 1, None, None]) & (v[None, :, None] <= hi[:, 1, None, None]))
         frac = np.clip((u[None, None, :] - lo[:, 0, None, None]) / np.maximum(hi - lo, 1e-9)[:, 0, None, None], 0, 1)
@@ -129,4 +129,5 @@ class FakeStages:
             "labels/bbox_visib": visib,
             "labels/visib_fract": any_px.astype(np.float32),
             "labels/deformation": np.ones((B, 4), np.float32),
+            "labels/worm_mask": mask.astype(np.uint8),
         }

@@ -72,6 +72,7 @@ class ParamSpec:
     values: tuple | None = None  # allowed values for discrete parameters
     doc: str = ""
     positive: bool = False  # strictly > 0
+    preset: bool = False  # NaN (the default) means "the gait preset's value" (warpworm.gaits.GAIT_PRESETS)
 
 
 _WP = WormParams()
@@ -106,13 +107,22 @@ def _worm_specs() -> dict[str, ParamSpec]:
         "wavelength": ParamSpec(_WP.wavelength, "m", low=0.0, doc="EPM path wavelength w"),
         "amplitude": ParamSpec(_WP.amplitude, "m", low=0.0, doc="EPM path amplitude a"),
         "closest_approach": ParamSpec(_WP.closest_approach, "m", low=0.0, doc="EPM closest approach h"),
-        "orientation": ParamSpec(_WP.orientation, "rad", doc="EPM moment angle theta (NaN: the gait preset)"),
+        "orientation": ParamSpec(_WP.orientation, "rad", preset=True,
+                                 doc="EPM moment angle theta (NaN: the gait preset)"),
         "cycle_period": ParamSpec(_WP.cycle_period, "s", positive=True, doc="duration of one EPM cycle"),
         # Batch-shared in the solver; randomizing them splits a batch into groups (one solver model per group).
         "gait": ParamSpec(_WP.gait, "", values=GAITS, doc="EPM path preset"),
         "backward": ParamSpec(_WP.backward, "", values=(False, True), doc="drive toward -x"),
         "magnet_model": ParamSpec(_WP.magnet_model, "", values=MAGNET_MODELS, doc="magnet force model"),
     }
+    # Path (and other) fields that the gait presets tune default to NaN = "the preset's value for the sample's gait",
+    # so a config that only names a gait gets the tuned path (resolved per sample in warpworm.pipeline.draw_worm).
+    from .gaits import GAIT_PRESETS
+
+    for key in sorted({k for preset in GAIT_PRESETS.values() for k in preset}):
+        if key in s:
+            s[key] = dataclasses.replace(s[key], default=float("nan"), preset=True,
+                                         doc=s[key].doc + " (default NaN: the gait preset's value)")
     if hasattr(_WP, "hinge_damping"):
         s["hinge_damping"] = ParamSpec(_WP.hinge_damping, "N*m*s/rad/m", low=0.0, doc="crease damping c_alpha")
     # Any other scalar WormParams field is randomizable too (constant at its default unless configured), so a field
@@ -349,7 +359,7 @@ def _check_spec(path: str, dist: rnd.Distribution, spec: ParamSpec, errors: list
         errors.append(f"{path}: got {_fmt(dist.to_yaml())}; expected numeric values [{spec.unit}]")
         return
     lo, hi = b
-    if path.endswith("worm.orientation") and isinstance(dist, rnd.Constant) and math.isnan(lo):
+    if spec.preset and isinstance(dist, rnd.Constant) and math.isnan(lo):
         return
     if spec.positive and lo <= 0:
         errors.append(f"{path}: got {_fmt(dist.to_yaml())}; expected values > 0 [{spec.unit}]")

@@ -61,7 +61,7 @@ SCHEMA: dict[str, tuple[str, str, str]] = {
     "poses/body_quat": ("float64", "", "(4,) body rotation as a quaternion (w, x, y, z)"),
     "keypoints/world": ("float64", "m", "(P, 3) keypoints in world, names in root attribute keypoint_names"),
     "keypoints/camera": ("float64", "m", "(P, 3) keypoints in the camera frame"),
-    "keypoints/pixel": ("float64", "px", "(P, 2) projection (u, v); pixel centres at integer + 0.5"),
+    "keypoints/pixel": ("float64", "px", "(P, 2) projection (u, v); pixel centres at integer (u, v) as in OpenCV"),
     "keypoints/visibility": ("uint8", "", "(P,) COCO: 0 outside the image, 1 occluded, 2 visible"),
     "creases/angle": ("float32", "rad", "(C,) signed dihedral of every crease, crease-pattern hinge order"),
     "bars/strain": ("float32", "", "(E,) Cauchy strain dL/L0 of every bar, crease-pattern edge order"),
@@ -69,6 +69,7 @@ SCHEMA: dict[str, tuple[str, str, str]] = {
     "labels/bbox_obj": ("float32", "px", "(4,) worm box (x, y, w, h) of the projected mesh, occlusion ignored"),
     "labels/bbox_visib": ("float32", "px", "(4,) worm box (x, y, w, h) of its visible pixels; 0 if none"),
     "labels/visib_fract": ("float32", "", "() visible worm pixels / pixels of the worm rendered alone (estimate)"),
+    "labels/worm_mask": ("uint8", "", "(H, W) 1 where the worm's sheet projects, occluders ignored (BOP 'mask')"),
     "labels/deformation": ("float32", "", "(4,) distances between adjacent segment centres over their rest values"),
     "time": ("float32", "s", "() simulated time of the frame after settling"),
     "trajectory": ("int64", "", "() trajectory (simulated world) id; its frames are consecutive samples"),
@@ -79,7 +80,7 @@ SCHEMA: dict[str, tuple[str, str, str]] = {
 }
 """Datasets every shard holds (``params/<group>.<name>`` come in addition, one per randomized parameter)."""
 
-IMAGE_KEYS = ("rgb", "depth", "segmentation")
+IMAGE_KEYS = ("rgb", "depth", "segmentation", "labels/worm_mask")
 
 
 class DatasetWriteError(OSError):

@@ -100,21 +100,215 @@ def load_stages(spec: str | Any) -> Any:
 
 
 class WarpStages:
-    """warpworm's own simulator (``warpworm.simulator``) and rasterizer (``warpworm.render``)."""
+    """warpworm's own simulator (:mod:`warpworm.simulator`) and rasterizer (:mod:`warpworm.render`).
+
+    Simulation: ``Model.from_params`` -> ``Simulator(dt, substeps)`` -> ``settle(settle_time)`` -> ``step`` to each
+    frame time -> ``snapshot``. A world flagged unstable at any frame is reported unstable.
+    Rendering: ``render.build_scene`` (worm sheet, IPM disks, EPM bar, floor) with an appearance built from the drawn
+    ``light/color/texture`` values, ``Renderer.render``, then sensor effects (:func:`apply_sensor_effects`) and labels
+    (:func:`compute_labels`).
+    """
 
     def __init__(self):
-        from . import stages_warp  # noqa: F401 - imported lazily: needs the simulator and renderer modules
+        self._renderers = {}
+        self._patterns = {}
 
-        self._impl = stages_warp.WarpStagesImpl()
+    def _pattern(self, n_units: int):
+        from . import crease
+
+        p = self._patterns.get(n_units)
+        if p is None:
+            w = WormParams()
+            p = self._patterns[n_units] = crease.build_worm(w.a, w.b, n_units, l0=w.l0)
+        return p
 
     def metadata(self, cfg):
-        return self._impl.metadata(cfg)
+        p = self._pattern(cfg.sim.n_units)
+        return {"keypoint_names": list(p.keypoint_names) + list(IPM_KEYPOINTS), "triangles": p.triangles,
+                "triangle_segment": p.triangle_segment, "hinges": p.hinges, "hinge_label": p.hinge_label,
+                "edges": p.edges, "num_vertices": p.num_vertices}
 
     def simulate_batch(self, params, num_worlds, cfg):
-        return self._impl.simulate_batch(params, num_worlds, cfg)
+        from .model import Model
+        from .simulator import Simulator
+
+        model = Model.from_params(params, num_worlds, device=cfg.sim.device)
+        sim = Simulator(model, dt=cfg.sim.dt, substeps=cfg.sim.substeps)
+        state = sim.initial_state()
+        sim.settle(state, cfg.sim.settle_time)
+        keep = ("positions", "magnet_pos", "magnet_rot", "crease_angle", "bar_strain")
+        frames, unstable, steps_done = [], np.zeros(num_worlds, bool), 0
+        for t in cfg.sim.frame_times:
+            n = int(round(t / cfg.sim.dt)) - steps_done
+            if n > 0:
+                sim.step(state, n)
+                steps_done += n
+            snap = sim.snapshot(state)
+            unstable |= snap["unstable"] | ~np.isfinite(snap["positions"]).all(axis=(1, 2))
+            frames.append({k: snap[k] for k in keep})
+        return SimResult(frames=frames, unstable=unstable)
+
+    def _renderer(self, cfg):
+        from .render import Renderer
+
+        key = (cfg.render.width, cfg.render.height, cfg.sim.device)
+        r = self._renderers.get(key)
+        if r is None:
+            r = self._renderers[key] = Renderer(cfg.render.width, cfg.render.height, device=cfg.sim.device)
+        return r
 
     def render_batch(self, frame, params, cameras, appearance, seeds, cfg):
-        return self._impl.render_batch(frame, params, cameras, appearance, seeds, cfg)
+        from . import render
+
+        B = len(seeds)
+        pattern = self._pattern(cfg.sim.n_units)
+        scene = render.build_scene(
+            frame["positions"], pattern.triangles, pattern.triangle_segment, magnet_pos=frame["magnet_pos"],
+            magnet_rot=frame["magnet_rot"], worm_texcoords=pattern.vertices, ipm_diameter=params.ipm_diameter,
+            ipm_thickness=params.ipm_thickness, epm_size=params.epm_size, floor_incline=params.floor_incline,
+            appearance=appearance_from_draws(appearance, seeds))
+        cams = render.Cameras(K=cameras.K, R=cameras.R, t=cameras.t, world=np.arange(B, dtype=np.int32),
+                              width=cameras.width, height=cameras.height)
+        img = self._renderer(cfg).render(scene, cams)
+        rgb = apply_sensor_effects(img["rgb"], appearance, seeds)
+        labels = compute_labels(pattern, frame, params, cameras, img["depth"], img["seg"], img["worm_mask"])
+        return {"rgb": rgb, "depth": img["depth"], "segmentation": img["seg"], **labels}
+
+
+IPM_KEYPOINTS = ("ipm_tail", "ipm_centre", "ipm_head")
+
+
+def appearance_from_draws(app: dict, seeds: np.ndarray):
+    """The renderer's :class:`~warpworm.render.Appearance` from the drawn ``light/color/texture`` values (B,) each."""
+    from .render import default_appearance
+    from .render.scene import _hsv_to_rgb
+
+    B = len(seeds)
+    a = default_appearance(B)
+    worm = _hsv_to_rgb(app["color.worm_hue"], app["color.worm_saturation"], app["color.worm_value"])
+    floor = _hsv_to_rgb(app["color.floor_hue"], app["color.floor_saturation"], app["color.floor_value"])
+    a.albedo = a.albedo.copy()
+    a.albedo[:, 2:7] = worm[:, None]
+    a.albedo[:, 1] = floor
+    a.floor_color2 = floor * 0.55
+    tex = np.asarray(app["texture.floor"]).astype(str)
+    ft = a.floor_tex.copy()
+    ft[:, 0] = app["texture.floor_scale"]
+    ft[:, 1] = np.where(tex == "checker", 0.6, 0.0)  # checker contrast
+    ft[:, 2] = np.where(tex == "noise", 0.5, 0.0)  # grain amplitude
+    ft[:, 3] = 1.0 / np.maximum(app["texture.floor_scale"], 1e-4) * 5.0
+    a.floor_tex = ft
+    fibre = np.asarray(app["texture.worm"]).astype(str) == "fibre"
+    a.paper_tex = np.stack([np.where(fibre, 0.25, 0.0), np.where(fibre, 0.10, 0.0)], axis=1)
+    a.tex_seed = (seeds % (2**31 - 1)).astype(np.int32)
+    el, az = app["light.elevation"], app["light.azimuth"]
+    a.sun_dir = np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], axis=1)
+    a.sun_color = app["light.intensity"][:, None] * np.ones(3)
+    a.ambient = app["light.ambient"][:, None] * np.ones(3)
+    bg = app["color.background_value"][:, None] * np.ones(3)
+    a.bg_top, a.bg_bottom = bg, 0.6 * bg
+    return a
+
+
+def apply_sensor_effects(rgb: np.ndarray, app: dict, seeds: np.ndarray) -> np.ndarray:
+    """Colour jitter, blur, Gaussian noise and JPEG re-encoding, each seeded by the sample's own seed.
+
+    Brightness/contrast are vectorized over the batch; blur, noise and JPEG run per image in OpenCV / NumPy (an image
+    is the unit those libraries take), skipping images whose effect is off.
+    """
+    import cv2
+
+    x = rgb.astype(np.float32)
+    c = app["sensor.contrast"].astype(np.float32)[:, None, None, None]
+    b = app["sensor.brightness"].astype(np.float32)[:, None, None, None]
+    x = (x - 128.0) * c + 128.0 + b
+    sig = app["sensor.blur_sigma"]
+    nstd = app["sensor.noise_std"]
+    q = np.asarray(app["sensor.jpeg_quality"]).astype(np.int64)
+    for i in np.flatnonzero((sig > 0.3) | (nstd > 0)):
+        if sig[i] > 0.3:
+            x[i] = cv2.GaussianBlur(x[i], (0, 0), float(sig[i]))
+        if nstd[i] > 0:
+            x[i] += float(nstd[i]) * np.random.Generator(np.random.Philox(int(seeds[i]))).standard_normal(
+                x[i].shape, dtype=np.float32)
+    out = np.clip(np.rint(x), 0, 255).astype(np.uint8)
+    for i in np.flatnonzero(q < 100):
+        ok, enc = cv2.imencode(".jpg", out[i], [cv2.IMWRITE_JPEG_QUALITY, int(q[i])])
+        out[i] = cv2.imdecode(enc, cv2.IMREAD_UNCHANGED)
+    return out
+
+
+def compute_labels(pattern, frame: dict, params: WormParams, cameras: Cameras, depth: np.ndarray, seg: np.ndarray,
+                   worm_mask: np.ndarray) -> dict:
+    """Pose, keypoint, crease and box labels of B images (NumPy, vectorized over the batch).
+
+    Body frame: origin = mean of the five segment centres; x = tail -> head; z = the floor normal made orthogonal to
+    x (up); y = z × x. Keypoints: the crease pattern's (seg0..seg4, tail, head: weighted vertex means, inside the tube)
+    then the three IPM centres. Visibility (COCO): 0 outside the image or behind the camera; 1 when something is in
+    front of the keypoint by more than the tube's radius (so a keypoint inside the worm's own tube counts as visible),
+    2 otherwise.
+    """
+    from . import transforms as tf
+    from .render.scene import floor_frame
+
+    B = depth.shape[0]
+    H, W = depth.shape[1:]
+    pos = np.asarray(frame["positions"], np.float64)
+    kw = np.concatenate([pattern.keypoints(pos), np.asarray(frame["magnet_pos"], np.float64)[:, 1:4]], axis=1)
+    names = list(pattern.keypoint_names)
+    seg_idx = [names.index(f"seg{i}") for i in range(5)]
+    tail, head = kw[:, names.index("tail")], kw[:, names.index("head")]
+    origin = kw[:, seg_idx].mean(axis=1)
+    ex = head - tail
+    ex /= np.linalg.norm(ex, axis=1, keepdims=True)
+    n, _ = floor_frame(params.floor_incline, B)
+    ez = n - np.einsum("bi,bi->b", n, ex)[:, None] * ex
+    ez /= np.linalg.norm(ez, axis=1, keepdims=True)
+    ey = np.cross(ez, ex)
+    body = tf.pose_matrix(np.stack([ex, ey, ez], axis=-1), origin)
+    mags = tf.pose_matrix(np.asarray(frame["magnet_rot"], np.float64), np.asarray(frame["magnet_pos"], np.float64))
+    kc = np.einsum("bij,bpj->bpi", cameras.R, kw) + cameras.t[:, None]
+    uvw = np.einsum("bij,bpj->bpi", cameras.K, kc)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        uv = uvw[..., :2] / uvw[..., 2:3]
+    inside = (kc[..., 2] > 1e-6) & (uv[..., 0] >= -0.5) & (uv[..., 0] < W - 0.5) & (uv[..., 1] >= -0.5) & (
+        uv[..., 1] < H - 0.5)
+    ui = np.clip(np.rint(np.nan_to_num(uv[..., 0])), 0, W - 1).astype(np.int64)
+    vi = np.clip(np.rint(np.nan_to_num(uv[..., 1])), 0, H - 1).astype(np.int64)
+    d = depth[np.arange(B)[:, None], vi, ui]
+    a = np.broadcast_to(np.asarray(params.a, np.float64), (B,))
+    tol = np.where(np.arange(kw.shape[1])[None] < len(names), (a / np.sqrt(3.0))[:, None] + 1e-3, 2e-3)
+    occluded = (d > 0) & (d < kc[..., 2] - tol)
+    vis = np.where(inside, np.where(occluded, 1, 2), 0).astype(np.uint8)
+    # boxes: all projected worm vertices (occlusion ignored) and the visible worm pixels
+    pc = np.einsum("bij,bvj->bvi", cameras.R, pos) + cameras.t[:, None]
+    pv = np.einsum("bij,bvj->bvi", cameras.K, pc)
+    pv = pv[..., :2] / pv[..., 2:3]
+    lo = np.clip(pv.min(axis=1), 0, [W, H])
+    hi = np.clip(pv.max(axis=1), 0, [W, H])
+    wormpix = (seg >= 2) & (seg <= 6)
+    rows, cols = wormpix.any(axis=2), wormpix.any(axis=1)
+    anyp = rows.any(axis=1)
+    y0, y1 = np.argmax(rows, 1), H - np.argmax(rows[:, ::-1], 1)
+    x0, x1 = np.argmax(cols, 1), W - np.argmax(cols[:, ::-1], 1)
+    bbv = np.where(anyp[:, None], np.stack([x0, y0, x1 - x0, y1 - y0], 1), 0).astype(np.float32)
+    full = worm_mask.reshape(B, -1).sum(axis=1)
+    visib = np.where(full > 0, wormpix.reshape(B, -1).sum(axis=1) / np.maximum(full, 1), 0.0)
+    segc = kw[:, seg_idx]
+    l0 = np.broadcast_to(np.asarray(params.l0, np.float64), (B,))
+    deform = np.linalg.norm(np.diff(segc, axis=1), axis=2) / (l0 / 5.0)[:, None]
+    return {
+        "poses/body": body, "poses/ipm": mags[:, 1:4], "poses/epm": mags[:, 0],
+        "poses/body_quat": tf.matrix_to_quat_wxyz(body[:, :3, :3]),
+        "keypoints/world": kw, "keypoints/camera": kc, "keypoints/pixel": uv, "keypoints/visibility": vis,
+        "creases/angle": np.asarray(frame["crease_angle"], np.float32),
+        "bars/strain": np.asarray(frame["bar_strain"], np.float32),
+        "worm/vertices": pos.astype(np.float32),
+        "labels/bbox_obj": np.concatenate([lo, hi - lo], axis=1).astype(np.float32),
+        "labels/bbox_visib": bbv, "labels/visib_fract": visib.astype(np.float32),
+        "labels/worm_mask": worm_mask.astype(np.uint8),
+        "labels/deformation": deform.astype(np.float32),
+    }
 
 
 # ---------------------------------------------------------------------------------------------------------------------
@@ -128,6 +322,25 @@ def draw_worm(cfg: DatasetConfig, traj: np.ndarray, attempt: np.ndarray) -> rnd.
     """Draw the ``worm.*`` parameters of trajectories ``traj`` (n,) at ``attempt`` (n,)."""
     dists = {f"worm.{k}": v for k, v in cfg.randomize["worm"].items()}
     d = rnd.draw(dists, cfg.seed, traj, attempt)
+    # NaN = "the gait preset's value" (warpworm.gaits.GAIT_PRESETS), resolved per sample's gait
+    from .gaits import GAIT_PRESETS
+
+    gait = np.asarray(d["worm.gait"]).astype(str)
+    for g, preset in GAIT_PRESETS.items():
+        sel = gait == g
+        if not sel.any():
+            continue
+        for key, value in preset.items():
+            arr = d.values.get(f"worm.{key}")
+            if arr is not None and arr.dtype.kind == "f":
+                arr[sel & np.isnan(arr)] = value
+    from .gaits import gait_theta
+
+    theta, back = d["worm.orientation"], np.asarray(d["worm.backward"]).astype(bool)
+    for g in np.unique(gait):
+        for bw in (False, True):
+            sel = (gait == g) & (back == bw) & np.isnan(theta)
+            theta[sel] = gait_theta(str(g), bw)
     # kinetic friction can't exceed static: clip per sample (and record the clipped value).
     d.values["worm.mu_kinetic"] = np.minimum(d["worm.mu_kinetic"], d["worm.mu_static"])
     return d
@@ -183,8 +396,8 @@ def look_at_cameras(cfg: DatasetConfig, target: np.ndarray, cam: rnd.Draws, keys
     K = np.zeros((len(f), 3, 3))
     K[:, 0, 0] = f
     K[:, 1, 1] = f
-    K[:, 0, 2] = 0.5 * w
-    K[:, 1, 2] = 0.5 * h
+    K[:, 0, 2] = 0.5 * (w - 1)  # pixel centres at integer (u, v) as in OpenCV and warpworm.render
+    K[:, 1, 2] = 0.5 * (h - 1)
     K[:, 2, 2] = 1.0
     return Cameras(K=K, R=R, t=t, width=w, height=h)
 

@@ -69,7 +69,7 @@ def main(args: argparse.Namespace) -> int:
     except ConfigError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    except (DatasetWriteError, WorkerError) as exc:
+    except (DatasetWriteError, WorkerError, RuntimeError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1
     print(summary.text())
