@@ -128,7 +128,7 @@ def test_dipole_grid_counts_match_the_paper_layout():
     epm = mg.Cuboid((0.01, 0.01, 0.04), moment=3.6)
     ipm = mg.Cylinder(0.01, 0.001, moment=0.07)
     assert len(mg.dipole_grid(epm)) == 256  # 4 x 4 x 16, as the paper
-    assert len(mg.dipole_grid(ipm)) == 12  # 4 x 4 lattice minus its 4 corners (paper: ~5 = density x volume)
+    assert len(mg.dipole_grid(ipm)) == 12  # one layer, rings of 3 + 9 equal-area cells (paper: ~5 = density x volume)
     assert len(mg.dipole_grid(mg.Cylinder(0.002, 0.001, moment=1.0))) == 1
     assert len(mg.dipole_grid(epm, 1e6)) == 4  # 1/cm³: 1 x 1 x 4
 
@@ -150,3 +150,15 @@ def test_dipoles_field_is_the_sum_of_its_grid(magnet):
     Bref = (1e-7 * (3 * rh * (rh @ m)[..., None] - m) / d**3).sum(axis=1)
     err = np.linalg.norm(B - Bref, axis=1) / np.linalg.norm(Bref, axis=1)
     assert err.max() < 1e-5
+
+
+@pytest.mark.parametrize("d, h, density", [(0.01, 0.001, 64e6), (0.008, 0.004, 64e6), (0.02, 0.006, 216e6),
+                                           (0.01, 0.001, 1728e6)])
+def test_cylinder_grid_has_the_disk_traceless_second_moment(d, h, density):
+    """Polar disk grid: centred, and Σx²/N = Σy²/N, Σx²/N − Σz²/N = R²/4 − h²/12 (the solid cylinder's)."""
+    g = mg.dipole_grid(mg.Cylinder(d, h, moment=1.0), density)
+    m2 = g.T @ g / len(g)
+    assert np.allclose(g.mean(0), 0, atol=1e-12)
+    assert np.allclose(m2 - np.diag(np.diag(m2)), 0, atol=1e-12)
+    assert np.isclose(m2[0, 0], m2[1, 1], rtol=1e-9)
+    assert np.isclose(m2[0, 0] - m2[2, 2], d * d / 16 - h * h / 12, rtol=1e-9)

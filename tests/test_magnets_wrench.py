@@ -105,12 +105,73 @@ def test_analytic_matches_magpylib_at_random_poses(src, tgt):
 
 
 def test_dipoles_epm_disk_within_band_at_worm_distances():
-    # 20–50 mm between centres: the 64/cm³ dipole model should be within ~1 % of the exact wrench
+    # 25–50 mm between centres: the 64/cm³ dipole model (measured: F <= 0.03 %, T <= 0.03 %) vs the exact wrench
     ps, Rs, pt, Rt = _random_pairs(8, seed=11, dist=(0.025, 0.05))
     F, T = mg.wrench(EPM, IPM, (ps, Rs), (pt, Rt), model="analytic")
     Fd, Td = mg.wrench(EPM, IPM, (ps, Rs), (pt, Rt), model="dipoles")
-    assert np.all(np.linalg.norm(Fd - F, axis=1) < 0.02 * np.linalg.norm(F, axis=1))
-    assert np.all(np.linalg.norm(Td - T, axis=1) < 0.02 * np.linalg.norm(T, axis=1))
+    assert np.all(np.linalg.norm(Fd - F, axis=1) < 1e-3 * np.linalg.norm(F, axis=1))
+    assert np.all(np.linalg.norm(Td - T, axis=1) < 1e-3 * np.linalg.norm(T, axis=1))
+
+
+BAR_DISK_GAPS = (1, 2, 3, 5, 7, 10, 20)  # mm, between the bar's pole face (or side face) and the disk
+
+
+def _bar_disk_poses(kind):
+    """Disk poses at BAR_DISK_GAPS from the EPM bar (centre at the origin, axis z, pole faces at z = ±20 mm)."""
+    g = np.asarray(BAR_DISK_GAPS, dtype=float) * 1e-3
+    n = len(g)
+    zero = np.zeros(n)
+    if kind == "axis":  # disk coaxial below the pole face
+        return np.stack([zero, zero, -0.0205 - g], 1), np.broadcast_to(I3, (n, 3, 3))
+    if kind == "off-axis":  # same, shifted 5 mm sideways (disk centre under the bar's edge)
+        return np.stack([zero + 0.005, zero, -0.0205 - g], 1), np.broadcast_to(I3, (n, 3, 3))
+    if kind == "tilted":  # tilted disk below the pole face, off axis
+        R = Rotation.from_euler("xyz", [0.5, 0.3, 0.2]).as_matrix()
+        return np.stack([zero + 0.003, zero + 0.002, -0.0255 - g], 1), np.broadcast_to(R, (n, 3, 3))
+    # "side": disk standing beside the bar's side face, its axis along x
+    R = Rotation.from_euler("y", np.pi / 2).as_matrix()
+    return np.stack([0.0055 + g, zero, zero], 1), np.broadcast_to(R, (n, 3, 3))
+
+
+def _bar_disk_errors(kind, density=mg.DEFAULT_DENSITY):
+    pt, Rt = _bar_disk_poses(kind)
+    src = (np.zeros(3), I3)
+    F, T = mg.wrench(EPM, IPM, src, (pt, Rt), model="analytic")
+    Fd, Td = mg.wrench(EPM, IPM, src, (pt, Rt), model="dipoles", density=density)
+    ef = np.linalg.norm(Fd - F, axis=1) / np.linalg.norm(F, axis=1)
+    et = np.linalg.norm(Td - T, axis=1) / np.maximum(np.linalg.norm(T, axis=1), 1e-30)
+    return ef, et
+
+
+def test_dipoles_epm_disk_on_axis_band():
+    """docs/magnets.md: the 64/cm³ EPM bar ↔ IPM disk force error on the bar's axis (polar disk grid), measured
+    13.7 / 3.2 / 0.97 / 0.13 / 0.25 / 0.19 / 0.036 % at 1 / 2 / 3 / 5 / 7 / 10 / 20 mm (the square-lattice disk
+    of the paper's layout: 42 / 5.9 / 2.1 / 1.8 / 1.6 / 1.2 / 0.52 %)."""
+    ef, _ = _bar_disk_errors("axis")
+    band = {1: (0.12, 0.16), 2: (0.028, 0.036), 3: (0.0085, 0.011), 5: (0.0, 0.0016), 7: (0.0, 0.0028),
+            10: (0.0, 0.0021), 20: (0.0, 0.0005)}
+    for g, e in zip(BAR_DISK_GAPS, ef):
+        assert band[g][0] < e < band[g][1], (g, e)
+
+
+@pytest.mark.parametrize("kind", ["axis", "off-axis", "tilted", "side"])
+def test_dipoles_epm_disk_band_from_5mm(kind):
+    """From 5 mm on, at all four pose families: force error <= 0.58 / 0.32 / 0.19 / 0.036 % at 5 / 7 / 10 / 20 mm,
+    torque (where not ~0 by symmetry) <= 4.1 / 2.4 / 1.2 / 0.21 % (measured maxima; docs/magnets.md)."""
+    ef, et = _bar_disk_errors(kind)
+    f_band = {5: 0.0064, 7: 0.0036, 10: 0.0021, 20: 0.0004}
+    t_band = {5: 0.045, 7: 0.027, 10: 0.0135, 20: 0.0024}
+    for g, e, t in zip(BAR_DISK_GAPS, ef, et):
+        if g in f_band:
+            assert e < f_band[g], (kind, g, e)
+            if kind in ("off-axis", "tilted"):
+                assert t < t_band[g], (kind, g, t)
+
+
+def test_dipoles_epm_disk_converge_monotonically_with_density():
+    errors = np.array([_bar_disk_errors("axis", per_cm3 * 1e6)[0][[0, 1, 3, 5]] for per_cm3 in (1, 8, 64, 512, 1728)])
+    assert np.all(np.diff(errors, axis=0) < 0), errors
+    assert errors[-1].max() < 0.005, errors
 
 
 @pytest.mark.parametrize("model", ["analytic", "dipoles"])

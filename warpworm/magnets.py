@@ -5,12 +5,12 @@ Two models of the interaction (``warpworm.params.MAGNET_MODELS``):
 ``"dipoles"``
     The paper's aggregation (Swaminathan et al. 2021, §II-B): each magnet is a regular grid of point dipoles at a
     density [dipoles/m³] (default 64 per cm³); the force on a target is the sum over all dipole pairs of the
-    point-dipole force, the torque about its centre Σ (r_j − c) × F_j + m_j × B(r_j). Grids: a cuboid gets
-    n_i = max(1, round(size_i · density^(1/3))) cell-centred points per axis (the paper's EPM, 10×10×40 mm:
-    4×4×16 = 256); a cylinder uses the square lattice of the same rule over its bounding box and keeps the points
-    inside the disk, one layer per round(h · density^(1/3)) (at least one): the 10 mm × 1 mm IPM gets 12 dipoles in
-    one layer, where the paper took density × volume ≈ 5. So the worm has 256 + 3·12 = 292 dipoles, not 271;
-    12 points sample the disk's area evenly, 5 would not. Each dipole carries m_total / N.
+    point-dipole force, the torque about its centre Σ (r_j − c) × F_j + m_j × B(r_j). Grids (spacing h = density^(-1/3),
+    all cells of equal volume, each dipole m_total / N): a cuboid gets n_i = max(1, round(size_i / h)) cell-centred
+    points per axis (the paper's EPM, 10×10×40 mm: 4×4×16 = 256); a cylinder gets max(1, round(height / h))
+    mid-height layers, each an equal-area polar partition of the disk (round(R / h) rings, round(ring area / h²)
+    sectors per ring) with the points on radii that keep the grid's traceless second moment exact — the 10 mm × 1 mm
+    IPM gets 3 + 9 = 12 dipoles, where the paper took density × volume ≈ 5 (so 256 + 3·12 = 292 dipoles, not 271).
 ``"analytic"``
     Exact closed-form source fields (cuboid: Yang / Engel-Herbert; cylinder: Derby axial, Caciagli diametral — both
     closed forms, in float64 inside the kernel) and the exact surface-charge integral over the target
@@ -424,19 +424,37 @@ __all__ = [
 def dipole_grid(magnet: Magnet, density: float = DEFAULT_DENSITY) -> np.ndarray:
     """The 'dipoles' model's grid of ``magnet`` at ``density`` [1/m³]: points (N, 3) [m] in the magnet frame.
 
-    Mirrors the kernels' on-the-fly generation (``kernels/magnet_fields.py``: ``dipole_grid_*``); each point
-    carries ``magnet.moment / N``.
+    Mirrors the kernels' on-the-fly generation (``kernels/magnet_fields.py``: ``dipole_grid_*``, same order); every
+    point stands for a cell of equal volume and carries ``magnet.moment / N``. Cuboid: cell centres of an
+    n_x × n_y × n_z lattice, n_i = max(1, round(size_i · density^(1/3))). Cylinder: n_z mid-height layers, each an
+    equal-area polar partition (rings of width ≈ h, sectors of area ≈ h²) with the dipoles on radii that keep the
+    grid's traceless second moment exact (see the kernel module and docs/magnets.md).
     """
     per_m = float(np.float32(density)) ** (1.0 / 3.0)
-    n = np.maximum(1, np.round(magnet.size * per_m).astype(int))
-    if magnet.shape == SHAPE_CYLINDER:
-        n[1] = n[0]
-    axes = [magnet.size[k] * ((np.arange(n[k]) + 0.5) / n[k] - 0.5) for k in range(3)]
-    pts = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-    if magnet.shape == SHAPE_CYLINDER:
-        rad = 0.5 * magnet.size[0]
-        pts = pts[pts[:, 0] ** 2 + pts[:, 1] ** 2 <= rad * rad * (1 + 1e-5)]
-    return pts
+    if magnet.shape != SHAPE_CYLINDER:
+        n = np.maximum(1, np.round(magnet.size * per_m).astype(int))
+        axes = [magnet.size[k] * ((np.arange(n[k]) + 0.5) / n[k] - 0.5) for k in range(3)]
+        return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    diameter, height = magnet.size[0], magnet.size[2]
+    n_z = max(1, int(np.round(height * per_m)))
+    r_per_m = 0.5 * diameter * per_m
+    n_r = max(1, int(np.round(r_per_m)))
+    cells = [max(1, int(np.round(np.pi * (r_per_m / n_r) ** 2 * (2 * i + 1)))) for i in range(n_r)]
+    cells = [3 if c == 2 else c for c in cells]
+    n_layer = sum(cells)
+    dz = height / n_z
+    z = height * ((np.arange(n_z) + 0.5) / n_z - 0.5)
+    pts = []
+    first = 0
+    for c in cells:
+        rho2 = 0.25 * diameter**2 / n_layer * 0.5 * (2 * first + c) - dz * dz / 6.0
+        rho = np.sqrt(max(rho2, 0.0)) if c >= 3 else 0.0
+        theta = (np.arange(c) + 0.5) * (2.0 * np.pi / c)
+        for t in theta:
+            for zk in z:
+                pts.append((rho * np.cos(t), rho * np.sin(t), zk))
+        first += c
+    return np.array(pts, dtype=np.float64)
 
 
 __all__.append("dipole_grid")
