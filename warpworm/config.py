@@ -189,9 +189,9 @@ BATCH_SHARED = ("worm.gait", "worm.backward", "worm.magnet_model")
 class SimConfig:
     worlds: int = 64
     """W: worlds simulated at once in one solver batch."""
-    dt: float = 0.002
-    """Solver time step [s]."""
-    substeps: int = 10
+    dt: float = 0.004
+    """Solver time step [s] (the gait runs' warpworm.gaits.DEFAULT_DT)."""
+    substeps: int = 32
     """Solver substeps per time step."""
     settle_time: float = 0.3
     """Time [s] the worm settles under gravity with the EPM parked at the path start."""

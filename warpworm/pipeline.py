@@ -124,7 +124,9 @@ class WarpStages:
 
     def metadata(self, cfg):
         p = self._pattern(cfg.sim.n_units)
-        return {"keypoint_names": list(p.keypoint_names) + list(IPM_KEYPOINTS), "triangles": p.triangles,
+        from .render.labels import KEYPOINT_NAMES
+
+        return {"keypoint_names": list(KEYPOINT_NAMES), "triangles": p.triangles,
                 "triangle_segment": p.triangle_segment, "hinges": p.hinges, "hinge_label": p.hinge_label,
                 "edges": p.edges, "num_vertices": p.num_vertices}
 
@@ -135,6 +137,7 @@ class WarpStages:
         model = Model.from_params(params, num_worlds, device=cfg.sim.device)
         sim = Simulator(model, dt=cfg.sim.dt, substeps=cfg.sim.substeps)
         state = sim.initial_state()
+        rest = sim.snapshot(state)["positions"]  # per-world rest geometry (a, b, l0 may differ per world)
         sim.settle(state, cfg.sim.settle_time)
         keep = ("positions", "magnet_pos", "magnet_rot", "crease_angle", "bar_strain")
         frames, unstable, steps_done = [], np.zeros(num_worlds, bool), 0
@@ -145,7 +148,7 @@ class WarpStages:
                 steps_done += n
             snap = sim.snapshot(state)
             unstable |= snap["unstable"] | ~np.isfinite(snap["positions"]).all(axis=(1, 2))
-            frames.append({k: snap[k] for k in keep})
+            frames.append({**{k: snap[k] for k in keep}, "rest_positions": rest})
         return SimResult(frames=frames, unstable=unstable)
 
     def _renderer(self, cfg):
@@ -171,11 +174,8 @@ class WarpStages:
                               width=cameras.width, height=cameras.height)
         img = self._renderer(cfg).render(scene, cams)
         rgb = apply_sensor_effects(img["rgb"], appearance, seeds)
-        labels = compute_labels(pattern, frame, params, cameras, img["depth"], img["seg"], img["worm_mask"])
+        labels = compute_labels(pattern, frame, params, cameras, img)
         return {"rgb": rgb, "depth": img["depth"], "segmentation": img["seg"], **labels}
-
-
-IPM_KEYPOINTS = ("ipm_tail", "ipm_centre", "ipm_head")
 
 
 def appearance_from_draws(app: dict, seeds: np.ndarray):
@@ -238,76 +238,37 @@ def apply_sensor_effects(rgb: np.ndarray, app: dict, seeds: np.ndarray) -> np.nd
     return out
 
 
-def compute_labels(pattern, frame: dict, params: WormParams, cameras: Cameras, depth: np.ndarray, seg: np.ndarray,
-                   worm_mask: np.ndarray) -> dict:
-    """Pose, keypoint, crease and box labels of B images (NumPy, vectorized over the batch).
-
-    Body frame: origin = mean of the five segment centres; x = tail -> head; z = the floor normal made orthogonal to
-    x (up); y = z × x. Keypoints: the crease pattern's (seg0..seg4, tail, head: weighted vertex means, inside the tube)
-    then the three IPM centres. Visibility (COCO): 0 outside the image or behind the camera; 1 when something is in
-    front of the keypoint by more than the tube's radius (so a keypoint inside the worm's own tube counts as visible),
-    2 otherwise.
-    """
+def compute_labels(pattern, frame: dict, params: WormParams, cameras: Cameras, images: dict) -> dict:
+    """Schema label arrays of B images from :func:`warpworm.render.labels.compute_labels` (its body frame, keypoints
+    and COCO visibility rules; see docs/render.md), reshaped to the dataset's names: poses as 4x4 object -> world,
+    boxes as (x, y, w, h) [px]."""
     from . import transforms as tf
-    from .render.scene import floor_frame
+    from .render import labels as rl
+    from .render import Cameras as RCameras
 
-    B = depth.shape[0]
-    H, W = depth.shape[1:]
-    pos = np.asarray(frame["positions"], np.float64)
-    kw = np.concatenate([pattern.keypoints(pos), np.asarray(frame["magnet_pos"], np.float64)[:, 1:4]], axis=1)
-    names = list(pattern.keypoint_names)
-    seg_idx = [names.index(f"seg{i}") for i in range(5)]
-    tail, head = kw[:, names.index("tail")], kw[:, names.index("head")]
-    origin = kw[:, seg_idx].mean(axis=1)
-    ex = head - tail
-    ex /= np.linalg.norm(ex, axis=1, keepdims=True)
-    n, _ = floor_frame(params.floor_incline, B)
-    ez = n - np.einsum("bi,bi->b", n, ex)[:, None] * ex
-    ez /= np.linalg.norm(ez, axis=1, keepdims=True)
-    ey = np.cross(ez, ex)
-    body = tf.pose_matrix(np.stack([ex, ey, ez], axis=-1), origin)
-    mags = tf.pose_matrix(np.asarray(frame["magnet_rot"], np.float64), np.asarray(frame["magnet_pos"], np.float64))
-    kc = np.einsum("bij,bpj->bpi", cameras.R, kw) + cameras.t[:, None]
-    uvw = np.einsum("bij,bpj->bpi", cameras.K, kc)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        uv = uvw[..., :2] / uvw[..., 2:3]
-    inside = (kc[..., 2] > 1e-6) & (uv[..., 0] >= -0.5) & (uv[..., 0] < W - 0.5) & (uv[..., 1] >= -0.5) & (
-        uv[..., 1] < H - 0.5)
-    ui = np.clip(np.rint(np.nan_to_num(uv[..., 0])), 0, W - 1).astype(np.int64)
-    vi = np.clip(np.rint(np.nan_to_num(uv[..., 1])), 0, H - 1).astype(np.int64)
-    d = depth[np.arange(B)[:, None], vi, ui]
-    a = np.broadcast_to(np.asarray(params.a, np.float64), (B,))
-    tol = np.where(np.arange(kw.shape[1])[None] < len(names), (a / np.sqrt(3.0))[:, None] + 1e-3, 2e-3)
-    occluded = (d > 0) & (d < kc[..., 2] - tol)
-    vis = np.where(inside, np.where(occluded, 1, 2), 0).astype(np.uint8)
-    # boxes: all projected worm vertices (occlusion ignored) and the visible worm pixels
-    pc = np.einsum("bij,bvj->bvi", cameras.R, pos) + cameras.t[:, None]
-    pv = np.einsum("bij,bvj->bvi", cameras.K, pc)
-    pv = pv[..., :2] / pv[..., 2:3]
-    lo = np.clip(pv.min(axis=1), 0, [W, H])
-    hi = np.clip(pv.max(axis=1), 0, [W, H])
-    wormpix = (seg >= 2) & (seg <= 6)
-    rows, cols = wormpix.any(axis=2), wormpix.any(axis=1)
-    anyp = rows.any(axis=1)
-    y0, y1 = np.argmax(rows, 1), H - np.argmax(rows[:, ::-1], 1)
-    x0, x1 = np.argmax(cols, 1), W - np.argmax(cols[:, ::-1], 1)
-    bbv = np.where(anyp[:, None], np.stack([x0, y0, x1 - x0, y1 - y0], 1), 0).astype(np.float32)
-    full = worm_mask.reshape(B, -1).sum(axis=1)
-    visib = np.where(full > 0, wormpix.reshape(B, -1).sum(axis=1) / np.maximum(full, 1), 0.0)
-    segc = kw[:, seg_idx]
-    l0 = np.broadcast_to(np.asarray(params.l0, np.float64), (B,))
-    deform = np.linalg.norm(np.diff(segc, axis=1), axis=2) / (l0 / 5.0)[:, None]
+    B = len(cameras.K)
+    rc = RCameras(K=cameras.K, R=cameras.R, t=cameras.t, world=np.arange(B, dtype=np.int32), width=cameras.width,
+                  height=cameras.height)
+    lab = rl.compute_labels(frame, pattern, rc, images, rest_positions=frame.get("rest_positions"),
+                            ipm_diameter=params.ipm_diameter, ipm_thickness=params.ipm_thickness)
+    body = tf.pose_matrix(lab["body_R_world"], lab["body_t_world"])
+    mags = tf.pose_matrix(lab["magnet_R_world"], lab["magnet_t_world"])
+    wb = lab["worm_box"]
+    vb = lab["worm_box_visible"].astype(np.float32)
+    bbv = np.where(vb[:, :1] >= 0, np.concatenate([vb[:, :2], vb[:, 2:] - vb[:, :2] + 1], axis=1), 0)
     return {
         "poses/body": body, "poses/ipm": mags[:, 1:4], "poses/epm": mags[:, 0],
-        "poses/body_quat": tf.matrix_to_quat_wxyz(body[:, :3, :3]),
-        "keypoints/world": kw, "keypoints/camera": kc, "keypoints/pixel": uv, "keypoints/visibility": vis,
+        "poses/body_quat": lab["body_q_world"],
+        "keypoints/world": lab["keypoints_world"], "keypoints/camera": lab["keypoints_cam"],
+        "keypoints/pixel": lab["keypoints_2d"], "keypoints/visibility": lab["keypoint_visibility"],
         "creases/angle": np.asarray(frame["crease_angle"], np.float32),
         "bars/strain": np.asarray(frame["bar_strain"], np.float32),
-        "worm/vertices": pos.astype(np.float32),
-        "labels/bbox_obj": np.concatenate([lo, hi - lo], axis=1).astype(np.float32),
-        "labels/bbox_visib": bbv, "labels/visib_fract": visib.astype(np.float32),
-        "labels/worm_mask": worm_mask.astype(np.uint8),
-        "labels/deformation": deform.astype(np.float32),
+        "worm/vertices": np.asarray(frame["positions"], np.float32),
+        "labels/bbox_obj": np.concatenate([wb[:, :2], wb[:, 2:] - wb[:, :2]], axis=1).astype(np.float32),
+        "labels/bbox_visib": bbv.astype(np.float32),
+        "labels/visib_fract": lab["visible_fraction"].astype(np.float32),
+        "labels/worm_mask": images["worm_mask"].astype(np.uint8),
+        "labels/deformation": lab["deformation_ratio"].astype(np.float32),
     }
 
 
