@@ -140,6 +140,31 @@ def value_noise3(p: wp.vec3, seed: int) -> float:
     return wp.lerp(wp.lerp(a0, b0, ty), wp.lerp(a1, b1, ty), tz)
 
 
+NOISE_SIZE = 128
+"""Side of the baked, tileable noise texture (a power of two: wrapping is a bit mask)."""
+
+
+@wp.func
+def noise_tex(tex: wp.array2d(dtype=float), u: float, v: float) -> float:
+    """Bilinear lookup of the tileable noise texture at texel coordinates (u, v), wrapping (values in [0, 1]).
+
+    Baking the noise once and reading 4 texels costs a fraction of hashing 4 (2-D) or 8 (3-D) lattice points per
+    pixel, which dominated the shading cost on CPU.
+    """
+    fu = wp.floor(u)
+    fv = wp.floor(v)
+    tu = u - fu
+    tv = v - fv
+    m = tex.shape[0] - 1
+    i0 = int(fu) & m
+    j0 = int(fv) & m
+    i1 = (i0 + 1) & m
+    j1 = (j0 + 1) & m
+    a = wp.lerp(tex[j0, i0], tex[j0, i1], tu)
+    b = wp.lerp(tex[j1, i0], tex[j1, i1], tu)
+    return wp.lerp(a, b, tv)
+
+
 @wp.func
 def to_srgb8(c: float) -> wp.uint8:
     """Linear [0, 1] -> 8-bit with a square-root display gamma (clamped; gamma 2 costs a sqrt, 2.2 a pow)."""
@@ -348,6 +373,7 @@ def resolve_shade(
     lamp_power: wp.array(dtype=wp.vec3),
     bg_top: wp.array(dtype=wp.vec3),
     bg_bottom: wp.array(dtype=wp.vec3),
+    noise: wp.array2d(dtype=float),
     write_normals: int,
     # Data out:
     rgb: wp.array2d(dtype=wp.vec3ub),
@@ -370,8 +396,9 @@ def resolve_shade(
         floor_half: half side [m] of the square floor, (Wf,).
         floor_tex: (tile size [m], checker contrast [0, 1], grain amplitude, grain frequency [1/m]), (Wf,).
         floor_color2: second checker colour (linear RGB), (Wf,). paper_tex: (fibre amplitude, mottle amplitude).
-        tex_seed: per-world texture seed. ambient, sun_dir (unit, toward the sun), sun_color, lamp_pos [m],
+        tex_seed: per-world texture seed (offsets the shared noise texture per world and surface). ambient, sun_dir (unit, toward the sun), sun_color, lamp_pos [m],
             lamp_power (irradiance at 1 m), bg_top, bg_bottom (background gradient): per world.
+        noise: baked tileable noise texture in [0, 1], (NOISE_SIZE, NOISE_SIZE) (see :func:`bake_noise`).
         write_normals: 1 to write camera-frame unit normals (facing the camera; 0 for background), 0 to skip.
         rgb: (N, H * W) vec3ub. depth: camera z [m], 0 for background, (N, H * W). seg: ids, (N, H * W).
         normals: (N, H * W) vec3, or a 1-element dummy when write_normals is 0.
@@ -398,6 +425,9 @@ def resolve_shade(
     fc2 = floor_color2[wf]
     pt = paper_tex[w % paper_tex.shape[0]]
     seed0 = tex_seed[w % tex_seed.shape[0]]
+    # per-world offsets into the shared noise texture (texels)
+    off_u = float(seed0 & 4095) * 0.03125
+    off_v = float((seed0 >> 12) & 4095) * 0.03125
     amb = ambient[w % ambient.shape[0]]
     sd = sun_dir[w % sun_dir.shape[0]]
     sc = sun_color[w % sun_color.shape[0]]
@@ -406,11 +436,25 @@ def resolve_shade(
     hgt = wp.dot(fn, eye)
     bg = wp.lerp(bg_top[w % bg_top.shape[0]], bg_bottom[w % bg_bottom.shape[0]], py / float(height))
     row = y * width
+    inv_tile = 1.0 / ft[0]
+    # the floor is matte with a constant normal: its ambient + sun irradiance is one constant per thread
+    floor_irr = amb + sc * wp.max(wp.dot(fn, sd), 0.0)
+
+    # along a row the world ray is affine in x: d(x) = d0 + x * dx, and so are its dot products with the floor axes
+    d0 = Rt * wp.vec3(-k[2] / k[0], (py - k[3]) / k[1], 1.0)
+    dx = Rt * wp.vec3(1.0 / k[0], 0.0, 0.0)
+    den0 = wp.dot(fn, d0)
+    dden = wp.dot(fn, dx)
+    eu = wp.dot(eye, fa)
+    ev = wp.dot(eye, fb)
+    du0 = wp.dot(d0, fa)
+    ddu = wp.dot(dx, fa)
+    dv0 = wp.dot(d0, fb)
+    ddv = wp.dot(dx, fb)
 
     for x in range(x_begin, x_end):
         px = float(x)
-        d_cam = wp.vec3((px - k[2]) / k[0], (py - k[3]) / k[1], 1.0)
-        d_world = Rt * d_cam  # a point at camera depth z lies at eye + z * d_world
+        d_world = d0 + px * dx  # a point at camera depth z lies at eye + z * d_world
 
         best_z = float(1.0e30)
         label = int(LABEL_BACKGROUND)
@@ -444,41 +488,48 @@ def resolve_shade(
             n_world = nw * wp.sqrt(inv)
 
         # analytic floor: the square |u|, |v| <= half of the plane fn . p = 0, seen from above only
-        denom = wp.dot(fn, d_world)
+        denom = den0 + px * dden
         if denom < 0.0 and hgt > 0.0:
             zf = -hgt / denom
             if zf < best_z:
-                q = eye + zf * d_world
-                fu = wp.dot(q, fa)
-                fv = wp.dot(q, fb)
+                fu = eu + zf * (du0 + px * ddu)
+                fv = ev + zf * (dv0 + px * ddv)
                 if wp.abs(fu) <= half and wp.abs(fv) <= half:
                     best_z = zf
                     label = LABEL_FLOOR
-                    n_world = fn
                     mat = wp.vec3(fu, fv, 0.0)
 
         color = bg
         nrm = wp.vec3(0.0)
         if label == LABEL_BACKGROUND:
             best_z = 0.0
+        elif label == LABEL_FLOOR:
+            # checker + grain in floor coordinates [m]; matte: ambient + sun (constant) + lamp (per pixel)
+            base = albedo[wa, LABEL_FLOOR]
+            cu = int(wp.floor(mat[0] * inv_tile))
+            cv = int(wp.floor(mat[1] * inv_tile))
+            if ((cu + cv) & 1) != 0:
+                base = wp.lerp(base, fc2, ft[1])
+            g = noise_tex(noise, mat[0] * ft[3] + off_u, mat[1] * ft[3] + off_v)
+            base = base * (1.0 + ft[2] * (g - 0.5))
+            p = eye + best_z * d_world
+            to_lamp = lp - p
+            inv_r2 = 1.0 / wp.max(wp.dot(to_lamp, to_lamp), 1.0e-6)
+            ndp = wp.max(wp.dot(fn, to_lamp), 0.0) * wp.sqrt(inv_r2)
+            color = wp.cw_mul(base, floor_irr + lpw * (ndp * inv_r2))
+            nrm = R * fn
         else:
             p = eye + best_z * d_world
             view = -d_world  # toward the camera (unnormalized)
             if wp.dot(n_world, view) < 0.0:
                 n_world = -n_world  # double-sided sheet: light the side the camera sees
             base = albedo[wa, label]
-            seed = seed0 + label * 7919
-            if label == LABEL_FLOOR:
-                cu = int(wp.floor(mat[0] / ft[0]))
-                cv = int(wp.floor(mat[1] / ft[0]))
-                if (cu + cv) % 2 != 0:
-                    base = wp.lerp(base, fc2, ft[1])
-                g = value_noise2(mat[0] * ft[3], mat[1] * ft[3], seed)
-                base = base * (1.0 + ft[2] * (g - 0.5))
-            elif label <= LABEL_WORM_LAST:
-                # paper: short fibres (anisotropic fine noise) over a soft mottle, in sheet coordinates [m]
-                fib = value_noise3(wp.vec3(mat[0] * 2500.0, mat[1] * 600.0, mat[2] * 600.0), seed)
-                mot = value_noise3(mat * 180.0, seed + 1)
+            if label <= LABEL_WORM_LAST:
+                # paper: short fibres (noise stretched along the sheet's x) over a soft mottle; material coordinates
+                # are the rest positions [m], so the texture sticks to the sheet as it folds
+                sw = mat[1] + mat[2]
+                fib = noise_tex(noise, mat[0] * 2500.0 + off_v, sw * 600.0 + off_u)
+                mot = noise_tex(noise, mat[0] * 180.0 - off_u, (mat[1] - mat[2]) * 180.0 + off_v)
                 base = base * (1.0 + pt[0] * (fib - 0.5) + pt[1] * (mot - 0.5))
             elif label == LABEL_EPM:
                 if mat[2] > 0.0:

@@ -27,6 +27,31 @@ def _vec_array(a, dtype, device):
     return wp.array(np.ascontiguousarray(a, dtype=np.float32), dtype=dtype, device=device)
 
 
+def bake_noise(size: int = 128, seed: int = 20240611) -> np.ndarray:
+    """Tileable fractal value noise in [0, 1], shape (size, size) float32.
+
+    Three octaves of smoothstep-interpolated lattice noise (8, 32 and ``size`` cells per tile, weights 0.5, 0.3,
+    0.2), normalized to [0, 1]. The seed is fixed, so every renderer bakes the same texture; worlds differ by their
+    texture offsets (``Appearance.tex_seed``)."""
+    rng = np.random.default_rng(seed)
+    out = np.zeros((size, size))
+    amp_sum = 0.0
+    for cells, amp in ((8, 0.5), (32, 0.3), (size, 0.2)):
+        lat = rng.uniform(size=(cells, cells))
+        t = (np.arange(size) * cells / size)
+        i0 = np.floor(t).astype(int)
+        f = t - i0
+        f = f * f * (3 - 2 * f)
+        i1 = (i0 + 1) % cells
+        row = lat[i0][:, i0] * (1 - f)[None, :] + lat[i0][:, i1] * f[None, :]
+        row1 = lat[i1][:, i0] * (1 - f)[None, :] + lat[i1][:, i1] * f[None, :]
+        out += amp * (row * (1 - f)[:, None] + row1 * f[:, None])
+        amp_sum += amp
+    out /= amp_sum
+    out = (out - out.min()) / (out.max() - out.min())
+    return out.astype(np.float32)
+
+
 class Renderer:
     """Off-screen z-buffer rasterizer for batches of (world, camera) images, on any Warp device."""
 
@@ -46,6 +71,7 @@ class Renderer:
         self.near = float(near)
         self.max_chunk_images = max(1, int(max_chunk_pixels) // (self.width * self.height))
         self._buffers: dict = {}
+        self._noise = wp.array(bake_noise(rk.NOISE_SIZE), dtype=float, device=self.device)
 
     # -- uploads -------------------------------------------------------------------------------------------------------
 
@@ -158,7 +184,7 @@ class Renderer:
                           s["albedo"], s["specular"], s["floor_normal"], s["floor_axis"], s["floor_half"],
                           s["floor_tex"], s["floor_color2"], s["paper_tex"], s["tex_seed"], s["ambient"],
                           s["sun_dir"], s["sun_color"], s["lamp_pos"], s["lamp_power"], s["bg_top"], s["bg_bottom"],
-                          int(normals)],
+                          self._noise, int(normals)],
                   outputs=[b["rgb"], b["depth"], b["seg"], b["normals"]])
         H, W = self.height, self.width
         res = {
