@@ -19,8 +19,9 @@ overshoot. We use mass splitting (Tonge et al. 2012): in the denominators of sti
 fold-through limits) a vertex's inverse mass is multiplied by ``split[v]``, the number of such constraints at the
 vertex. In the soft limit (compliance >> inverse mass) the split cancels out and the force is the exact spring force,
 in the rigid limit the summed correction is the average of the individual ones; both limits are dt-consistent.
-Hinge springs are split among the hinges at each vertex (``split_hinge``), bars and anchors among the bars and
-anchors (``split``), fold-through limits among all of them.
+Hinge springs are split only as much as their stiffness needs at the substep used (``split_hinge = max(1, 2 G_v)``,
+G_v = sum over the vertex's hinges of k L w |grad psi|² dt², computed by the Simulator), bars and anchors among the
+bars and anchors at the vertex (``split``), fold-through limits among all of them.
 """
 
 from __future__ import annotations
@@ -152,7 +153,7 @@ def solve_constraints(
     # Model:
     inv_mass: wp.array2d(dtype=float),
     split: wp.array(dtype=float),
-    split_hinge: wp.array(dtype=float),
+    split_hinge: wp.array2d(dtype=float),
     edges: wp.array2d(dtype=wp.int32),
     rest_length: wp.array2d(dtype=float),
     bar_stiffness: wp.array(dtype=float),
@@ -216,6 +217,7 @@ def solve_constraints(
         return
     h = e - num_edges
     if h < num_hinges:
+        sh_row = world % split_hinge.shape[0]
         i = hinges[h, 0]
         j = hinges[h, 1]
         k = hinges[h, 2]
@@ -244,10 +246,10 @@ def solve_constraints(
             # rigid NoFoldThrough limit: split over every constraint at the vertex
             bound = wp.where(phi < lo, lo, hi)
             denom = (
-                (split[i] + split_hinge[i]) * wi * wp.length_sq(gi)
-                + (split[j] + split_hinge[j]) * wj * wp.length_sq(gj)
-                + (split[k] + split_hinge[k]) * wk * wp.length_sq(gk)
-                + (split[l] + split_hinge[l]) * wl * wp.length_sq(gl)
+                (split[i] + split_hinge[sh_row, i]) * wi * wp.length_sq(gi)
+                + (split[j] + split_hinge[sh_row, j]) * wj * wp.length_sq(gj)
+                + (split[k] + split_hinge[sh_row, k]) * wk * wp.length_sq(gk)
+                + (split[l] + split_hinge[sh_row, l]) * wl * wp.length_sq(gl)
             )
             if denom > 0.0:
                 dlam = -(phi - bound) / denom
@@ -258,15 +260,15 @@ def solve_constraints(
                 alpha = 1.0 / (kh * dt2)
                 # XPBD damping: gamma = alpha * beta / dt with beta = c L [N m s/rad]
                 gamma = alpha * pw(hinge_damping, world) * length / dt
-                # hinges split among themselves: many hinges share a vertex, and their summed Jacobi corrections
-                # overshoot once k L dt² |grad|² / m is not small (measured: k_alpha = 0.02 N/rad diverges at
-                # dt = 250 us unsplit); splitting keeps every k and dt stable, at the price of implicit-Euler-like
-                # softening of the hinge modes that vanishes as dt -> 0
+                # Up to 12 hinges share a vertex and their summed Jacobi corrections overshoot once
+                # G_v = sum_h k L w |grad|² dt² is not small (k_alpha = 0.02 N/rad diverged at dt = 250 us unsplit).
+                # split_hinge = max(1, 2 G_v) (set by the Simulator for its dt) splits only where needed: a full
+                # split by the hinge count halved the effective crease stiffness at dt = 125 us.
                 wsum = (
-                    split_hinge[i] * wi * wp.length_sq(gi)
-                    + split_hinge[j] * wj * wp.length_sq(gj)
-                    + split_hinge[k] * wk * wp.length_sq(gk)
-                    + split_hinge[l] * wl * wp.length_sq(gl)
+                    split_hinge[sh_row, i] * wi * wp.length_sq(gi)
+                    + split_hinge[sh_row, j] * wj * wp.length_sq(gj)
+                    + split_hinge[sh_row, k] * wk * wp.length_sq(gk)
+                    + split_hinge[sh_row, l] * wl * wp.length_sq(gl)
                 )
                 rate = (
                     wp.dot(gi, xi - x_prev[world, i])
@@ -327,8 +329,13 @@ def apply_corrections(
     if unstable[world] != 0:
         delta[world, i] = wp.vec3(0.0)
         return
-    p = x[world, i] + delta[world, i]
+    corr = delta[world, i]
     delta[world, i] = wp.vec3(0.0)
+    p = x[world, i] + corr
+    # Velocity = predicted velocity + correction / dt, not (x - x_prev) / dt: positions are float32 of ~0.1 m, and
+    # the difference of two of them loses ~1 % of a substep's displacement to a rounding that repeats with the same
+    # sign every substep (free fall came out 0.35 % slow that way).
+    vel = v[world, i] + corr / dt
     beta = pw(floor_incline, world)
     n = wp.vec3(-wp.sin(beta), 0.0, wp.cos(beta))
     depth = -wp.dot(p, n)
@@ -337,14 +344,20 @@ def apply_corrections(
     if depth > 0.0:
         touching = 1
         p = p + n * depth
-        s = p - p0
-        s = s - n * wp.dot(s, n)
-        s_len = wp.length(s)
-        if s_len <= pw(mu_static, world) * depth:
-            p = p - s
+        vel = vel + n * (depth / dt)
+        vn = wp.dot(vel, n)
+        vt = vel - n * vn
+        vt_len = wp.length(vt)
+        # Friction in velocity space: at small substeps mu * depth is about one float32 ulp of a position, so
+        # subtracting it from p would round to 0 or 1 ulp and bias kinetic friction by tens of percent.
+        if vt_len * dt <= pw(mu_static, world) * depth:
+            # stick: tangentially back to exactly where the substep started (p0 + n dn, not p - s, whose
+            # round-off would random-walk downhill)
+            p = p0 + n * wp.dot(p - p0, n)
+            vel = n * vn
         else:
-            p = p - s * (pw(mu_kinetic, world) * depth / s_len)
-    vel = (p - p0) / dt
+            vel = vel - vt * (pw(mu_kinetic, world) * depth / (dt * vt_len))
+            p = p0 + vel * dt
     speed = wp.length(vel)
     if not (speed < speed_limit):  # NaN fails every comparison
         unstable[world] = 1

@@ -39,6 +39,12 @@ import numpy as np
 
 from .params import GAITS, WormParams, per_world
 
+DEFAULT_DT = 4.0e-3
+"""Step of the gait runs [s]: the magnetic wrench and EPM pose are refreshed every step."""
+DEFAULT_SUBSTEPS = 80
+"""XPBD substeps per step in the gait runs (substep 50 µs: one Jacobi pass per substep makes a bar only as stiff as
+~m / (n dt²), so the sheet is near-rigid only at small substeps; docs/dynamics.md)."""
+
 SINE_FIELDS = ("start_x", "start_y", "wavelength", "amplitude", "closest", "theta", "period", "direction", "phase")
 """Order of the sinusoidal path's per-world arrays as the kernel takes them."""
 

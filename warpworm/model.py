@@ -191,10 +191,7 @@ class Model:
         """Hinge labels (0 flat, 1 mountain, 2 valley), shape (H,), int32; sets the NoFoldThrough range."""
         self.split = wp.array(np.maximum(split, 1.0), dtype=float, device=dev)
         """Number of bars and anchors at each vertex, shape (V,), float (Jacobi mass splitting)."""
-        split_h = np.zeros(V)
-        np.add.at(split_h, pat.hinges.reshape(-1), 1.0)
-        self.split_hinge = wp.array(np.maximum(split_h, 1.0), dtype=float, device=dev)
-        """Number of hinges at each vertex, shape (V,), float (Jacobi mass splitting of the hinge springs)."""
+
         self.mount_vertices = wp.array(mv, dtype=wp.int32, device=dev)
         """IPM mount vertices (tail, centre, head), shape (3, K), int32."""
         self.mount_local_pos = wp.array(pat.mount_local_pos[None], dtype=wp.vec3, device=dev)
@@ -334,6 +331,22 @@ class Model:
             step_count=z((W,), wp.int32),
             anchor_target=wp.array(targets.reshape(W, A, 3), dtype=wp.vec3, device=dev),
         )
+
+    def hinge_split(self, dt_sub: float) -> np.ndarray:
+        """Jacobi mass-splitting factor of the hinge springs per vertex for substep ``dt_sub`` [s]: max(1, 2 G_v)
+        with G_v = sum over the hinges at v of k_alpha L w_v |d psi / d x_v|² dt² (rest geometry), shape (R, V)."""
+        pat = self.pattern
+        rows = max(self.inv_mass.shape[0], self.hinge_length.shape[0], self.hinge_stiffness.shape[0])
+        x = self.rest_positions_host[:rows]
+        grad = crease.dihedral_gradients(x, pat.hinges)  # (R, H, 4, 3)
+        w = np.broadcast_to(self.inv_mass.numpy(), (rows, self.num_vertices))
+        kL = (np.broadcast_to(self.hinge_stiffness.numpy()[:, None], (rows, 1))
+              * np.broadcast_to(self.hinge_length.numpy(), (rows, self.num_hinges)))
+        gain = kL[:, :, None] * np.sum(grad**2, axis=-1) * dt_sub**2  # (R, H, 4)
+        G = np.zeros((rows, self.num_vertices))
+        for c in range(4):
+            np.add.at(G, (slice(None), pat.hinges[:, c]), gain[:, :, c] * w[:, pat.hinges[:, c]])
+        return np.maximum(1.0, 2.0 * G)
 
     def bytes_per_world(self) -> int:
         """Device bytes of one world's state and per-world model arrays (shared topology excluded)."""

@@ -12,7 +12,7 @@ Pass ``magnet_every_substep=True`` to evaluate it every substep instead.
 Typical use::
 
     model = Model.from_params(gaits.preset_params("peristaltic"), num_worlds=16, device="cpu")
-    sim = Simulator(model, dt=2e-3, substeps=8)
+    sim = Simulator(model, dt=2e-3, substeps=40)
     state = sim.initial_state()
     sim.settle(state, 0.3)            # EPM absent, worm settles under gravity; resets t to 0
     sim.step(state, 500)              # 1 s
@@ -63,7 +63,7 @@ class Simulator:
         self,
         model: Model,
         dt: float = 2.0e-3,
-        substeps: int = 8,
+        substeps: int = 40,
         *,
         magnet_every_substep: bool = False,
         strain_limit: float = 0.5,
@@ -82,6 +82,9 @@ class Simulator:
         self.magnet_every_substep = bool(magnet_every_substep)
         self.strain_limit = float(strain_limit)
         self.speed_limit = float(speed_limit)
+        self.split_hinge = wp.array(model.hinge_split(self.dt_sub).astype(np.float32), dtype=float,
+                                    device=model.device)
+        """Hinge mass-splitting factor per vertex for this substep, shape (R, V) (see Model.hinge_split)."""
         self.use_graph = model.device.is_cuda if use_graph is None else bool(use_graph and model.device.is_cuda)
         self._cmds = {}
         self._graphs = {}
@@ -139,7 +142,7 @@ class Simulator:
                        outputs=[state.positions, state.velocities, state.prev_positions],
                        device=m.device, record_cmd=True)
         c2 = wp.launch(k.solve_constraints, dim=(W, n_elem),
-                       inputs=[m.inv_mass, m.split, m.split_hinge, m.edges, m.rest_length, m.bar_stiffness, m.hinges,
+                       inputs=[m.inv_mass, m.split, self.split_hinge, m.edges, m.rest_length, m.bar_stiffness, m.hinges,
                                m.hinge_rest_angle, m.hinge_length, m.hinge_label, m.hinge_stiffness,
                                m.hinge_damping, m.anchor_vertex, m.anchor_stiffness, dt, self.strain_limit,
                                state.positions, state.prev_positions, state.anchor_target],
@@ -211,7 +214,8 @@ class Simulator:
         """
         m = self.model
         self._magnet_poses(state)  # poses at the current time (the wrench kept the step's starting ones)
-        x = state.positions.numpy()
+        # .numpy() aliases device memory on the CPU: copy, so a snapshot never changes after it is taken
+        x = state.positions.numpy().copy()
         q = state.magnet_rot.numpy()
         A = m.num_anchors
         if A:
@@ -221,13 +225,13 @@ class Simulator:
             anchor_force = np.zeros((m.num_worlds, 0, 3), np.float32)
         return {
             "positions": x,
-            "velocities": state.velocities.numpy(),
-            "magnet_pos": state.magnet_pos.numpy(),
+            "velocities": state.velocities.numpy().copy(),
+            "magnet_pos": state.magnet_pos.numpy().copy(),
             "magnet_rot": quat_wxyz_to_matrix(quat_xyzw_to_wxyz(q)).astype(np.float32),
-            "magnet_force": state.magnet_force.numpy(),
-            "magnet_torque": state.magnet_torque.numpy(),
-            "crease_angle": state.crease_angle.numpy(),
-            "bar_strain": state.bar_strain.numpy(),
+            "magnet_force": state.magnet_force.numpy().copy(),
+            "magnet_torque": state.magnet_torque.numpy().copy(),
+            "crease_angle": state.crease_angle.numpy().copy(),
+            "bar_strain": state.bar_strain.numpy().copy(),
             "anchor_force": anchor_force.astype(np.float32),
             "contact": state.contact.numpy().astype(bool),
             "unstable": state.unstable.numpy().astype(bool),

@@ -1,0 +1,229 @@
+"""``warpworm simulate``: run a gait on W worlds, print each world's net displacement, write a trajectory and a preview.
+
+Outputs in ``--out`` (default ``./simulate_out``):
+- ``trajectory.npz``: ``times (F,)`` [s]; ``positions (F, S, V, 3)``, ``magnet_pos (F, S, 4, 3)`` [m];
+  ``magnet_rot (F, S, 4, 3, 3)``; ``crease_angle (F, S, H)`` [rad]; ``bar_strain (F, S, E)``; ``unstable (S,)``;
+  topology ``triangles``, ``edges``, ``hinges``, ``hinge_label``, ``triangle_segment``; ``displacement_m (W,)``;
+  S = the first ``--save-worlds`` worlds (float32).
+- ``preview.mp4`` (OpenCV mp4v; side view of world 0 with the magnets) and ``preview_strip.png`` (frames side by side).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+HELP = "run a gait (peristaltic, omega, inchworm; forward or backward) on W worlds and report net displacement"
+
+RANDOMIZED = {  # parameter: relative half-range of the uniform draw around the preset value (--randomize)
+    "hinge_stiffness": 0.2,
+    "mu_static": 0.1,
+    "sheet_density": 0.2,
+    "closest_approach": 0.05,
+    "epm_moment": 0.05,
+}
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--gait", choices=["peristaltic", "omega", "inchworm"], default="peristaltic")
+    parser.add_argument("--backward", action="store_true", help="drive the worm toward -x")
+    parser.add_argument("--cycles", type=int, default=5, help="EPM cycles to run (default 5)")
+    parser.add_argument("--worlds", type=int, default=1, help="number of worlds W (default 1)")
+    parser.add_argument("--device", default="cpu", help="Warp device: cpu | cuda | cuda:N (default cpu)")
+    parser.add_argument("--magnet-model", choices=["dipoles", "analytic"], default="dipoles")
+    parser.add_argument("--dt", type=float, default=None, help="step [s] (magnet wrench refresh; default preset)")
+    parser.add_argument("--substeps", type=int, default=None, help="XPBD substeps per step (default preset)")
+    parser.add_argument("--settle", type=float, default=0.2, help="settling time before the gait [s] (default 0.2)")
+    parser.add_argument("--json", action="store_true", help="print only a JSON summary on stdout")
+    parser.add_argument("--out", default="simulate_out", help="output folder (default ./simulate_out)")
+    parser.add_argument("--no-output", action="store_true", help="write no trajectory / preview files")
+    parser.add_argument("--save-worlds", type=int, default=4, help="worlds stored in the trajectory (default 4)")
+    parser.add_argument("--fps", type=float, default=30.0, help="trajectory / preview frame rate [1/s]")
+    parser.add_argument("--seed", type=int, default=0, help="seed of --randomize")
+    parser.add_argument("--randomize", action="store_true",
+                        help="draw per-world parameters uniformly around the preset (" + ", ".join(
+                            f"{k} ±{int(100 * v)}%" for k, v in RANDOMIZED.items()) + ")")
+
+
+def randomized_params(params, num_worlds: int, seed: int):
+    """``params`` with the :data:`RANDOMIZED` fields drawn per world (uniform, relative half-range)."""
+    rng = np.random.default_rng(seed)
+    changes = {}
+    for name, rel in RANDOMIZED.items():
+        base = float(np.mean(getattr(params, name)))
+        changes[name] = base * (1.0 + rel * rng.uniform(-1.0, 1.0, num_worlds))
+    changes["mu_kinetic"] = np.minimum(float(np.mean(params.mu_kinetic)), changes["mu_static"])
+    return replace(params, **changes)
+
+
+def axis_displacement(x0: np.ndarray, x1: np.ndarray, incline) -> np.ndarray:
+    """Net displacement [m] of each world's vertex centroid along the worm axis (+x laid on the floor), (W,)."""
+    beta = np.broadcast_to(np.asarray(incline, np.float64), (x0.shape[0],))
+    axis = np.stack([np.cos(beta), np.zeros_like(beta), np.sin(beta)], -1)
+    return np.einsum("wc,wc->w", x1.mean(axis=1) - x0.mean(axis=1), axis)
+
+
+def run_gait(params, num_worlds: int, cycles: float, *, device="cpu", dt=None, substeps=None, settle=0.2,
+             fps: float | None = 30.0, save_worlds: int = 4):
+    """Settle, then run ``cycles`` EPM cycles. Returns a dict: displacement_m (W,), unstable (W,), sim_time_s,
+    wall_time_s, frames (dict of stacked snapshot arrays of the first ``save_worlds`` worlds, or None), model, sim."""
+    from warpworm import gaits
+    from warpworm.model import Model
+    from warpworm.simulator import Simulator
+
+    dt = gaits.DEFAULT_DT if dt is None else dt
+    substeps = gaits.DEFAULT_SUBSTEPS if substeps is None else substeps
+    t_wall = time.perf_counter()
+    model = Model.from_params(params, num_worlds, device)
+    sim = Simulator(model, dt=dt, substeps=substeps)
+    state = sim.initial_state()
+    if settle > 0:
+        sim.settle(state, settle)
+    x0 = state.positions.numpy().copy()
+    period = float(np.max(np.asarray(params.cycle_period)))
+    sim_time = cycles * period
+    n_steps = int(round(sim_time / dt))
+    frames = None
+    keys = ("positions", "magnet_pos", "magnet_rot", "crease_angle", "bar_strain", "time")
+    if fps:
+        every = max(1, int(round(1.0 / (fps * dt))))
+        S = min(save_worlds, num_worlds)
+        frames = {k: [] for k in keys}
+        done = 0
+        while True:
+            snap = sim.snapshot(state)
+            for k in keys:
+                frames[k].append(snap[k][:S])
+            if done >= n_steps:
+                break
+            n = min(every, n_steps - done)
+            sim.step(state, n)
+            done += n
+        frames = {k: np.stack(v) for k, v in frames.items()}
+        frames["time"] = frames["time"][:, 0]
+    else:
+        sim.step(state, n_steps)
+    snap = sim.snapshot(state)
+    disp = axis_displacement(x0, snap["positions"], np.broadcast_to(np.asarray(params.floor_incline), (num_worlds,)))
+    return {
+        "displacement_m": disp,
+        "unstable": snap["unstable"],
+        "sim_time_s": n_steps * dt,
+        "wall_time_s": time.perf_counter() - t_wall,
+        "frames": frames,
+        "model": model,
+        "sim": sim,
+    }
+
+
+def _draw_frame(x, tri, mpos, mrot, msize, width=640, height=360, xlim=(-0.03, 0.14), zlim=(-0.01, 0.10)):
+    """Side view (x right, z up) of one world: facets, floor, magnets (EPM red rectangle, IPMs blue bars)."""
+    import cv2
+
+    img = np.full((height, width, 3), 255, np.uint8)
+    sx = width / (xlim[1] - xlim[0])
+    sz = height / (zlim[1] - zlim[0])
+    s = min(sx, sz)
+
+    def px(p):
+        return np.stack([(p[..., 0] - xlim[0]) * s, height - (p[..., 2] - zlim[0]) * s], -1).astype(np.int32)
+
+    y0 = px(np.array([0.0, 0.0, 0.0]))[1]
+    cv2.line(img, (0, int(y0)), (width - 1, int(y0)), (80, 80, 80), 1)
+    pts = px(x[tri])
+    for poly in pts:  # back-to-front order is irrelevant for a flat-shaded outline view
+        cv2.fillConvexPoly(img, poly, (225, 235, 240))
+        cv2.polylines(img, [poly], True, (120, 120, 120), 1, cv2.LINE_AA)
+    for m in range(4):
+        half = 0.5 * msize[m]
+        corners = np.array([[sx_, sy_, sz_] for sx_ in (-1, 1) for sy_ in (-1, 1) for sz_ in (-1, 1)]) * half
+        world = mpos[m] + corners @ mrot[m].T
+        hull = cv2.convexHull(px(world))
+        cv2.fillConvexPoly(img, hull, (60, 60, 220) if m == 0 else (200, 90, 40))
+        tip = px(mpos[m] + mrot[m][:, 2] * (0.6 * float(np.max(msize[m]))))
+        cv2.arrowedLine(img, tuple(int(v) for v in px(mpos[m])), tuple(int(v) for v in tip), (0, 0, 0), 1,
+                        cv2.LINE_AA, tipLength=0.3)
+    return img
+
+
+def write_outputs(out: Path, result: dict, params, num_worlds: int) -> list[Path]:
+    """trajectory.npz, preview.mp4 and preview_strip.png (world 0)."""
+    import cv2
+
+    out.mkdir(parents=True, exist_ok=True)
+    model, fr = result["model"], result["frames"]
+    pat = model.pattern
+    paths = []
+    traj = out / "trajectory.npz"
+    np.savez_compressed(
+        traj, times=fr["time"], positions=fr["positions"], magnet_pos=fr["magnet_pos"], magnet_rot=fr["magnet_rot"],
+        crease_angle=fr["crease_angle"], bar_strain=fr["bar_strain"], unstable=result["unstable"],
+        displacement_m=result["displacement_m"], triangles=pat.triangles, edges=pat.edges, hinges=pat.hinges,
+        hinge_label=pat.hinge_label, triangle_segment=pat.triangle_segment, gait=params.gait,
+        backward=params.backward,
+    )
+    paths.append(traj)
+    x = fr["positions"][:, 0]
+    lo = min(x[..., 0].min(), fr["magnet_pos"][:, 0, :, 0].min()) - 0.02
+    hi = max(x[..., 0].max(), fr["magnet_pos"][:, 0, :, 0].max()) + 0.02
+    ztop = max(0.06, float(fr["magnet_pos"][:, 0, 0, 2].max()) + 0.03)
+    size = model.magnet_size_host[0]
+    imgs = [_draw_frame(x[f], pat.triangles, fr["magnet_pos"][f, 0], fr["magnet_rot"][f, 0], size,
+                        xlim=(lo, hi), zlim=(-0.01, ztop)) for f in range(len(x))]
+    for f, img in enumerate(imgs):
+        cv2.putText(img, f"{params.gait}{' backward' if params.backward else ''}  t = {fr['time'][f]:.2f} s",
+                    (10, 22), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (0, 0, 0), 1, cv2.LINE_AA)
+    video = out / "preview.mp4"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"mp4v"), 30.0, (imgs[0].shape[1], imgs[0].shape[0]))
+    for img in imgs:
+        writer.write(img)
+    writer.release()
+    paths.append(video)
+    pick = np.linspace(0, len(imgs) - 1, min(6, len(imgs))).astype(int)
+    strip = out / "preview_strip.png"
+    cv2.imwrite(str(strip), np.concatenate([imgs[i][:, :, :] for i in pick], axis=1))
+    paths.append(strip)
+    return paths
+
+
+def main(args) -> int:
+    import warp as wp
+
+    wp.config.quiet = True
+    from warpworm import gaits
+
+    params = gaits.preset_params(args.gait, args.backward, magnet_model=args.magnet_model)
+    if args.randomize:
+        params = randomized_params(params, args.worlds, args.seed)
+    device = "cuda:0" if args.device == "cuda" else args.device
+    want_files = not args.no_output
+    result = run_gait(params, args.worlds, args.cycles, device=device, dt=args.dt, substeps=args.substeps,
+                      settle=args.settle, fps=args.fps if want_files else None, save_worlds=args.save_worlds)
+    disp = result["displacement_m"]
+    unstable = result["unstable"]
+    paths = write_outputs(Path(args.out), result, params, args.worlds) if want_files else []
+    if args.json:
+        summary = {
+            "gait": args.gait,
+            "worlds": args.worlds,
+            "displacement_m": [float(d) for d in disp],
+            "unstable": [bool(u) for u in unstable],
+            "sim_time_s": float(result["sim_time_s"]),
+            "wall_time_s": float(result["wall_time_s"]),
+        }
+        sys.stdout.write(json.dumps(summary) + "\n")
+        return 0
+    direction = "backward" if args.backward else "forward"
+    print(f"{args.gait} {direction}: {args.cycles} cycles, {result['sim_time_s']:.2f} s simulated on {args.worlds} "
+          f"world(s) in {result['wall_time_s']:.1f} s wall")
+    for w, (d, u) in enumerate(zip(disp, unstable)):
+        print(f"  world {w:4d}: net displacement along the worm axis {1e3 * d:+8.2f} mm"
+              f"  ({1e3 * d / max(result['sim_time_s'], 1e-12):+.2f} mm/s){'  UNSTABLE (frozen)' if u else ''}")
+    for p in paths:
+        print(f"  wrote {p}")
+    return 0
