@@ -1,0 +1,554 @@
+"""The paper's virtual experiments (Swaminathan et al., RA-L 2021, §IV), batched: one Simulator per experiment.
+
+Every function returns a dict with NumPy arrays and a ``"summary"`` dict of plain floats / strings (JSON-ready with
+:func:`to_jsonable`). A sweep (hinge stiffnesses, slopes, gaits) is W worlds of one :class:`~warpworm.simulator.
+Simulator`; nothing loops over worlds on the host. SI units throughout (the plots convert to mm / mN).
+
+==================  ====================================================================================================
+force_distance      §IV-A, Fig. 5: attraction of two 1 cm³ N52 cubes (0.9 A·m², unlike poles facing) vs gap, dipole
+                    model at several densities and the exact (analytic) model, beside the closed-form table.
+compression         §IV-B, Fig. 6/7: tail section anchored, head section pushed along −x in quasi-static increments;
+                    force vs displacement, one world per hinge stiffness k_α; linear quasi-static prediction beside it.
+flexure             §IV-B: worm lifted on two supports near its ends, centre section pushed down; force vs deflection
+                    per k_α (force relative to the unloaded preload), linear prediction beside it.
+slope               §IV-F: worm (no magnets) on inclines β across atan(μs); slide along the slope vs time and the
+                    Coulomb prediction ½ g (sin β − μk cos β) t².
+force_plate         §IV-D, Fig. 9/10: tail tied by anchors to a fixed point while each gait runs; anchor force vs time.
+strain              §IV-G, Fig. 12: Cauchy strain of every bar over a gait: max / mean |strain| per bar.
+deformation         §IV-E, Fig. 11: the four deformation ratios (adjacent segment-centre distances over rest) vs time
+                    and the net displacement, per gait.
+==================  ====================================================================================================
+
+Gait experiments run the three gait presets (:func:`warpworm.gaits.preset_params`) as three worlds of one batch: the
+presets' per-gait scalars become per-world arrays and each world gets its own gait's EPM path.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import fields, replace
+from pathlib import Path
+
+import numpy as np
+
+from . import crease, gaits
+from . import magnets as mg
+from .params import GAITS, WormParams
+
+EXPERIMENTS = ("force-distance", "compression", "flexure", "slope", "force-plate", "strain", "deformation")
+
+CUBE_TABLE = {
+    1: 26.04212, 2: 18.76765, 3: 14.05910, 5: 8.401509, 7: 5.308457, 10: 2.879273, 15: 1.214808, 20: 0.592872,
+    30: 0.189106,
+}
+"""Closed-form attraction [N] of two coaxial 10 mm cubes, 0.9 A·m² each, unlike poles facing, by face gap [mm]
+(shared/DESIGN-NOTES.md; closed form and magpylib agree to 3e-7)."""
+
+NO_MAGNETS = dict(ipm_moment=np.zeros(3), epm_moment=0.0)
+"""Overrides that switch every magnet off (mechanical tests: compression, flexure, slope)."""
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# helpers
+
+
+def _dt_substeps(dt, substeps):
+    return (getattr(gaits, "DEFAULT_DT", 4.0e-3) if dt is None else float(dt),
+            getattr(gaits, "DEFAULT_SUBSTEPS", 32) if substeps is None else int(substeps))
+
+
+def _quiet_warp():
+    import warp as wp
+
+    if hasattr(wp, "LOG_WARNING"):
+        wp.config.log_level = wp.LOG_WARNING
+    else:
+        wp.config.quiet = True
+
+
+def section_vertices(n_units: int, section: int, corners=(0, 1, 2)) -> np.ndarray:
+    """Vertex indices of the given corners of cross-section ``section`` (0 tail … 2n head); corner 0 bottom-left,
+    1 bottom-right, 2 top (docs/crease.md: vertex 3s + k)."""
+    if not 0 <= section <= 2 * n_units:
+        raise ValueError(f"section must be in [0, {2 * n_units}], got {section}")
+    return np.array([3 * section + k for k in corners], np.int32)
+
+
+def _lift(state, dz: float) -> None:
+    x = state.positions.numpy() + np.array([0.0, 0.0, dz], np.float32)
+    state.positions.assign(x)
+    state.prev_positions.assign(x)
+
+
+def linear_anchor_response(model, params: WormParams, target_offsets: np.ndarray, world: int = 0,
+                           anchor_stiffness: float | np.ndarray | None = None) -> np.ndarray:
+    """Independent quasi-static prediction: anchor forces [N], shape (A, 3), for small anchor-target offsets.
+
+    Linearizes the bar-and-hinge energy at the rest shape of ``world`` (NumPy, float64, no solver involved):
+    K = Σ_bars (EA/L0) e eᵀ + Σ_hinges k_α L ∇ψ ∇ψᵀ + Σ_anchors k_a (on the anchored vertex), solves K u = k_a Δt on
+    the anchored vertices and returns k_a (u − Δt) per anchor (the worm's pull on the anchor, as ``snapshot``'s
+    ``anchor_force``). No gravity, no contact: compare with a zero-gravity run.
+
+    Args:
+        model: the :class:`~warpworm.model.Model` (topology, rest geometry, anchors).
+        params: its parameters (``bar_stiffness``, ``hinge_stiffness`` per world or shared).
+        target_offsets: anchor target displacements [m], shape (A, 3).
+        world: which world's stiffness and geometry.
+        anchor_stiffness: [N/m] (default the model's).
+    """
+    pat = model.pattern
+    V = model.num_vertices
+    x = np.asarray(model.rest_positions_host[world], np.float64)
+    ea = float(np.broadcast_to(np.asarray(params.bar_stiffness, np.float64), (model.num_worlds,))[world])
+    ka = float(np.broadcast_to(np.asarray(params.hinge_stiffness, np.float64), (model.num_worlds,))[world])
+    rest_len = model.rest_length.numpy()
+    rest_len = rest_len[world % rest_len.shape[0]].astype(np.float64)
+    hinge_len = model.hinge_length.numpy()
+    hinge_len = hinge_len[world % hinge_len.shape[0]].astype(np.float64)
+    K = np.zeros((3 * V, 3 * V))
+    e = x[pat.edges[:, 1]] - x[pat.edges[:, 0]]
+    e /= np.linalg.norm(e, axis=1, keepdims=True)
+    ea_e = np.full(model.num_edges, ea)
+    valley = getattr(params, "valley_bar_stiffness", None)
+    if valley is not None:
+        ea_e[pat.edge_label == crease.VALLEY] = float(np.broadcast_to(np.asarray(valley, np.float64),
+                                                                     (model.num_worlds,))[world])
+    kb = ea_e / rest_len
+    for s, (i, j) in enumerate(pat.edges):  # small dense assembly (V = 39): a host loop over elements is fine
+        blk = kb[s] * np.outer(e[s], e[s])
+        for a, b, sg in ((i, i, 1), (j, j, 1), (i, j, -1), (j, i, -1)):
+            K[3 * a:3 * a + 3, 3 * b:3 * b + 3] += sg * blk
+    g = crease.dihedral_gradients(x, pat.hinges)  # (H, 4, 3)
+    for h, stencil in enumerate(pat.hinges):
+        gv = np.zeros(3 * V)
+        for c, v in enumerate(stencil):
+            gv[3 * v:3 * v + 3] += g[h, c]
+        K += ka * hinge_len[h] * np.outer(gv, gv)
+    av = model.anchor_vertex.numpy()
+    if anchor_stiffness is None:
+        ak = model.anchor_stiffness.numpy()
+        ak = ak[world % ak.shape[0]].astype(np.float64)
+    else:
+        ak = np.broadcast_to(np.asarray(anchor_stiffness, np.float64), (len(av),))
+    f = np.zeros(3 * V)
+    off = np.asarray(target_offsets, np.float64).reshape(len(av), 3)
+    for a, v in enumerate(av):
+        K[3 * v:3 * v + 3, 3 * v:3 * v + 3] += ak[a] * np.eye(3)
+        f[3 * v:3 * v + 3] += ak[a] * off[a]
+    u = np.linalg.solve(K, f).reshape(V, 3)
+    return ak[:, None] * (u[av] - off)
+
+
+def _batched_gait_params(gait_list, base: WormParams | None = None, **overrides) -> WormParams:
+    """One WormParams for W = len(gait_list) worlds: every scalar field on which the gait presets differ becomes a
+    per-world array (the string fields ``gait`` / ``backward`` keep the first gait's; paths are set per world)."""
+    presets = [gaits.preset_params(g, base=base, **overrides) for g in gait_list]
+    merged = {}
+    for f in fields(WormParams):
+        vals = [getattr(p, f.name) for p in presets]
+        if f.name in ("gait", "backward", "magnet_model", "n_units"):
+            continue
+        arrs = [np.asarray(v, np.float64) if not isinstance(v, str) else None for v in vals]
+        if any(a is None for a in arrs) or all(np.array_equal(arrs[0], a, equal_nan=True) for a in arrs):
+            continue
+        if arrs[0].ndim == 0:
+            merged[f.name] = np.array([float(a) for a in arrs])
+        else:
+            merged[f.name] = np.stack([np.broadcast_to(a, arrs[0].shape) for a in arrs])
+    return replace(presets[0], **merged)
+
+
+def _gait_model(gait_list, *, anchors=None, anchor_stiffness=1.0e4, base=None, device="cpu", **overrides):
+    """A Model with one world per gait in ``gait_list``, each on its own gait's sinusoidal EPM path."""
+    from .model import Model
+
+    p = _batched_gait_params(gait_list, base=base, **overrides)
+    W = len(gait_list)
+    model = Model.from_params(p, W, device, anchors=anchors, anchor_stiffness=anchor_stiffness)
+    ipm_x = model.ipm_rest_pos_host[:, :, 0]
+    paths = {g: gaits.sine_path(replace(p, gait=g), ipm_x, num_worlds=W) for g in set(gait_list)}
+    merged = {}
+    for name in gaits.SINE_FIELDS:
+        rows = [np.broadcast_to(np.asarray(getattr(paths[g], name), np.float64).reshape(-1), (W,))[w]
+                for w, g in enumerate(gait_list)]
+        merged[name] = np.array(rows)
+    model.set_path(gaits.EpmPath(kind="sine", **merged))
+    return model, p
+
+
+def run_gaits(gait_list=GAITS, duration: float = 2.0, *, sample_every: int = 2, settle: float = 0.2, anchors=None,
+              anchor_stiffness: float = 1.0e4, dt=None, substeps=None, device="cpu", base=None, **overrides) -> dict:
+    """Run each gait preset as one world of a batch for ``duration`` [s]; record a trajectory.
+
+    Returns ``gaits`` (list), ``time (S,)``, ``positions (S, W, V, 3)``, ``bar_strain (S, W, E)``,
+    ``anchor_force (S, W, A, 3)``, ``magnet_pos (S, W, 4, 3)``, ``unstable (W,)``, ``rest_positions (W, V, 3)``
+    (the settled shape at t = 0), and ``model``.
+    """
+    from .simulator import Simulator
+
+    _quiet_warp()
+    gait_list = list(gait_list)
+    dt, substeps = _dt_substeps(dt, substeps)
+    model, p = _gait_model(gait_list, anchors=anchors, anchor_stiffness=anchor_stiffness, base=base,
+                           device=device, **overrides)
+    sim = Simulator(model, dt=dt, substeps=substeps)
+    state = sim.initial_state()
+    if settle > 0:
+        sim.settle(state, settle)
+    snaps = [sim.snapshot(state)]
+    n_samples = max(1, int(round(duration / (dt * sample_every))))
+    for _ in range(n_samples):
+        sim.step(state, sample_every)
+        snaps.append(sim.snapshot(state))
+    rec = {k: np.stack([s[k] for s in snaps]) for k in ("positions", "bar_strain", "anchor_force", "magnet_pos")}
+    rec["time"] = np.array([s["time"][0] for s in snaps])
+    rec["unstable"] = snaps[-1]["unstable"]
+    rec["rest_positions"] = snaps[0]["positions"]
+    rec["gaits"] = gait_list
+    rec["model"] = model
+    rec["params"] = p
+    return rec
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# 1. force-distance (§IV-A, Fig. 5)
+
+
+def force_distance(gaps=None, densities=(1e6, 8e6, 64e6), moment: float = 0.9, side: float = 0.010) -> dict:
+    """Attraction [N] between two coaxial cubes (side ``side``, ``moment`` each, unlike poles facing) vs face gap.
+
+    Returns ``gap (K,)`` [m], ``analytic (K,)`` [N], ``dipoles (D, K)`` [N] (one row per density [1/m³]),
+    ``densities (D,)``, ``table_gap (T,)`` [m] and ``table_force (T,)`` [N] (DESIGN-NOTES closed form),
+    ``analytic_at_table (T,)`` and ``dipoles_at_table (D, T)``, and a summary of relative errors vs the table.
+    """
+    from .calibration import pair_forces
+
+    gaps = np.geomspace(0.5e-3, 40e-3, 60) if gaps is None else np.asarray(gaps, np.float64)
+    cube = mg.Cuboid((side, side, side), moment=(0.0, 0.0, moment))
+    tg = np.array(sorted(CUBE_TABLE), np.float64) * 1e-3
+    tf = np.array([CUBE_TABLE[k] for k in sorted(CUBE_TABLE)])
+    allg = np.concatenate([gaps, tg])
+    ana = pair_forces(cube, cube, allg, model="analytic")
+    dip = np.stack([pair_forces(cube, cube, allg, model="dipoles", density=d) for d in densities])
+    K = len(gaps)
+    rel_a = ana[K:] / tf - 1.0
+    rel_d = dip[:, K:] / tf - 1.0
+    summary = {"analytic_max_rel_err_vs_table": float(np.abs(rel_a).max())}
+    for d, r in zip(densities, rel_d):
+        summary[f"dipoles_{d / 1e6:g}_per_cm3_rel_err_at_1mm"] = float(r[0])
+        summary[f"dipoles_{d / 1e6:g}_per_cm3_max_rel_err_from_5mm"] = float(np.abs(r[tg >= 5e-3 - 1e-12]).max())
+    return {
+        "gap": gaps, "analytic": ana[:K], "dipoles": dip[:, :K], "densities": np.asarray(densities, np.float64),
+        "table_gap": tg, "table_force": tf, "analytic_at_table": ana[K:], "dipoles_at_table": dip[:, K:],
+        "summary": summary,
+    }
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# 2./3. compression and 3-point flexure (§IV-B)
+
+
+def _quasi_static(model, params, anchors_moving, direction, displacements, *, lift=0.0, settle=0.2, hold=0.1,
+                  dt=None, substeps=None) -> dict:
+    """Shared driver: moving anchors' targets stepped by ``displacements`` along ``direction``; other anchors fixed.
+
+    Returns ``force (K+1, W)`` [N]: the load on the fixed anchors along ``direction`` (the load cell) minus its value
+    at zero displacement, ``force_raw`` (without that subtraction), ``force_pusher`` / ``force_pusher_raw``: the same
+    read on the moving anchors (equal at equilibrium; coarser, since the anchor force is k_a times a float32
+    position difference and float32 positions are coarser far from the origin), ``displacement (K+1, W)`` (measured
+    mean motion of the moving vertices along ``direction``), ``prescribed (K+1,)``, ``unstable (W,)``.
+    """
+    from .simulator import Simulator
+
+    dt, substeps = _dt_substeps(dt, substeps)
+    sim = Simulator(model, dt=dt, substeps=substeps)
+    state = sim.initial_state()
+    av = model.anchor_vertex.numpy()
+    moving = np.isin(av, anchors_moving)
+    x0 = model.rest_positions_host.astype(np.float64).copy()
+    x0[..., 2] += lift
+    if lift:
+        _lift(state, lift)
+    base_t = x0[:, av]  # (W, A, 3)
+    sim.set_anchor_targets(state, base_t)
+    n_settle, n_hold = int(round(settle / dt)), max(1, int(round(hold / dt)))
+    sim.step(state, n_settle, epm=False)
+    d = np.concatenate([[0.0], np.asarray(displacements, np.float64)])
+    u = np.asarray(direction, np.float64) / np.linalg.norm(direction)
+    fm, disp, reac, snaps = [], [], [], None
+    for dk in d:
+        t = base_t.copy()
+        t[:, moving] += dk * u
+        sim.set_anchor_targets(state, t)
+        sim.step(state, n_hold, epm=False)
+        snaps = sim.snapshot(state)
+        af = snaps["anchor_force"].astype(np.float64)  # (W, A, 3)
+        fm.append(-(af[:, moving] @ u).sum(axis=1))  # the worm resists the push: it pulls the pusher along -u
+        reac.append((af[:, ~moving] @ u).sum(axis=1))  # and loads the fixed supports along +u
+        xm = snaps["positions"][:, av[moving]].astype(np.float64)
+        disp.append(((xm - x0[:, av[moving]]) @ u).mean(axis=1))
+    reac, fm = np.array(reac), np.array(fm)
+    return {"force_raw": reac, "force": reac - reac[0], "force_pusher_raw": fm, "force_pusher": fm - fm[0],
+            "displacement": np.array(disp), "prescribed": d, "unstable": snaps["unstable"],
+            "final_positions": snaps["positions"]}
+
+
+def compression(hinge_stiffness=(0.01, 0.02, 0.04, 0.08), max_displacement: float = 2.0e-3, increments: int = 8,
+                *, base: WormParams | None = None, hold: float = 0.1, settle: float = 0.2,
+                anchor_stiffness: float = 1.0e4, dt=None, substeps=None, device="cpu", **overrides) -> dict:
+    """Compression test (§IV-B): tail section (3 vertices) anchored, head section pushed along −x; one world per k_α.
+
+    The worm lies on the floor (gravity and friction on, magnets off unless ``overrides`` turn them on). The head
+    anchors' targets move by ``max_displacement / increments`` per increment and are held ``hold`` [s] (damping
+    raised to 50/s so each hold ends near equilibrium). ``force`` is the head anchors' resisting force along +x
+    minus its value before loading [N]; ``displacement`` the head section's measured shortening [m]; ``linear`` the
+    independent linear quasi-static prediction (no gravity, no friction) at the prescribed displacement.
+    """
+    from .model import Model
+
+    _quiet_warp()
+    ks = np.asarray(hinge_stiffness, np.float64)
+    W = len(ks)
+    kw = dict(NO_MAGNETS, damping=50.0)
+    kw.update(overrides)
+    p = replace(base or WormParams(), hinge_stiffness=ks, **kw)
+    n = int(p.n_units)
+    tail, head = section_vertices(n, 0), section_vertices(n, 2 * n)
+    model = Model.from_params(p, W, device, anchors=np.concatenate([tail, head]), anchor_stiffness=anchor_stiffness)
+    steps = np.linspace(0.0, max_displacement, increments + 1)[1:]
+    r = _quasi_static(model, p, head, (-1.0, 0.0, 0.0), steps, settle=settle, hold=hold, dt=dt, substeps=substeps)
+    lin = np.zeros_like(r["force"])
+    for w in range(W):  # host reference, one small dense solve per stiffness (not the simulation)
+        off = np.zeros((len(tail) + len(head), 3))
+        off[len(tail):, 0] = -1.0
+        unit = linear_anchor_response(model, p, off * 1e-6, world=w)[len(tail):, 0].sum() / 1e-6
+        lin[:, w] = unit * r["prescribed"]
+    fmax = r["force"][-1]
+    dmax = r["displacement"][-1]
+    r.update(hinge_stiffness=ks, linear=lin, summary={
+        "hinge_stiffness_N_per_rad": ks.tolist(),
+        "force_at_max_mN": (1e3 * fmax).tolist(),
+        "measured_displacement_at_max_mm": (1e3 * dmax).tolist(),
+        "secant_stiffness_N_per_m": (fmax / np.maximum(dmax, 1e-12)).tolist(),
+        "linear_stiffness_N_per_m": (lin[-1] / max(r["prescribed"][-1], 1e-12)).tolist(),
+        "bar_stiffness_EA_N": float(np.asarray(p.bar_stiffness).max()),
+        "valley_bar_stiffness": str(getattr(p, "valley_bar_stiffness", "not in WormParams")),
+        "unstable_worlds": int(r["unstable"].sum()),
+    })
+    return r
+
+
+def flexure(hinge_stiffness=(0.01, 0.02, 0.04, 0.08), max_deflection: float = 2.0e-3, increments: int = 8, *,
+            lift: float = 0.02, base: WormParams | None = None, hold: float = 0.1, settle: float = 0.2,
+            anchor_stiffness: float = 1.0e4, dt=None, substeps=None, device="cpu", **overrides) -> dict:
+    """3-point flexure (§IV-B): worm lifted ``lift`` [m] off the floor, held at the bottom corners of the sections
+    next to both ends (two line supports free to rotate about y), centre section pushed down; one world per k_α.
+
+    Gravity is on: ``force`` is the load anchors' resisting force (+z) minus the unloaded preload [N] against the
+    measured deflection [m]. The supports are anchors (pins, not rollers), so at large deflection the span's stretch
+    adds a membrane stiffening that a roller test would not have; ``linear`` is the linear prediction.
+    """
+    from .model import Model
+
+    _quiet_warp()
+    ks = np.asarray(hinge_stiffness, np.float64)
+    W = len(ks)
+    kw = dict(NO_MAGNETS, damping=50.0)
+    kw.update(overrides)
+    p = replace(base or WormParams(), hinge_stiffness=ks, **kw)
+    n = int(p.n_units)
+    sup = np.concatenate([section_vertices(n, 1, (0, 1)), section_vertices(n, 2 * n - 1, (0, 1))])
+    load = section_vertices(n, n)
+    model = Model.from_params(p, W, device, anchors=np.concatenate([sup, load]), anchor_stiffness=anchor_stiffness)
+    steps = np.linspace(0.0, max_deflection, increments + 1)[1:]
+    r = _quasi_static(model, p, load, (0.0, 0.0, -1.0), steps, lift=lift, settle=settle, hold=hold, dt=dt,
+                      substeps=substeps)
+    lin = np.zeros_like(r["force"])
+    for w in range(W):
+        off = np.zeros((len(sup) + len(load), 3))
+        off[len(sup):, 2] = -1.0
+        unit = linear_anchor_response(model, p, off * 1e-6, world=w)[len(sup):, 2].sum() / 1e-6
+        lin[:, w] = unit * r["prescribed"]
+    fmax, dmax = r["force"][-1], r["displacement"][-1]
+    r.update(hinge_stiffness=ks, linear=lin, summary={
+        "hinge_stiffness_N_per_rad": ks.tolist(),
+        "force_at_max_mN": (1e3 * fmax).tolist(),
+        "measured_deflection_at_max_mm": (1e3 * dmax).tolist(),
+        "secant_stiffness_N_per_m": (fmax / np.maximum(dmax, 1e-12)).tolist(),
+        "linear_stiffness_N_per_m": (lin[-1] / max(r["prescribed"][-1], 1e-12)).tolist(),
+        "preload_mN": (1e3 * r["force_raw"][0]).tolist(),
+        "unstable_worlds": int(r["unstable"].sum()),
+    })
+    return r
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# 4. slope (§IV-F)
+
+
+def slope(offsets_deg=(-4.0, -2.0, -1.0, 1.0, 2.0, 4.0), duration: float = 0.5, *, settle: float = 0.2,
+          sample_every: int = 5, base: WormParams | None = None, dt=None, substeps=None, device="cpu",
+          slide_threshold: float = 1.0e-4, **overrides) -> dict:
+    """Slope sliding test (§IV-F): the worm (magnets off, damping 0) on inclines β = atan(μs) + offsets, one world each.
+
+    After ``settle`` [s] (the worm takes its weight; the Jacobi contact transient slips a few vertices by ~0.1 mm)
+    the centroid's motion down the slope is recorded for ``duration`` [s]. ``slide (S, W)`` [m] down-slope,
+    ``predicted (S, W)`` = ½ g (sin β − μk cos β) t² where β > atan(μs), else 0. A world "slides" when its final slide
+    exceeds ``slide_threshold`` [m]; the summary gives the transition angle bracket.
+    """
+    from .model import Model
+    from .simulator import Simulator
+
+    _quiet_warp()
+    dt, substeps = _dt_substeps(dt, substeps)
+    b = base or WormParams()
+    mu_s = float(np.asarray(overrides.get("mu_static", b.mu_static)))
+    beta = np.arctan(mu_s) + np.deg2rad(np.asarray(offsets_deg, np.float64))
+    kw = dict(NO_MAGNETS, damping=0.0)
+    kw.update(overrides)
+    p = replace(b, floor_incline=beta, **kw)
+    W = len(beta)
+    model = Model.from_params(p, W, device)
+    sim = Simulator(model, dt=dt, substeps=substeps)
+    state = sim.initial_state()
+    sim.step(state, int(round(settle / dt)), epm=False)
+    down = np.stack([-np.cos(beta), np.zeros(W), -np.sin(beta)], axis=1)  # (W, 3) down the slope
+    s0 = sim.snapshot(state)
+    c0 = s0["positions"].astype(np.float64).mean(axis=1)
+    t0 = s0["time"][0]
+    ts, slide = [0.0], [np.zeros(W)]
+    for _ in range(max(1, int(round(duration / (dt * sample_every))))):
+        sim.step(state, sample_every, epm=False)
+        s = sim.snapshot(state)
+        ts.append(s["time"][0] - t0)
+        slide.append(np.einsum("wc,wc->w", s["positions"].astype(np.float64).mean(axis=1) - c0, down))
+    ts, slide = np.array(ts), np.array(slide)
+    g = float(np.asarray(p.gravity))
+    mu_k = float(np.asarray(p.mu_kinetic))
+    acc = np.where(beta > np.arctan(mu_s), g * (np.sin(beta) - mu_k * np.cos(beta)), 0.0)
+    pred = 0.5 * acc[None] * ts[:, None] ** 2
+    slides = slide[-1] > slide_threshold
+    below = np.rad2deg(beta[~slides]).max() if (~slides).any() else float("nan")
+    above = np.rad2deg(beta[slides]).min() if slides.any() else float("nan")
+    return {
+        "beta": beta, "offsets_deg": np.asarray(offsets_deg, np.float64), "time": ts, "slide": slide,
+        "predicted": pred, "slides": slides, "unstable": s["unstable"],
+        "summary": {
+            "mu_static": mu_s, "mu_kinetic": mu_k, "friction_angle_deg": float(np.rad2deg(np.arctan(mu_s))),
+            "beta_deg": np.rad2deg(beta).tolist(), "final_slide_mm": (1e3 * slide[-1]).tolist(),
+            "predicted_slide_mm": (1e3 * pred[-1]).tolist(),
+            "largest_holding_beta_deg": float(below), "smallest_sliding_beta_deg": float(above),
+            "duration_s": float(ts[-1]),
+        },
+    }
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# 5.-7. gait experiments (§IV-D, E, G)
+
+
+def force_plate(gait_list=GAITS, duration: float = 2.0, *, anchor_stiffness: float = 1.0e4, sample_every: int = 2,
+                settle: float = 0.2, record: dict | None = None, **kw) -> dict:
+    """Force plate (§IV-D): the tail section's 3 vertices tied by anchors (strength ``anchor_stiffness`` [N/m]) to
+    their settled rest points while each gait runs. ``force (S, W, 3)`` [N] is the summed anchor force (the worm's
+    pull on the plate; +x = forward pull), ``pull (S, W)`` its x component."""
+    if record is None:
+        n = int((kw.get("base") or WormParams()).n_units)
+        record = run_gaits(gait_list, duration, sample_every=sample_every, settle=settle,
+                           anchors=section_vertices(n, 0), anchor_stiffness=anchor_stiffness, **kw)
+    F = record["anchor_force"].sum(axis=2).astype(np.float64)  # (S, W, 3)
+    t = record["time"]
+    pull = F[..., 0]
+    summary = {"gaits": list(record["gaits"]), "duration_s": float(t[-1]),
+               "anchor_stiffness_N_per_m": float(anchor_stiffness),
+               "max_pull_mN": (1e3 * pull.max(axis=0)).tolist(), "mean_pull_mN": (1e3 * pull.mean(axis=0)).tolist(),
+               "min_pull_mN": (1e3 * pull.min(axis=0)).tolist(),
+               "max_abs_force_mN": (1e3 * np.linalg.norm(F, axis=-1).max(axis=0)).tolist(),
+               "unstable": record["unstable"].tolist()}
+    return {"time": t, "force": F, "pull": pull, "gaits": list(record["gaits"]), "unstable": record["unstable"],
+            "summary": summary}
+
+
+def strain(gait_list=GAITS, duration: float = 2.0, *, sample_every: int = 2, settle: float = 0.2,
+           record: dict | None = None, **kw) -> dict:
+    """Bar strain (§IV-G): Cauchy strain (L − L0)/L0 of every bar over each gait (free worm, no anchors).
+
+    ``strain (S, W, E)``, ``max_abs (W, E)`` and ``mean_abs (W, E)`` per bar, ``max_over_bars (S, W)``, the bar
+    endpoints' positions at the most strained instant ``peak_positions (W, V, 3)``, ``edges (E, 2)``, ``edge_label``.
+    """
+    if record is None:
+        record = run_gaits(gait_list, duration, sample_every=sample_every, settle=settle, **kw)
+    eps = record["bar_strain"].astype(np.float64)  # (S, W, E)
+    a = np.abs(eps)
+    max_abs, mean_abs = a.max(axis=0), a.mean(axis=0)
+    over = a.max(axis=2)  # (S, W)
+    ipeak = over.argmax(axis=0)
+    W = eps.shape[1]
+    peak_pos = record["positions"][ipeak, np.arange(W)]
+    pat = record["model"].pattern
+    labels = {crease.FLAT: "flat", crease.MOUNTAIN: "mountain", crease.VALLEY: "valley", crease.BOUNDARY: "boundary"}
+    per_label = {}
+    for lab, name in labels.items():
+        m = pat.edge_label == lab
+        if m.any():
+            per_label[name] = (max_abs[:, m].max(axis=1)).tolist()
+    summary = {"gaits": list(record["gaits"]), "duration_s": float(record["time"][-1]),
+               "max_abs_strain": max_abs.max(axis=1).tolist(), "mean_abs_strain": mean_abs.mean(axis=1).tolist(),
+               "most_strained_bar": max_abs.argmax(axis=1).tolist(), "max_abs_strain_by_label": per_label,
+               "unstable": record["unstable"].tolist()}
+    return {"time": record["time"], "strain": eps, "max_abs": max_abs, "mean_abs": mean_abs, "max_over_bars": over,
+            "peak_positions": peak_pos, "edges": pat.edges, "edge_label": pat.edge_label,
+            "gaits": list(record["gaits"]), "unstable": record["unstable"], "summary": summary}
+
+
+def deformation(gait_list=GAITS, duration: float = 2.0, *, sample_every: int = 2, settle: float = 0.2,
+                record: dict | None = None, **kw) -> dict:
+    """Deformation ratios and displacement (§IV-E, Fig. 11), free worm, one world per gait.
+
+    The five segment centres ``seg0..seg4`` (``pattern.keypoints``) give four distances between neighbours;
+    ``ratio (S, W, 4)`` divides them by their values at t = 0 (the settled worm). ``displacement (S, W)`` [m] is the
+    mean x of the five centres relative to t = 0 (net forward motion, +x).
+    """
+    if record is None:
+        record = run_gaits(gait_list, duration, sample_every=sample_every, settle=settle, **kw)
+    pat = record["model"].pattern
+    idx = [pat.keypoint_names.index(f"seg{i}") for i in range(5)]
+    kp = pat.keypoints(record["positions"].astype(np.float64))[..., idx, :]  # (S, W, 5, 3)
+    dist = np.linalg.norm(np.diff(kp, axis=2), axis=-1)  # (S, W, 4)
+    ratio = dist / dist[0]
+    disp = kp[..., 0].mean(axis=2) - kp[0, :, :, 0].mean(axis=1)  # (S, W)
+    summary = {"gaits": list(record["gaits"]), "duration_s": float(record["time"][-1]),
+               "net_displacement_mm": (1e3 * disp[-1]).tolist(),
+               "ratio_min": ratio.min(axis=0).tolist(), "ratio_max": ratio.max(axis=0).tolist(),
+               "unstable": record["unstable"].tolist()}
+    return {"time": record["time"], "ratio": ratio, "distance": dist, "displacement": disp,
+            "keypoints": kp, "gaits": list(record["gaits"]), "unstable": record["unstable"], "summary": summary}
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# output
+
+
+def to_jsonable(obj):
+    """Arrays to lists, NumPy scalars to Python, recursively; drops non-data values (models, params)."""
+    if isinstance(obj, dict):
+        return {str(k): to_jsonable(v) for k, v in obj.items() if k not in ("model", "params")}
+    if isinstance(obj, (list, tuple)):
+        return [to_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return to_jsonable(obj.tolist())
+    if isinstance(obj, (np.bool_,)):
+        return bool(obj)
+    if isinstance(obj, (np.integer,)):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        f = float(obj)
+        return f if np.isfinite(f) else None
+    return obj
+
+
+def save_json(result: dict, path) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(to_jsonable(result)))
+    return path
