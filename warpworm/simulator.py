@@ -118,6 +118,12 @@ class Simulator:
                                                     state.positions],
                   outputs=[state.magnet_pos, state.magnet_rot], device=m.device)
 
+    def update_magnets(self, state: State, *, epm: bool = True) -> State:
+        """Evaluate the magnet poses at the current time and positions, the net magnetic wrench on every magnet and
+        its distribution onto the mount vertices (``state.external_force``), as the first substep of a step does."""
+        self._wrench(state, self.model.magnet_moment if epm else self.model.magnet_moment_parked)
+        return state
+
     def _wrench(self, state: State, moment: wp.array) -> None:
         m = self.model
         self._magnet_poses(state)
