@@ -113,7 +113,7 @@ def test_schema_attributes_and_readers(tmp_path):
     assert a["quaternion_order"] == "wxyz"
     assert load_config(yaml.safe_load(a["config_yaml"])).to_yaml() == cfg.to_yaml()  # (NaN != NaN in dicts)
     with h5py.File(r.shard_paths[0]) as f:
-        assert f["depth"].attrs["unit"] == "m" and f["rgb"].compression == "lzf" and f["rgb"].chunks == (1, H, W, 3)
+        assert f["depth"].attrs["unit"] == "m" and f["rgb"].compression == "gzip" and f["rgb"].chunks == (1, H, W, 3)
     # manifest
     m = json.loads((tmp_path / "d" / "manifest.json").read_text())
     assert m["complete"] and m["samples_written"] == N and len(m["shards"]) == 4
@@ -257,3 +257,16 @@ def test_disk_full_gives_clear_error_and_keeps_completed_shards(tmp_path, monkey
 def test_read_only_folder_refused_before_work(tmp_path):
     with pytest.raises(ConfigError, match="writable"):
         run(tiny(), "/proc/warpworm-dataset")
+
+
+def test_ray_engine_gives_the_same_samples(tmp_path, monkeypatch):
+    ray = pytest.importorskip("ray", reason="Ray not installed (optional extra: pip install 'warpworm[ray]')")
+    # local Ray workers inherit the environment: let them import the fake stages
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(TESTS), os.environ.get("PYTHONPATH", "")]))
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    try:
+        run(tiny(), tmp_path / "ray", engine="ray")
+    finally:
+        ray.shutdown()
+    run(tiny(), tmp_path / "local")
+    assert_same(everything(tmp_path / "ray")[0], everything(tmp_path / "local")[0])

@@ -21,6 +21,7 @@ Schema (all SI: m, s, rad, kg; see ``docs/dataset.md`` and the packaged ``datase
       device: str                   # Warp device, "cpu" or "cuda:0"
     render:
       width, height: int >= 8       # image size [px]
+      batch: int >= 1               # images per render call (memory bound)
       camera_per_frame: bool        # false: one camera per trajectory (a video); true: a new camera per frame
     output:
       compression: lzf | gzip | none
@@ -213,12 +214,15 @@ class RenderConfig:
     """Image height [px]."""
     camera_per_frame: bool = False
     """False: one camera per trajectory (frames of a world form a video); True: a new camera for every frame."""
+    batch: int = 1024
+    """Images per render call (whole trajectories); bounds the memory of images held before writing."""
 
 
 @dataclass
 class OutputConfig:
-    compression: str = "lzf"
-    """HDF5 filter for images: 'lzf' (measured fastest at a small size cost; see benchmarks), 'gzip' or 'none'."""
+    compression: str = "gzip"
+    """HDF5 filter for images: 'gzip' (level 1 measured smaller *and* faster to write and read than 'lzf' on rendered
+    images; benchmarks/bench_dataset.py), 'lzf' or 'none'."""
     compression_level: int = 1
     """gzip level 0..9 (ignored for lzf/none)."""
     preview: bool = True
@@ -275,7 +279,7 @@ _CONSTRAINTS = {
     "seed": (0, False), "num_samples": (1, False), "shard_size": (1, False),
     "sim.worlds": (1, False), "sim.dt": (0, True), "sim.substeps": (1, False), "sim.settle_time": (0, False),
     "sim.n_units": (1, False), "sim.max_attempts": (1, False),
-    "render.width": (8, False), "render.height": (8, False), "output.compression_level": (0, False),
+    "render.width": (8, False), "render.height": (8, False), "render.batch": (1, False), "output.compression_level": (0, False),
 }
 
 

@@ -486,34 +486,38 @@ def run_shard(cfg: DatasetConfig, out_dir, k: int, stages, progress=None) -> Sha
             traj = np.arange(c0, min(c0 + W, t_last), dtype=np.int64)
             frames, wdraws, attempt = _simulate_with_replacement(stages, cfg, traj, stats)
             stats.trajectories += len(traj)
+            B = len(traj)
             appearance = {}
             for g in ("light", "color", "texture", "sensor"):
                 appearance.update(draw_group(cfg, g, traj).values)
-            targets = None
+            cam_traj = draw_group(cfg, "camera", traj).values
             if not cfg.render.camera_per_frame:
                 # one camera per trajectory: aim at the worm's mean position over the frames
                 targets = np.mean([f["positions"].mean(axis=1) for f in frames], axis=0)
-                cams_traj = look_at_cameras(cfg, targets, draw_group(cfg, "camera", traj),
-                                            rnd.sample_keys(cfg.seed, traj))
-            for fi, frame in enumerate(frames):
-                sid = traj * F + fi
-                keep = sid < stop
-                if not keep.any():
-                    continue
-                sel = np.flatnonzero(keep)
-                sid = sid[sel]
-                fr = _take(frame, sel)
+                cams_traj = look_at_cameras(cfg, targets, rnd.Draws(cam_traj), rnd.sample_keys(cfg.seed, traj))
+            # Samples in row order (trajectory-major, frame-minor), so that every write is a contiguous row range:
+            # strided HDF5 writes into chunked, compressed datasets measured ~25x slower than contiguous ones.
+            sid_all = (traj[:, None] * F + np.arange(F)[None]).reshape(-1)
+            tsel_all = np.repeat(np.arange(B), F)  # trajectory (position in this batch) of each sample
+            fidx_all = np.tile(np.arange(F), B)
+            n_keep = int(np.sum(sid_all < stop))
+            step = max(F, (cfg.render.batch // F) * F)  # images per render call: whole trajectories
+            for r0 in range(0, n_keep, step):
+                sl = slice(r0, min(r0 + step, n_keep))
+                sid, tsel, fidx = sid_all[sl], tsel_all[sl], fidx_all[sl]
+                # the snapshot of each sample's (trajectory, frame), stacked: (n, ...) "worlds" of the renderer
+                fr = _gather_frames(frames, tsel, fidx)
                 skeys = rnd.sample_keys(cfg.seed, sid)
                 if cfg.render.camera_per_frame:
-                    cams = look_at_cameras(cfg, fr["positions"].mean(axis=1), draw_group(cfg, "camera", sid), skeys)
                     cam_draws = draw_group(cfg, "camera", sid).values
+                    cams = look_at_cameras(cfg, fr["positions"].mean(axis=1), rnd.Draws(cam_draws), skeys)
                 else:
-                    cams = Cameras(cams_traj.K[sel], cams_traj.R[sel], cams_traj.t[sel], cfg.render.width,
+                    cam_draws = _take(cam_traj, tsel)
+                    cams = Cameras(cams_traj.K[tsel], cams_traj.R[tsel], cams_traj.t[tsel], cfg.render.width,
                                    cfg.render.height)
-                    cam_draws = _take(draw_group(cfg, "camera", traj).values, sel)
                 seeds = rnd.derived_seed(skeys)
-                params = worm_params(cfg, wdraws, sel)
-                app = _take(appearance, sel)
+                params = worm_params(cfg, wdraws, tsel)
+                app = _take(appearance, tsel)
                 t0 = time.perf_counter()
                 out = stages.render_batch(fr, params, cams, app, seeds, cfg)
                 stats.render_s += time.perf_counter() - t0
@@ -522,15 +526,13 @@ def run_shard(cfg: DatasetConfig, out_dir, k: int, stages, progress=None) -> Sha
                     **out,
                     "camera/K": cams.K, "camera/R": cams.R, "camera/t": cams.t,
                     "camera/position": -np.einsum("bji,bj->bi", cams.R, cams.t),
-                    "time": np.full(len(sel), cfg.sim.frame_times[fi], dtype=np.float32),
-                    "trajectory": traj[sel], "frame": np.full(len(sel), fi, dtype=np.int32),
-                    "attempt": attempt[sel].astype(np.int32), "sample_id": sid, "seed": seeds,
+                    "time": np.asarray(cfg.sim.frame_times, dtype=np.float32)[fidx],
+                    "trajectory": traj[tsel], "frame": fidx.astype(np.int32),
+                    "attempt": attempt[tsel].astype(np.int32), "sample_id": sid, "seed": seeds,
                 }
-                for name, v in {**_take(wdraws.values, sel), **app, **cam_draws}.items():
+                for name, v in {**_take(wdraws.values, tsel), **app, **cam_draws}.items():
                     rows[f"params/{name}"] = v
-                # rows of this frame: (traj - t_first) * F + fi  -> a strided slice (one hyperslab per dataset)
-                r0 = int((traj[sel[0]] - t_first) * F + fi)
-                _write_strided(writer, r0, F, rows)
+                writer.write(int(sid[0] - start), rows)
                 stats.write_s += time.perf_counter() - t0
             if progress is not None:
                 progress(int(np.minimum(traj * F + F, stop).sum() - np.minimum(traj * F, stop).sum()))
@@ -546,8 +548,13 @@ def run_shard(cfg: DatasetConfig, out_dir, k: int, stages, progress=None) -> Sha
     return stats
 
 
-def _write_strided(writer: ds.ShardWriter, r0: int, step: int, rows: dict):
-    writer.write(r0, rows, step=step)
+def _gather_frames(frames: list[dict], tsel: np.ndarray, fidx: np.ndarray) -> dict:
+    """Snapshot arrays of samples (trajectory tsel[i], frame fidx[i]) -> dict of (n, ...) arrays."""
+    out = {}
+    for k in frames[0]:
+        stacked = np.stack([f[k] for f in frames], axis=1)  # (B, F, ...)
+        out[k] = stacked[tsel, fidx]
+    return out
 
 
 # ---------------------------------------------------------------------------------------------------------------------

@@ -1,0 +1,39 @@
+"""The packaged default config through the real simulator and renderer (short physics, tiny images)."""
+
+import json
+
+import cv2
+import numpy as np
+
+from warpworm import dataset as ds
+from warpworm.config import load_config
+from warpworm.pipeline import generate
+
+
+def test_default_config_end_to_end_with_real_stages(tmp_path):
+    cfg = load_config("default", ["sim.worlds=3", "shard_size=4", "sim.settle_time=0.02",
+                                  "sim.frame_times=[0.02, 0.04]", "render.width=64", "render.height=48"],
+                      num_samples=8)
+    s = generate(cfg, tmp_path / "d", progress=False)
+    assert s.new_samples == 8
+    r = ds.open(tmp_path / "d")
+    assert len(r) == 8 and (tmp_path / "d" / "preview.png").is_file() and (tmp_path / "d" / "preview.mp4").is_file()
+    names = json.loads(r.attrs["keypoint_names"])
+    d = {k: r.read(k) for k in ("rgb", "depth", "segmentation", "camera/K", "camera/R", "camera/t", "poses/body",
+                                "keypoints/world", "keypoints/pixel", "keypoints/visibility", "creases/angle",
+                                "worm/vertices", "trajectory", "frame")}
+    P = len(names)
+    assert d["keypoints/pixel"].shape == (8, P, 2) and d["rgb"].shape == (8, 48, 64, 3)
+    assert d["creases/angle"].shape[1] == len(r.attrs["crease_hinges"])
+    assert np.isin(d["keypoints/visibility"], [0, 1, 2]).all() and (d["keypoints/visibility"] == 2).any()
+    # every label id of the worm appears, and depth is positive where something was hit
+    seg = d["segmentation"]
+    assert ((seg >= 2) & (seg <= 6)).any() and (d["depth"][seg > 0] > 0).all()
+    # labels re-derived with OpenCV from the stored camera
+    for i in range(8):
+        rvec, _ = cv2.Rodrigues(d["camera/R"][i])
+        uv, _ = cv2.projectPoints(d["keypoints/world"][i], rvec, d["camera/t"][i], d["camera/K"][i], None)
+        assert np.abs(uv.reshape(-1, 2) - d["keypoints/pixel"][i]).max() < 1e-6
+    # frames of one trajectory differ in time but share the camera (camera_per_frame: false)
+    assert np.array_equal(d["trajectory"], [0, 0, 1, 1, 2, 2, 3, 3]) and np.array_equal(d["frame"], [0, 1] * 4)
+    assert np.allclose(d["camera/R"][0], d["camera/R"][1])
