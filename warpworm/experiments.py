@@ -80,6 +80,27 @@ def _lift(state, dz: float) -> None:
     state.prev_positions.assign(x)
 
 
+def anchor_forces(sim, snap: dict) -> np.ndarray:
+    """The force each anchor actually applies [N], shape (W, A, 3): the worm's pull on the anchor.
+
+    ``snapshot()["anchor_force"]`` is strength × (x − target), the spring force. The Jacobi XPBD anchor of
+    :mod:`warpworm.kernels.xpbd` applies Δλ / dt² = C / ((split·w + 1/(k dt²)) dt²) per substep, i.e. the spring force
+    divided by 1 + split·w·k·dt_sub²: equal in the compliant limit, smaller (by up to 10× and more for light vertices
+    and k ≳ 1e3 N/m at the 50 µs substep) in the rigid one. This returns that applied force, which is the one that
+    balances gravity and the structure at equilibrium (checked by the flexure preload against the weight).
+    """
+    m = sim.model
+    af = np.asarray(snap["anchor_force"], np.float64)
+    if m.num_anchors == 0:
+        return af
+    av = m.anchor_vertex.numpy()
+    w = m.inv_mass.numpy().astype(np.float64)[:, av]  # (R, A)
+    split = m.split.numpy().astype(np.float64)[av]  # (A,)
+    k = m.anchor_stiffness.numpy().astype(np.float64)  # (R', A)
+    factor = 1.0 + split * w * k * sim.dt_sub**2  # broadcasts (R, A) against (R', A)
+    return af / np.broadcast_to(factor, af.shape[:2])[..., None]
+
+
 def linear_anchor_response(model, params: WormParams, target_offsets: np.ndarray, world: int = 0,
                            anchor_stiffness: float | np.ndarray | None = None) -> np.ndarray:
     """Independent quasi-static prediction: anchor forces [N], shape (A, 3), for small anchor-target offsets.
@@ -201,7 +222,7 @@ def run_gaits(gait_list=GAITS, duration: float = 2.0, *, sample_every: int = 2, 
         sim.step(state, sample_every)
         snaps.append(sim.snapshot(state))
     rec = {k: np.stack([s[k] for s in snaps]) for k in ("positions", "bar_strain", "anchor_force", "magnet_pos")}
-    rec["time"] = np.array([s["time"][0] for s in snaps])
+    rec["time"] = np.array([s["time"].max() for s in snaps])  # an unstable world's clock stops: take the max
     rec["unstable"] = snaps[-1]["unstable"]
     rec["rest_positions"] = snaps[0]["positions"]
     rec["gaits"] = gait_list
@@ -282,11 +303,11 @@ def _quasi_static(model, params, anchors_moving, direction, displacements, *, li
         sim.set_anchor_targets(state, t)
         sim.step(state, n_hold, epm=False)
         snaps = sim.snapshot(state)
-        af = snaps["anchor_force"].astype(np.float64)  # (W, A, 3)
+        af = anchor_forces(sim, snaps)  # (W, A, 3)
         fm.append(-(af[:, moving] @ u).sum(axis=1))  # the worm resists the push: it pulls the pusher along -u
         reac.append((af[:, ~moving] @ u).sum(axis=1))  # and loads the fixed supports along +u
-        xm = snaps["positions"][:, av[moving]].astype(np.float64)
-        disp.append(((xm - x0[:, av[moving]]) @ u).mean(axis=1))
+        xs = snaps["positions"][:, av].astype(np.float64) - x0[:, av]
+        disp.append((xs[:, moving] @ u).mean(axis=1) - (xs[:, ~moving] @ u).mean(axis=1))
     reac, fm = np.array(reac), np.array(fm)
     return {"force_raw": reac, "force": reac - reac[0], "force_pusher_raw": fm, "force_pusher": fm - fm[0],
             "displacement": np.array(disp), "prescribed": d, "unstable": snaps["unstable"],
@@ -391,10 +412,11 @@ def slope(offsets_deg=(-4.0, -2.0, -1.0, 1.0, 2.0, 4.0), duration: float = 0.5, 
           slide_threshold: float = 1.0e-4, **overrides) -> dict:
     """Slope sliding test (§IV-F): the worm (magnets off, damping 0) on inclines β = atan(μs) + offsets, one world each.
 
-    After ``settle`` [s] (the worm takes its weight; the Jacobi contact transient slips a few vertices by ~0.1 mm)
-    the centroid's motion down the slope is recorded for ``duration`` [s]. ``slide (S, W)`` [m] down-slope,
-    ``predicted (S, W)`` = ½ g (sin β − μk cos β) t² where β > atan(μs), else 0. A world "slides" when its final slide
-    exceeds ``slide_threshold`` [m]; the summary gives the transition angle bracket.
+    The centroid's motion down the slope is recorded from t = 0 (worm built unloaded at rest on the slope) for
+    ``settle + duration`` [s]: ``slide (S, W)`` [m] down-slope, ``predicted (S, W)`` = ½ g (sin β − μk cos β) t² where
+    β > atan(μs), else 0. A world "slides" when it moves more than ``slide_threshold`` [m] after ``settle`` (the
+    worm takes its weight first; the Jacobi contact transient may slip a few vertices by ~0.1 mm); the summary gives
+    the transition angle bracket.
     """
     from .model import Model
     from .simulator import Simulator
@@ -411,23 +433,23 @@ def slope(offsets_deg=(-4.0, -2.0, -1.0, 1.0, 2.0, 4.0), duration: float = 0.5, 
     model = Model.from_params(p, W, device)
     sim = Simulator(model, dt=dt, substeps=substeps)
     state = sim.initial_state()
-    sim.step(state, int(round(settle / dt)), epm=False)
     down = np.stack([-np.cos(beta), np.zeros(W), -np.sin(beta)], axis=1)  # (W, 3) down the slope
-    s0 = sim.snapshot(state)
-    c0 = s0["positions"].astype(np.float64).mean(axis=1)
-    t0 = s0["time"][0]
+    c0 = sim.snapshot(state)["positions"].astype(np.float64).mean(axis=1)
     ts, slide = [0.0], [np.zeros(W)]
-    for _ in range(max(1, int(round(duration / (dt * sample_every))))):
+    total = settle + duration
+    for _ in range(max(1, int(round(total / (dt * sample_every))))):
         sim.step(state, sample_every, epm=False)
         s = sim.snapshot(state)
-        ts.append(s["time"][0] - t0)
+        ts.append(s["time"].max())
         slide.append(np.einsum("wc,wc->w", s["positions"].astype(np.float64).mean(axis=1) - c0, down))
     ts, slide = np.array(ts), np.array(slide)
     g = float(np.asarray(p.gravity))
     mu_k = float(np.asarray(p.mu_kinetic))
     acc = np.where(beta > np.arctan(mu_s), g * (np.sin(beta) - mu_k * np.cos(beta)), 0.0)
     pred = 0.5 * acc[None] * ts[:, None] ** 2
-    slides = slide[-1] > slide_threshold
+    i0 = int(np.searchsorted(ts, settle - 1e-9))
+    after = slide[-1] - slide[i0]  # motion after the settling transient
+    slides = after > slide_threshold
     below = np.rad2deg(beta[~slides]).max() if (~slides).any() else float("nan")
     above = np.rad2deg(beta[slides]).min() if slides.any() else float("nan")
     return {
@@ -437,6 +459,7 @@ def slope(offsets_deg=(-4.0, -2.0, -1.0, 1.0, 2.0, 4.0), duration: float = 0.5, 
             "mu_static": mu_s, "mu_kinetic": mu_k, "friction_angle_deg": float(np.rad2deg(np.arctan(mu_s))),
             "beta_deg": np.rad2deg(beta).tolist(), "final_slide_mm": (1e3 * slide[-1]).tolist(),
             "predicted_slide_mm": (1e3 * pred[-1]).tolist(),
+            "slide_after_settle_mm": (1e3 * after).tolist(), "settle_s": float(settle),
             "largest_holding_beta_deg": float(below), "smallest_sliding_beta_deg": float(above),
             "duration_s": float(ts[-1]),
         },
