@@ -31,6 +31,9 @@ from __future__ import annotations
 
 import warp as wp
 
+# forward only: nothing differentiates through rendering, and skipping adjoints halves the compile time
+wp.set_module_options({"enable_backward": False})
+
 NUM_LABELS = 11
 """Segmentation ids 0..10 (docs/architecture.md): 0 background, 1 floor, 2..6 worm segments, 7..9 IPMs, 10 EPM."""
 
@@ -517,7 +520,8 @@ def resolve_shade(
             inv_r2 = 1.0 / wp.max(wp.dot(to_lamp, to_lamp), 1.0e-6)
             ndp = wp.max(wp.dot(fn, to_lamp), 0.0) * wp.sqrt(inv_r2)
             color = wp.cw_mul(base, floor_irr + lpw * (ndp * inv_r2))
-            nrm = R * fn
+            if write_normals != 0:
+                nrm = R * fn
         else:
             p = eye + best_z * d_world
             view = -d_world  # toward the camera (unnormalized)
@@ -535,7 +539,8 @@ def resolve_shade(
                 if mat[2] > 0.0:
                     base = base * 0.55  # a painted north half breaks the bar's 180 degree symmetry
             color = light_surface(base, specular[wa, label], p, n_world, view, amb, sd, sc, lp, lpw)
-            nrm = R * n_world
+            if write_normals != 0:
+                nrm = R * n_world
         if write_normals != 0:
             normals[img, row + x] = nrm
         rgb[img, row + x] = wp.vec3ub(to_srgb8(color[0]), to_srgb8(color[1]), to_srgb8(color[2]))

@@ -13,6 +13,9 @@ from warpworm.render.camera import Cameras
 from warpworm.render.scene import SceneBatch
 
 
+# forward only: nothing differentiates through rendering, and skipping adjoints halves the compile time
+wp.set_module_options({"enable_backward": False})
+
 @wp.kernel
 def cast_rays(
     # Model:

@@ -174,3 +174,11 @@ def test_chunked_render_equals_single_launch():
     chunked = Renderer(32, 32, max_chunk_pixels=2 * 32 * 32).render(scene, cams)
     for k in full:
         assert np.array_equal(full[k], chunked[k])
+
+
+def test_threads_give_identical_images():
+    _, _, scene, cams = _random_worm_batch(num_worlds=3, cams_per_world=3, size=32, seed=9)
+    one = Renderer(32, 32).render(scene, cams, normals=True)
+    two = Renderer(32, 32, threads=2, max_chunk_pixels=2 * 32 * 32).render(scene, cams, normals=True)
+    for k in one:
+        assert np.array_equal(one[k], two[k])
