@@ -64,10 +64,10 @@ def _quasi_static_plot(r: dict, path, title: str, xlabel: str) -> Path:
     for w, k in enumerate(ks):
         c = cmap(w / max(1, len(ks) - 1))
         a.plot(1e3 * r["displacement"][:, w], 1e3 * r["force"][:, w], "o-", color=c, label=f"k_α = {k:g} N/rad")
-        b.plot(1e3 * r["prescribed"], 1e3 * r["linear"][:, w], "--", color=c, label=f"k_α = {k:g}")
+        b.plot(1e3 * r["prescribed"][1:], 1e3 * r["linear"][1:, w], "o--", color=c, label=f"k_α = {k:g}")
     a.set_xlabel(xlabel), a.set_ylabel("force [mN]"), a.set_title(title + ": simulated")
     a.legend(fontsize=8), a.grid(alpha=0.3)
-    b.set_xlabel(xlabel), b.set_ylabel("force [mN]"), b.set_yscale("symlog", linthresh=1.0)
+    b.set_xlabel(xlabel), b.set_ylabel("force [mN]"), b.set_yscale("log")
     b.set_title("linear quasi-static prediction (EA bars, no gravity)"), b.legend(fontsize=8), b.grid(alpha=0.3)
     return _save(fig, path)
 
@@ -135,7 +135,7 @@ def plot_strain(r: dict, path) -> Path:
         ax.add_collection(lc)
         ax.set_xlim(segs[..., 0].min() - 3, segs[..., 0].max() + 3)
         ax.set_ylim(segs[..., 1].min() - 3, segs[..., 1].max() + 3)
-        ax.set_aspect("equal")
+        ax.set_aspect("equal", adjustable="datalim")
         ax.set_title(f"{g}: max |strain| per bar over the run (side view at the most strained instant); "
                      f"max {r['max_abs'][w].max():.2e}", fontsize=9)
         ax.set_xlabel("x [mm]"), ax.set_ylabel("z [mm]")
