@@ -258,8 +258,9 @@ def solve_constraints(
             kh = pw(hinge_stiffness, world) * length
             if kh > 0.0:
                 alpha = 1.0 / (kh * dt2)
-                # XPBD damping: gamma = alpha * beta / dt with beta = c L [N m s/rad]
-                gamma = alpha * pw(hinge_damping, world) * length / dt
+                # XPBD damping (Macklin 2016): gamma = compliance * beta / dt with beta = c L [N m s/rad] and the
+                # compliance 1 / (k L) (not alpha-tilde): in the soft limit the force is then k C + c dC/dt
+                gamma = pw(hinge_damping, world) * length / (kh * dt)
                 # Up to 12 hinges share a vertex and their summed Jacobi corrections overshoot once
                 # G_v = sum_h k L w |grad|² dt² is not small (k_alpha = 0.02 N/rad diverged at dt = 250 us unsplit).
                 # split_hinge = max(1, 2 G_v) (set by the Simulator for its dt) splits only where needed: a full

@@ -1,0 +1,134 @@
+"""The XPBD substep of :mod:`warpworm.kernels.xpbd` written in NumPy, vectorized over worlds: the benchmark's
+reference and a cross-check of the kernels (same math, float64).
+
+One substep = predict (gravity, external force, damping) -> one Jacobi pass over bars and hinges with mass
+splitting -> apply corrections, floor contact and friction in velocity space. Anchors and the stability check are
+left out (the benchmark uses neither). Usage::
+
+    ref = NumpySubstep(model, dt_sub, split_hinge=sim.split_hinge.numpy())
+    x, v, angle = ref.init(state)              # NumPy copies (W, V, 3), (W, V, 3), (W, H)
+    x, v, angle = ref.substep(x, v, angle, f_ext)
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+class NumpySubstep:
+    def __init__(self, model, dt_sub: float, split_hinge: np.ndarray | None = None):
+        p = model.pattern
+        self.W, self.V = model.num_worlds, model.num_vertices
+        self.dt = float(dt_sub)
+        self.edges = p.edges.astype(np.int64)
+        self.hinges = p.hinges.astype(np.int64)
+        self.label = p.hinge_label.astype(np.int64)
+        self.split = model.split.numpy().astype(np.float64)
+        sh = model.hinge_split(dt_sub) if split_hinge is None else split_hinge
+        self.split_hinge = np.broadcast_to(np.asarray(sh, np.float64), (self.W, self.V))
+
+        def rows(a, inner=()):
+            a = np.asarray(a, np.float64)
+            return np.broadcast_to(a.reshape((a.shape[0],) + a.shape[1:]), (self.W,) + a.shape[1:])
+
+        self.w = rows(model.inv_mass.numpy())
+        self.L0 = rows(model.rest_length.numpy())
+        self.rest = rows(model.hinge_rest_angle.numpy())
+        self.hlen = rows(model.hinge_length.numpy())
+
+        def col(a):
+            return np.broadcast_to(np.asarray(a.numpy(), np.float64), (self.W,))[:, None]
+
+        self.EA, self.k, self.c_h = col(model.bar_stiffness), col(model.hinge_stiffness), col(model.hinge_damping)
+        self.damping, self.g = col(model.damping), col(model.gravity)
+        self.mu_s, self.mu_k, self.beta = col(model.mu_static), col(model.mu_kinetic), col(model.floor_incline)
+        lo = np.full(len(self.label), -np.pi)
+        hi = np.full(len(self.label), np.pi)
+        hi[self.label == 1] = 0.0
+        lo[self.label == 2] = 0.0
+        self.lo, self.hi = lo, hi
+        self._flat = (np.arange(self.W)[:, None] * self.V)
+
+    def init(self, state):
+        return (state.positions.numpy().astype(np.float64).copy(), state.velocities.numpy().astype(np.float64).copy(),
+                state.crease_angle.numpy().astype(np.float64).copy())
+
+    def _scatter(self, idx: np.ndarray, val: np.ndarray) -> np.ndarray:
+        """Sum val (W, n, 3) into vertices idx (n,) of each world -> (W, V, 3) (bincount: fast add.at)."""
+        flat = (self._flat + idx[None, :]).ravel()
+        out = np.empty((self.W * self.V, 3))
+        for c in range(3):
+            out[:, c] = np.bincount(flat, weights=val[..., c].ravel(), minlength=self.W * self.V)
+        return out.reshape(self.W, self.V, 3)
+
+    def substep(self, x, v, angle, f_ext):
+        dt, w = self.dt, self.w
+        # 1. predict
+        grav = np.zeros(3)
+        acc = f_ext * w[..., None]
+        acc[..., 2] -= self.g
+        v = np.where(w[..., None] > 0, (v + dt * acc) / (1.0 + self.damping[..., None] * dt), 0.0)
+        x_prev = x
+        x = x + dt * v
+        # 2. bars
+        a, b = self.edges[:, 0], self.edges[:, 1]
+        d = x[:, a] - x[:, b]
+        L = np.linalg.norm(d, axis=-1)
+        C = L - self.L0
+        denom = self.split[a] * w[:, a] + self.split[b] * w[:, b] + self.L0 / (self.EA * dt * dt)
+        dl = -C / denom
+        n = d / L[..., None]
+        delta = self._scatter(a, n * (w[:, a] * dl)[..., None]) + self._scatter(b, -n * (w[:, b] * dl)[..., None])
+        # 2b. hinges
+        h = self.hinges
+        xi, xj, xk, xl = (x[:, h[:, c]] for c in range(4))
+        n1 = np.cross(xj - xi, xk - xi)
+        n2 = np.cross(xk - xl, xj - xl)
+        e = xj - xk
+        e = e / np.linalg.norm(e, axis=-1, keepdims=True)
+        raw = np.arctan2(np.einsum("whc,whc->wh", np.cross(n1, n2), e), np.einsum("whc,whc->wh", n1, n2))
+        dphi = raw - angle
+        phi = angle + (dphi - 2 * np.pi * np.floor((dphi + np.pi) / (2 * np.pi)))
+        rkj = xk - xj
+        L2 = np.einsum("whc,whc->wh", rkj, rkj)
+        Lh = np.sqrt(L2)
+        gi = (Lh / np.einsum("whc,whc->wh", n1, n1))[..., None] * n1
+        gl = (Lh / np.einsum("whc,whc->wh", n2, n2))[..., None] * n2
+        pi_ = (np.einsum("whc,whc->wh", xi - xj, rkj) / L2)[..., None]
+        pl_ = (np.einsum("whc,whc->wh", xk - xl, rkj) / L2)[..., None]
+        gj = (pi_ - 1.0) * gi - pl_ * gl
+        gk = (pl_ - 1.0) * gl - pi_ * gi
+        grads = (gi, gj, gk, gl)
+        wv = [w[:, h[:, c]] for c in range(4)]
+        g2 = [np.sum(g * g, axis=-1) for g in grads]
+        sh = [np.take_along_axis(self.split_hinge, np.broadcast_to(h[:, c], (self.W, len(h))), 1) for c in range(4)]
+        sb = [self.split[h[:, c]][None, :] for c in range(4)]
+        kh = self.k * self.hlen
+        alpha = 1.0 / (kh * dt * dt)
+        gamma = self.c_h * self.hlen / (kh * dt)
+        rate = sum(np.sum(g * (xc - x_prev[:, h[:, c]]), axis=-1) for c, (g, xc) in enumerate(zip(grads, (xi, xj, xk, xl))))
+        wsum = sum(sh[c] * wv[c] * g2[c] for c in range(4))
+        dl_spring = -((phi - self.rest) + gamma * rate) / ((1.0 + gamma) * wsum + alpha)
+        outside = (phi < self.lo) | (phi > self.hi)
+        bound = np.where(phi < self.lo, self.lo, self.hi)
+        wlim = sum((sb[c] + sh[c]) * wv[c] * g2[c] for c in range(4))
+        dl_h = np.where(outside, -(phi - bound) / wlim, dl_spring)
+        for c in range(4):
+            delta += self._scatter(h[:, c], grads[c] * (wv[c] * dl_h)[..., None])
+        # 3. apply, contact, friction (velocity space), velocities
+        p = x + delta
+        vel = v + delta / dt
+        nrm = np.stack([-np.sin(self.beta[:, 0]), np.zeros(self.W), np.cos(self.beta[:, 0])], -1)[:, None, :]
+        depth = -np.sum(p * nrm, axis=-1, keepdims=True)
+        touch = depth > 0
+        p_c = p + nrm * depth
+        vel_c = vel + nrm * (depth / dt)
+        vn = np.sum(vel_c * nrm, axis=-1, keepdims=True)
+        vt = vel_c - nrm * vn
+        vt_len = np.linalg.norm(vt, axis=-1, keepdims=True)
+        stick = vt_len * dt <= self.mu_s[..., None] * depth
+        p_stick = x_prev + nrm * np.sum((p_c - x_prev) * nrm, axis=-1, keepdims=True)
+        vel_slip = vel_c - vt * (self.mu_k[..., None] * depth / (dt * np.maximum(vt_len, 1e-30)))
+        p_new = np.where(touch, np.where(stick, p_stick, x_prev + vel_slip * dt), p)
+        v_new = np.where(touch, np.where(stick, nrm * vn, vel_slip), vel)
+        return p_new, v_new, phi
