@@ -128,7 +128,7 @@ def contact_sheet(images: dict, labels: dict, *, rgb=None, max_rows: int = 8, sc
     sheet = np.concatenate(rows, axis=0)
     header = np.zeros((22, sheet.shape[1], 3), np.uint8)
     tw = sheet.shape[1] // 3
-    for i, txt in enumerate(("RGB", "depth (near = red)", "segmentation + keypoints (hollow = occluded)")):
+    for i, txt in enumerate(("RGB", "depth (near = red)", "seg + keypoints (hollow: occluded)")):
         cv2.putText(header, txt, (i * tw + 4, 15), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 255, 255), 1, cv2.LINE_AA)
     return np.concatenate([header, sheet], axis=0)
 

@@ -28,7 +28,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--source", choices=["sim", "posed"], default="sim",
                         help="sim: run the simulator's gait for --sim-time; posed: bent rest worms (no physics)")
     parser.add_argument("--gait", choices=["peristaltic", "omega", "inchworm"], default="peristaltic")
-    parser.add_argument("--sim-time", type=float, default=0.3, help="simulated time after settling [s] (default 0.3)")
+    parser.add_argument("--sim-time", type=float, default=0.15,
+                        help="simulated gait time after settling [s] (default 0.15)")
     parser.add_argument("--device", default=None, help="Warp device for simulation and rendering (default Warp's)")
     parser.add_argument("--sensor", action="store_true", help="apply seeded sensor effects to the RGB column")
     parser.add_argument("--sheet-rows", type=int, default=8, help="images shown in the contact sheet (default 8)")
