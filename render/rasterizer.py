@@ -145,6 +145,8 @@ class Renderer:
         """
         if cameras.width != self.width or cameras.height != self.height:
             raise ValueError(f"cameras are {cameras.width}x{cameras.height}, renderer is {self.width}x{self.height}")
+        if len(cameras) and (cameras.world.min() < 0 or cameras.world.max() >= scene.num_worlds):
+            raise ValueError(f"cameras.world must index the scene's {scene.num_worlds} worlds")
         if np.any(np.abs(cameras.K[:, 0, 1]) > 0):
             raise ValueError("skewed intrinsics (K[0, 1] != 0) are not supported")
         N = len(cameras)
