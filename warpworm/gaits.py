@@ -52,16 +52,16 @@ SINE_FIELDS = ("start_x", "start_y", "wavelength", "amplitude", "closest", "thet
 # toward the head IPM (forward) or toward the tail IPM (backward); 0 = over the centre IPM.
 GAIT_ORIENTATION = {
     "peristaltic": (0.5 * np.pi, -0.5 * np.pi),
-    "omega": (0.0, np.pi),
+    "omega": (np.pi, np.pi),
     "inchworm": (-0.5 * np.pi, 0.5 * np.pi),
 }
-GAIT_PLACEMENT = {"peristaltic": 0.4, "omega": 0.0, "inchworm": 0.4}
+GAIT_PLACEMENT = {"peristaltic": 0.4, "omega": 0.0, "inchworm": 0.2}
 
 # Tuned path and crease parameters per gait (docs/dynamics.md: grid search over w, a, h, period).
 GAIT_PRESETS = {
-    "peristaltic": dict(wavelength=0.010, amplitude=0.03, closest_approach=0.045, cycle_period=1.0),
-    "omega": dict(wavelength=0.010, amplitude=0.03, closest_approach=0.035, cycle_period=1.0),
-    "inchworm": dict(wavelength=0.010, amplitude=0.03, closest_approach=0.045, cycle_period=1.0),
+    "peristaltic": dict(wavelength=0.008, amplitude=0.02, closest_approach=0.070, cycle_period=1.0),
+    "omega": dict(wavelength=0.008, amplitude=0.02, closest_approach=0.060, cycle_period=1.0),
+    "inchworm": dict(wavelength=0.008, amplitude=0.02, closest_approach=0.070, cycle_period=1.0),
 }
 
 

@@ -41,8 +41,9 @@ class WormParams:
     # --- sheet and creases ---
     sheet_density: float | np.ndarray = 0.15
     """Areal density of the sheet [kg/m²] (mineral paper ≈ 0.15), shape () or (W,)."""
-    hinge_stiffness: float | np.ndarray = 0.02
-    """Crease stiffness k_α per metre of crease [N·m/rad/m = N/rad], shape () or (W,)."""
+    hinge_stiffness: float | np.ndarray = 0.3
+    """Crease stiffness k_α per metre of crease [N·m/rad/m = N/rad], shape () or (W,). 0.3 is calibrated so the
+    three gait presets move (docs/dynamics.md); the paper's 11.55 is Kangaroo's unitless strength."""
     bar_stiffness: float | np.ndarray = 1.0e4
     """Axial rigidity EA of every bar [N] (force per unit Cauchy strain), shape () or (W,)."""
     damping: float | np.ndarray = 2.0
