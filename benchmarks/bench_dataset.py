@@ -105,8 +105,7 @@ def bench_storage(samples: dict, reps_read: int = 200) -> list[dict]:
 def bench_end_to_end(W: int, width: int = 128, height: int = 96) -> tuple[dict, dict]:
     """One shard of W trajectories x 4 frames through generate(), and the same stages timed alone."""
     from warpworm import dataset as ds
-    from warpworm import randomize as rnd
-    from warpworm.pipeline import WarpStages, draw_group, draw_worm, generate, look_at_cameras, worm_params
+    from warpworm.pipeline import WarpStages, dataset_cameras, draw_group, draw_worm, generate, worm_params
 
     F = 4
     cfg = _cfg([f"sim.worlds={W}", f"shard_size={W * F}", f"render.width={width}", f"render.height={height}"],
@@ -133,8 +132,7 @@ def bench_end_to_end(W: int, width: int = 128, height: int = 96) -> tuple[dict, 
     app = {}
     for g in ("light", "color", "texture", "sensor"):
         app.update(draw_group(cfg, g, traj).values)
-    target = np.mean([f["positions"].mean(axis=1) for f in res.frames], axis=0)
-    cams = look_at_cameras(cfg, target, draw_group(cfg, "camera", traj), rnd.sample_keys(cfg.seed, traj))
+    cams, _ = dataset_cameras(cfg, traj, np.concatenate([f["positions"] for f in res.frames], axis=1))
     t0 = time.perf_counter()
     for f in res.frames:
         st.render_batch(f, p, cams, app, np.arange(W), cfg)

@@ -13,6 +13,7 @@ from warpworm.render.scene import (
     SceneBatch,
     build_scene,
     default_appearance,
+    hsv_to_rgb,
     sample_appearance,
     scene_from_snapshot,
 )
@@ -26,6 +27,7 @@ __all__ = [
     "build_scene",
     "default_appearance",
     "focal_from_fov",
+    "hsv_to_rgb",
     "intrinsics",
     "look_at",
     "make_cameras",

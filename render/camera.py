@@ -33,6 +33,9 @@ class Cameras:
     """Sampler only: whether the view met the in-frame requirement, shape (N,), bool."""
     in_frame: np.ndarray | None = None
     """Sampler only: fraction of the worm's points inside the image, shape (N,)."""
+    draws: dict | None = None
+    """Sampler only: the kept draw of each image, (N,) arrays: ``distance`` [m], ``elevation_deg``,
+    ``azimuth_deg``, ``roll_deg``, ``fov_deg`` (along ``fov_axis``), and ``lookat`` (N, 3) [m]."""
 
     def __len__(self) -> int:
         return self.K.shape[0]
@@ -47,7 +50,10 @@ class Cameras:
         out = {}
         for f in fields(self):
             a = getattr(self, f.name)
-            out[f.name] = a[index] if isinstance(a, np.ndarray) else a
+            if isinstance(a, dict):
+                out[f.name] = {k: v[index] for k, v in a.items()}
+            else:
+                out[f.name] = a[index] if isinstance(a, np.ndarray) else a
         return Cameras(**out)
 
     def project(self, points_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -137,6 +143,7 @@ def sample_cameras(
     roll_deg=(-10.0, 10.0),
     lookat_jitter: float = 0.01,
     fov_deg=(35.0, 60.0),
+    fov_axis: str = "x",
     aspect_jitter: float = 0.02,
     principal_jitter: float = 0.02,
     min_in_frame: float = 0.98,
@@ -160,10 +167,13 @@ def sample_cameras(
         distance: camera-to-target range [m]. elevation_deg: above the horizontal plane (world z up) [deg].
         azimuth_deg: about world z, 0 = looking from +x [deg]. roll_deg: about the optical axis [deg].
         lookat_jitter: uniform jitter of the look-at point in a cube of this half side [m].
-        fov_deg: horizontal field of view range [deg]. aspect_jitter: relative fy/fx jitter (pixel aspect).
+        fov_deg: field of view range [deg] along ``fov_axis`` ("x": horizontal over ``width``, "y": vertical over
+            ``height``). aspect_jitter: relative fy/fx jitter (pixel aspect).
         principal_jitter: principal point offset range as a fraction of the image size.
         min_in_frame, margin, max_tries: rejection rule above. up: world up vector.
     """
+    if fov_axis not in ("x", "y"):
+        raise ValueError(f"fov_axis: got {fov_axis!r}; expected 'x' or 'y'")
     seeds = np.asarray(seeds).reshape(-1)
     N = seeds.shape[0]
     pts = np.asarray(worm_points, dtype=np.float64)
@@ -175,20 +185,28 @@ def sample_cameras(
     t = np.zeros((N, 3))
     frac = np.full(N, -1.0)
     accepted = np.zeros(N, dtype=bool)
+    draws = {k: np.zeros(N) for k in ("distance", "elevation_deg", "azimuth_deg", "roll_deg", "fov_deg")}
+    draws["lookat"] = np.zeros((N, 3))
     pending = np.arange(N)
     for attempt in range(max_tries):
         if pending.size == 0:
             break
         u = uniforms(seeds[pending], 0xCA3E0 + attempt, 12)
         dist = uniform_range(u[:, 0], distance)
-        el = np.deg2rad(uniform_range(u[:, 1], elevation_deg))
-        az = np.deg2rad(uniform_range(u[:, 2], azimuth_deg))
-        roll = np.deg2rad(uniform_range(u[:, 3], roll_deg))
+        el_deg = uniform_range(u[:, 1], elevation_deg)
+        az_deg = uniform_range(u[:, 2], azimuth_deg)
+        roll_d = uniform_range(u[:, 3], roll_deg)
+        el, az, roll = np.deg2rad(el_deg), np.deg2rad(az_deg), np.deg2rad(roll_d)
         look = tgt[wi[pending]] + lookat_jitter * (2 * u[:, 4:7] - 1)
         eye = look + dist[:, None] * np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], 1)
         Ri, ti = look_at(eye, look, up=up, roll=roll)
-        fx = focal_from_fov(np.deg2rad(uniform_range(u[:, 7], fov_deg)), width)
-        fy = fx * (1 + aspect_jitter * (2 * u[:, 8] - 1))
+        fov = uniform_range(u[:, 7], fov_deg)
+        if fov_axis == "x":
+            fx = focal_from_fov(np.deg2rad(fov), width)
+            fy = fx * (1 + aspect_jitter * (2 * u[:, 8] - 1))
+        else:
+            fy = focal_from_fov(np.deg2rad(fov), height)
+            fx = fy * (1 + aspect_jitter * (2 * u[:, 8] - 1))
         cx = (width - 1) / 2 + principal_jitter * width * (2 * u[:, 9] - 1)
         cy = (height - 1) / 2 + principal_jitter * height * (2 * u[:, 10] - 1)
         Ki = intrinsics(fx, fy, cx, cy)
@@ -200,8 +218,11 @@ def sample_cameras(
         better = fr > frac[pending]  # keep the best attempt for images that never pass
         idx = pending[better]
         K[idx], R[idx], t[idx], frac[idx] = Ki[better], Ri[better], ti[better], fr[better]
+        for k, v in (("distance", dist), ("elevation_deg", el_deg), ("azimuth_deg", az_deg), ("roll_deg", roll_d),
+                     ("fov_deg", fov), ("lookat", look)):
+            draws[k][idx] = v[better]
         ok = fr >= min_in_frame
         accepted[pending[ok]] = True
         pending = pending[~ok]
     return Cameras(K=K, R=R, t=t, world=wi.astype(np.int32), width=int(width), height=int(height),
-                   accepted=accepted, in_frame=frac)
+                   accepted=accepted, in_frame=frac, draws=draws)

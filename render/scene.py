@@ -119,7 +119,7 @@ def default_appearance(num_worlds: int = 1) -> Appearance:
     return a.take(np.zeros(num_worlds, dtype=np.int64))
 
 
-def _hsv_to_rgb(h, s, v):
+def hsv_to_rgb(h, s, v):
     """Vectorised HSV (all in [0, 1]) -> linear-ish RGB, shape (..., 3)."""
     h = np.asarray(h) * 6.0
     i = np.floor(h).astype(int) % 6
@@ -146,14 +146,14 @@ def sample_appearance(seeds) -> Appearance:
     # paper: off-white, 30 % of worlds a pale coloured sheet
     tinted = u[:, 0] < 0.3
     sat = np.where(tinted, 0.15 + 0.35 * u[:, 1], 0.03 * u[:, 1])
-    paper = _hsv_to_rgb(u[:, 2], sat, 0.6 + 0.3 * u[:, 3])
+    paper = hsv_to_rgb(u[:, 2], sat, 0.6 + 0.3 * u[:, 3])
     albedo[:, LABEL_WORM_FIRST:LABEL_WORM_FIRST + 5] = paper[:, None]
-    floor = _hsv_to_rgb(u[:, 4], 0.1 + 0.4 * u[:, 5], 0.2 + 0.5 * u[:, 6])
+    floor = hsv_to_rgb(u[:, 4], 0.1 + 0.4 * u[:, 5], 0.2 + 0.5 * u[:, 6])
     albedo[:, LABEL_FLOOR] = floor
-    floor2 = _hsv_to_rgb(u[:, 7], 0.1 + 0.4 * u[:, 8], 0.1 + 0.5 * u[:, 9])
+    floor2 = hsv_to_rgb(u[:, 7], 0.1 + 0.4 * u[:, 8], 0.1 + 0.5 * u[:, 9])
     metal = 0.45 + 0.2 * u[:, 10]
     albedo[:, LABEL_IPM_FIRST:LABEL_IPM_FIRST + 3] = metal[:, None, None] * np.array([1.0, 1.0, 1.04])
-    albedo[:, LABEL_EPM] = _hsv_to_rgb(u[:, 11], 0.3 * u[:, 12], 0.4 + 0.3 * u[:, 13])
+    albedo[:, LABEL_EPM] = hsv_to_rgb(u[:, 11], 0.3 * u[:, 12], 0.4 + 0.3 * u[:, 13])
     spec = base.specular.copy()
     spec[:, LABEL_IPM_FIRST:, 0] = (0.4 + 0.6 * u[:, 14])[:, None]
     floor_tex = np.stack([0.01 + 0.03 * u[:, 15], np.where(u[:, 16] < 0.25, 0.0, 0.2 + 0.7 * u[:, 17]),
@@ -170,7 +170,7 @@ def sample_appearance(seeds) -> Appearance:
     lr = 0.2 + 0.3 * u[:, 29]
     lamp_pos = lr[:, None] * np.stack([np.cos(lel) * np.cos(laz), np.cos(lel) * np.sin(laz), np.sin(lel)], 1)
     lamp_power = (0.2 + 0.5 * u[:, 30])[:, None] * lr[:, None] ** 2 * np.ones(3)
-    bg_top = _hsv_to_rgb(u[:, 31], 0.3 * u[:, 32], 0.3 + 0.5 * u[:, 33])
+    bg_top = hsv_to_rgb(u[:, 31], 0.3 * u[:, 32], 0.3 + 0.5 * u[:, 33])
     bg_bottom = bg_top * (0.3 + 0.5 * u[:, 34])[:, None]
     return Appearance(albedo=albedo, specular=spec, floor_tex=floor_tex, floor_color2=floor2, paper_tex=paper_tex,
                       tex_seed=(u[:, 35] * 2**31).astype(np.int32), ambient=ambient, sun_dir=sun_dir,

@@ -39,40 +39,75 @@ class SensorConfig:
     """JPEG quality range."""
 
 
-def apply_sensor(rgb: np.ndarray, seeds, config: SensorConfig | None = None) -> np.ndarray:
-    """Sensor effects on a batch ``rgb`` (N, H, W, 3) uint8 with one seed per image; returns a new array."""
+SENSOR_PARAMS = ("wb_r", "wb_g", "wb_b", "hue_deg", "saturation", "contrast", "brightness", "blur_sigma",
+                 "noise_sigma", "shot_noise", "jpeg_quality")
+"""Per-image effect values (:func:`draw_sensor`): white-balance gains, hue shift [deg], saturation gain, contrast,
+brightness (fraction of full scale), blur sigma [px], read noise and shot noise (fraction of full scale), JPEG quality
+(0 = no JPEG round trip)."""
+
+
+def _draws(u: np.ndarray, cfg: SensorConfig) -> dict:
+    def draw(r, k):
+        return r[0] + (r[1] - r[0]) * u[k]
+
+    return {"wb_r": draw(cfg.white_balance, 0), "wb_g": draw(cfg.white_balance, 1), "wb_b": draw(cfg.white_balance, 2),
+            "hue_deg": draw(cfg.hue_deg, 3), "saturation": draw(cfg.saturation, 4), "contrast": draw(cfg.contrast, 5),
+            "brightness": draw(cfg.brightness, 6), "blur_sigma": draw(cfg.blur_sigma, 7),
+            "noise_sigma": draw(cfg.noise_sigma, 8), "shot_noise": draw(cfg.shot_noise, 9),
+            "jpeg_quality": int(round(draw(cfg.jpeg_quality, 11))) if u[10] < cfg.jpeg_probability else 0}
+
+
+def draw_sensor(seeds, config: SensorConfig | None = None) -> dict:
+    """The effect values :func:`apply_sensor` draws for each seed: name (:data:`SENSOR_PARAMS`) -> (N,) array."""
+    cfg = SensorConfig() if config is None else config
+    rows = [_draws(np.random.default_rng([int(s), 0x5E75]).uniform(size=12), cfg) for s in np.asarray(seeds).ravel()]
+    return {k: np.array([r[k] for r in rows]) for k in SENSOR_PARAMS}
+
+
+def apply_sensor(rgb: np.ndarray, seeds, config: SensorConfig | None = None, *, values: dict | None = None
+                 ) -> np.ndarray:
+    """Sensor effects on a batch ``rgb`` (N, H, W, 3) uint8 with one seed per image; returns a new array.
+
+    ``values``: explicit per-image effect values (name of :data:`SENSOR_PARAMS` -> (N,) array) instead of drawing
+    them from ``config`` (e.g. values drawn by a dataset's own distributions); pixel noise still comes from each
+    image's seed. Neutral colour values (gains 1, hue 0) skip the colour conversions.
+    """
     cfg = SensorConfig() if config is None else config
     seeds = np.asarray(seeds).reshape(-1)
     if len(seeds) != len(rgb):
         raise ValueError(f"need one seed per image: {len(seeds)} seeds for {len(rgb)} images")
+    if values is not None:
+        missing = [k for k in SENSOR_PARAMS if k not in values]
+        if missing:
+            raise ValueError(f"values: missing {missing}; expected every name of SENSOR_PARAMS")
+        values = {k: np.broadcast_to(np.asarray(values[k]), (len(rgb),)) for k in SENSOR_PARAMS}
     out = np.empty_like(rgb)
     for i in range(len(rgb)):
         rng = np.random.default_rng([int(seeds[i]), 0x5E75])
-        u = rng.uniform(size=12)
-
-        def draw(r, k):
-            return r[0] + (r[1] - r[0]) * u[k]
-
+        u = rng.uniform(size=12)  # drawn even with explicit values, so the noise stream is the same either way
+        v = _draws(u, cfg) if values is None else {k: values[k][i] for k in SENSOR_PARAMS}
         img = rgb[i].astype(np.float32) / 255.0
         # colour: white balance, saturation and hue (HSV), contrast, brightness
-        img *= np.array([draw(cfg.white_balance, 0), draw(cfg.white_balance, 1), draw(cfg.white_balance, 2)],
-                        np.float32)
-        np.clip(img, 0, 1, out=img)
-        hsv = cv2.cvtColor(img, cv2.COLOR_RGB2HSV)  # float: H in [0, 360)
-        hsv[..., 0] = (hsv[..., 0] + draw(cfg.hue_deg, 3)) % 360.0
-        hsv[..., 1] = np.clip(hsv[..., 1] * draw(cfg.saturation, 4), 0, 1)
-        img = cv2.cvtColor(hsv, cv2.COLOR_HSV2RGB)
-        img = (img - 0.5) * draw(cfg.contrast, 5) + 0.5 + draw(cfg.brightness, 6)
-        sigma = draw(cfg.blur_sigma, 7)
+        wb = np.array([v["wb_r"], v["wb_g"], v["wb_b"]], np.float32)
+        if np.any(wb != 1):
+            img *= wb
+            np.clip(img, 0, 1, out=img)
+        if v["hue_deg"] != 0 or v["saturation"] != 1:
+            hsv = cv2.cvtColor(img, cv2.COLOR_RGB2HSV)  # float: H in [0, 360)
+            hsv[..., 0] = (hsv[..., 0] + v["hue_deg"]) % 360.0
+            hsv[..., 1] = np.clip(hsv[..., 1] * v["saturation"], 0, 1)
+            img = cv2.cvtColor(hsv, cv2.COLOR_HSV2RGB)
+        img = (img - 0.5) * v["contrast"] + 0.5 + v["brightness"]
+        sigma = float(v["blur_sigma"])
         if sigma > 0.05:
             img = cv2.GaussianBlur(img, (0, 0), sigmaX=sigma)
-        ns, ss = draw(cfg.noise_sigma, 8), draw(cfg.shot_noise, 9)
+        ns, ss = float(v["noise_sigma"]), float(v["shot_noise"])
         if ns > 0 or ss > 0:
             std = ns + ss * np.sqrt(np.clip(img, 0, 1))
             img = img + rng.standard_normal(img.shape).astype(np.float32) * std
         img8 = (np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8)
-        if u[10] < cfg.jpeg_probability:
-            q = int(round(draw(cfg.jpeg_quality, 11)))
+        q = int(v["jpeg_quality"])
+        if 0 < q < 100:
             ok, buf = cv2.imencode(".jpg", img8[..., ::-1], [cv2.IMWRITE_JPEG_QUALITY, q])
             img8 = cv2.imdecode(buf, cv2.IMREAD_COLOR)[..., ::-1]
         out[i] = img8

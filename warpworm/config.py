@@ -29,7 +29,8 @@ Schema (all SI: m, s, rad, kg; see ``docs/dataset.md`` and the packaged ``datase
       preview: bool                 # contact sheet PNG + MP4 of one world at the end
     randomize:                      # group -> parameter -> distribution (see warpworm.randomize)
       worm:    {<WormParams field or component>: dist}
-      camera:  {distance, elevation, azimuth, roll, fov_y, lookat_jitter}
+      camera:  {distance, elevation, azimuth, roll, fov_y (constant or uniform), lookat_jitter,
+                min_in_frame, max_tries (constants)}
       light:   {elevation, azimuth, intensity, ambient}
       color:   {worm_hue, worm_saturation, worm_value, floor_hue, floor_saturation, floor_value, background_value}
       texture: {floor, floor_scale, worm}
@@ -74,6 +75,9 @@ class ParamSpec:
     doc: str = ""
     positive: bool = False  # strictly > 0
     preset: bool = False  # NaN (the default) means "the gait preset's value" (warpworm.gaits.GAIT_PRESETS)
+    ranges_only: bool = False  # a constant or {uniform: [lo, hi]} only (the camera sampler's ranges)
+    constant_only: bool = False  # a setting, not a distribution
+    integer: bool = False  # whole numbers only
 
 
 _WP = WormParams()
@@ -138,16 +142,26 @@ def _worm_specs() -> dict[str, ParamSpec]:
 
 PARAM_SPECS: dict[str, dict[str, ParamSpec]] = {
     "worm": _worm_specs(),
+    # The camera group is what warpworm.render.sample_cameras takes: ranges (a constant or {uniform: [lo, hi]}) that it
+    # draws from per attempt, redrawing views where less than min_in_frame of the worm is inside the image.
     "camera": {
-        "distance": ParamSpec({"uniform": [0.17, 0.28]}, "m", positive=True, doc="camera to look-at point"),
-        "elevation": ParamSpec({"uniform": [0.35, 1.2]}, "rad", low=-_PI / 2, high=_PI / 2,
+        "distance": ParamSpec({"uniform": [0.17, 0.28]}, "m", positive=True, ranges_only=True,
+                              doc="camera to look-at point"),
+        "elevation": ParamSpec({"uniform": [0.35, 1.2]}, "rad", low=-_PI / 2, high=_PI / 2, ranges_only=True,
                                doc="angle above the floor plane"),
-        "azimuth": ParamSpec({"uniform": [-_PI, _PI]}, "rad", doc="about world z, from the worm's +x axis"),
-        "roll": ParamSpec({"normal": {"mean": 0.0, "std": 0.05, "low": -0.3, "high": 0.3}}, "rad",
-                          doc="rotation about the optical axis"),
-        "fov_y": ParamSpec({"uniform": [0.6, 0.9]}, "rad", low=0.05, high=3.0, doc="vertical field of view"),
-        "lookat_jitter": ParamSpec({"uniform": [0.0, 0.008]}, "m", low=0.0,
-                                   doc="look-at point offset from the worm centre (random direction)"),
+        "azimuth": ParamSpec({"uniform": [-_PI, _PI]}, "rad", ranges_only=True,
+                             doc="about world z, from the worm's +x axis"),
+        "roll": ParamSpec({"uniform": [-0.08, 0.08]}, "rad", ranges_only=True, doc="rotation about the optical axis"),
+        "fov_y": ParamSpec({"uniform": [0.6, 0.9]}, "rad", low=0.05, high=3.0, ranges_only=True,
+                           doc="vertical field of view"),
+        "lookat_jitter": ParamSpec(0.005, "m", low=0.0, constant_only=True,
+                                   doc="half side of the cube the look-at point is jittered in (stored: the offset's "
+                                       "length)"),
+        "min_in_frame": ParamSpec(0.9, "1", low=0.0, high=1.0, constant_only=True,
+                                  doc="views with a smaller fraction of the worm's vertices (all frames the camera "
+                                      "shows) inside the image are redrawn (stored: the kept view's fraction)"),
+        "max_tries": ParamSpec(16, "1", low=1, high=1000, constant_only=True, integer=True,
+                               doc="draws per camera before the best one is kept below min_in_frame"),
     },
     "light": {
         "elevation": ParamSpec({"uniform": [0.5, 1.4]}, "rad", doc="directional light elevation"),
@@ -358,11 +372,20 @@ def _check_spec(path: str, dist: rnd.Distribution, spec: ParamSpec, errors: list
         if bad:
             errors.append(f"{path}: got {_fmt(bad[0])}; expected one of {list(spec.values)}")
         return
+    if spec.constant_only and not isinstance(dist, rnd.Constant):
+        errors.append(f"{path}: got {_fmt(dist.to_yaml())}; expected a constant [{spec.unit}] ({spec.doc})")
+        return
+    if spec.ranges_only and not isinstance(dist, (rnd.Constant, rnd.Uniform)):
+        errors.append(f"{path}: got {_fmt(dist.to_yaml())}; expected a constant or {{uniform: [lo, hi]}} "
+                      f"[{spec.unit}] (the camera sampler draws uniformly in the range, per attempt)")
+        return
     b = rnd.distribution_bounds(dist)
     if b is None:
         errors.append(f"{path}: got {_fmt(dist.to_yaml())}; expected numeric values [{spec.unit}]")
         return
     lo, hi = b
+    if spec.integer and not (float(lo).is_integer() and float(hi).is_integer()):
+        errors.append(f"{path}: got {_fmt(dist.to_yaml())}; expected a whole number")
     if spec.preset and isinstance(dist, rnd.Constant) and math.isnan(lo):
         return
     if spec.positive and lo <= 0:

@@ -56,6 +56,8 @@ SCHEMA: dict[str, tuple[str, str, str]] = {
     "camera/R": ("float64", "", "(3, 3) world -> camera rotation (x_cam = R x_world + t)"),
     "camera/t": ("float64", "m", "(3,) world -> camera translation"),
     "camera/position": ("float64", "m", "(3,) camera centre in world"),
+    "camera/in_frame": ("float32", "", "() fraction of the worm's vertices (every frame the camera shows) inside the "
+                        "image; below camera.min_in_frame only if no view in camera.max_tries draws reached it"),
     "poses/body": ("float64", "m", "(4, 4) worm body frame -> world"),
     "poses/ipm": ("float64", "m", "(3, 4, 4) IPM (tail, centre, head) -> world"),
     "poses/epm": ("float64", "m", "(4, 4) EPM -> world"),

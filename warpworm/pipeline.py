@@ -21,20 +21,17 @@ import functools
 import importlib
 import json
 import math
-import os
 import sys
-import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
-import yaml
 
 from . import dataset as ds
 from . import randomize as rnd
-from .config import BATCH_SHARED, ConfigError, DatasetConfig, check_output_dir, config_from_dict
+from .config import BATCH_SHARED, ConfigError, DatasetConfig, check_output_dir
 from .params import WormParams
 
 DEFAULT_STAGES = "warpworm.pipeline:WarpStages"
@@ -55,20 +52,6 @@ class SimResult:
     unstable: np.ndarray
 
 
-@dataclass
-class Cameras:
-    """Pinhole cameras for B images (OpenCV: +z forward, +y down, x_cam = R x_world + t).
-
-    K (B,3,3) [px]; R (B,3,3); t (B,3) [m]; width, height [px].
-    """
-
-    K: np.ndarray
-    R: np.ndarray
-    t: np.ndarray
-    width: int
-    height: int
-
-
 class Stages(Protocol):
     """The two heavy stages of the pipeline (simulation, rendering), pluggable for tests and other engines."""
 
@@ -79,9 +62,12 @@ class Stages(Protocol):
     def simulate_batch(self, params: WormParams, num_worlds: int, cfg: DatasetConfig) -> SimResult:
         """Settle for ``sim.settle_time`` then drive the EPM paths; snapshots at ``sim.frame_times``."""
 
-    def render_batch(self, frame: dict[str, np.ndarray], params: WormParams, cameras: Cameras,
+    def render_batch(self, frame: dict[str, np.ndarray], params: WormParams, cameras,
                      appearance: dict[str, np.ndarray], seeds: np.ndarray, cfg: DatasetConfig) -> dict[str, np.ndarray]:
         """Render B images of one snapshot per world and compute their labels.
+
+        ``cameras`` is a :class:`warpworm.render.Cameras` of B images (``K (B,3,3)``, ``R (B,3,3)``, ``t (B,3)``,
+        ``width``, ``height``; image b shows world b of ``frame``).
 
         Returns name -> (B, ...) arrays for the image and label datasets of :data:`warpworm.dataset.SCHEMA`
         (rgb, depth, segmentation, poses/*, keypoints/*, creases/angle, bars/strain, worm/vertices, labels/*).
@@ -105,8 +91,8 @@ class WarpStages:
     Simulation: ``Model.from_params`` -> ``Simulator(dt, substeps)`` -> ``settle(settle_time)`` -> ``step`` to each
     frame time -> ``snapshot``. A world flagged unstable at any frame is reported unstable.
     Rendering: ``render.build_scene`` (worm sheet, IPM disks, EPM bar, floor) with an appearance built from the drawn
-    ``light/color/texture`` values, ``Renderer.render``, then sensor effects (:func:`apply_sensor_effects`) and labels
-    (:func:`compute_labels`).
+    ``light/color/texture`` values, ``Renderer.render``, then sensor effects (:func:`warpworm.render.sensor.apply_sensor`
+    with the drawn ``sensor.*`` values, :func:`sensor_values`) and labels (:func:`compute_labels`).
     """
 
     def __init__(self):
@@ -170,23 +156,23 @@ class WarpStages:
             magnet_rot=frame["magnet_rot"], worm_texcoords=pattern.vertices, ipm_diameter=params.ipm_diameter,
             ipm_thickness=params.ipm_thickness, epm_size=params.epm_size, floor_incline=params.floor_incline,
             appearance=appearance_from_draws(appearance, seeds))
-        cams = render.Cameras(K=cameras.K, R=cameras.R, t=cameras.t, world=np.arange(B, dtype=np.int32),
-                              width=cameras.width, height=cameras.height)
+        from .render.sensor import apply_sensor
+
+        cams = dataclasses.replace(cameras, world=np.arange(B, dtype=np.int32))
         img = self._renderer(cfg).render(scene, cams)
-        rgb = apply_sensor_effects(img["rgb"], appearance, seeds)
-        labels = compute_labels(pattern, frame, params, cameras, img)
+        rgb = apply_sensor(img["rgb"], seeds, values=sensor_values(appearance))
+        labels = compute_labels(pattern, frame, params, cams, img)
         return {"rgb": rgb, "depth": img["depth"], "segmentation": img["seg"], **labels}
 
 
 def appearance_from_draws(app: dict, seeds: np.ndarray):
     """The renderer's :class:`~warpworm.render.Appearance` from the drawn ``light/color/texture`` values (B,) each."""
-    from .render import default_appearance
-    from .render.scene import _hsv_to_rgb
+    from .render import default_appearance, hsv_to_rgb
 
     B = len(seeds)
     a = default_appearance(B)
-    worm = _hsv_to_rgb(app["color.worm_hue"], app["color.worm_saturation"], app["color.worm_value"])
-    floor = _hsv_to_rgb(app["color.floor_hue"], app["color.floor_saturation"], app["color.floor_value"])
+    worm = hsv_to_rgb(app["color.worm_hue"], app["color.worm_saturation"], app["color.worm_value"])
+    floor = hsv_to_rgb(app["color.floor_hue"], app["color.floor_saturation"], app["color.floor_value"])
     a.albedo = a.albedo.copy()
     a.albedo[:, 2:7] = worm[:, None]
     a.albedo[:, 1] = floor
@@ -210,46 +196,31 @@ def appearance_from_draws(app: dict, seeds: np.ndarray):
     return a
 
 
-def apply_sensor_effects(rgb: np.ndarray, app: dict, seeds: np.ndarray) -> np.ndarray:
-    """Colour jitter, blur, Gaussian noise and JPEG re-encoding, each seeded by the sample's own seed.
+def sensor_values(app: dict) -> dict:
+    """The dataset's drawn ``sensor.*`` values (B,) -> :func:`warpworm.render.sensor.apply_sensor` ``values``.
 
-    Brightness/contrast are vectorized over the batch; blur, noise and JPEG run per image in OpenCV / NumPy (an image
-    is the unit those libraries take), skipping images whose effect is off.
+    Brightness and noise are configured in 8-bit levels (the renderer takes fractions of full scale); JPEG quality 100
+    means no round trip (the renderer's 0). White balance, hue, saturation and shot noise are not dataset parameters:
+    neutral (the renderer then skips the colour conversions).
     """
-    import cv2
-
-    x = rgb.astype(np.float32)
-    c = app["sensor.contrast"].astype(np.float32)[:, None, None, None]
-    b = app["sensor.brightness"].astype(np.float32)[:, None, None, None]
-    x = (x - 128.0) * c + 128.0 + b
-    sig = app["sensor.blur_sigma"]
-    nstd = app["sensor.noise_std"]
     q = np.asarray(app["sensor.jpeg_quality"]).astype(np.int64)
-    for i in np.flatnonzero((sig > 0.3) | (nstd > 0)):
-        if sig[i] > 0.3:
-            x[i] = cv2.GaussianBlur(x[i], (0, 0), float(sig[i]))
-        if nstd[i] > 0:
-            x[i] += float(nstd[i]) * np.random.Generator(np.random.Philox(int(seeds[i]))).standard_normal(
-                x[i].shape, dtype=np.float32)
-    out = np.clip(np.rint(x), 0, 255).astype(np.uint8)
-    for i in np.flatnonzero(q < 100):
-        ok, enc = cv2.imencode(".jpg", out[i], [cv2.IMWRITE_JPEG_QUALITY, int(q[i])])
-        out[i] = cv2.imdecode(enc, cv2.IMREAD_UNCHANGED)
-    return out
+    B = len(q)
+    return {"wb_r": np.ones(B), "wb_g": np.ones(B), "wb_b": np.ones(B), "hue_deg": np.zeros(B),
+            "saturation": np.ones(B), "contrast": np.asarray(app["sensor.contrast"], np.float64),
+            "brightness": np.asarray(app["sensor.brightness"], np.float64) / 255.0,
+            "blur_sigma": np.asarray(app["sensor.blur_sigma"], np.float64),
+            "noise_sigma": np.asarray(app["sensor.noise_std"], np.float64) / 255.0, "shot_noise": np.zeros(B),
+            "jpeg_quality": np.where(q >= 100, 0, q)}
 
 
-def compute_labels(pattern, frame: dict, params: WormParams, cameras: Cameras, images: dict) -> dict:
+def compute_labels(pattern, frame: dict, params: WormParams, cameras, images: dict) -> dict:
     """Schema label arrays of B images from :func:`warpworm.render.labels.compute_labels` (its body frame, keypoints
     and COCO visibility rules; see docs/render.md), reshaped to the dataset's names: poses as 4x4 object -> world,
     boxes as (x, y, w, h) [px]."""
     from . import transforms as tf
     from .render import labels as rl
-    from .render import Cameras as RCameras
 
-    B = len(cameras.K)
-    rc = RCameras(K=cameras.K, R=cameras.R, t=cameras.t, world=np.arange(B, dtype=np.int32), width=cameras.width,
-                  height=cameras.height)
-    lab = rl.compute_labels(frame, pattern, rc, images, rest_positions=frame.get("rest_positions"),
+    lab = rl.compute_labels(frame, pattern, cameras, images, rest_positions=frame.get("rest_positions"),
                             ipm_diameter=params.ipm_diameter, ipm_thickness=params.ipm_thickness)
     body = tf.pose_matrix(lab["body_R_world"], lab["body_t_world"])
     mags = tf.pose_matrix(lab["magnet_R_world"], lab["magnet_t_world"])
@@ -330,37 +301,49 @@ def draw_group(cfg: DatasetConfig, group: str, index: np.ndarray) -> rnd.Draws:
 
 # ---------------------------------------------------------------------------------------------------------------------
 # Cameras
-def look_at_cameras(cfg: DatasetConfig, target: np.ndarray, cam: rnd.Draws, keys: np.ndarray) -> Cameras:
-    """Cameras on a shell around ``target`` (B,3) from drawn camera.* values (B,); vectorized over B.
+def _range(dist: rnd.Distribution) -> tuple[float, float]:
+    """(lo, hi) of a camera range (config validation allows only constants and uniforms)."""
+    if isinstance(dist, rnd.Uniform):
+        return (float(dist.low), float(dist.high))
+    return (float(dist.value), float(dist.value))
 
-    Position = target + jitter + distance * (cos el cos az, cos el sin az, sin el); optical axis toward the jittered
-    target; image x axis horizontal before ``roll``. Square pixels, principal point at the image centre.
+
+def dataset_cameras(cfg: DatasetConfig, index: np.ndarray, worm_points: np.ndarray):
+    """Cameras of ``index`` (n,) trajectory or sample ids (whatever the camera is keyed by) from the ``camera.*``
+    ranges, with :func:`warpworm.render.sample_cameras`: on a shell around the mean of ``worm_points`` (n, P, 3) (the
+    worm's vertices over every frame the camera shows), redrawn until at least ``camera.min_in_frame`` of those
+    points project inside the image (up to ``camera.max_tries``; then the best view is kept). Square pixels, principal
+    point at the image centre, ``fov_y`` vertical.
+
+    Each camera draws from its own seed, derived from (master seed, index), so it is the same in any batch, shard or
+    worker. Returns (cameras, ``camera.*`` values (n,) each as stored in ``params/``: the kept view's distance,
+    elevation, azimuth, roll, fov_y [rad], look-at offset length [m], its in-frame fraction, max_tries).
     """
-    w, h = cfg.render.width, cfg.render.height
-    # jitter direction: 3 more uniforms from the same keys -> a random unit vector (Gaussian via inverse CDF)
-    g = np.stack([rnd.norm_ppf(rnd.uniform01(keys, "camera.lookat_dir", k)) for k in range(3)], axis=1)
-    g /= np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-12)
-    tgt = target + g * cam["camera.lookat_jitter"][:, None]
-    el, az, dist = cam["camera.elevation"], cam["camera.azimuth"], cam["camera.distance"]
-    offset = np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], axis=1)
-    C = tgt + dist[:, None] * offset
-    fwd = -offset
-    up = np.array([0.0, 0.0, 1.0])
-    right = np.cross(fwd, up)
-    right /= np.maximum(np.linalg.norm(right, axis=1, keepdims=True), 1e-12)
-    down = np.cross(fwd, right)
-    c, s = np.cos(cam["camera.roll"])[:, None], np.sin(cam["camera.roll"])[:, None]
-    right, down = c * right + s * down, -s * right + c * down
-    R = np.stack([right, down, fwd], axis=1)  # rows: camera axes in world -> world->camera rotation
-    t = -np.einsum("bij,bj->bi", R, C)
-    f = 0.5 * h / np.tan(0.5 * cam["camera.fov_y"])
-    K = np.zeros((len(f), 3, 3))
-    K[:, 0, 0] = f
-    K[:, 1, 1] = f
-    K[:, 0, 2] = 0.5 * (w - 1)  # pixel centres at integer (u, v) as in OpenCV and warpworm.render
-    K[:, 1, 2] = 0.5 * (h - 1)
-    K[:, 2, 2] = 1.0
-    return Cameras(K=K, R=R, t=t, width=w, height=h)
+    from .render import sample_cameras
+
+    c = cfg.randomize["camera"]
+    index = np.asarray(index, dtype=np.int64)
+    seeds = rnd.derived_seed(rnd.sample_keys(cfg.seed, index), "camera")
+    pts = np.asarray(worm_points, dtype=np.float64)
+    target = pts.mean(axis=1)
+    deg = lambda name: tuple(np.rad2deg(_range(c[name])))  # noqa: E731
+    cams = sample_cameras(
+        seeds, pts, width=cfg.render.width, height=cfg.render.height, world_index=np.arange(len(index)),
+        target=target, distance=_range(c["distance"]), elevation_deg=deg("elevation"), azimuth_deg=deg("azimuth"),
+        roll_deg=deg("roll"), fov_deg=deg("fov_y"), fov_axis="y", lookat_jitter=_range(c["lookat_jitter"])[0],
+        aspect_jitter=0.0, principal_jitter=0.0, min_in_frame=_range(c["min_in_frame"])[0],
+        max_tries=int(_range(c["max_tries"])[0]))
+    d = cams.draws
+    n = len(index)
+    values = {
+        "camera.distance": d["distance"], "camera.elevation": np.deg2rad(d["elevation_deg"]),
+        "camera.azimuth": np.deg2rad(d["azimuth_deg"]), "camera.roll": np.deg2rad(d["roll_deg"]),
+        "camera.fov_y": np.deg2rad(d["fov_deg"]),
+        "camera.lookat_jitter": np.linalg.norm(d["lookat"] - target, axis=1),
+        "camera.min_in_frame": cams.in_frame.astype(np.float64),
+        "camera.max_tries": np.full(n, float(_range(c["max_tries"])[0])),
+    }
+    return cams, values
 
 
 # ---------------------------------------------------------------------------------------------------------------------
@@ -376,6 +359,8 @@ class ShardStats:
     render_s: float = 0.0
     write_s: float = 0.0
     total_s: float = 0.0
+    cameras_below_min: int = 0
+    """Cameras whose best view in ``camera.max_tries`` draws kept less than ``camera.min_in_frame`` of the worm."""
     file: str = ""
     bytes: int = 0
 
@@ -490,11 +475,11 @@ def run_shard(cfg: DatasetConfig, out_dir, k: int, stages, progress=None) -> Sha
             appearance = {}
             for g in ("light", "color", "texture", "sensor"):
                 appearance.update(draw_group(cfg, g, traj).values)
-            cam_traj = draw_group(cfg, "camera", traj).values
             if not cfg.render.camera_per_frame:
-                # one camera per trajectory: aim at the worm's mean position over the frames
-                targets = np.mean([f["positions"].mean(axis=1) for f in frames], axis=0)
-                cams_traj = look_at_cameras(cfg, targets, rnd.Draws(cam_traj), rnd.sample_keys(cfg.seed, traj))
+                # one camera per trajectory, keyed by the trajectory: the worm (all its frames) in view
+                pts = np.concatenate([f["positions"] for f in frames], axis=1)
+                cams_traj, cam_traj = dataset_cameras(cfg, traj, pts)
+                stats.cameras_below_min += int((~cams_traj.accepted).sum())
             # Samples in row order (trajectory-major, frame-minor), so that every write is a contiguous row range:
             # strided HDF5 writes into chunked, compressed datasets measured ~25x slower than contiguous ones.
             sid_all = (traj[:, None] * F + np.arange(F)[None]).reshape(-1)
@@ -508,13 +493,13 @@ def run_shard(cfg: DatasetConfig, out_dir, k: int, stages, progress=None) -> Sha
                 # the snapshot of each sample's (trajectory, frame), stacked: (n, ...) "worlds" of the renderer
                 fr = _gather_frames(frames, tsel, fidx)
                 skeys = rnd.sample_keys(cfg.seed, sid)
-                if cfg.render.camera_per_frame:
-                    cam_draws = draw_group(cfg, "camera", sid).values
-                    cams = look_at_cameras(cfg, fr["positions"].mean(axis=1), rnd.Draws(cam_draws), skeys)
+                if cfg.render.camera_per_frame:  # a camera per sample, keyed by the sample id
+                    cams, cam_draws = dataset_cameras(cfg, sid, fr["positions"])
+                    stats.cameras_below_min += int((~cams.accepted).sum())
                 else:
                     cam_draws = _take(cam_traj, tsel)
-                    cams = Cameras(cams_traj.K[tsel], cams_traj.R[tsel], cams_traj.t[tsel], cfg.render.width,
-                                   cfg.render.height)
+                    cams = cams_traj.take(tsel)
+                cams.world = np.arange(len(sid), dtype=np.int32)
                 seeds = rnd.derived_seed(skeys)
                 params = worm_params(cfg, wdraws, tsel)
                 app = _take(appearance, tsel)
@@ -525,7 +510,7 @@ def run_shard(cfg: DatasetConfig, out_dir, k: int, stages, progress=None) -> Sha
                 rows = {
                     **out,
                     "camera/K": cams.K, "camera/R": cams.R, "camera/t": cams.t,
-                    "camera/position": -np.einsum("bji,bj->bi", cams.R, cams.t),
+                    "camera/position": cams.position, "camera/in_frame": cams.in_frame.astype(np.float32),
                     "time": np.asarray(cfg.sim.frame_times, dtype=np.float32)[fidx],
                     "trajectory": traj[tsel], "frame": fidx.astype(np.int32),
                     "attempt": attempt[tsel].astype(np.int32), "sample_id": sid, "seed": seeds,
@@ -575,6 +560,7 @@ class Summary:
     workers: int
     engine: str
     new_samples: int = 0
+    cameras_below_min: int = 0
 
     @property
     def samples_per_s(self) -> float:
@@ -585,7 +571,8 @@ class Summary:
         return (f"wrote {self.shards_written} shard(s) ({self.new_samples} samples; {self.shards_done_before} shard(s) "
                 f"were already complete) to {self.out} in {self.wall_s:.1f} s = {self.samples_per_s:.1f} samples/s "
                 f"with {self.workers} worker(s) [{self.engine}]; unstable worlds dropped and replaced: "
-                f"{self.replaced_worlds}; stage time (all workers): sim {self.sim_s:.1f} s, render {self.render_s:.1f} s, "
+                f"{self.replaced_worlds}; cameras below camera.min_in_frame after max_tries: {self.cameras_below_min}; "
+                f"stage time (all workers): sim {self.sim_s:.1f} s, render {self.render_s:.1f} s, "
                 f"write {self.write_s:.1f} s")
 
 
@@ -691,7 +678,8 @@ def generate(cfg: DatasetConfig, out_dir, *, workers: int = 1, resume: bool = Fa
                       replaced_worlds=sum(s.replaced for s in written.values()), wall_s=wall,
                       sim_s=sum(s.sim_s for s in written.values()), render_s=sum(s.render_s for s in written.values()),
                       write_s=sum(s.write_s for s in written.values()), workers=workers, engine=engine,
-                      new_samples=sum(s.count for s in written.values()))
+                      new_samples=sum(s.count for s in written.values()),
+                      cameras_below_min=sum(s.cameras_below_min for s in written.values()))
     ds.atomic_write_json(out / ds.MANIFEST, _manifest(cfg, done, complete=True, summary=summary))
     if cfg.output.preview if preview is None else preview:
         try:
@@ -703,65 +691,58 @@ def generate(cfg: DatasetConfig, out_dir, *, workers: int = 1, resume: bool = Fa
 
 # ---------------------------------------------------------------------------------------------------------------------
 # Previews
-def _depth_colour(depth: np.ndarray) -> np.ndarray:
-    import cv2
+def _sheet_inputs(samples: list[dict]) -> tuple[dict, dict]:
+    """Dataset samples -> the (images, labels) that :func:`warpworm.render.contact_sheet.contact_sheet` draws:
+    boxes back from (x, y, w, h) to corners, the body pose from ``poses/body``."""
+    def st(k):
+        return np.stack([s[k] for s in samples])
 
-    valid = depth > 0
-    out = np.zeros(depth.shape + (3,), np.uint8)
-    if valid.any():
-        lo, hi = np.percentile(depth[valid], [1, 99])
-        norm = np.clip((depth - lo) / max(hi - lo, 1e-9), 0, 1)
-        out = cv2.applyColorMap((255 * (1 - norm)).astype(np.uint8), cv2.COLORMAP_TURBO)[..., ::-1]
-        out[~valid] = 0
-    return out
-
-
-_SEG_PALETTE = np.array([[0, 0, 0], [90, 90, 90], [230, 25, 75], [245, 130, 48], [255, 225, 25], [60, 180, 75],
-                         [70, 240, 240], [0, 130, 200], [145, 30, 180], [240, 50, 230], [255, 255, 255]], np.uint8)
-
-
-def contact_sheet(samples: list[dict], scale: int = 2) -> np.ndarray:
-    """One row per sample: RGB with keypoints (green visible, red occluded), depth colour map, segmentation overlay."""
-    import cv2
-
-    rows = []
-    for s in samples:
-        rgb = s["rgb"].copy()
-        seg = _SEG_PALETTE[np.minimum(s["segmentation"], len(_SEG_PALETTE) - 1)]
-        over = (0.5 * rgb + 0.5 * seg).astype(np.uint8)
-        tiles = [rgb, _depth_colour(s["depth"]), over]
-        tiles = [cv2.resize(t, None, fx=scale, fy=scale, interpolation=cv2.INTER_NEAREST) for t in tiles]
-        for t in (tiles[0], tiles[2]):
-            for (u, v), vis in zip(s["keypoints/pixel"], s["keypoints/visibility"]):
-                if vis > 0:
-                    col = (0, 255, 0) if vis == 2 else (255, 0, 0)
-                    cv2.circle(t, (int(round(u * scale)), int(round(v * scale))), 2 * scale, col, -1)
-        rows.append(np.concatenate(tiles, axis=1))
-    return np.concatenate(rows, axis=0)
+    box, vb, body = st("labels/bbox_obj"), st("labels/bbox_visib"), st("poses/body")
+    visible = vb[:, 2] > 0
+    images = {"rgb": st("rgb"), "depth": st("depth"), "seg": st("segmentation")}
+    labels = {
+        "K": st("camera/K"), "R": st("camera/R"), "t": st("camera/t"),
+        "body_R_world": body[:, :3, :3], "body_t_world": body[:, :3, 3],
+        "keypoints_2d": st("keypoints/pixel"), "keypoint_visibility": st("keypoints/visibility"),
+        "worm_box": np.concatenate([box[:, :2], box[:, :2] + box[:, 2:]], axis=1),
+        "worm_box_visible": np.where(visible[:, None], np.concatenate([vb[:, :2], vb[:, :2] + vb[:, 2:] - 1], axis=1),
+                                     -1).astype(np.int64),
+        "visible_fraction": st("labels/visib_fract"),
+    }
+    return images, labels
 
 
 def write_previews(cfg: DatasetConfig, out, stages=DEFAULT_STAGES, max_rows: int = 8) -> list[Path]:
-    """``preview.png``: contact sheet of the first samples; ``preview.mp4``: the frames of trajectory 0, resimulated
-    at 20 fps over ``sim.frame_times`` with the same draws (one world, small)."""
+    """``preview.png``: the renderer's contact sheet (:func:`warpworm.render.contact_sheet.contact_sheet`) of the
+    first samples; ``preview.mp4``: trajectory 0 resimulated at 20 fps over ``sim.frame_times`` with the same draws,
+    seen from sample 0's stored camera (one world, small)."""
     import cv2
+
+    from .render import make_cameras
+    from .render.contact_sheet import contact_sheet, save_png
 
     out = Path(out)
     reader = ds.open(out)
-    n = min(len(reader), max_rows)
-    paths = []
-    if n:
-        sheet = contact_sheet([reader[i] for i in range(n)])
-        cv2.imwrite(str(out / "preview.png"), sheet[..., ::-1])
+    try:
+        n = min(len(reader), max_rows)
+        paths = []
+        if n == 0:
+            return paths
+        images, labels = _sheet_inputs([reader[i] for i in range(n)])
+        save_png(out / "preview.png", contact_sheet(images, labels, max_rows=n, scale=2))
         paths.append(out / "preview.png")
+        cam = {k: reader.read(f"camera/{k}", [0]) for k in ("K", "R", "t")}
+    finally:
+        reader.close()
     # video: trajectory 0 with a dense frame list (same parameters and camera as in the dataset)
     T = cfg.sim.frame_times[-1]
-    dense = dataclasses.replace(cfg, sim=dataclasses.replace(cfg.sim, frame_times=list(np.linspace(0, T, max(
-        2, int(T * 20) + 1))), worlds=1), shard_size=max(2, int(T * 20) + 1) * 1, num_samples=max(2, int(T * 20) + 1))
+    nf = max(2, int(T * 20) + 1)
+    dense = dataclasses.replace(cfg, sim=dataclasses.replace(cfg.sim, frame_times=list(np.linspace(0, T, nf)),
+                                                             worlds=1), shard_size=nf, num_samples=nf)
     stg = load_stages(stages)
     frames, wdraws, _ = _simulate_with_replacement(stg, dense, np.array([0]), ShardStats(0, 0))
-    target = np.mean([f["positions"].mean(axis=1) for f in frames], axis=0)
+    cams = make_cameras(cam["K"], cam["R"], cam["t"], 0, cfg.render.width, cfg.render.height)
     traj = np.array([0])
-    cams = look_at_cameras(cfg, target, draw_group(cfg, "camera", traj), rnd.sample_keys(cfg.seed, traj))
     app = {}
     for g in ("light", "color", "texture", "sensor"):
         app.update(draw_group(cfg, g, traj).values)
@@ -772,5 +753,4 @@ def write_previews(cfg: DatasetConfig, out, stages=DEFAULT_STAGES, max_rows: int
         vw.write(np.ascontiguousarray(img[..., ::-1]))
     vw.release()
     paths.append(out / "preview.mp4")
-    reader.close()
     return paths
