@@ -270,3 +270,44 @@ def test_ray_engine_gives_the_same_samples(tmp_path, monkeypatch):
         ray.shutdown()
     run(tiny(), tmp_path / "local")
     assert_same(everything(tmp_path / "ray")[0], everything(tmp_path / "local")[0])
+
+
+def _in_frame(data, margin=2.0):
+    """Fraction of each sample's worm vertices that project at least ``margin`` px inside the image (re-derived)."""
+    pc = np.einsum("nij,nvj->nvi", data["camera/R"], data["worm/vertices"].astype(np.float64)) + data["camera/t"][:, None]
+    uv = np.einsum("nij,nvj->nvi", data["camera/K"], pc)
+    u, v = uv[..., 0] / uv[..., 2], uv[..., 1] / uv[..., 2]
+    H, W = data["depth"].shape[1:]
+    inside = (pc[..., 2] > 1e-3) & (u >= margin) & (u <= W - 1 - margin) & (v >= margin) & (v <= H - 1 - margin)
+    return inside.mean(axis=1)
+
+
+def test_cameras_keep_the_worm_in_frame_and_do_not_depend_on_batching(tmp_path):
+    cam = {"render": {"width": 24, "height": 16, "camera_per_frame": True},
+           "randomize": {"worm": {"hinge_stiffness": {"uniform": [0.5, 1.0]}},
+                         "camera": {"distance": {"uniform": [0.05, 0.3]}, "min_in_frame": 0.95}}}
+    s = run(tiny(**cam), tmp_path / "a")
+    a, _ = everything(tmp_path / "a")
+    assert s.cameras_below_min == 0
+    assert np.all(a["camera/in_frame"] >= 0.95)
+    assert np.allclose(a["camera/in_frame"], _in_frame(a), atol=1e-6)  # the stored fraction is the real one
+    assert np.allclose(a["params/camera.min_in_frame"], a["camera/in_frame"])
+    # a view's distance / fov are drawn within the configured ranges, and stored
+    assert np.all((a["params/camera.distance"] >= 0.05) & (a["params/camera.distance"] <= 0.3))
+    # same cameras with another shard size and batch size (per-sample seeds)
+    run(tiny(**cam, shard_size=22, sim={"worlds": 5, "frame_times": [0.1, 0.3]}), tmp_path / "b")
+    b, _ = everything(tmp_path / "b")
+    for k in ("camera/K", "camera/R", "camera/t", "camera/in_frame", "params/camera.azimuth"):
+        assert np.array_equal(a[k], b[k]), k
+
+
+def test_unattainable_in_frame_requirement_keeps_best_view_and_counts_it(tmp_path):
+    # 1 cm away with a narrow field of view: the worm can never be 99 % inside a 24 x 16 image
+    cam = {"randomize": {"worm": {"hinge_stiffness": {"uniform": [0.5, 1.0]}},
+                         "camera": {"distance": 0.01, "fov_y": 0.1, "min_in_frame": 0.99, "max_tries": 3}}}
+    s = run(tiny(**cam), tmp_path / "a")
+    a, _ = everything(tmp_path / "a")
+    assert s.cameras_below_min == len(np.unique(a["trajectory"]))  # one camera per trajectory, none met it
+    assert np.all(a["camera/in_frame"] < 0.99)
+    m = json.loads((tmp_path / "a" / "manifest.json").read_text())
+    assert m["summary"]["cameras_below_min"] == s.cameras_below_min
