@@ -103,7 +103,8 @@ def apply_sensor(rgb: np.ndarray, seeds, config: SensorConfig | None = None, *, 
             img = cv2.GaussianBlur(img, (0, 0), sigmaX=sigma)
         ns, ss = float(v["noise_sigma"]), float(v["shot_noise"])
         if ns > 0 or ss > 0:
-            std = ns + ss * np.sqrt(np.clip(img, 0, 1))
+            # (a scalar std when there is no shot noise: same values, no per-pixel sqrt)
+            std = ns + ss * np.sqrt(np.clip(img, 0, 1)) if ss > 0 else img.dtype.type(ns)
             img = img + rng.standard_normal(img.shape).astype(np.float32) * std
         img8 = (np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8)
         q = int(v["jpeg_quality"])
