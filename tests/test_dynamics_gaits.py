@@ -22,3 +22,25 @@ def test_gait_preset_moves_the_worm_its_way(gait, backward):
     sign = -1.0 if backward else 1.0
     # at least 1 mm in the commanded direction over 5 cycles (the worm is 80 mm long)
     assert sign * d > 1e-3, f"{gait} {'backward' if backward else 'forward'}: net displacement {d * 1e3:+.2f} mm"
+
+
+def test_simulate_cli_json_and_files(tmp_path, capsys):
+    import json
+
+    from warpworm.cli import main
+
+    out = tmp_path / "run"
+    rc = main(["simulate", "--gait", "omega", "--backward", "--cycles", "1", "--worlds", "2", "--json",
+               "--out", str(out), "--fps", "10"])
+    assert rc == 0
+    stdout = capsys.readouterr().out
+    summary = json.loads(stdout)  # only JSON on stdout
+    assert list(summary) == ["gait", "worlds", "displacement_m", "unstable", "sim_time_s", "wall_time_s"]
+    assert summary["gait"] == "omega" and summary["worlds"] == 2
+    assert len(summary["displacement_m"]) == 2 and len(summary["unstable"]) == 2
+    assert summary["sim_time_s"] == pytest.approx(1.0)
+    traj = np.load(out / "trajectory.npz")
+    F = len(traj["times"])
+    assert traj["positions"].shape[:2] == (F, 2) and traj["magnet_rot"].shape[-2:] == (3, 3)
+    assert traj["crease_angle"].shape[:2] == (F, 2) and "triangles" in traj.files
+    assert (out / "preview.mp4").stat().st_size > 0 and (out / "preview_strip.png").stat().st_size > 0

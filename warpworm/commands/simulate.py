@@ -47,7 +47,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="seed of --randomize")
     parser.add_argument("--randomize", action="store_true",
                         help="draw per-world parameters uniformly around the preset (" + ", ".join(
-                            f"{k} ±{int(100 * v)}%" for k, v in RANDOMIZED.items()) + ")")
+                            f"{k} ±{int(100 * v)}%%" for k, v in RANDOMIZED.items()) + ")")
 
 
 def randomized_params(params, num_worlds: int, seed: int):
