@@ -4,6 +4,10 @@ Why processes: Warp runs CPU kernels on one thread, so P cores need P processes.
 native state that must not be forked. Each shard is an independent task whose output depends only on (config, k), so
 the engine and worker count never change the data.
 
+Start-up: the parent starts the workers, then loads the stages' Warp kernel modules once (``WarpStages.warm``: with a
+cold kernel cache the modules compile in parallel threads, into the cache every worker reads); meanwhile each worker
+does its heavy imports (``preload``) and then waits for the parent, so no two processes compile the same module.
+
 A worker that dies (SIGKILL, out of memory) breaks the local pool: the job stops with a clear error, finished shards stay
 committed, the half-written shard is a temporary file, and ``--resume`` redoes exactly the missing shards. A worker whose
 parent dies exits by itself (a watchdog thread), so a killed job leaves no orphan writing files.
@@ -21,7 +25,7 @@ from typing import Callable
 _progress_queue = None
 
 
-def _init_worker(q, parent_pid: int):
+def _init_worker(q, parent_pid: int, stages=None, ready=None):
     global _progress_queue
     _progress_queue = q
 
@@ -32,6 +36,16 @@ def _init_worker(q, parent_pid: int):
             time.sleep(0.5)
 
     threading.Thread(target=watchdog, daemon=True, name="warpworm-parent-watchdog").start()
+    if stages is not None:
+        # heavy imports now, while the parent warms the kernel cache; then wait for it, so that no worker compiles
+        # a kernel module the parent is compiling (each would compile its own copy: ~33 s of CPU per worker here)
+        from .pipeline import load_stages
+
+        preload = getattr(load_stages(stages), "preload", None)
+        if preload is not None:
+            preload()
+    if ready is not None:
+        ready.wait()
 
 
 def _report(n: int):
@@ -43,6 +57,22 @@ def _run_shard_task(cfg, out, k, stages):
     from .pipeline import run_shard
 
     return run_shard(cfg, out, k, stages, progress=_report)
+
+
+def _warm(cfg, stages) -> None:
+    """Load / compile the stages' kernels once in this process (``stages.warm(cfg)``, when the stages have it)."""
+    from .pipeline import load_stages
+
+    warm = getattr(load_stages(stages), "warm", None)
+    if warm is None:
+        return
+    try:
+        warm(cfg)
+    except Exception as exc:  # noqa: BLE001 - a failed warm-up only costs time; the shards report real errors
+        import sys
+
+        print(f"warning: kernel warm-up failed ({type(exc).__name__}: {exc}); modules load on first use",
+              file=sys.stderr)
 
 
 class WorkerError(RuntimeError):
@@ -62,6 +92,7 @@ def run_shards(cfg, out, todo: list[int], stages, *, workers: int = 1, engine: s
     if workers <= 1:
         from .pipeline import run_shard
 
+        _warm(cfg, stages)  # cold cache: the kernel modules compile in parallel threads
         for k in todo:
             on_shard(run_shard(cfg, out, k, stages, progress=on_progress))
         return
@@ -89,10 +120,15 @@ def _run_local_pool(cfg, out, todo, stages, workers, on_progress, on_shard):
 
     t = threading.Thread(target=drain, daemon=True)
     t.start()
+    ready = ctx.Event()
     pool = ProcessPoolExecutor(max_workers=min(workers, len(todo)), mp_context=ctx, initializer=_init_worker,
-                               initargs=(q, os.getpid()))
+                               initargs=(q, os.getpid(), stages, ready))
     try:
-        pending = {pool.submit(_run_shard_task, cfg, str(out), k, stages): k for k in todo}
+        pending = {pool.submit(_run_shard_task, cfg, str(out), k, stages): k for k in todo}  # starts the workers
+        try:
+            _warm(cfg, stages)  # once, here, while the workers start up
+        finally:
+            ready.set()
         while pending:
             finished, _ = wait(pending, return_when=FIRST_COMPLETED)
             for fut in finished:
