@@ -261,6 +261,7 @@ def solve_constraints(
                 # XPBD damping (Macklin 2016): gamma = compliance * beta / dt with beta = c L [N m s/rad] and the
                 # compliance 1 / (k L) (not alpha-tilde): in the soft limit the force is then k C + c dC/dt
                 gamma = pw(hinge_damping, world) * length / (kh * dt)
+                rate = float(0.0)
                 # Up to 12 hinges share a vertex and their summed Jacobi corrections overshoot once
                 # G_v = sum_h k L w |grad|² dt² is not small (k_alpha = 0.02 N/rad diverged at dt = 250 us unsplit).
                 # split_hinge = max(1, 2 G_v) (set by the Simulator for its dt) splits only where needed: a full
@@ -271,12 +272,13 @@ def solve_constraints(
                     + split_hinge[sh_row, k] * wk * wp.length_sq(gk)
                     + split_hinge[sh_row, l] * wl * wp.length_sq(gl)
                 )
-                rate = (
-                    wp.dot(gi, xi - x_prev[world, i])
-                    + wp.dot(gj, xj - x_prev[world, j])
-                    + wp.dot(gk, xk - x_prev[world, k])
-                    + wp.dot(gl, xl - x_prev[world, l])
-                )
+                if gamma > 0.0:  # the fold rate costs four more vertex loads: only when damped
+                    rate = (
+                        wp.dot(gi, xi - x_prev[world, i])
+                        + wp.dot(gj, xj - x_prev[world, j])
+                        + wp.dot(gk, xk - x_prev[world, k])
+                        + wp.dot(gl, xl - x_prev[world, l])
+                    )
                 c = phi - hinge_rest[world % hinge_rest.shape[0], h]
                 dlam = -(c + gamma * rate) / ((1.0 + gamma) * wsum + alpha)
         if dlam != 0.0:
