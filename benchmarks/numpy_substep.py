@@ -39,7 +39,8 @@ class NumpySubstep:
         def col(a):
             return np.broadcast_to(np.asarray(a.numpy(), np.float64), (self.W,))[:, None]
 
-        self.EA, self.k, self.c_h = col(model.bar_stiffness), col(model.hinge_stiffness), col(model.hinge_damping)
+        self.EA = rows(model.bar_stiffness.numpy())
+        self.k, self.c_h = col(model.hinge_stiffness), col(model.hinge_damping)
         self.damping, self.g = col(model.damping), col(model.gravity)
         self.mu_s, self.mu_k, self.beta = col(model.mu_static), col(model.mu_kinetic), col(model.floor_incline)
         lo = np.full(len(self.label), -np.pi)

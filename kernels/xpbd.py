@@ -156,7 +156,7 @@ def solve_constraints(
     split_hinge: wp.array2d(dtype=float),
     edges: wp.array2d(dtype=wp.int32),
     rest_length: wp.array2d(dtype=float),
-    bar_stiffness: wp.array(dtype=float),
+    bar_stiffness: wp.array2d(dtype=float),
     hinges: wp.array2d(dtype=wp.int32),
     hinge_rest: wp.array2d(dtype=float),
     hinge_length: wp.array2d(dtype=float),
@@ -207,7 +207,7 @@ def solve_constraints(
             return
         wa = inv_mass[im_row, a]
         wb = inv_mass[im_row, b]
-        alpha = l0 / (pw(bar_stiffness, world) * dt2)
+        alpha = l0 / (bar_stiffness[world % bar_stiffness.shape[0], e] * dt2)
         denom = split[a] * wa + split[b] * wb + alpha
         if denom > 0.0 and length > 0.0:
             n = d / length

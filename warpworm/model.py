@@ -223,8 +223,13 @@ class Model:
         def sp(name):
             return wp.array(_scalar_param(getattr(p, name), W, name), dtype=float, device=dev)
 
-        self.bar_stiffness = sp("bar_stiffness")
-        """Axial rigidity EA of every bar [N], shape (R,)."""
+        # Per-bar rigidity: the valley rings get their own (soft) EA so the isostatic tube can fold (docs/crease.md).
+        ea_rigid = _scalar_param(p.bar_stiffness, W, "bar_stiffness")
+        ea_valley = _scalar_param(p.valley_bar_stiffness, W, "valley_bar_stiffness")
+        is_valley = pat.edge_label == crease.VALLEY
+        ea = np.where(is_valley[None, :], ea_valley[:, None], ea_rigid[:, None])
+        self.bar_stiffness = wp.array(ea.astype(np.float32), dtype=float, device=dev)
+        """Axial rigidity EA of each bar [N], shape (R, E), float (valley-ring bars: ``valley_bar_stiffness``)."""
         self.hinge_stiffness = sp("hinge_stiffness")
         """Crease stiffness k_alpha per metre of crease [N·m/rad/m], shape (R,)."""
         self.hinge_damping = sp("hinge_damping")

@@ -45,7 +45,11 @@ class WormParams:
     """Crease stiffness k_α per metre of crease [N·m/rad/m = N/rad], shape () or (W,). 0.3 is calibrated so the
     three gait presets move (docs/dynamics.md); the paper's 11.55 is Kangaroo's unitless strength."""
     bar_stiffness: float | np.ndarray = 1.0e4
-    """Axial rigidity EA of every bar [N] (force per unit Cauchy strain), shape () or (W,)."""
+    """Axial rigidity EA of every bar but the valley rings [N] (force per unit Cauchy strain), shape () or (W,)."""
+    valley_bar_stiffness: float | np.ndarray = 2.0
+    """Axial rigidity EA of the VALLEY-ring bars at the unit middles [N], shape () or (W,). The tube is isostatic
+    (docs/crease.md): these bars stand for the panel bending near the mid creases that lets the paper bellows fold,
+    so they must be far softer than ``bar_stiffness`` for the worm to shorten under the magnets."""
     damping: float | np.ndarray = 2.0
     """Linear velocity damping rate [1/s], shape () or (W,)."""
     hinge_damping: float | np.ndarray = 0.0
