@@ -113,7 +113,10 @@ class WarpStages:
         from . import render  # noqa: F401
 
         for name in self.KERNEL_MODULES:
-            importlib.import_module(name)
+            try:
+                importlib.import_module(name)
+            except ImportError:  # renamed / removed by the solver: it just loads on first use
+                pass
 
     def warm(self, cfg, max_workers: int | None = None):
         """Load every kernel module of :data:`KERNEL_MODULES` on ``sim.device``, compiling the missing ones into
@@ -131,8 +134,8 @@ class WarpStages:
                 max_workers = len(os.sched_getaffinity(0))
             except AttributeError:  # pragma: no cover - not Linux
                 max_workers = os.cpu_count() or 1
-        wp.force_load(device=cfg.sim.device, modules=[wp.get_module(n) for n in self.KERNEL_MODULES],
-                      max_workers=max_workers)
+        names = [n for n in self.KERNEL_MODULES if n in sys.modules]
+        wp.force_load(device=cfg.sim.device, modules=[wp.get_module(n) for n in names], max_workers=max_workers)
 
     def _pattern(self, n_units: int):
         from . import crease
