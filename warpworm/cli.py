@@ -53,12 +53,9 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     # Warp's banner and module-load lines go to stdout; keep stdout for results (e.g. `--json`).
     # Set before any command module imports (and so initialises) Warp.
-    import warp as wp
+    from warpworm import quiet_warp
 
-    if hasattr(wp, "LOG_WARNING"):  # Warp >= 1.12: leveled logging
-        wp.config.log_level = wp.LOG_WARNING
-    else:
-        wp.config.quiet = True
+    quiet_warp()
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "_main", None):

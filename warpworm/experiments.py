@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import crease, gaits
+from . import crease, gaits, quiet_warp
 from . import magnets as mg
 from .params import GAITS, WormParams
 
@@ -57,13 +57,6 @@ def _dt_substeps(dt, substeps):
             getattr(gaits, "DEFAULT_SUBSTEPS", 32) if substeps is None else int(substeps))
 
 
-def _quiet_warp():
-    import warp as wp
-
-    if hasattr(wp, "LOG_WARNING"):
-        wp.config.log_level = wp.LOG_WARNING
-    else:
-        wp.config.quiet = True
 
 
 def section_vertices(n_units: int, section: int, corners=(0, 1, 2)) -> np.ndarray:
@@ -207,7 +200,7 @@ def run_gaits(gait_list=GAITS, duration: float = 2.0, *, sample_every: int = 2, 
     """
     from .simulator import Simulator
 
-    _quiet_warp()
+    quiet_warp()
     gait_list = list(gait_list)
     dt, substeps = _dt_substeps(dt, substeps)
     model, p = _gait_model(gait_list, anchors=anchors, anchor_stiffness=anchor_stiffness, base=base,
@@ -327,7 +320,7 @@ def compression(hinge_stiffness=(0.01, 0.02, 0.04, 0.08), max_displacement: floa
     """
     from .model import Model
 
-    _quiet_warp()
+    quiet_warp()
     ks = np.asarray(hinge_stiffness, np.float64)
     W = len(ks)
     kw = dict(NO_MAGNETS, damping=50.0)
@@ -371,7 +364,7 @@ def flexure(hinge_stiffness=(0.01, 0.02, 0.04, 0.08), max_deflection: float = 2.
     """
     from .model import Model
 
-    _quiet_warp()
+    quiet_warp()
     ks = np.asarray(hinge_stiffness, np.float64)
     W = len(ks)
     kw = dict(NO_MAGNETS, damping=50.0)
@@ -421,7 +414,7 @@ def slope(offsets_deg=(-4.0, -2.0, -1.0, 1.0, 2.0, 4.0), duration: float = 0.5, 
     from .model import Model
     from .simulator import Simulator
 
-    _quiet_warp()
+    quiet_warp()
     dt, substeps = _dt_substeps(dt, substeps)
     b = base or WormParams()
     mu_s = float(np.asarray(overrides.get("mu_static", b.mu_static)))

@@ -96,9 +96,19 @@ class WarpStages:
     with the drawn ``sensor.*`` values, :func:`sensor_values`) and labels (:func:`compute_labels`).
     """
 
-    KERNEL_MODULES = ("warpworm.kernels.xpbd", "warpworm.kernels.magnet_wrench", "warpworm.render.raster_kernels")
-    """The Warp modules the stages launch (:meth:`warm` compiles them together; one missing here is simply compiled
-    on first use, in each process)."""
+    @staticmethod
+    def kernel_modules() -> list[str]:
+        """Every module of ``warpworm.kernels`` and ``warpworm.render`` whose name says it holds kernels
+        (:meth:`warm` compiles them together). Discovered, not listed, so a new solver module is warmed too."""
+        import pkgutil
+
+        from . import kernels, render
+
+        names = []
+        for pkg in (kernels, render):
+            names += [f"{pkg.__name__}.{m.name}" for m in pkgutil.iter_modules(pkg.__path__)
+                      if "kernel" in m.name or pkg is kernels]
+        return names
 
     def __init__(self):
         self._renderers = {}
@@ -106,20 +116,17 @@ class WarpStages:
 
     def preload(self):
         """Heavy imports (Warp, the simulator, the renderer), so a worker does them while the parent warms the cache."""
-        import warp as wp
+        from . import quiet_warp
 
-        wp.config.quiet = True
+        quiet_warp()
         from . import model, simulator  # noqa: F401
         from . import render  # noqa: F401
 
-        for name in self.KERNEL_MODULES:
-            try:
-                importlib.import_module(name)
-            except ImportError:  # renamed / removed by the solver: it just loads on first use
-                pass
+        for name in self.kernel_modules():
+            importlib.import_module(name)
 
     def warm(self, cfg, max_workers: int | None = None):
-        """Load every kernel module of :data:`KERNEL_MODULES` on ``sim.device``, compiling the missing ones into
+        """Load every kernel module of :meth:`kernel_modules` on ``sim.device``, compiling the missing ones into
         Warp's kernel cache in parallel (``max_workers`` threads; default one per available core).
 
         Run once in the parent before workers start: with a cold cache (a kernel source changed, a fresh install)
@@ -134,7 +141,7 @@ class WarpStages:
                 max_workers = len(os.sched_getaffinity(0))
             except AttributeError:  # pragma: no cover - not Linux
                 max_workers = os.cpu_count() or 1
-        names = [n for n in self.KERNEL_MODULES if n in sys.modules]
+        names = self.kernel_modules()
         wp.force_load(device=cfg.sim.device, modules=[wp.get_module(n) for n in names], max_workers=max_workers)
 
     def _pattern(self, n_units: int):
