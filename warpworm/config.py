@@ -92,6 +92,8 @@ def _worm_specs() -> dict[str, ParamSpec]:
         "sheet_density": ParamSpec(_WP.sheet_density, "kg/m^2", positive=True, doc="areal density of the sheet"),
         "hinge_stiffness": ParamSpec(_WP.hinge_stiffness, "N*m/rad/m", positive=True, doc="crease stiffness k_alpha"),
         "bar_stiffness": ParamSpec(_WP.bar_stiffness, "N", positive=True, doc="bar axial rigidity EA"),
+        "valley_bar_stiffness": ParamSpec(_WP.valley_bar_stiffness, "N", positive=True,
+                                          doc="axial rigidity EA of the valley-ring bars (panel bending; lets the tube fold)"),
         "damping": ParamSpec(_WP.damping, "1/s", low=0.0, doc="linear velocity damping rate"),
         "mu_static": ParamSpec(_WP.mu_static, "1", low=0.0, doc="static friction coefficient"),
         "mu_kinetic": ParamSpec(_WP.mu_kinetic, "1", low=0.0,
