@@ -111,6 +111,38 @@ def mount_frame(
     return o, wp.matrix_from_cols(ex, ey, ez)
 
 
+@wp.func
+def floor_contact(p: wp.vec3, vel: wp.vec3, p0: wp.vec3, beta: float, mu_s: float, mu_k: float, dt: float):
+    """Floor contact and position-level static / kinetic friction of one vertex (eq. 8 of the paper).
+
+    ``p`` the corrected position, ``vel`` its velocity (predicted + correction / dt), ``p0`` the position at the start
+    of the substep. The floor is the plane through the origin with normal n = (-sin b, 0, cos b). A penetration d is
+    removed along n; the tangential displacement of the substep is cancelled if it is at most mu_s d (stick: back to
+    exactly where the substep started, tangentially) and otherwise reduced by mu_k d (kinetic). With d = (F_n/m) dt²
+    this is f = min(F_h, mu F_n). Done in velocity space: at small substeps mu d is about one float32 ulp of a
+    position. Returns (p, vel, touching).
+    """
+    n = wp.vec3(-wp.sin(beta), 0.0, wp.cos(beta))
+    depth = -wp.dot(p, n)
+    touching = int(0)
+    if depth > 0.0:
+        touching = 1
+        p = p + n * depth
+        vel = vel + n * (depth / dt)
+        vn = wp.dot(vel, n)
+        vt = vel - n * vn
+        vt_len = wp.length(vt)
+        if vt_len * dt <= mu_s * depth:
+            # stick: tangentially back to exactly where the substep started (p0 + n dn, not p - s, whose
+            # round-off would random-walk downhill)
+            p = p0 + n * wp.dot(p - p0, n)
+            vel = n * vn
+        else:
+            vel = vel - vt * (mu_k * depth / (dt * vt_len))
+            p = p0 + vel * dt
+    return p, vel, touching
+
+
 # ----------------------------------------------------------------------------------------------------------------
 # substep kernels
 
@@ -339,28 +371,9 @@ def apply_corrections(
     # the difference of two of them loses ~1 % of a substep's displacement to a rounding that repeats with the same
     # sign every substep (free fall came out 0.35 % slow that way).
     vel = v[world, i] + corr / dt
-    beta = pw(floor_incline, world)
-    n = wp.vec3(-wp.sin(beta), 0.0, wp.cos(beta))
-    depth = -wp.dot(p, n)
-    touching = int(0)
     p0 = x_prev[world, i]
-    if depth > 0.0:
-        touching = 1
-        p = p + n * depth
-        vel = vel + n * (depth / dt)
-        vn = wp.dot(vel, n)
-        vt = vel - n * vn
-        vt_len = wp.length(vt)
-        # Friction in velocity space: at small substeps mu * depth is about one float32 ulp of a position, so
-        # subtracting it from p would round to 0 or 1 ulp and bias kinetic friction by tens of percent.
-        if vt_len * dt <= pw(mu_static, world) * depth:
-            # stick: tangentially back to exactly where the substep started (p0 + n dn, not p - s, whose
-            # round-off would random-walk downhill)
-            p = p0 + n * wp.dot(p - p0, n)
-            vel = n * vn
-        else:
-            vel = vel - vt * (pw(mu_kinetic, world) * depth / (dt * vt_len))
-            p = p0 + vel * dt
+    p, vel, touching = floor_contact(p, vel, p0, pw(floor_incline, world), pw(mu_static, world),
+                                     pw(mu_kinetic, world), dt)
     speed = wp.length(vel)
     if not (speed < speed_limit):  # NaN fails every comparison
         unstable[world] = 1

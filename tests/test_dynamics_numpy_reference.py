@@ -19,12 +19,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 from numpy_substep import NumpySubstep  # noqa: E402
 
 
-def test_warp_substeps_match_numpy_reference():
+def test_warp_jacobi_substeps_match_numpy_reference():
     p = gaits.preset_params("inchworm", hinge_damping=1e-4, floor_incline=0.05)
     W = 3
     p.closest_approach = np.array([0.06, 0.07, 0.08])
     model = Model.from_params(p, W, "cpu")
-    sim = Simulator(model, dt=2e-3, substeps=40)
+    sim = Simulator(model, dt=2e-3, substeps=40, solver="jacobi")
     state = sim.initial_state()
     sim.step(state, 5)  # get the worm moving: contact, friction, magnets all active
     sim.update_magnets(state)

@@ -73,6 +73,9 @@ class State:
     """Substeps taken by each world since t = 0, shape (W,), int32 (time = step_count · dt_sub, exact)."""
     anchor_target: wp.array
     """Anchor target points [m], shape (W, A), vec3 (A may be 0)."""
+    constraint_lambda: wp.array
+    """Accumulated XPBD multipliers of bars, hinges and anchors, shape (W, E + H + A), float (Gauss–Seidel scratch,
+    used with more than one iteration per substep)."""
 
 
 class Model:
@@ -335,6 +338,7 @@ class Model:
             unstable=z((W,), wp.int32),
             step_count=z((W,), wp.int32),
             anchor_target=wp.array(targets.reshape(W, A, 3), dtype=wp.vec3, device=dev),
+            constraint_lambda=z((W, E + H + A), float),
         )
 
     def hinge_split(self, dt_sub: float) -> np.ndarray:

@@ -27,6 +27,8 @@ import warp as wp
 from .model import Model, State
 from .transforms import quat_wxyz_to_matrix, quat_xyzw_to_wxyz
 
+SOLVERS = ("gauss_seidel", "jacobi")
+
 
 def launch_world_wrenches(model: Model, state: State, moment: wp.array) -> None:
     """Net magnetic force and torque on every magnet of every world (the one place the magnet API is called)."""
@@ -57,6 +59,10 @@ class Simulator:
         strain_limit: a bar strained beyond this |ΔL/L0| flags its world unstable.
         speed_limit: a vertex faster than this [m/s] (or non-finite) flags its world unstable.
         use_graph: capture a step as a CUDA graph (default: on CUDA devices); ignored on CPU.
+        solver: "gauss_seidel" (default: one thread per world runs all substeps of a step, constraints projected
+            sequentially in place; :mod:`warpworm.kernels.xpbd_gs`) or "jacobi" (every element of every world a
+            thread, atomics and mass splitting, three launches per substep; :mod:`warpworm.kernels.xpbd`).
+        iterations: Gauss–Seidel constraint passes per substep (multipliers accumulated); Jacobi: 1.
     """
 
     def __init__(
@@ -69,10 +75,21 @@ class Simulator:
         strain_limit: float = 0.5,
         speed_limit: float = 20.0,
         use_graph: bool | None = None,
+        solver: str = "gauss_seidel",
+        iterations: int = 1,
     ):
-        from .kernels import xpbd
+        from .kernels import xpbd, xpbd_gs
 
+        if solver not in SOLVERS:
+            raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
         self._k = xpbd
+        self._kgs = xpbd_gs
+        self.solver = solver
+        self.iterations = int(iterations)
+        if self.iterations < 1:
+            raise ValueError("iterations must be >= 1")
+        if solver == "jacobi" and self.iterations != 1:
+            raise ValueError("the Jacobi solver does one iteration per substep (use more substeps)")
         self.model = model
         self.dt = float(dt)
         self.substeps = int(substeps)
@@ -98,11 +115,14 @@ class Simulator:
 
     @property
     def launches_per_substep(self) -> float:
-        """Kernel launches per substep (3 per substep + 4 per step: EPM pose, IPM poses, wrench, distribution)."""
+        """Kernel launches per substep: per step 5 for the magnets (EPM pose, IPM poses, wrench, zero f_ext,
+        distribution), plus 3 per substep (Jacobi) or 1 per step (Gauss–Seidel)."""
         per_step = 5  # epm pose, ipm poses, wrench, zero f_ext, distribute
+        if self.solver == "jacobi":
+            return 3.0 + (per_step if self.magnet_every_substep else per_step / self.substeps)
         if self.magnet_every_substep:
-            return 3.0 + per_step
-        return 3.0 + per_step / self.substeps
+            return 1.0 + per_step
+        return (1.0 + per_step) / self.substeps
 
     # ------------------------------------------------------------------------------------------------------------
     def _magnet_poses(self, state: State) -> None:
@@ -164,7 +184,37 @@ class Simulator:
         self._cmds[key] = (state, cmds)
         return cmds
 
+    def _gs_cmd(self, state: State, num_substeps: int):
+        """The Gauss–Seidel launch of ``num_substeps`` substeps over all worlds, recorded once per state."""
+        key = ("gs", id(state), num_substeps)
+        cmd = self._cmds.get(key)
+        if cmd is not None and cmd[0] is state:
+            return cmd[1]
+        m = self.model
+        c = wp.launch(self._kgs.gs_step, dim=m.num_worlds,
+                      inputs=[m.inv_mass, m.gravity, m.damping, m.edges, m.rest_length, m.bar_stiffness, m.hinges,
+                              m.hinge_rest_angle, m.hinge_length, m.hinge_label, m.hinge_stiffness, m.hinge_damping,
+                              m.anchor_vertex, m.anchor_stiffness, m.floor_incline, m.mu_static, m.mu_kinetic,
+                              self.dt_sub, int(num_substeps), self.iterations, self.strain_limit, self.speed_limit,
+                              state.external_force, state.anchor_target],
+                      outputs=[state.positions, state.velocities, state.prev_positions, state.delta,
+                               state.constraint_lambda, state.bar_strain, state.crease_angle, state.contact,
+                               state.unstable, state.step_count],
+                      device=m.device, record_cmd=True)
+        self._cmds[key] = (state, c)
+        return c
+
     def _one_step(self, state: State, moment: wp.array) -> None:
+        if self.solver == "gauss_seidel":
+            if self.magnet_every_substep:
+                cmd = self._gs_cmd(state, 1)
+                for _ in range(self.substeps):
+                    self._wrench(state, moment)
+                    cmd.launch()
+            else:
+                self._wrench(state, moment)
+                self._gs_cmd(state, self.substeps).launch()
+            return
         cmds = self._substep_cmds(state)
         for s in range(self.substeps):
             if s == 0 or self.magnet_every_substep:
@@ -183,7 +233,10 @@ class Simulator:
             key = (id(state), epm)
             g = self._graphs.get(key)
             if g is None or g[0] is not state:
-                self._substep_cmds(state)
+                if self.solver == "jacobi":
+                    self._substep_cmds(state)
+                else:
+                    self._gs_cmd(state, 1 if self.magnet_every_substep else self.substeps)
                 with wp.ScopedCapture(device=self.model.device) as capture:
                     self._one_step(state, moment)
                 g = (state, capture.graph)
