@@ -24,6 +24,7 @@ import math
 import os
 import sys
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
@@ -510,6 +511,19 @@ def run_shard(cfg: DatasetConfig, out_dir, k: int, stages, progress=None) -> Sha
     meta = stages.metadata(cfg)
     writer = ds.ShardWriter(out_dir, k, start, stop - start, root_attributes(cfg, meta),
                             cfg.output.compression, cfg.output.compression_level)
+    # Compression and HDF5 writes run on one background thread while the next batch simulates and renders (Warp's
+    # CPU kernels run without the GIL). At most one write is in flight, so memory stays bounded by one batch.
+    io = ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"shard{k}-writer")
+    pending = None
+
+    def wait_write():
+        nonlocal pending
+        if pending is not None:
+            t0 = time.perf_counter()
+            pending.result()  # re-raises a write error (disk full, ...) here, in the shard's thread
+            stats.write_s += time.perf_counter() - t0
+            pending = None
+
     try:
         t_first, t_last = start // F, -(-stop // F)
         W = cfg.sim.worlds
@@ -563,16 +577,26 @@ def run_shard(cfg: DatasetConfig, out_dir, k: int, stages, progress=None) -> Sha
                 }
                 for name, v in {**_take(wdraws.values, tsel), **app, **cam_draws}.items():
                     rows[f"params/{name}"] = v
-                writer.write(int(sid[0] - start), rows)
                 stats.write_s += time.perf_counter() - t0
+                wait_write()
+                pending = io.submit(writer.write, int(sid[0] - start), rows)
             if progress is not None:
                 progress(int(np.minimum(traj * F + F, stop).sum() - np.minimum(traj * F, stop).sum()))
+        wait_write()
         t0 = time.perf_counter()
         final = writer.commit()
         stats.write_s += time.perf_counter() - t0
     except BaseException:
+        if pending is not None:
+            pending.cancel()
+            try:
+                pending.result()
+            except BaseException:  # the original error is the one to report
+                pass
         writer.abort()
         raise
+    finally:
+        io.shutdown(wait=True)
     stats.file = final.name
     stats.bytes = final.stat().st_size
     stats.total_s = time.perf_counter() - t_start
