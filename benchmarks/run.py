@@ -55,6 +55,9 @@ def main(argv=None) -> int:
     parser.add_argument("names", nargs="*", help=f"benchmarks to run (default all): {', '.join(available)}")
     parser.add_argument("--quick", action="store_true", help="smaller sizes, for CI / a first look")
     args = parser.parse_args(argv)
+    from warpworm import quiet_warp
+
+    quiet_warp()  # Warp's banner and module-load lines would interleave with the tables
     names = args.names or list(available)
     unknown = [n for n in names if n not in available]
     if unknown:
