@@ -1,4 +1,5 @@
-"""The XPBD substep of :mod:`warpworm.kernels.xpbd` written in NumPy, vectorized over worlds: the benchmark's
+"""The XPBD substeps of :mod:`warpworm.kernels.xpbd` (Jacobi, :class:`NumpySubstep`) and
+:mod:`warpworm.kernels.xpbd_gs` (Gauss–Seidel, :class:`NumpyGaussSeidel`) written in NumPy, vectorized over worlds: the benchmark's
 reference and a cross-check of the kernels (same math, float64).
 
 One substep = predict (gravity, external force, damping) -> one Jacobi pass over bars and hinges with mass
@@ -133,3 +134,120 @@ class NumpySubstep:
         p_new = np.where(touch, np.where(stick, p_stick, x_prev + vel_slip * dt), p)
         v_new = np.where(touch, np.where(stick, nrm * vn, vel_slip), vel)
         return p_new, v_new, phi
+
+
+class NumpyGaussSeidel(NumpySubstep):
+    """The Gauss–Seidel substep of :mod:`warpworm.kernels.xpbd_gs` in NumPy (float64): vectorized over worlds, a
+    Python loop over the elements in the kernel's order (bars, hinges, anchors; ``iterations`` passes with
+    accumulated multipliers), then floor contact and friction. The honest reference for the per-world kernel: a
+    sequential sweep cannot be vectorized over elements without changing the method.
+
+    ``x, v, angle = ref.substep(x, v, angle, f_ext)`` as :class:`NumpySubstep`.
+    """
+
+    def __init__(self, model, dt_sub: float, iterations: int = 1):
+        super().__init__(model, dt_sub, split_hinge=np.ones((1, model.num_vertices)))
+        self.iterations = int(iterations)
+        self.anchor_vertex = model.anchor_vertex.numpy().astype(np.int64)
+        A = len(self.anchor_vertex)
+        self.anchor_k = np.broadcast_to(model.anchor_stiffness.numpy().astype(np.float64), (self.W, A))
+        self.anchor_target = None  # (W, A, 3), set from the state in init()
+        self._edges_l = [tuple(e) for e in self.edges.tolist()]
+        self._hinges_l = [tuple(h) for h in self.hinges.tolist()]
+
+    def init(self, state):
+        self.anchor_target = state.anchor_target.numpy().astype(np.float64)
+        return super().init(state)
+
+    def substep(self, x, v, angle, f_ext):
+        dt, w = self.dt, self.w
+        W = self.W
+        acc = f_ext * w[..., None]
+        acc[..., 2] -= self.g
+        v = np.where(w[..., None] > 0, (v + dt * acc) / (1.0 + self.damping[..., None] * dt), 0.0)
+        x_prev = x
+        x = x + dt * v
+        delta = np.zeros_like(x)
+        angle = angle.copy()
+        ne, nh = len(self._edges_l), len(self._hinges_l)
+        lam = np.zeros((W, ne + nh + len(self.anchor_vertex)))
+        multi = self.iterations > 1
+        k1, ch = self.k[:, 0], self.c_h[:, 0]
+        for _ in range(self.iterations):
+            for e, (a, b) in enumerate(self._edges_l):
+                d = x[:, a] - x[:, b]
+                L = np.sqrt(np.einsum("wc,wc->w", d, d))
+                C = L - self.L0[:, e]
+                alpha = self.L0[:, e] / self.EA[:, e] / (dt * dt)
+                dl = -(C + alpha * lam[:, e]) / (w[:, a] + w[:, b] + alpha)
+                if multi:
+                    lam[:, e] += dl
+                n = d * (dl / L)[:, None]
+                ca, cb = n * w[:, a, None], -n * w[:, b, None]
+                x[:, a] += ca
+                x[:, b] += cb
+                delta[:, a] += ca
+                delta[:, b] += cb
+            for h, (i, j, k, l) in enumerate(self._hinges_l):
+                xi, xj, xk, xl = x[:, i], x[:, j], x[:, k], x[:, l]
+                n1 = np.cross(xj - xi, xk - xi)
+                n2 = np.cross(xk - xl, xj - xl)
+                rkj = xk - xj
+                L2 = np.einsum("wc,wc->w", rkj, rkj)
+                Lh = np.sqrt(L2)
+                psi = np.arctan2(-np.einsum("wc,wc->w", np.cross(n1, n2), rkj) / Lh, np.einsum("wc,wc->w", n1, n2))
+                dphi = psi - angle[:, h]
+                phi = angle[:, h] + (dphi - 2 * np.pi * np.floor((dphi + np.pi) / (2 * np.pi)))
+                angle[:, h] = phi
+                gi = (Lh / np.einsum("wc,wc->w", n1, n1))[:, None] * n1
+                gl = (Lh / np.einsum("wc,wc->w", n2, n2))[:, None] * n2
+                pi_ = (np.einsum("wc,wc->w", xi - xj, rkj) / L2)[:, None]
+                pl_ = (np.einsum("wc,wc->w", xk - xl, rkj) / L2)[:, None]
+                gj = (pi_ - 1.0) * gi - pl_ * gl
+                gk = (pl_ - 1.0) * gl - pi_ * gi
+                ws = [w[:, i], w[:, j], w[:, k], w[:, l]]
+                gs = [gi, gj, gk, gl]
+                wsum = sum(wc * np.einsum("wc,wc->w", g, g) for wc, g in zip(ws, gs))
+                lo, hi = self.lo[h], self.hi[h]
+                outside = (phi < lo) | (phi > hi)
+                bound = np.where(phi < lo, lo, hi)
+                kh = k1 * self.hlen[:, h]
+                alpha = 1.0 / (kh * dt * dt)
+                gamma = ch / (k1 * dt)
+                rate = sum(np.einsum("wc,wc->w", g, xc - x_prev[:, vi])
+                           for g, xc, vi in zip(gs, (xi, xj, xk, xl), (i, j, k, l)))
+                dl_s = -((phi - self.rest[:, h]) + alpha * lam[:, ne + h] + gamma * rate) / ((1.0 + gamma) * wsum + alpha)
+                dl = np.where(outside, -(phi - bound) / wsum, dl_s)
+                if multi:
+                    lam[:, ne + h] += np.where(outside, 0.0, dl_s)
+                for vi, wc, g in zip((i, j, k, l), ws, gs):
+                    c = g * (wc * dl)[:, None]
+                    x[:, vi] += c
+                    delta[:, vi] += c
+            for an, pv in enumerate(self.anchor_vertex.tolist()):
+                d = x[:, pv] - self.anchor_target[:, an]
+                dist = np.linalg.norm(d, axis=-1)
+                alpha = 1.0 / (self.anchor_k[:, an] * dt * dt)
+                dl = -(dist + alpha * lam[:, ne + nh + an]) / (w[:, pv] + alpha)
+                if multi:
+                    lam[:, ne + nh + an] += dl
+                c = d * (w[:, pv] * dl / np.maximum(dist, 1e-300))[:, None]
+                x[:, pv] += c
+                delta[:, pv] += c
+        # contact and friction, velocities (as NumpySubstep with p = x, vel = v + delta / dt)
+        p = x
+        vel = v + delta / dt
+        nrm = np.stack([-np.sin(self.beta[:, 0]), np.zeros(W), np.cos(self.beta[:, 0])], -1)[:, None, :]
+        depth = -np.sum(p * nrm, axis=-1, keepdims=True)
+        touch = depth > 0
+        p_c = p + nrm * depth
+        vel_c = vel + nrm * (depth / dt)
+        vn = np.sum(vel_c * nrm, axis=-1, keepdims=True)
+        vt = vel_c - nrm * vn
+        vt_len = np.linalg.norm(vt, axis=-1, keepdims=True)
+        stick = vt_len * dt <= self.mu_s[..., None] * depth
+        p_stick = x_prev + nrm * np.sum((p_c - x_prev) * nrm, axis=-1, keepdims=True)
+        vel_slip = vel_c - vt * (self.mu_k[..., None] * depth / (dt * np.maximum(vt_len, 1e-30)))
+        p_new = np.where(touch, np.where(stick, p_stick, x_prev + vel_slip * dt), p)
+        v_new = np.where(touch, np.where(stick, nrm * vn, vel_slip), vel)
+        return p_new, v_new, angle

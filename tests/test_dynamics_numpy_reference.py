@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 import warp as wp
 
 from warpworm import crease, gaits
@@ -16,7 +17,7 @@ from warpworm.simulator import Simulator
 
 wp.config.quiet = True
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-from numpy_substep import NumpySubstep  # noqa: E402
+from numpy_substep import NumpyGaussSeidel, NumpySubstep  # noqa: E402
 
 
 def test_warp_jacobi_substeps_match_numpy_reference():
@@ -39,6 +40,31 @@ def test_warp_jacobi_substeps_match_numpy_reference():
     xw = state.positions.numpy()
     assert np.abs(xw - x).max() < 2e-7, np.abs(xw - x).max()  # float32 positions of ~0.1 m: ~1e-8 per op
     # velocities of contact vertices carry one float32 position rounding per substep: ulp(0.1 m) / dt_sub
+    assert np.abs(state.velocities.numpy() - v).max() < 20 * np.spacing(np.float32(0.1)) / sim.dt_sub
+    assert np.abs(state.crease_angle.numpy() - ang).max() < 1e-4
+
+
+@pytest.mark.parametrize("iterations", [1, 2])
+def test_warp_gauss_seidel_substeps_match_numpy_reference(iterations):
+    """10 substeps of the per-world Gauss–Seidel kernel (one launch) against the NumPy sweep, with contact, friction,
+    magnets, crease damping and an anchor."""
+    p = gaits.preset_params("inchworm", hinge_damping=1e-4, floor_incline=0.05)
+    W = 3
+    p.closest_approach = np.array([0.05, 0.06, 0.07])
+    model = Model.from_params(p, W, "cpu", anchors=[4], anchor_stiffness=50.0)
+    sim = Simulator(model, dt=2e-3, substeps=40, iterations=iterations)
+    state = sim.initial_state()
+    sim.step(state, 5)  # get the worm moving: contact, friction, magnets all active
+    sim.update_magnets(state)
+    ref = NumpyGaussSeidel(model, sim.dt_sub, iterations=iterations)
+    x, v, ang = ref.init(state)
+    f = state.external_force.numpy().astype(np.float64)
+    sim._gs_cmd(state, 10).launch()
+    for _ in range(10):
+        x, v, ang = ref.substep(x, v, ang, f)
+    assert not state.unstable.numpy().any()
+    xw = state.positions.numpy()
+    assert np.abs(xw - x).max() < 2e-7, np.abs(xw - x).max()
     assert np.abs(state.velocities.numpy() - v).max() < 20 * np.spacing(np.float32(0.1)) / sim.dt_sub
     assert np.abs(state.crease_angle.numpy() - ang).max() < 1e-4
 

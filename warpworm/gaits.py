@@ -42,8 +42,9 @@ from .params import GAITS, WormParams, per_world
 DEFAULT_DT = 4.0e-3
 """Step of the gait runs [s]: the magnetic wrench and EPM pose are refreshed every step."""
 DEFAULT_SUBSTEPS = 80
-"""XPBD substeps per step in the gait runs (substep 50 µs: one Jacobi pass per substep makes a bar only as stiff as
-~m / (n dt²), so the sheet is near-rigid only at small substeps; docs/dynamics.md)."""
+"""XPBD substeps per step in the gait runs (50 µs). The Gauss–Seidel solver holds the rest shape, friction and the six
+presets at 250 µs (16), but warpworm.experiments' anchor-force model (Jacobi's split formula) needs 50 µs;
+docs/dynamics.md."""
 
 SINE_FIELDS = ("start_x", "start_y", "wavelength", "amplitude", "closest", "theta", "period", "direction", "phase")
 """Order of the sinusoidal path's per-world arrays as the kernel takes them."""

@@ -69,7 +69,7 @@ class Simulator:
         self,
         model: Model,
         dt: float = 2.0e-3,
-        substeps: int = 40,
+        substeps: int = 8,
         *,
         magnet_every_substep: bool = False,
         strain_limit: float = 0.5,
