@@ -76,7 +76,8 @@ def _lift(state, dz: float) -> None:
 def anchor_forces(sim, snap: dict) -> np.ndarray:
     """The force each anchor actually applies [N], shape (W, A, 3): the worm's pull on the anchor.
 
-    ``snapshot()["anchor_force"]`` is strength × (x − target), the spring force. The Jacobi XPBD anchor of
+    ``snapshot()["anchor_force"]`` is strength × (x − target), the spring force: what the Gauss–Seidel solver applies.
+    The Jacobi XPBD anchor of
     :mod:`warpworm.kernels.xpbd` applies Δλ / dt² = C / ((split·w + 1/(k dt²)) dt²) per substep, i.e. the spring force
     divided by 1 + split·w·k·dt_sub²: equal in the compliant limit, smaller (by up to 10× and more for light vertices
     and k ≳ 1e3 N/m at the 50 µs substep) in the rigid one. This returns that applied force, which is the one that
@@ -84,7 +85,9 @@ def anchor_forces(sim, snap: dict) -> np.ndarray:
     """
     m = sim.model
     af = np.asarray(snap["anchor_force"], np.float64)
-    if m.num_anchors == 0:
+    if m.num_anchors == 0 or getattr(sim, "solver", "jacobi") != "jacobi":
+        # Gauss-Seidel projects each anchor exactly once per pass with no mass splitting: the correction it applies,
+        # C_pred / ((w + 1/(k dt²)) dt²), equals k·C after the projection, i.e. the spring force it reports.
         return af
     av = m.anchor_vertex.numpy()
     w = m.inv_mass.numpy().astype(np.float64)[:, av]  # (R, A)
