@@ -463,9 +463,28 @@ def config_from_dict(raw: dict) -> DatasetConfig:
     if cfg.shard_size % len(ft) != 0:
         errors.append(f"shard_size: got {cfg.shard_size}; expected a multiple of len(sim.frame_times) = {len(ft)} "
                       "(a shard holds whole trajectories)")
+    device_error = _check_device(cfg.sim.device)
+    if device_error:
+        errors.append(f"sim.device: got {_fmt(cfg.sim.device)}; expected {device_error}")
     if errors:
         raise ConfigError(errors)
     return cfg
+
+
+def _check_device(ident: str) -> str | None:
+    """None if Warp can run on ``ident`` here, else what would be accepted (so a CUDA config fails before any work
+    on a machine without a GPU, not in a worker's traceback)."""
+    import warp as wp
+
+    from . import quiet_warp
+
+    quiet_warp()
+    try:
+        wp.get_device(ident)
+    except (ValueError, RuntimeError):
+        names = [str(d) for d in wp.get_devices()]
+        return f"a Warp device available here: one of {names} (override with sim.device=cpu)"
+    return None
 
 
 # ---------------------------------------------------------------------------------------------------------------------
