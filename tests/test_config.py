@@ -56,6 +56,7 @@ def _err(raw, overrides=()):
     ({"sim": {"frame_times": [0.5, 0.2]}}, ["sim.frame_times", "increasing"]),
     ({"sim": {"frame_times": [0.1, 0.2, 0.3]}, "shard_size": 4}, ["shard_size", "4", "multiple"]),
     ({"output": {"compression": "zstd"}}, ["output.compression", "'zstd'", "lzf"]),
+    ({"sim": {"device": "cuda:99"}}, ["sim.device", "'cuda:99'", "Warp device available here"]),
     ({"sim": [1, 2]}, ["sim", "mapping"]),
 ])
 def test_bad_config_names_path_value_and_expectation(raw, must):

@@ -18,7 +18,7 @@ Schema (all SI: m, s, rad, kg; see ``docs/dataset.md`` and the packaged ``datase
       frame_times: [float >= 0]     # times after settling at which frames are taken [s], strictly increasing
       n_units: int >= 1             # prism units (fixes array shapes: creases, vertices) — shared by the dataset
       max_attempts: int >= 1        # an unstable world is redrawn (attempt + 1) at most this many times in all
-      device: str                   # Warp device, "cpu" or "cuda:0"
+      device: str                   # Warp device: "cpu", "cuda:0" or "auto"
     render:
       width, height: int >= 8       # image size [px]
       batch: int >= 1               # images per render call (memory bound)
@@ -219,7 +219,7 @@ class SimConfig:
     max_attempts: int = 4
     """Unstable worlds are redrawn with attempt + 1, at most this many attempts in all; then the job fails."""
     device: str = "cpu"
-    """Warp device for simulation and rendering."""
+    """Warp device for simulation and rendering: "cpu", "cuda:N", or "auto" (the first GPU if any, else the CPU)."""
 
 
 @dataclass
@@ -463,12 +463,23 @@ def config_from_dict(raw: dict) -> DatasetConfig:
     if cfg.shard_size % len(ft) != 0:
         errors.append(f"shard_size: got {cfg.shard_size}; expected a multiple of len(sim.frame_times) = {len(ft)} "
                       "(a shard holds whole trajectories)")
+    if cfg.sim.device == "auto":  # the first GPU if there is one, else the CPU (resolved and stored in the config)
+        cfg.sim.device = _auto_device()
     device_error = _check_device(cfg.sim.device)
     if device_error:
         errors.append(f"sim.device: got {_fmt(cfg.sim.device)}; expected {device_error}")
     if errors:
         raise ConfigError(errors)
     return cfg
+
+
+def _auto_device() -> str:
+    import warp as wp
+
+    from . import quiet_warp
+
+    quiet_warp()
+    return "cuda:0" if wp.get_cuda_device_count() > 0 else "cpu"
 
 
 def _check_device(ident: str) -> str | None:
@@ -483,7 +494,7 @@ def _check_device(ident: str) -> str | None:
         wp.get_device(ident)
     except (ValueError, RuntimeError):
         names = [str(d) for d in wp.get_devices()]
-        return f"a Warp device available here: one of {names} (override with sim.device=cpu)"
+        return f"'auto' or a Warp device available here: one of {names} (override with sim.device=cpu)"
     return None
 
 
