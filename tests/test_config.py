@@ -57,6 +57,7 @@ def _err(raw, overrides=()):
     ({"sim": {"frame_times": [0.1, 0.2, 0.3]}, "shard_size": 4}, ["shard_size", "4", "multiple"]),
     ({"output": {"compression": "zstd"}}, ["output.compression", "'zstd'", "lzf"]),
     ({"sim": {"device": "cuda:99"}}, ["sim.device", "'cuda:99'", "Warp device available here"]),
+    ({"sim": {"dt": 0.004, "frame_times": [0.25, 0.501]}}, ["sim.frame_times", "0.501", "multiples of sim.dt"]),
     ({"sim": [1, 2]}, ["sim", "mapping"]),
 ])
 def test_bad_config_names_path_value_and_expectation(raw, must):

@@ -16,7 +16,7 @@ from warpworm.pipeline import generate
 @pytest.fixture(scope="module")
 def data_dir(tmp_path_factory):
     d = tmp_path_factory.mktemp("exp") / "data"
-    cfg = load_config({"num_samples": 12, "shard_size": 4, "seed": 3, "sim": {"worlds": 3, "frame_times": [0.1, 0.2, 0.4]},
+    cfg = load_config({"num_samples": 12, "seed": 3, "sim": {"worlds": 3, "frame_times": [0.1, 0.2, 0.4]},
                        "shard_size": 6, "render": {"width": 32, "height": 24}, "output": {"preview": False},
                        "randomize": {"worm": {"floor_incline": 0.05}}})
     generate(cfg, d, stages="test_dataset_fakes:FakeStages", progress=False)

@@ -32,11 +32,22 @@ def test_axis_angle_matches_quaternion():
         assert np.allclose(tf.axis_angle_to_matrix(axis, angle), tf.quat_wxyz_to_matrix(q), atol=1e-12)
 
 
-def test_pose_inverse_and_warp_order():
+def test_pose_inverse():
     rng = np.random.default_rng(2)
     R = _random_rotations(10, rng)
     t = rng.normal(size=(10, 3))
     T = tf.pose_matrix(R, t)
     assert np.allclose(T @ tf.invert_pose(T), np.eye(4), atol=1e-12)
+
+
+def test_quaternion_order_matches_warp():
+    """Our (w, x, y, z) -> Warp's (x, y, z, w) conversion gives the rotation Warp itself builds from it."""
+    import warp as wp
+
+    rng = np.random.default_rng(3)
+    R = _random_rotations(10, rng)
     q = tf.matrix_to_quat_wxyz(R)
+    for Ri, qi in zip(R, tf.quat_wxyz_to_xyzw(q)):
+        Rw = np.array(wp.quat_to_matrix(wp.quat(*qi.astype(np.float32))), dtype=np.float64).reshape(3, 3)
+        assert np.allclose(Rw, Ri, atol=1e-6)
     assert np.allclose(tf.quat_xyzw_to_wxyz(tf.quat_wxyz_to_xyzw(q)), q)

@@ -212,8 +212,8 @@ class SimConfig:
     """Solver substeps per time step."""
     settle_time: float = 0.3
     """Time [s] the worm settles under gravity with the EPM parked at the path start."""
-    frame_times: list = field(default_factory=lambda: [0.25, 0.5, 0.75, 1.0])
-    """Times [s] after settling at which frames are taken; each trajectory gives len(frame_times) samples."""
+    frame_times: list = field(default_factory=lambda: [0.2, 0.5, 0.8, 1.0])
+    """Times [s] after settling at which frames are taken; each trajectory gives len(frame_times) samples; multiples of ``dt``."""
     n_units: int = 6
     """Prism units of the worm; fixes the number of creases and vertices, so one value per dataset."""
     max_attempts: int = 4
@@ -456,6 +456,12 @@ def config_from_dict(raw: dict) -> DatasetConfig:
     ft = cfg.sim.frame_times
     if any(t < 0 for t in ft) or any(b <= a for a, b in zip(ft, ft[1:])):
         errors.append(f"sim.frame_times: got {ft}; expected strictly increasing times >= 0 [s]")
+    elif cfg.sim.dt > 0:
+        # frames are taken after whole steps: a time between steps would be rounded silently, and two frames within
+        # one step would store the same snapshot under two times
+        steps = [t / cfg.sim.dt for t in ft]
+        if any(abs(k - round(k)) > 1e-6 * max(1.0, k) for k in steps):
+            errors.append(f"sim.frame_times: got {ft}; expected multiples of sim.dt = {cfg.sim.dt} [s]")
     if cfg.output.compression not in ("lzf", "gzip", "none"):
         errors.append(f"output.compression: got {_fmt(cfg.output.compression)}; expected one of ['lzf', 'gzip', 'none']")
     if cfg.output.compression_level > 9:

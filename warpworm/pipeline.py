@@ -211,6 +211,17 @@ class WarpStages:
         return {"rgb": rgb, "depth": img["depth"], "segmentation": img["seg"], **labels}
 
 
+def appearance_draws(cfg: DatasetConfig, traj: np.ndarray) -> dict[str, np.ndarray]:
+    """The ``light / color / texture / sensor`` draws of trajectories ``traj`` (B,), each (B,), plus
+    ``texture.seed``: the procedural textures' offset, keyed by the trajectory so that the floor grain and paper fibre
+    stay put across a trajectory's frames (a per-sample seed would make them crawl between frames of one camera)."""
+    app = {}
+    for g in ("light", "color", "texture", "sensor"):
+        app.update(draw_group(cfg, g, traj).values)
+    app["texture.seed"] = rnd.derived_seed(rnd.sample_keys(cfg.seed, traj), "texture") % (2**31 - 1)
+    return app
+
+
 def appearance_from_draws(app: dict, seeds: np.ndarray):
     """The renderer's :class:`~warpworm.render.Appearance` from the drawn ``light/color/texture`` values (B,) each."""
     from .render import default_appearance, hsv_to_rgb
@@ -232,7 +243,8 @@ def appearance_from_draws(app: dict, seeds: np.ndarray):
     a.floor_tex = ft
     fibre = np.asarray(app["texture.worm"]).astype(str) == "fibre"
     a.paper_tex = np.stack([np.where(fibre, 0.25, 0.0), np.where(fibre, 0.10, 0.0)], axis=1)
-    a.tex_seed = (seeds % (2**31 - 1)).astype(np.int32)
+    tex_seed = app.get("texture.seed")  # per trajectory (appearance_draws); a bare per-sample seed otherwise
+    a.tex_seed = ((seeds if tex_seed is None else np.asarray(tex_seed)) % (2**31 - 1)).astype(np.int32)
     el, az = app["light.elevation"], app["light.azimuth"]
     a.sun_dir = np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], axis=1)
     a.sun_color = app["light.intensity"][:, None] * np.ones(3)
@@ -532,9 +544,7 @@ def run_shard(cfg: DatasetConfig, out_dir, k: int, stages, progress=None) -> Sha
             frames, wdraws, attempt = _simulate_with_replacement(stages, cfg, traj, stats)
             stats.trajectories += len(traj)
             B = len(traj)
-            appearance = {}
-            for g in ("light", "color", "texture", "sensor"):
-                appearance.update(draw_group(cfg, g, traj).values)
+            appearance = appearance_draws(cfg, traj)
             if not cfg.render.camera_per_frame:
                 # one camera per trajectory, keyed by the trajectory: the worm (all its frames) in view
                 pts = np.concatenate([f["positions"] for f in frames], axis=1)
@@ -813,9 +823,7 @@ def write_previews(cfg: DatasetConfig, out, stages=DEFAULT_STAGES, max_rows: int
     frames, wdraws, _ = _simulate_with_replacement(stg, dense, np.array([0]), ShardStats(0, 0))
     cams = make_cameras(cam["K"], cam["R"], cam["t"], 0, cfg.render.width, cfg.render.height)
     traj = np.array([0])
-    app = {}
-    for g in ("light", "color", "texture", "sensor"):
-        app.update(draw_group(cfg, g, traj).values)
+    app = appearance_draws(cfg, traj)
     vw = cv2.VideoWriter(str(out / "preview.mp4"), cv2.VideoWriter_fourcc(*"mp4v"), 20,
                          (cfg.render.width, cfg.render.height))
     for f in frames:

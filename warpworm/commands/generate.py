@@ -53,6 +53,12 @@ def main(args: argparse.Namespace) -> int:
             return 0
         if args.workers < 1:
             raise ConfigError([f"--workers: got {args.workers}; expected >= 1"])
+        if args.engine == "ray":
+            import importlib.util
+
+            if importlib.util.find_spec("ray") is None:  # before anything is written to --out
+                raise ConfigError(["--engine: got 'ray'; expected Ray to be installed "
+                                   "(pip install 'warpworm[ray]') or --engine local"])
         check_output_dir(args.out, args.resume)
     except ConfigError as exc:
         print(f"error: {exc}", file=sys.stderr)
