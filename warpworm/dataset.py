@@ -305,7 +305,9 @@ class DatasetReader:
 
     ``len(ds)`` samples; ``ds[i]`` -> dict name -> per-sample array; ``ds.read(name, indices)`` -> stacked arrays.
     Files are opened lazily per process, so a reader can be passed to DataLoader workers (fork or spawn).
-    Only shards present on disk are listed (a job still running or killed shows what is complete).
+    Only shards present on disk are listed (a job still running or killed shows what is complete): then ``i`` counts
+    the samples on disk in shard order and may differ from ``ds[i]["sample_id"]``; in a finished dataset (the
+    manifest's ``complete``) the two are equal.
     """
 
     def __init__(self, root):
