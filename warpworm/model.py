@@ -169,13 +169,15 @@ class Model:
         # mass (so gravity's moment on the mount is exact); docs/dynamics.md discusses the inertia this implies.
         mv = pat.mount_vertices
         mpos_rest, _ = crease.mount_poses(pat, xm)  # (mrows, 3, 3)
-        for r in range(mrows):  # a 4 x K least-squares per row and mount, once at build
-            for m in range(len(mv)):
-                Amat = np.vstack([np.ones(mv.shape[1]), xm[r, mv[m]].T])
-                wgt = np.linalg.lstsq(Amat, np.concatenate([[1.0], mpos_rest[r, m]]), rcond=None)[0]
-                if np.any(wgt < -1e-9):
-                    wgt = np.full(mv.shape[1], 1.0 / mv.shape[1])
-                np.add.at(mass[r], mv[m], ipm_mass[r] * wgt)
+        # least-norm weights w (K,) with sum(w) = 1 and sum(w x_k) = mount centre: a batched 4 x K pseudo-inverse over
+        # (row, mount), no loop over worlds
+        pts = xm[:, mv]  # (mrows, M, K, 3)
+        Amat = np.concatenate([np.ones(pts.shape[:-1])[..., None, :], np.swapaxes(pts, -1, -2)], axis=-2)
+        rhs = np.concatenate([np.ones(mpos_rest.shape[:-1] + (1,)), mpos_rest], axis=-1)  # (mrows, M, 4)
+        wgt = np.einsum("...kj,...j->...k", np.linalg.pinv(Amat), rhs)  # (mrows, M, K)
+        negative = np.any(wgt < -1e-9, axis=-1, keepdims=True)
+        wgt = np.where(negative, 1.0 / mv.shape[1], wgt)
+        np.add.at(mass, (np.arange(mrows)[:, None, None], mv[None]), ipm_mass[:mrows, None, None] * wgt)
         self.vertex_mass_host = mass
         """Lumped vertex masses [kg], host float64, shape (R, V)."""
 
