@@ -26,6 +26,8 @@ from pathlib import Path
 import numpy as np
 import warp as wp
 
+from warpworm import quiet_warp
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 PAPER_ITERATIONS_PER_S = 400.0
@@ -105,7 +107,7 @@ def bench_one(W: int, magnet_model: str, device: str, with_numpy: bool, min_time
 
 
 def run(quick: bool = False) -> list[dict]:
-    wp.config.quiet = True
+    quiet_warp()
     wp.init()
     sizes = [1, 16, 256] if quick else [1, 16, 256, 1024, 4096, 16384]
     devices = ["cpu"] + (["cuda:0"] if wp.is_cuda_available() else [])

@@ -19,6 +19,8 @@ import time
 import numpy as np
 import warp as wp
 
+from warpworm import quiet_warp
+
 NBODY_PAIRS_PER_S = 2.6e8
 NOTES = ("pairs_per_s: point-dipole pair interactions/s ('dipoles', 19,296 per world at 64/cm³); DESIGN-NOTES n-body "
          "reference on this machine: 2.6e8/s. magpylib_est rows are linear extrapolations of the measured magpylib "
@@ -123,7 +125,7 @@ def _magpylib_world(magnets, pos, rot, meshing=1000):
 def run(quick: bool = False) -> list[dict]:
     from warpworm import magnets as mg
 
-    wp.config.quiet = True
+    quiet_warp()
     wp.init()
     device = wp.get_device("cpu")
     sizes = [1, 16, 256] if quick else [1, 16, 256, 1024, 4096]

@@ -72,7 +72,9 @@ def run(quick: bool = False, device=None, threads=(1, 2)) -> list[dict]:
     from warpworm.render import Renderer, sample_cameras
     from warpworm.render.raycast import RayCaster
 
-    wp.config.quiet = True
+    from warpworm import quiet_warp
+
+    quiet_warp()
     wp.init()
     dev = wp.get_device(device)
     thread_counts = tuple(threads) if dev.is_cpu else (1,)

@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import warp as wp
 
-from warpworm import gaits
+from warpworm import gaits, quiet_warp
 from warpworm.commands.simulate import run_gait
 
-wp.config.quiet = True
+quiet_warp()
 
 
 @pytest.mark.parametrize("backward", [False, True], ids=["forward", "backward"])

@@ -6,14 +6,13 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-import warp as wp
 
-from warpworm import gaits, magnets
+from warpworm import gaits, magnets, quiet_warp
 from warpworm.commands.simulate import RANDOMIZED, randomized_params
 from warpworm.model import Model
 from warpworm.simulator import Simulator
 
-wp.config.quiet = True
+quiet_warp()
 
 
 @pytest.mark.parametrize("magnet_model", ["dipoles", "analytic"])

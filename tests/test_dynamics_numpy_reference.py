@@ -9,13 +9,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 import warp as wp
-
-from warpworm import crease, gaits
 from warpworm.kernels import xpbd
+
+from warpworm import crease, gaits, quiet_warp
 from warpworm.model import Model
 from warpworm.simulator import Simulator
 
-wp.config.quiet = True
+quiet_warp()
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 from numpy_substep import NumpyGaussSeidel, NumpySubstep  # noqa: E402
 

@@ -6,18 +6,15 @@ The truths are closed forms (g, g(sin β − μk cos β), the crease pattern's r
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 import pytest
-import warp as wp
 
-from warpworm import gaits
+from warpworm import gaits, quiet_warp
 from warpworm.model import Model
 from warpworm.params import WormParams
 from warpworm.simulator import Simulator
 
-wp.config.quiet = True
+quiet_warp()
 
 NO_MAGNETS = dict(ipm_moment=np.zeros(3), epm_moment=0.0)
 

@@ -1,7 +1,6 @@
 """The field picture and the `warpworm field` command produce a real image."""
 
 import cv2
-import numpy as np
 
 from warpworm.field_plot import render_field_picture
 

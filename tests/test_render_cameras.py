@@ -4,15 +4,15 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
-import warp as wp
-
 from warpworm.render import look_at, sample_cameras
 from warpworm.render.camera import intrinsics, make_cameras
 from warpworm.render.demo import default_pattern, posed_worm_states
 from warpworm.render.seeding import uniforms
 from warpworm.render.sensor import apply_sensor
 
-wp.config.quiet = True
+from warpworm import quiet_warp
+
+quiet_warp()
 
 
 def test_look_at_is_opencv():

@@ -5,15 +5,21 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
-import warp as wp
-
-from warpworm.render import Renderer, build_scene, make_cameras, sample_appearance, sample_cameras
+from warpworm.render import (
+    Renderer,
+    build_scene,
+    make_cameras,
+    sample_appearance,
+    sample_cameras,
+)
 from warpworm.render.camera import intrinsics, look_at
 from warpworm.render.demo import default_pattern, posed_worm_states
 from warpworm.render.labels import KEYPOINT_NAMES, VIS_EPS, WormBody, compute_labels
+
+from warpworm import quiet_warp
 from warpworm.transforms import axis_angle_to_matrix, quat_wxyz_to_matrix
 
-wp.config.quiet = True
+quiet_warp()
 
 SIZE = 128
 

@@ -6,14 +6,22 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import warp as wp
-
-from warpworm.render import Renderer, SceneBatch, build_scene, make_cameras, sample_appearance, sample_cameras
+from warpworm.render import (
+    Renderer,
+    SceneBatch,
+    build_scene,
+    make_cameras,
+    sample_appearance,
+    sample_cameras,
+)
 from warpworm.render.camera import intrinsics, look_at
 from warpworm.render.demo import default_pattern, posed_worm_states
 from warpworm.render.raycast import RayCaster
 from warpworm.render.scene import box_mesh
 
-wp.config.quiet = True
+from warpworm import quiet_warp
+
+quiet_warp()
 
 
 def _devices():

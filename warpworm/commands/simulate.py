@@ -192,9 +192,9 @@ def write_outputs(out: Path, result: dict, params, num_worlds: int) -> list[Path
 
 
 def main(args) -> int:
-    import warp as wp
+    from warpworm import quiet_warp
 
-    wp.config.quiet = True
+    quiet_warp()
     from warpworm import gaits
 
     params = gaits.preset_params(args.gait, args.backward, magnet_model=args.magnet_model)
