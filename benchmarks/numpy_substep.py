@@ -66,7 +66,6 @@ class NumpySubstep:
     def substep(self, x, v, angle, f_ext):
         dt, w = self.dt, self.w
         # 1. predict
-        grav = np.zeros(3)
         acc = f_ext * w[..., None]
         acc[..., 2] -= self.g
         v = np.where(w[..., None] > 0, (v + dt * acc) / (1.0 + self.damping[..., None] * dt), 0.0)
@@ -118,8 +117,12 @@ class NumpySubstep:
         for c in range(4):
             delta += self._scatter(h[:, c], grads[c] * (wv[c] * dl_h)[..., None])
         # 3. apply, contact, friction (velocity space), velocities
-        p = x + delta
-        vel = v + delta / dt
+        p_new, v_new = self._floor_contact(x + delta, v + delta / dt, x_prev, dt)
+        return p_new, v_new, phi
+
+    def _floor_contact(self, p, vel, x_prev, dt):
+        """Floor contact and position-level static / kinetic friction of ``kernels.xpbd.floor_contact``, in
+        velocity space: positions p and velocities vel (W, V, 3) after the constraints -> (p, vel)."""
         nrm = np.stack([-np.sin(self.beta[:, 0]), np.zeros(self.W), np.cos(self.beta[:, 0])], -1)[:, None, :]
         depth = -np.sum(p * nrm, axis=-1, keepdims=True)
         touch = depth > 0
@@ -133,7 +136,7 @@ class NumpySubstep:
         vel_slip = vel_c - vt * (self.mu_k[..., None] * depth / (dt * np.maximum(vt_len, 1e-30)))
         p_new = np.where(touch, np.where(stick, p_stick, x_prev + vel_slip * dt), p)
         v_new = np.where(touch, np.where(stick, nrm * vn, vel_slip), vel)
-        return p_new, v_new, phi
+        return p_new, v_new
 
 
 class NumpyGaussSeidel(NumpySubstep):
@@ -234,20 +237,6 @@ class NumpyGaussSeidel(NumpySubstep):
                 c = d * (w[:, pv] * dl / np.maximum(dist, 1e-300))[:, None]
                 x[:, pv] += c
                 delta[:, pv] += c
-        # contact and friction, velocities (as NumpySubstep with p = x, vel = v + delta / dt)
-        p = x
-        vel = v + delta / dt
-        nrm = np.stack([-np.sin(self.beta[:, 0]), np.zeros(W), np.cos(self.beta[:, 0])], -1)[:, None, :]
-        depth = -np.sum(p * nrm, axis=-1, keepdims=True)
-        touch = depth > 0
-        p_c = p + nrm * depth
-        vel_c = vel + nrm * (depth / dt)
-        vn = np.sum(vel_c * nrm, axis=-1, keepdims=True)
-        vt = vel_c - nrm * vn
-        vt_len = np.linalg.norm(vt, axis=-1, keepdims=True)
-        stick = vt_len * dt <= self.mu_s[..., None] * depth
-        p_stick = x_prev + nrm * np.sum((p_c - x_prev) * nrm, axis=-1, keepdims=True)
-        vel_slip = vel_c - vt * (self.mu_k[..., None] * depth / (dt * np.maximum(vt_len, 1e-30)))
-        p_new = np.where(touch, np.where(stick, p_stick, x_prev + vel_slip * dt), p)
-        v_new = np.where(touch, np.where(stick, nrm * vn, vel_slip), vel)
+        # contact and friction, velocities (in-place positions; velocity from the summed corrections)
+        p_new, v_new = self._floor_contact(x, v + delta / dt, x_prev, dt)
         return p_new, v_new, angle

@@ -219,3 +219,26 @@ def test_axial_squeeze_folds_the_creases():
     rings = (pat.hinge_label == crease.VALLEY) | ((pat.hinge_label == crease.MOUNTAIN)
                                                  & (np.abs(model.hinge_rest_angle_host[0]) < 1.2))
     assert np.median(turn[rings]) > 2.0, np.median(turn[rings])
+
+
+@pytest.mark.parametrize("solver", ["gauss_seidel", "jacobi"])
+def test_anchor_forces_carry_the_weight_of_a_hanging_worm(solver):
+    """Force plate: a worm hung 6 cm above the floor by its end sections comes to rest with the anchors' reported
+    forces summing to its weight (m g, from the lumped masses) for either solver."""
+    p = WormParams(damping=50.0, **NO_MAGNETS)
+    n2 = 2 * p.n_units
+    ends = [0, 1, 2, 3 * n2, 3 * n2 + 1, 3 * n2 + 2]  # the tail and head sections' vertices
+    model = Model.from_params(p, 1, "cpu", anchors=ends, anchor_stiffness=1e3)
+    sim = Simulator(model, dt=4e-3, substeps=80, solver=solver)
+    state = sim.initial_state()
+    rest = state.positions.numpy()[0, ends].astype(np.float64)
+    for lift in np.linspace(0.0, 0.06, 31)[1:]:  # raise the anchors over 0.24 s (a jump would tear the sheet)
+        sim.set_anchor_targets(state, rest + [0.0, 0.0, lift])
+        sim.step(state, 2)
+    sim.step(state, 150)  # hold 0.6 s, well damped
+    snap = sim.snapshot(state)
+    assert not snap["unstable"].any() and not snap["contact"].any()
+    weight = model.vertex_mass_host[0].sum() * p.gravity
+    pull = snap["anchor_force"][0].sum(axis=0)  # the worm pulls the anchors down
+    assert abs(pull[2] / -weight - 1.0) < 0.01, (pull, weight)
+    assert np.abs(pull[:2]).max() < 0.01 * weight

@@ -45,7 +45,7 @@ def test_compression_matches_linear_quasi_static_and_scales_with_hinge_stiffness
 
 def test_flexure_anchor_forces_balance_weight_and_grow_with_deflection():
     r = ex.flexure((0.02,), max_deflection=1.0e-3, increments=2, hold=0.15, settle=0.1)
-    # anchor forces (XPBD-applied, see experiments.anchor_forces) hold the weight at the unloaded start
+    # anchor forces (as applied by the solver: Simulator.snapshot) hold the weight at the unloaded start
     # (supports' share minus the load pad's pull; the load pad also carries some)
     from warpworm.model import Model
 

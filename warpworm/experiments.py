@@ -73,30 +73,6 @@ def _lift(state, dz: float) -> None:
     state.prev_positions.assign(x)
 
 
-def anchor_forces(sim, snap: dict) -> np.ndarray:
-    """The force each anchor actually applies [N], shape (W, A, 3): the worm's pull on the anchor.
-
-    ``snapshot()["anchor_force"]`` is strength × (x − target), the spring force: what the Gauss–Seidel solver applies.
-    The Jacobi XPBD anchor of
-    :mod:`warpworm.kernels.xpbd` applies Δλ / dt² = C / ((split·w + 1/(k dt²)) dt²) per substep, i.e. the spring force
-    divided by 1 + split·w·k·dt_sub²: equal in the compliant limit, smaller (by up to 10× and more for light vertices
-    and k ≳ 1e3 N/m at the 50 µs substep) in the rigid one. This returns that applied force, which is the one that
-    balances gravity and the structure at equilibrium (checked by the flexure preload against the weight).
-    """
-    m = sim.model
-    af = np.asarray(snap["anchor_force"], np.float64)
-    if m.num_anchors == 0 or getattr(sim, "solver", "jacobi") != "jacobi":
-        # Gauss-Seidel projects each anchor exactly once per pass with no mass splitting: the correction it applies,
-        # C_pred / ((w + 1/(k dt²)) dt²), equals k·C after the projection, i.e. the spring force it reports.
-        return af
-    av = m.anchor_vertex.numpy()
-    w = m.inv_mass.numpy().astype(np.float64)[:, av]  # (R, A)
-    split = m.split.numpy().astype(np.float64)[av]  # (A,)
-    k = m.anchor_stiffness.numpy().astype(np.float64)  # (R', A)
-    factor = 1.0 + split * w * k * sim.dt_sub**2  # broadcasts (R, A) against (R', A)
-    return af / np.broadcast_to(factor, af.shape[:2])[..., None]
-
-
 def linear_anchor_response(model, params: WormParams, target_offsets: np.ndarray, world: int = 0,
                            anchor_stiffness: float | np.ndarray | None = None) -> np.ndarray:
     """Independent quasi-static prediction: anchor forces [N], shape (A, 3), for small anchor-target offsets.
@@ -299,7 +275,7 @@ def _quasi_static(model, params, anchors_moving, direction, displacements, *, li
         sim.set_anchor_targets(state, t)
         sim.step(state, n_hold, epm=False)
         snaps = sim.snapshot(state)
-        af = anchor_forces(sim, snaps)  # (W, A, 3)
+        af = snaps["anchor_force"].astype(np.float64)  # (W, A, 3), as applied by the solver
         fm.append(-(af[:, moving] @ u).sum(axis=1))  # the worm resists the push: it pulls the pusher along -u
         reac.append((af[:, ~moving] @ u).sum(axis=1))  # and loads the fixed supports along +u
         xs = snaps["positions"][:, av].astype(np.float64) - x0[:, av]
@@ -308,6 +284,16 @@ def _quasi_static(model, params, anchors_moving, direction, displacements, *, li
     return {"force_raw": reac, "force": reac - reac[0], "force_pusher_raw": fm, "force_pusher": fm - fm[0],
             "displacement": np.array(disp), "prescribed": d, "unstable": snaps["unstable"],
             "final_positions": snaps["positions"]}
+
+
+def _stiffness_sweep(hinge_stiffness, base: WormParams | None, overrides: dict):
+    """Quasi-static rigs: one world per k_α (W,), magnets off, damping raised so each hold ends near equilibrium.
+    Returns (k_α (W,), W, WormParams)."""
+    quiet_warp()
+    ks = np.asarray(hinge_stiffness, np.float64)
+    kw = dict(NO_MAGNETS, damping=50.0)
+    kw.update(overrides)
+    return ks, len(ks), replace(base or WormParams(), hinge_stiffness=ks, **kw)
 
 
 def compression(hinge_stiffness=(0.01, 0.02, 0.04, 0.08), max_displacement: float = 2.0e-3, increments: int = 8,
@@ -323,12 +309,7 @@ def compression(hinge_stiffness=(0.01, 0.02, 0.04, 0.08), max_displacement: floa
     """
     from .model import Model
 
-    quiet_warp()
-    ks = np.asarray(hinge_stiffness, np.float64)
-    W = len(ks)
-    kw = dict(NO_MAGNETS, damping=50.0)
-    kw.update(overrides)
-    p = replace(base or WormParams(), hinge_stiffness=ks, **kw)
+    ks, W, p = _stiffness_sweep(hinge_stiffness, base, overrides)
     n = int(p.n_units)
     tail, head = section_vertices(n, 0), section_vertices(n, 2 * n)
     model = Model.from_params(p, W, device, anchors=np.concatenate([tail, head]), anchor_stiffness=anchor_stiffness)
@@ -367,12 +348,7 @@ def flexure(hinge_stiffness=(0.01, 0.02, 0.04, 0.08), max_deflection: float = 2.
     """
     from .model import Model
 
-    quiet_warp()
-    ks = np.asarray(hinge_stiffness, np.float64)
-    W = len(ks)
-    kw = dict(NO_MAGNETS, damping=50.0)
-    kw.update(overrides)
-    p = replace(base or WormParams(), hinge_stiffness=ks, **kw)
+    ks, W, p = _stiffness_sweep(hinge_stiffness, base, overrides)
     n = int(p.n_units)
     sup = np.concatenate([section_vertices(n, 1, (0, 1)), section_vertices(n, 2 * n - 1, (0, 1))])
     load = section_vertices(n, n)

@@ -268,7 +268,7 @@ class Simulator:
         Returns ``positions (W, V, 3)``, ``velocities (W, V, 3)`` [m, m/s]; ``magnet_pos (W, 4, 3)`` [m],
         ``magnet_rot (W, 4, 3, 3)`` (magnet -> world; slots EPM, tail, centre, head); ``magnet_force``,
         ``magnet_torque (W, 4, 3)`` [N, N·m]; ``crease_angle (W, H)`` [rad]; ``bar_strain (W, E)``;
-        ``anchor_force (W, A, 3)`` [N] = strength × (x − target), the pull of the worm on the anchor (force plate);
+        ``anchor_force (W, A, 3)`` [N]: the force each anchor applies, the pull of the worm on it (force plate);
         ``contact (W, V)`` bool; ``unstable (W,)`` bool; ``time (W,)`` [s].
         """
         m = self.model
@@ -278,8 +278,16 @@ class Simulator:
         q = state.magnet_rot.numpy()
         A = m.num_anchors
         if A:
+            av = m.anchor_vertex.numpy()
             ak = np.broadcast_to(m.anchor_stiffness.numpy(), (m.num_worlds, A))
-            anchor_force = ak[..., None] * (x[:, m.anchor_vertex.numpy()] - state.anchor_target.numpy())
+            anchor_force = ak[..., None] * (x[:, av] - state.anchor_target.numpy())
+            if self.solver == "jacobi":
+                # Jacobi's mass splitting applies the spring force divided by 1 + split·w·k·dt² (equal in the
+                # compliant limit, up to ~10x smaller for light vertices and stiff anchors); Gauss–Seidel applies
+                # exactly k·C after its projection, the spring force above.
+                w = np.broadcast_to(m.inv_mass.numpy()[:, av], (m.num_worlds, A))
+                applied = 1.0 + m.split.numpy()[av] * w * ak * self.dt_sub**2
+                anchor_force = anchor_force / applied[..., None]
         else:
             anchor_force = np.zeros((m.num_worlds, 0, 3), np.float32)
         return {
