@@ -53,28 +53,23 @@ def wrap_angle(a: float) -> float:
 
 
 @wp.func
-def dihedral_angle(xi: wp.vec3, xj: wp.vec3, xk: wp.vec3, xl: wp.vec3) -> float:
-    """Signed fold angle psi [rad] of the hinge stencil (i, j, k, l), shared edge j-k; 0 flat, > 0 valley.
+def dihedral_angle_and_gradient(xi: wp.vec3, xj: wp.vec3, xk: wp.vec3, xl: wp.vec3):
+    """Signed fold angle psi [rad] of the hinge stencil (i, j, k, l) (shared edge j-k; 0 flat, > 0 valley) and its
+    exact gradient w.r.t. (x_i, x_j, x_k, x_l) [rad/m], sharing their cross products.
 
     The convention of :func:`warpworm.crease.dihedral_angles`: psi = atan2((n1 x n2) . e, n1 . n2) with the outward
     wing normals n1 = (x_j - x_i) x (x_k - x_i), n2 = (x_k - x_l) x (x_j - x_l) and e = (x_j - x_k) / |x_j - x_k|.
+    Gradient (Liu & Paulino 2017, MERLIN, with psi = pi - theta_MERLIN): d psi/d x_i = L n1/|n1|²,
+    d psi/d x_l = L n2/|n2|², x_j and x_k by the wings' projections on the hinge axis (free of translation and
+    rotation). Returns (psi, g_i, g_j, g_k, g_l).
     """
-    n1 = wp.cross(xj - xi, xk - xi)
-    n2 = wp.cross(xk - xl, xj - xl)
-    e = wp.normalize(xj - xk)
-    return wp.atan2(wp.dot(wp.cross(n1, n2), e), wp.dot(n1, n2))
-
-
-@wp.func
-def dihedral_gradient(xi: wp.vec3, xj: wp.vec3, xk: wp.vec3, xl: wp.vec3):
-    """Exact gradient of :func:`dihedral_angle` w.r.t. (x_i, x_j, x_k, x_l) [rad/m] (Liu & Paulino 2017, MERLIN,
-    with psi = pi - theta_MERLIN): d psi/d x_i = L n1/|n1|², d psi/d x_l = L n2/|n2|², x_j and x_k by the wings'
-    projections on the hinge axis (so the gradient is free of translation and rotation)."""
     n1 = wp.cross(xj - xi, xk - xi)
     n2 = wp.cross(xk - xl, xj - xl)
     r_kj = xk - xj
     len2 = wp.dot(r_kj, r_kj)
     length = wp.sqrt(len2)
+    # (n1 x n2) . e with e = (x_j - x_k) / |x_j - x_k| = -r_kj / length
+    psi = wp.atan2(-wp.dot(wp.cross(n1, n2), r_kj) / length, wp.dot(n1, n2))
     # guard degenerate wings (zero area): no gradient rather than inf
     gi = n1 * (length / wp.max(wp.dot(n1, n1), 1.0e-30))
     gl = n2 * (length / wp.max(wp.dot(n2, n2), 1.0e-30))
@@ -82,7 +77,7 @@ def dihedral_gradient(xi: wp.vec3, xj: wp.vec3, xk: wp.vec3, xl: wp.vec3):
     pl_ = wp.dot(xk - xl, r_kj) / len2
     gj = gi * (pi_ - 1.0) - gl * pl_
     gk = gl * (pl_ - 1.0) - gi * pi_
-    return gi, gj, gk, gl
+    return psi, gi, gj, gk, gl
 
 
 @wp.func
@@ -259,9 +254,9 @@ def solve_constraints(
         xk = x[world, k]
         xl = x[world, l]
         prev = crease_angle[world, h]
-        phi = prev + wrap_angle(dihedral_angle(xi, xj, xk, xl) - prev)
+        psi, gi, gj, gk, gl = dihedral_angle_and_gradient(xi, xj, xk, xl)
+        phi = prev + wrap_angle(psi - prev)
         crease_angle[world, h] = phi
-        gi, gj, gk, gl = dihedral_gradient(xi, xj, xk, xl)
         wi = inv_mass[im_row, i]
         wj = inv_mass[im_row, j]
         wk = inv_mass[im_row, k]

@@ -24,31 +24,9 @@ from __future__ import annotations
 
 import warp as wp
 
-from .xpbd import LABEL_MOUNTAIN, LABEL_VALLEY, PI, floor_contact, pw, wrap_angle
+from .xpbd import LABEL_MOUNTAIN, LABEL_VALLEY, PI, dihedral_angle_and_gradient, floor_contact, pw, wrap_angle
 
 wp.set_module_options({"enable_backward": False})
-
-
-@wp.func
-def dihedral_angle_and_gradient(xi: wp.vec3, xj: wp.vec3, xk: wp.vec3, xl: wp.vec3):
-    """:func:`warpworm.kernels.xpbd.dihedral_angle` and ``dihedral_gradient`` sharing their cross products.
-
-    Returns (psi, g_i, g_j, g_k, g_l); psi the signed fold angle [rad], g the exact (MERLIN) gradient [rad/m].
-    """
-    n1 = wp.cross(xj - xi, xk - xi)
-    n2 = wp.cross(xk - xl, xj - xl)
-    r_kj = xk - xj
-    len2 = wp.dot(r_kj, r_kj)
-    length = wp.sqrt(len2)
-    # (n1 x n2) . e with e = (x_j - x_k) / |x_j - x_k| = -r_kj / length
-    psi = wp.atan2(-wp.dot(wp.cross(n1, n2), r_kj) / length, wp.dot(n1, n2))
-    gi = n1 * (length / wp.max(wp.dot(n1, n1), 1.0e-30))
-    gl = n2 * (length / wp.max(wp.dot(n2, n2), 1.0e-30))
-    pi_ = wp.dot(xi - xj, r_kj) / len2
-    pl_ = wp.dot(xk - xl, r_kj) / len2
-    gj = gi * (pi_ - 1.0) - gl * pl_
-    gk = gl * (pl_ - 1.0) - gi * pi_
-    return psi, gi, gj, gk, gl
 
 
 @wp.func

@@ -74,8 +74,8 @@ def _dihedral_kernel(x: wp.array(dtype=wp.vec3), h: wp.array2d(dtype=wp.int32), 
                      grad: wp.array2d(dtype=wp.vec3)):
     i = wp.tid()
     a, b, c, d = x[h[i, 0]], x[h[i, 1]], x[h[i, 2]], x[h[i, 3]]
-    ang[i] = xpbd.dihedral_angle(a, b, c, d)
-    g0, g1, g2, g3 = xpbd.dihedral_gradient(a, b, c, d)
+    psi, g0, g1, g2, g3 = xpbd.dihedral_angle_and_gradient(a, b, c, d)
+    ang[i] = psi
     grad[i, 0] = g0
     grad[i, 1] = g1
     grad[i, 2] = g2
