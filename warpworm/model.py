@@ -34,6 +34,13 @@ def _scalar_param(value, num_worlds: int, name: str) -> np.ndarray:
     raise ValueError(f"WormParams.{name}: expected a scalar or shape ({num_worlds},), got {arr.shape}")
 
 
+def vertex_bandwidth(edges: np.ndarray, hinges: np.ndarray) -> int:
+    """Half-bandwidth, in 3×3 vertex blocks, of the implicit solver's Newton matrix (kernels/band_cholesky.py): every
+    bar and crease couples the vertices it touches, so it is the largest vertex-index span of an element."""
+    return max(int(np.ptp(np.asarray(edges), axis=1).max(initial=0)),
+               int(np.ptp(np.asarray(hinges), axis=1).max(initial=0)))
+
+
 def _is_shared(*values) -> bool:
     return all(np.asarray(v).ndim == 0 for v in values)
 
@@ -76,6 +83,10 @@ class State:
     constraint_lambda: wp.array
     """Accumulated XPBD multipliers of bars, hinges and anchors, shape (W, E + H + A), float (Gauss–Seidel scratch,
     used with more than one iteration per substep)."""
+    newton_matrix: wp.array
+    """Lower block band of the Newton matrix, shape (W, V, B + 1), mat33 (implicit solver scratch)."""
+    newton_rhs: wp.array
+    """Newton right-hand side, then step, shape (W, V), vec3 (implicit solver scratch)."""
 
 
 class Model:
@@ -190,6 +201,8 @@ class Model:
         np.add.at(split, A_idx, 1.0)
         self.edges = wp.array(pat.edges, dtype=wp.int32, device=dev)
         """Bar vertex pairs, shape (E, 2), int32."""
+        self.vertex_bandwidth = vertex_bandwidth(pat.edges, pat.hinges)
+        """Half-bandwidth in vertex blocks of the implicit solver's Newton matrix (6 for the default worm)."""
         self.hinges = wp.array(pat.hinges, dtype=wp.int32, device=dev)
         """Hinge stencils (i, j, k, l), shared edge j-k, shape (H, 4), int32."""
         self.hinge_label = wp.array(pat.hinge_label.astype(np.int32), dtype=wp.int32, device=dev)
@@ -341,6 +354,8 @@ class Model:
             step_count=z((W,), wp.int32),
             anchor_target=wp.array(targets.reshape(W, A, 3), dtype=wp.vec3, device=dev),
             constraint_lambda=z((W, E + H + A), float),
+            newton_matrix=z((W, V, self.vertex_bandwidth + 1), wp.mat33),
+            newton_rhs=z((W, V), wp.vec3),
         )
 
     def hinge_split(self, dt_sub: float) -> np.ndarray:

@@ -27,7 +27,7 @@ import warp as wp
 from .model import Model, State
 from .transforms import quat_wxyz_to_matrix, quat_xyzw_to_wxyz
 
-SOLVERS = ("gauss_seidel", "jacobi")
+SOLVERS = ("implicit", "gauss_seidel", "jacobi")
 
 
 def launch_world_wrenches(model: Model, state: State, moment: wp.array) -> None:
@@ -63,6 +63,9 @@ class Simulator:
             sequentially in place; :mod:`warpworm.kernels.xpbd_gs`) or "jacobi" (every element of every world a
             thread, atomics and mass splitting, three launches per substep; :mod:`warpworm.kernels.xpbd`).
         iterations: Gauss–Seidel constraint passes per substep (multipliers accumulated); Jacobi: 1.
+        newton: implicit solver: Newton steps per substep (the first free, the others with the floor contacts
+            fixed; at least 2).
+        limit_ratio: implicit solver: stiffness of the NoFoldThrough limit spring as a multiple of k_α.
     """
 
     def __init__(
@@ -77,19 +80,26 @@ class Simulator:
         use_graph: bool | None = None,
         solver: str = "gauss_seidel",
         iterations: int = 1,
+        newton: int = 2,
+        limit_ratio: float = 100.0,
     ):
-        from .kernels import xpbd, xpbd_gs
+        from .kernels import implicit_euler, xpbd, xpbd_gs
 
         if solver not in SOLVERS:
             raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
         self._k = xpbd
         self._kgs = xpbd_gs
+        self._ki = implicit_euler
         self.solver = solver
         self.iterations = int(iterations)
         if self.iterations < 1:
             raise ValueError("iterations must be >= 1")
         if solver == "jacobi" and self.iterations != 1:
             raise ValueError("the Jacobi solver does one iteration per substep (use more substeps)")
+        self.newton = int(newton)
+        if self.newton < 2:
+            raise ValueError(f"newton must be >= 2 (the first step is free, the floor enters the second), got {newton}")
+        self.limit_ratio = float(limit_ratio)
         self.model = model
         self.dt = float(dt)
         self.substeps = int(substeps)
@@ -185,12 +195,26 @@ class Simulator:
         return cmds
 
     def _gs_cmd(self, state: State, num_substeps: int):
-        """The Gauss–Seidel launch of ``num_substeps`` substeps over all worlds, recorded once per state."""
-        key = ("gs", id(state), num_substeps)
+        """The per-world launch (block or Gauss–Seidel solver) of ``num_substeps`` substeps over all worlds, recorded
+        once per state."""
+        key = (self.solver, id(state), num_substeps)
         cmd = self._cmds.get(key)
         if cmd is not None and cmd[0] is state:
             return cmd[1]
         m = self.model
+        if self.solver == "implicit":
+            c = wp.launch(self._ki.implicit_step, dim=m.num_worlds,
+                          inputs=[m.inv_mass, m.gravity, m.damping, m.edges, m.rest_length, m.bar_stiffness,
+                                  m.hinges, m.hinge_rest_angle, m.hinge_length, m.hinge_label, m.hinge_stiffness,
+                                  m.hinge_damping, m.anchor_vertex, m.anchor_stiffness, m.floor_incline, m.mu_static,
+                                  m.mu_kinetic, self.dt_sub, int(num_substeps), self.newton, self.limit_ratio,
+                                  self.strain_limit, self.speed_limit, state.external_force, state.anchor_target],
+                          outputs=[state.positions, state.velocities, state.prev_positions, state.delta,
+                                   state.newton_matrix, state.newton_rhs, state.bar_strain, state.crease_angle,
+                                   state.contact, state.unstable, state.step_count],
+                          device=m.device, record_cmd=True)
+            self._cmds[key] = (state, c)
+            return c
         c = wp.launch(self._kgs.gs_step, dim=m.num_worlds,
                       inputs=[m.inv_mass, m.gravity, m.damping, m.edges, m.rest_length, m.bar_stiffness, m.hinges,
                               m.hinge_rest_angle, m.hinge_length, m.hinge_label, m.hinge_stiffness, m.hinge_damping,
@@ -205,7 +229,7 @@ class Simulator:
         return c
 
     def _one_step(self, state: State, moment: wp.array) -> None:
-        if self.solver == "gauss_seidel":
+        if self.solver in ("implicit", "gauss_seidel"):
             if self.magnet_every_substep:
                 cmd = self._gs_cmd(state, 1)
                 for _ in range(self.substeps):

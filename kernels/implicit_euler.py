@@ -1,0 +1,345 @@
+"""The default solver: implicit Euler with Newton steps on a banded direct solve, one thread per world.
+
+Kernels only; the host orchestration is :class:`warpworm.simulator.Simulator` (``solver="implicit"``).
+:func:`implicit_step` is launched 1-D over worlds (``world = wp.tid()``); each thread runs its world's substeps. A
+substep of length dt finds the positions x that minimise
+
+    ½ |x − x̃|²_M / dt² + E(x),      x̃ = x_n + dt v',   v' = (v_n + dt (g + M⁻¹ f_ext)) / (1 + c dt)
+
+(implicit Euler: gravity, the step's magnetic force and the linear velocity damping c are in x̃), with E the elastic
+energy of the worm:
+
+- every bar a spring ½ (EA / L0)(L − L0)² (stiff bars near-rigid, the valley rings soft; Cauchy strain reported);
+- every crease ½ k_α L (φ − φ0)² plus its damping as the implicit dissipation ½ (c_α L / dt)(φ − φ_n)², and the
+  NoFoldThrough limits as a one-sided spring ``limit_ratio`` × k_α beyond the bound (0 for mountain/valley creases);
+- every anchor ½ k |x − target|² (so the force plate reads k (x − target), the force it applies).
+
+``newton`` Gauss–Newton steps (bar and crease Hessians kept positive semi-definite: the compressive geometric
+stiffness and the crease curvature terms dropped) solve it; each assembles the gradient and the 3V × 3V Hessian in a
+banded per-world scratch and factors it (:mod:`warpworm.kernels.band_cholesky`). The first step is unconstrained;
+the floor then decides who touches it (a vertex the free solution puts below the floor): those are pushed back onto
+it with position-level static / kinetic friction (eq. 8 of the paper, as :func:`warpworm.kernels.xpbd.floor_contact`),
+and in the following steps a stuck vertex is fixed and a sliding one moves only along the floor (the Newton step is
+projected there, P H P). A last contact pass catches vertices that reached the floor in the last step; then
+v = v' + (x − x̃) / dt.
+
+Why: the bars are ~1e6 N/m on 1e-5 kg vertices. An XPBD sweep per substep caps their stiffness near m/dt² (the
+Gauss–Seidel and Jacobi solvers of this package: "rigid" bars strain by percents), and explicit crease forces
+projected on rigid bars are only stable below ~100–200 µs and lose stability as the bellows approaches its
+snap-through. Implicit Euler with a direct solve is unconditionally stable, has the exact statics of E (no mass in
+the equilibrium, unlike a one-pass XPBD compliance) and converges at first order as dt is halved.
+"""
+
+from __future__ import annotations
+
+import warp as wp
+
+from .band_cholesky import band_add_block, band_cholesky_factor, band_cholesky_solve
+from .xpbd import LABEL_MOUNTAIN, LABEL_VALLEY, PI, dihedral_angle_and_gradient, pw, wrap_angle
+
+wp.set_module_options({"enable_backward": False})
+
+CONTACT_FREE = wp.constant(0)
+CONTACT_SLIDING = wp.constant(1)
+CONTACT_STUCK = wp.constant(2)
+
+
+@wp.func
+def contact_in_substep(p: wp.vec3, vel: wp.vec3, p0: wp.vec3, status: int, beta: float, mu_s: float, mu_k: float,
+                       dt: float):
+    """Floor contact and friction of one vertex (eq. 8 of the paper), as :func:`warpworm.kernels.xpbd.floor_contact`,
+    plus memory of a stick: a vertex that stuck earlier in this substep (``status`` CONTACT_STUCK) stays tangentially
+    where the substep started and is only pushed back onto the floor.
+
+    ``p`` position, ``vel`` its velocity (predicted + corrections / dt), ``p0`` the position at the start of the
+    substep; the floor is the plane through the origin with normal (−sin β, 0, cos β). Returns (p, vel, status).
+    """
+    n = wp.vec3(-wp.sin(beta), 0.0, wp.cos(beta))
+    depth = -wp.dot(p, n)
+    if status == CONTACT_STUCK:
+        dn = wp.dot(p - p0, n)
+        vn = wp.dot(vel, n)
+        if depth > 0.0:
+            dn = dn + depth
+            vn = vn + depth / dt
+        return p0 + n * dn, n * vn, status
+    out = status
+    if depth > 0.0:
+        p = p + n * depth
+        vel = vel + n * (depth / dt)
+        vn = wp.dot(vel, n)
+        vt = vel - n * vn
+        vt_len = wp.length(vt)
+        if vt_len * dt <= mu_s * depth:
+            # stick: tangentially back to exactly where the substep started (p0 + n dn, not p - s, whose round-off
+            # would random-walk downhill); the velocity is set, not differenced from positions (float32 rounding)
+            p = p0 + n * wp.dot(p - p0, n)
+            vel = n * vn
+            out = CONTACT_STUCK
+        else:
+            vel = vel - vt * (mu_k * depth / (dt * vt_len))
+            p = p0 + vel * dt
+            out = CONTACT_SLIDING
+    return p, vel, out
+
+
+@wp.func
+def dof_projector(status: int, n: wp.vec3) -> wp.mat33:
+    """The directions a vertex may move in a constrained Newton step: all (free), along the floor (sliding), none
+    (stuck, or a vertex of infinite mass: status CONTACT_STUCK as well)."""
+    if status == CONTACT_STUCK:
+        return wp.mat33(0.0)
+    if status == CONTACT_SLIDING:
+        return wp.identity(n=3, dtype=float) - wp.outer(n, n)
+    return wp.identity(n=3, dtype=float)
+
+
+@wp.func
+def add_pair(world: int, mat: wp.array3d(dtype=wp.mat33), u: int, v: int, k: wp.mat33, su: int, sv: int, n: wp.vec3):
+    """Add Pu k Pv at (u, v) of the band, P from the vertices' contact status (:func:`dof_projector`)."""
+    if su == CONTACT_FREE and sv == CONTACT_FREE:
+        band_add_block(world, mat, u, v, k)  # the common case: no projection
+    else:
+        band_add_block(world, mat, u, v, dof_projector(su, n) * k * dof_projector(sv, n))
+    return 0
+
+
+@wp.kernel
+def implicit_step(
+    # Model:
+    inv_mass: wp.array2d(dtype=float),
+    gravity: wp.array(dtype=float),
+    damping: wp.array(dtype=float),
+    edges: wp.array2d(dtype=wp.int32),
+    rest_length: wp.array2d(dtype=float),
+    bar_stiffness: wp.array2d(dtype=float),
+    hinges: wp.array2d(dtype=wp.int32),
+    hinge_rest: wp.array2d(dtype=float),
+    hinge_length: wp.array2d(dtype=float),
+    hinge_label: wp.array(dtype=wp.int32),
+    hinge_stiffness: wp.array(dtype=float),
+    hinge_damping: wp.array(dtype=float),
+    anchor_vertex: wp.array(dtype=wp.int32),
+    anchor_stiffness: wp.array2d(dtype=float),
+    floor_incline: wp.array(dtype=float),
+    mu_static: wp.array(dtype=float),
+    mu_kinetic: wp.array(dtype=float),
+    dt: float,
+    num_substeps: int,
+    newton: int,
+    limit_ratio: float,
+    strain_limit: float,
+    speed_limit: float,
+    # Data in:
+    f_ext: wp.array2d(dtype=wp.vec3),
+    anchor_target: wp.array2d(dtype=wp.vec3),
+    # Data out:
+    x: wp.array2d(dtype=wp.vec3),
+    v: wp.array2d(dtype=wp.vec3),
+    x_prev: wp.array2d(dtype=wp.vec3),
+    delta: wp.array2d(dtype=wp.vec3),
+    hess: wp.array3d(dtype=wp.mat33),
+    grad: wp.array2d(dtype=wp.vec3),
+    bar_strain: wp.array2d(dtype=float),
+    crease_angle: wp.array2d(dtype=float),
+    contact: wp.array2d(dtype=wp.int32),
+    unstable: wp.array(dtype=wp.int32),
+    step_count: wp.array(dtype=wp.int32),
+):
+    """``num_substeps`` implicit-Euler substeps of length ``dt`` [s] of one world (module docstring). Launch dim (W,).
+
+    Shapes as :class:`warpworm.model.Model` / :class:`warpworm.model.State`: ``x``, ``v`` (W, V) [m, m/s];
+    ``delta (W, V)`` x − x̃ of the current substep [m] (zero between substeps); ``hess (W, V, B + 1)`` (mat33) and
+    ``grad (W, V)`` (vec3) the Newton system's scratch; ``crease_angle (W, H)`` [rad] unwrapped, at the end of the step;
+    ``contact (W, V)`` 0 free, 1 sliding, 2 stuck (last substep).
+    """
+    world = wp.tid()
+    if unstable[world] != 0:
+        return
+    nv = x.shape[1]
+    ne = edges.shape[0]
+    nh = hinges.shape[0]
+    na = anchor_vertex.shape[0]
+    bw = hess.shape[2] - 1
+    im_row = world % inv_mass.shape[0]
+    rl_row = world % rest_length.shape[0]
+    ea_row = world % bar_stiffness.shape[0]
+    hr_row = world % hinge_rest.shape[0]
+    hl_row = world % hinge_length.shape[0]
+    ak_row = world % anchor_stiffness.shape[0]
+    gvec = wp.vec3(0.0, 0.0, -pw(gravity, world))
+    damp = 1.0 / (1.0 + pw(damping, world) * dt)
+    k_hinge = pw(hinge_stiffness, world)
+    c_hinge = pw(hinge_damping, world)
+    beta = pw(floor_incline, world)
+    floor_n = wp.vec3(-wp.sin(beta), 0.0, wp.cos(beta))
+    mu_s = pw(mu_static, world)
+    mu_k = pw(mu_kinetic, world)
+    inv_dt = 1.0 / dt
+    inv_dt2 = inv_dt * inv_dt
+    eye = wp.identity(n=3, dtype=float)
+
+    for s in range(num_substeps):
+        # 1. predict x̃ (x starts there: delta = x − x̃ = 0)
+        for i in range(nv):
+            w_inv = inv_mass[im_row, i]
+            vel = wp.vec3(0.0)
+            if w_inv > 0.0:
+                vel = (v[world, i] + dt * (gvec + f_ext[world, i] * w_inv)) * damp
+            p = x[world, i]
+            x_prev[world, i] = p
+            x[world, i] = p + dt * vel
+            v[world, i] = vel
+            # a vertex of infinite mass never moves: fixed in the Newton steps like a stuck one
+            contact[world, i] = wp.where(w_inv > 0.0, CONTACT_FREE, CONTACT_STUCK)
+
+        # 2. Newton steps
+        bad = int(0)
+        for it in range(newton):
+            if it == 1:
+                # the floor takes the vertices the free solution put below it (with friction), from now on fixed
+                # (stuck) or moving along it (sliding)
+                for i in range(nv):
+                    if contact[world, i] != CONTACT_FREE:
+                        continue  # infinite mass
+                    vel0 = v[world, i]
+                    p, vel, st = contact_in_substep(x[world, i], vel0 + delta[world, i] * inv_dt, x_prev[world, i],
+                                                    CONTACT_FREE, beta, mu_s, mu_k, dt)
+                    if st != CONTACT_FREE:
+                        x[world, i] = p
+                        delta[world, i] = (vel - vel0) * dt
+                        contact[world, i] = st
+            # assemble: inertia
+            for i in range(nv):
+                w_inv = inv_mass[im_row, i]
+                m_dt2 = float(1.0)
+                g = wp.vec3(0.0)
+                if w_inv > 0.0:
+                    m_dt2 = inv_dt2 / w_inv
+                    g = delta[world, i] * m_dt2
+                # m/dt² on the diagonal in every direction, also the fixed ones (keeps the matrix definite; their
+                # rows are decoupled by the projection and their update is zero)
+                hess[world, i, 0] = eye * m_dt2
+                for k in range(1, bw + 1):
+                    hess[world, i, k] = wp.mat33(0.0)
+                grad[world, i] = g
+            # bars
+            for e in range(ne):
+                a = edges[e, 0]
+                b = edges[e, 1]
+                d = x[world, a] - x[world, b]
+                length = wp.length(d)
+                l0 = rest_length[rl_row, e]
+                strain = (length - l0) / l0
+                bar_strain[world, e] = strain
+                if not (wp.abs(strain) < strain_limit):  # also catches NaN
+                    bad = 1
+                if bad == 0:
+                    n = d / length
+                    ka = bar_stiffness[ea_row, e] / l0
+                    f = n * (ka * (length - l0))
+                    grad[world, a] = grad[world, a] + f
+                    grad[world, b] = grad[world, b] - f
+                    nn = wp.outer(n, n)
+                    kb = ka * nn + (ka * wp.max(0.0, 1.0 - l0 / length)) * (eye - nn)
+                    sa = contact[world, a]
+                    sb = contact[world, b]
+                    add_pair(world, hess, a, a, kb, sa, sa, floor_n)
+                    add_pair(world, hess, b, b, kb, sb, sb, floor_n)
+                    add_pair(world, hess, a, b, -kb, sa, sb, floor_n)
+            if bad != 0:
+                break
+            # creases: spring, implicit damping, NoFoldThrough limit
+            for h in range(nh):
+                i0 = hinges[h, 0]
+                i1 = hinges[h, 1]
+                i2 = hinges[h, 2]
+                i3 = hinges[h, 3]
+                psi, g0, g1, g2, g3 = dihedral_angle_and_gradient(x[world, i0], x[world, i1], x[world, i2],
+                                                                  x[world, i3])
+                prev = crease_angle[world, h]
+                phi = prev + wrap_angle(psi - prev)
+                lh = hinge_length[hl_row, h]
+                torque = lh * (k_hinge * (phi - hinge_rest[hr_row, h]) + c_hinge * inv_dt * (phi - prev))
+                stiff = lh * (k_hinge + c_hinge * inv_dt)
+                label = hinge_label[h]
+                lo = -PI
+                hi = PI
+                if label == LABEL_MOUNTAIN:
+                    hi = 0.0
+                if label == LABEL_VALLEY:
+                    lo = 0.0
+                if phi < lo or phi > hi:
+                    torque += limit_ratio * k_hinge * lh * (phi - wp.where(phi < lo, lo, hi))
+                    stiff += limit_ratio * k_hinge * lh
+                grad[world, i0] = grad[world, i0] + g0 * torque
+                grad[world, i1] = grad[world, i1] + g1 * torque
+                grad[world, i2] = grad[world, i2] + g2 * torque
+                grad[world, i3] = grad[world, i3] + g3 * torque
+                p0 = contact[world, i0]
+                p1 = contact[world, i1]
+                p2 = contact[world, i2]
+                p3 = contact[world, i3]
+                add_pair(world, hess, i0, i0, stiff * wp.outer(g0, g0), p0, p0, floor_n)
+                add_pair(world, hess, i1, i1, stiff * wp.outer(g1, g1), p1, p1, floor_n)
+                add_pair(world, hess, i2, i2, stiff * wp.outer(g2, g2), p2, p2, floor_n)
+                add_pair(world, hess, i3, i3, stiff * wp.outer(g3, g3), p3, p3, floor_n)
+                add_pair(world, hess, i1, i0, stiff * wp.outer(g1, g0), p1, p0, floor_n)
+                add_pair(world, hess, i2, i0, stiff * wp.outer(g2, g0), p2, p0, floor_n)
+                add_pair(world, hess, i3, i0, stiff * wp.outer(g3, g0), p3, p0, floor_n)
+                add_pair(world, hess, i2, i1, stiff * wp.outer(g2, g1), p2, p1, floor_n)
+                add_pair(world, hess, i3, i1, stiff * wp.outer(g3, g1), p3, p1, floor_n)
+                add_pair(world, hess, i3, i2, stiff * wp.outer(g3, g2), p3, p2, floor_n)
+            # anchors
+            for an in range(na):
+                pv = anchor_vertex[an]
+                ka = anchor_stiffness[ak_row, an]
+                if ka > 0.0:
+                    f = (x[world, pv] - anchor_target[world, an]) * ka
+                    grad[world, pv] = grad[world, pv] + f
+                    sp = contact[world, pv]
+                    add_pair(world, hess, pv, pv, eye * ka, sp, sp, floor_n)
+            # the gradient restricted to the allowed directions, then solve H dx = -grad
+            for i in range(nv):
+                st = contact[world, i]
+                if st != CONTACT_FREE:
+                    grad[world, i] = dof_projector(st, floor_n) * grad[world, i]
+            band_cholesky_factor(world, nv, bw, hess)
+            band_cholesky_solve(world, nv, bw, hess, grad)
+            for i in range(nv):
+                dx = -grad[world, i]
+                x[world, i] = x[world, i] + dx
+                delta[world, i] = delta[world, i] + dx
+        if bad != 0:
+            unstable[world] = 1
+            for i in range(nv):
+                x[world, i] = x_prev[world, i]
+                v[world, i] = wp.vec3(0.0)
+                delta[world, i] = wp.vec3(0.0)
+            return
+
+        # 3. floor once more (vertices that reached it in the last step), velocities, crease angles, stability
+        for i in range(nv):
+            # v = v' + (x − x̃) / dt with x − x̃ summed at its own precision (the difference of two ~0.1 m float32
+            # positions would carry ~1e-8 m of rounding, as large as a friction step)
+            vel = v[world, i] + delta[world, i] * inv_dt
+            delta[world, i] = wp.vec3(0.0)
+            p, vel, st = contact_in_substep(x[world, i], vel, x_prev[world, i], contact[world, i], beta, mu_s, mu_k,
+                                            dt)
+            if not (wp.length(vel) < speed_limit):  # NaN fails every comparison
+                bad = 1
+            x[world, i] = p
+            v[world, i] = vel
+            contact[world, i] = st
+        for h in range(nh):
+            psi, g0, g1, g2, g3 = dihedral_angle_and_gradient(x[world, hinges[h, 0]], x[world, hinges[h, 1]],
+                                                              x[world, hinges[h, 2]], x[world, hinges[h, 3]])
+            prev = crease_angle[world, h]
+            crease_angle[world, h] = prev + wrap_angle(psi - prev)
+        if bad != 0:
+            unstable[world] = 1
+            for i in range(nv):
+                x[world, i] = x_prev[world, i]
+                v[world, i] = wp.vec3(0.0)
+            return
+        step_count[world] = step_count[world] + 1
