@@ -20,7 +20,9 @@ banded per-world scratch and factors it (:mod:`warpworm.kernels.band_cholesky`).
 the floor then decides who touches it (a vertex the free solution puts below the floor): those are pushed back onto
 it with position-level static / kinetic friction (eq. 8 of the paper, as :func:`warpworm.kernels.xpbd.floor_contact`),
 and in the following steps a stuck vertex is fixed and a sliding one moves only along the floor (the Newton step is
-projected there, P H P). A last contact pass catches vertices that reached the floor in the last step; then
+projected there, P H P) against a kinetic friction force μ_k F_n (F_n = m · penetration / dt², the floor's push that
+the free step measured: as a force in the Newton problem, not a position correction that the inertia term of the
+next step would undo). A last contact pass catches vertices that reached the floor in the last step; then
 v = v' + (x − x̃) / dt.
 
 Why: the bars are ~1e6 N/m on 1e-5 kg vertices. An XPBD sweep per substep caps their stiffness near m/dt² (the
@@ -45,42 +47,36 @@ CONTACT_STUCK = wp.constant(2)
 
 
 @wp.func
-def contact_in_substep(p: wp.vec3, vel: wp.vec3, p0: wp.vec3, status: int, beta: float, mu_s: float, mu_k: float,
-                       dt: float):
-    """Floor contact and friction of one vertex (eq. 8 of the paper), as :func:`warpworm.kernels.xpbd.floor_contact`,
-    plus memory of a stick: a vertex that stuck earlier in this substep (``status`` CONTACT_STUCK) stays tangentially
-    where the substep started and is only pushed back onto the floor.
+def floor_response(p0: wp.vec3, vel: wp.vec3, status: int, n: wp.vec3, mu_s: float, mu_k: float, dt: float,
+                   kinetic: bool):
+    """Floor contact and position-level friction of one vertex at the end of a substep (eq. 8 of the paper).
 
-    ``p`` position, ``vel`` its velocity (predicted + corrections / dt), ``p0`` the position at the start of the
-    substep; the floor is the plane through the origin with normal (−sin β, 0, cos β). Returns (p, vel, status).
+    ``p0`` its position at the start of the substep, ``vel`` = (x − p0) / dt its velocity over the substep (kept
+    apart from p0 so that a penetration of ~g dt² ≈ 2e-8 m at 50 µs is not lost in the float32 rounding of a ~0.1 m
+    position), ``n`` the floor normal (floor through the origin). A penetration d is removed along n; the tangential
+    motion is cancelled if it is at most mu_s d (stick, status CONTACT_STUCK; a vertex already stuck in this substep
+    stays stuck), otherwise the vertex slides (CONTACT_SLIDING) and, with ``kinetic``, its tangential speed is
+    reduced by mu_k d / dt (f = mu_k F_n over the substep with F_n = m d / dt²). Returns (p, vel, status, d).
     """
-    n = wp.vec3(-wp.sin(beta), 0.0, wp.cos(beta))
-    depth = -wp.dot(p, n)
-    if status == CONTACT_STUCK:
-        dn = wp.dot(p - p0, n)
-        vn = wp.dot(vel, n)
-        if depth > 0.0:
-            dn = dn + depth
-            vn = vn + depth / dt
-        return p0 + n * dn, n * vn, status
+    h = wp.dot(p0, n) + dt * wp.dot(vel, n)
+    depth = wp.max(-h, 0.0)
     out = status
     if depth > 0.0:
-        p = p + n * depth
         vel = vel + n * (depth / dt)
+    if status == CONTACT_STUCK:
+        vel = n * wp.dot(vel, n)
+    elif depth > 0.0:
         vn = wp.dot(vel, n)
         vt = vel - n * vn
         vt_len = wp.length(vt)
         if vt_len * dt <= mu_s * depth:
-            # stick: tangentially back to exactly where the substep started (p0 + n dn, not p - s, whose round-off
-            # would random-walk downhill); the velocity is set, not differenced from positions (float32 rounding)
-            p = p0 + n * wp.dot(p - p0, n)
-            vel = n * vn
+            vel = n * vn  # stick: tangentially back to exactly where the substep started
             out = CONTACT_STUCK
         else:
-            vel = vel - vt * (mu_k * depth / (dt * vt_len))
-            p = p0 + vel * dt
+            if kinetic:
+                vel = vel - vt * (mu_k * depth / (dt * vt_len))
             out = CONTACT_SLIDING
-    return p, vel, out
+    return p0 + vel * dt, vel, out, depth
 
 
 @wp.func
@@ -101,6 +97,139 @@ def add_pair(world: int, mat: wp.array3d(dtype=wp.mat33), u: int, v: int, k: wp.
         band_add_block(world, mat, u, v, k)  # the common case: no projection
     else:
         band_add_block(world, mat, u, v, dof_projector(su, n) * k * dof_projector(sv, n))
+    return 0
+
+
+@wp.func
+def assemble(
+    world: int,
+    im_row: int,
+    rl_row: int,
+    ea_row: int,
+    hr_row: int,
+    hl_row: int,
+    ak_row: int,
+    inv_mass: wp.array2d(dtype=float),
+    edges: wp.array2d(dtype=wp.int32),
+    rest_length: wp.array2d(dtype=float),
+    bar_stiffness: wp.array2d(dtype=float),
+    hinges: wp.array2d(dtype=wp.int32),
+    hinge_rest: wp.array2d(dtype=float),
+    hinge_length: wp.array2d(dtype=float),
+    hinge_label: wp.array(dtype=wp.int32),
+    k_hinge: float,
+    c_hinge: float,
+    anchor_vertex: wp.array(dtype=wp.int32),
+    anchor_stiffness: wp.array2d(dtype=float),
+    anchor_target: wp.array2d(dtype=wp.vec3),
+    limit_ratio: float,
+    strain_limit: float,
+    inv_dt: float,
+    floor_n: wp.vec3,
+    with_hessian: bool,
+    x: wp.array2d(dtype=wp.vec3),
+    delta: wp.array2d(dtype=wp.vec3),
+    crease_angle: wp.array2d(dtype=float),
+    contact: wp.array2d(dtype=wp.int32),
+    bar_strain: wp.array2d(dtype=float),
+    hess: wp.array3d(dtype=wp.mat33),
+    grad: wp.array2d(dtype=wp.vec3),
+):
+    """Gradient ∂Φ/∂x of the substep's objective (inertia, bars, creases, anchors; friction excluded) into
+    ``grad[world]`` and, ``with_hessian``, its Gauss–Newton Hessian projected on each vertex's allowed directions
+    into ``hess[world]``. ``crease_angle`` holds the angles at the start of the substep (damping, unwrapping).
+    Returns 1 if a bar is strained beyond ``strain_limit`` (or non-finite), else 0."""
+    nv = x.shape[1]
+    bw = hess.shape[2] - 1
+    eye = wp.identity(n=3, dtype=float)
+    inv_dt2 = inv_dt * inv_dt
+    for i in range(nv):
+        w_inv = inv_mass[im_row, i]
+        m_dt2 = float(1.0)
+        g = wp.vec3(0.0)
+        if w_inv > 0.0:
+            m_dt2 = inv_dt2 / w_inv
+            g = delta[world, i] * m_dt2
+        grad[world, i] = g
+        if with_hessian:
+            # m/dt² on the diagonal in every direction, also the fixed ones (keeps the matrix definite; their rows
+            # are decoupled by the projection and their update is zero)
+            hess[world, i, 0] = eye * m_dt2
+            for k in range(1, bw + 1):
+                hess[world, i, k] = wp.mat33(0.0)
+    for e in range(edges.shape[0]):
+        a = edges[e, 0]
+        b = edges[e, 1]
+        d = x[world, a] - x[world, b]
+        length = wp.length(d)
+        l0 = rest_length[rl_row, e]
+        strain = (length - l0) / l0
+        bar_strain[world, e] = strain
+        if not (wp.abs(strain) < strain_limit):  # also catches NaN
+            return 1
+        n = d / length
+        ka = bar_stiffness[ea_row, e] / l0
+        f = n * (ka * (length - l0))
+        grad[world, a] = grad[world, a] + f
+        grad[world, b] = grad[world, b] - f
+        if with_hessian:
+            nn = wp.outer(n, n)
+            # the compressive geometric stiffness is dropped (keeps the matrix positive definite)
+            kb = ka * nn + (ka * wp.max(0.0, 1.0 - l0 / length)) * (eye - nn)
+            sa = contact[world, a]
+            sb = contact[world, b]
+            add_pair(world, hess, a, a, kb, sa, sa, floor_n)
+            add_pair(world, hess, b, b, kb, sb, sb, floor_n)
+            add_pair(world, hess, a, b, -kb, sa, sb, floor_n)
+    for h in range(hinges.shape[0]):
+        i0 = hinges[h, 0]
+        i1 = hinges[h, 1]
+        i2 = hinges[h, 2]
+        i3 = hinges[h, 3]
+        psi, g0, g1, g2, g3 = dihedral_angle_and_gradient(x[world, i0], x[world, i1], x[world, i2], x[world, i3])
+        prev = crease_angle[world, h]
+        phi = prev + wrap_angle(psi - prev)
+        lh = hinge_length[hl_row, h]
+        torque = lh * (k_hinge * (phi - hinge_rest[hr_row, h]) + c_hinge * inv_dt * (phi - prev))
+        stiff = lh * (k_hinge + c_hinge * inv_dt)
+        label = hinge_label[h]
+        lo = -PI
+        hi = PI
+        if label == LABEL_MOUNTAIN:
+            hi = 0.0
+        if label == LABEL_VALLEY:
+            lo = 0.0
+        if phi < lo or phi > hi:
+            torque += limit_ratio * k_hinge * lh * (phi - wp.where(phi < lo, lo, hi))
+            stiff += limit_ratio * k_hinge * lh
+        grad[world, i0] = grad[world, i0] + g0 * torque
+        grad[world, i1] = grad[world, i1] + g1 * torque
+        grad[world, i2] = grad[world, i2] + g2 * torque
+        grad[world, i3] = grad[world, i3] + g3 * torque
+        if with_hessian:
+            # Gauss–Newton: the angle's curvature term (torque ∇²φ) is dropped
+            p0 = contact[world, i0]
+            p1 = contact[world, i1]
+            p2 = contact[world, i2]
+            p3 = contact[world, i3]
+            add_pair(world, hess, i0, i0, stiff * wp.outer(g0, g0), p0, p0, floor_n)
+            add_pair(world, hess, i1, i1, stiff * wp.outer(g1, g1), p1, p1, floor_n)
+            add_pair(world, hess, i2, i2, stiff * wp.outer(g2, g2), p2, p2, floor_n)
+            add_pair(world, hess, i3, i3, stiff * wp.outer(g3, g3), p3, p3, floor_n)
+            add_pair(world, hess, i1, i0, stiff * wp.outer(g1, g0), p1, p0, floor_n)
+            add_pair(world, hess, i2, i0, stiff * wp.outer(g2, g0), p2, p0, floor_n)
+            add_pair(world, hess, i3, i0, stiff * wp.outer(g3, g0), p3, p0, floor_n)
+            add_pair(world, hess, i2, i1, stiff * wp.outer(g2, g1), p2, p1, floor_n)
+            add_pair(world, hess, i3, i1, stiff * wp.outer(g3, g1), p3, p1, floor_n)
+            add_pair(world, hess, i3, i2, stiff * wp.outer(g3, g2), p3, p2, floor_n)
+    for an in range(anchor_vertex.shape[0]):
+        pv = anchor_vertex[an]
+        ka = anchor_stiffness[ak_row, an]
+        if ka > 0.0:
+            grad[world, pv] = grad[world, pv] + (x[world, pv] - anchor_target[world, an]) * ka
+            if with_hessian:
+                sp = contact[world, pv]
+                add_pair(world, hess, pv, pv, eye * ka, sp, sp, floor_n)
     return 0
 
 
@@ -138,6 +267,7 @@ def implicit_step(
     v: wp.array2d(dtype=wp.vec3),
     x_prev: wp.array2d(dtype=wp.vec3),
     delta: wp.array2d(dtype=wp.vec3),
+    friction: wp.array2d(dtype=wp.vec3),
     hess: wp.array3d(dtype=wp.mat33),
     grad: wp.array2d(dtype=wp.vec3),
     bar_strain: wp.array2d(dtype=float),
@@ -149,7 +279,8 @@ def implicit_step(
     """``num_substeps`` implicit-Euler substeps of length ``dt`` [s] of one world (module docstring). Launch dim (W,).
 
     Shapes as :class:`warpworm.model.Model` / :class:`warpworm.model.State`: ``x``, ``v`` (W, V) [m, m/s];
-    ``delta (W, V)`` x − x̃ of the current substep [m] (zero between substeps); ``hess (W, V, B + 1)`` (mat33) and
+    ``delta (W, V)`` x − x̃ of the current substep [m] (zero between substeps); ``friction (W, V)`` the kinetic
+    friction force on each sliding vertex in the last substep [N]; ``hess (W, V, B + 1)`` (mat33) and
     ``grad (W, V)`` (vec3) the Newton system's scratch; ``crease_angle (W, H)`` [rad] unwrapped, at the end of the step;
     ``contact (W, V)`` 0 free, 1 sliding, 2 stuck (last substep).
     """
@@ -177,7 +308,6 @@ def implicit_step(
     mu_k = pw(mu_kinetic, world)
     inv_dt = 1.0 / dt
     inv_dt2 = inv_dt * inv_dt
-    eye = wp.identity(n=3, dtype=float)
 
     for s in range(num_substeps):
         # 1. predict x̃ (x starts there: delta = x − x̃ = 0)
@@ -190,120 +320,85 @@ def implicit_step(
             x_prev[world, i] = p
             x[world, i] = p + dt * vel
             v[world, i] = vel
+            friction[world, i] = wp.vec3(0.0)
             # a vertex of infinite mass never moves: fixed in the Newton steps like a stuck one
             contact[world, i] = wp.where(w_inv > 0.0, CONTACT_FREE, CONTACT_STUCK)
 
-        # 2. Newton steps
+        # 2. Newton steps: the first free, then with the floor (module docstring)
         bad = int(0)
         for it in range(newton):
             if it == 1:
-                # the floor takes the vertices the free solution put below it (with friction), from now on fixed
-                # (stuck) or moving along it (sliding)
+                # the floor takes the vertices the free solution put below it: back onto it, stuck or sliding by
+                # eq. (8) with the penetration as the measure of the floor's push (F_n = m d / dt²)
                 for i in range(nv):
                     if contact[world, i] != CONTACT_FREE:
                         continue  # infinite mass
                     vel0 = v[world, i]
-                    p, vel, st = contact_in_substep(x[world, i], vel0 + delta[world, i] * inv_dt, x_prev[world, i],
-                                                    CONTACT_FREE, beta, mu_s, mu_k, dt)
+                    vel = vel0 + delta[world, i] * inv_dt
+                    p, vel, st, depth = floor_response(x_prev[world, i], vel, CONTACT_FREE, floor_n, mu_s, mu_k, dt,
+                                                       False)
                     if st != CONTACT_FREE:
+                        if st == CONTACT_SLIDING:
+                            vt = vel - floor_n * wp.dot(vel, floor_n)
+                            friction[world, i] = vt * (-mu_k * depth * inv_dt2 / (inv_mass[im_row, i] * wp.length(vt)))
                         x[world, i] = p
                         delta[world, i] = (vel - vel0) * dt
                         contact[world, i] = st
-            # assemble: inertia
-            for i in range(nv):
-                w_inv = inv_mass[im_row, i]
-                m_dt2 = float(1.0)
-                g = wp.vec3(0.0)
-                if w_inv > 0.0:
-                    m_dt2 = inv_dt2 / w_inv
-                    g = delta[world, i] * m_dt2
-                # m/dt² on the diagonal in every direction, also the fixed ones (keeps the matrix definite; their
-                # rows are decoupled by the projection and their update is zero)
-                hess[world, i, 0] = eye * m_dt2
-                for k in range(1, bw + 1):
-                    hess[world, i, k] = wp.mat33(0.0)
-                grad[world, i] = g
-            # bars
-            for e in range(ne):
-                a = edges[e, 0]
-                b = edges[e, 1]
-                d = x[world, a] - x[world, b]
-                length = wp.length(d)
-                l0 = rest_length[rl_row, e]
-                strain = (length - l0) / l0
-                bar_strain[world, e] = strain
-                if not (wp.abs(strain) < strain_limit):  # also catches NaN
-                    bad = 1
-                if bad == 0:
-                    n = d / length
-                    ka = bar_stiffness[ea_row, e] / l0
-                    f = n * (ka * (length - l0))
-                    grad[world, a] = grad[world, a] + f
-                    grad[world, b] = grad[world, b] - f
-                    nn = wp.outer(n, n)
-                    kb = ka * nn + (ka * wp.max(0.0, 1.0 - l0 / length)) * (eye - nn)
-                    sa = contact[world, a]
-                    sb = contact[world, b]
-                    add_pair(world, hess, a, a, kb, sa, sa, floor_n)
-                    add_pair(world, hess, b, b, kb, sb, sb, floor_n)
-                    add_pair(world, hess, a, b, -kb, sa, sb, floor_n)
+            if it >= 2:
+                # the floor's force at each contact is now known exactly, F = ∂Φ/∂x there (what holds the vertex
+                # against the rest of the implicit step): Coulomb with it. A stuck vertex whose tangential load
+                # exceeds mu_s F_n slides, a sliding one feels mu_k F_n against its motion, one the floor would
+                # have to pull lets go.
+                bad = assemble(world, im_row, rl_row, ea_row, hr_row, hl_row, ak_row, inv_mass, edges, rest_length,
+                               bar_stiffness, hinges, hinge_rest, hinge_length, hinge_label, k_hinge, c_hinge,
+                               anchor_vertex, anchor_stiffness, anchor_target, limit_ratio, strain_limit, inv_dt,
+                               floor_n, False, x, delta, crease_angle, contact, bar_strain, hess, grad)
+                if bad != 0:
+                    break
+                for i in range(nv):
+                    st = contact[world, i]
+                    w_inv = inv_mass[im_row, i]
+                    if st == CONTACT_FREE or not (w_inv > 0.0):
+                        continue
+                    force = grad[world, i]
+                    fn = wp.dot(force, floor_n)
+                    ft = force - floor_n * fn
+                    ft_len = wp.length(ft)
+                    if fn <= 0.0:
+                        contact[world, i] = CONTACT_FREE
+                        friction[world, i] = wp.vec3(0.0)
+                    elif st == CONTACT_STUCK:
+                        if ft_len > mu_s * fn:
+                            contact[world, i] = CONTACT_SLIDING
+                            friction[world, i] = ft * (mu_k * fn / ft_len)
+                    else:
+                        vel = v[world, i] + delta[world, i] * inv_dt
+                        vn = wp.dot(vel, floor_n)
+                        # its tangential velocity without this substep's friction impulse (one-vertex estimate)
+                        vt = vel - floor_n * vn - friction[world, i] * (dt * w_inv)
+                        vt_len = wp.length(vt)
+                        if vt_len <= mu_s * fn * dt * w_inv:
+                            # static friction can stop it within the substep (eq. 8 at the position level): it sticks
+                            vel = floor_n * vn
+                            x[world, i] = x_prev[world, i] + vel * dt
+                            delta[world, i] = (vel - v[world, i]) * dt
+                            contact[world, i] = CONTACT_STUCK
+                            friction[world, i] = wp.vec3(0.0)
+                        else:
+                            friction[world, i] = vt * (-mu_k * fn / vt_len)
+            bad = assemble(world, im_row, rl_row, ea_row, hr_row, hl_row, ak_row, inv_mass, edges, rest_length,
+                           bar_stiffness, hinges, hinge_rest, hinge_length, hinge_label, k_hinge, c_hinge,
+                           anchor_vertex, anchor_stiffness, anchor_target, limit_ratio, strain_limit, inv_dt, floor_n,
+                           True, x, delta, crease_angle, contact, bar_strain, hess, grad)
             if bad != 0:
                 break
-            # creases: spring, implicit damping, NoFoldThrough limit
-            for h in range(nh):
-                i0 = hinges[h, 0]
-                i1 = hinges[h, 1]
-                i2 = hinges[h, 2]
-                i3 = hinges[h, 3]
-                psi, g0, g1, g2, g3 = dihedral_angle_and_gradient(x[world, i0], x[world, i1], x[world, i2],
-                                                                  x[world, i3])
-                prev = crease_angle[world, h]
-                phi = prev + wrap_angle(psi - prev)
-                lh = hinge_length[hl_row, h]
-                torque = lh * (k_hinge * (phi - hinge_rest[hr_row, h]) + c_hinge * inv_dt * (phi - prev))
-                stiff = lh * (k_hinge + c_hinge * inv_dt)
-                label = hinge_label[h]
-                lo = -PI
-                hi = PI
-                if label == LABEL_MOUNTAIN:
-                    hi = 0.0
-                if label == LABEL_VALLEY:
-                    lo = 0.0
-                if phi < lo or phi > hi:
-                    torque += limit_ratio * k_hinge * lh * (phi - wp.where(phi < lo, lo, hi))
-                    stiff += limit_ratio * k_hinge * lh
-                grad[world, i0] = grad[world, i0] + g0 * torque
-                grad[world, i1] = grad[world, i1] + g1 * torque
-                grad[world, i2] = grad[world, i2] + g2 * torque
-                grad[world, i3] = grad[world, i3] + g3 * torque
-                p0 = contact[world, i0]
-                p1 = contact[world, i1]
-                p2 = contact[world, i2]
-                p3 = contact[world, i3]
-                add_pair(world, hess, i0, i0, stiff * wp.outer(g0, g0), p0, p0, floor_n)
-                add_pair(world, hess, i1, i1, stiff * wp.outer(g1, g1), p1, p1, floor_n)
-                add_pair(world, hess, i2, i2, stiff * wp.outer(g2, g2), p2, p2, floor_n)
-                add_pair(world, hess, i3, i3, stiff * wp.outer(g3, g3), p3, p3, floor_n)
-                add_pair(world, hess, i1, i0, stiff * wp.outer(g1, g0), p1, p0, floor_n)
-                add_pair(world, hess, i2, i0, stiff * wp.outer(g2, g0), p2, p0, floor_n)
-                add_pair(world, hess, i3, i0, stiff * wp.outer(g3, g0), p3, p0, floor_n)
-                add_pair(world, hess, i2, i1, stiff * wp.outer(g2, g1), p2, p1, floor_n)
-                add_pair(world, hess, i3, i1, stiff * wp.outer(g3, g1), p3, p1, floor_n)
-                add_pair(world, hess, i3, i2, stiff * wp.outer(g3, g2), p3, p2, floor_n)
-            # anchors
-            for an in range(na):
-                pv = anchor_vertex[an]
-                ka = anchor_stiffness[ak_row, an]
-                if ka > 0.0:
-                    f = (x[world, pv] - anchor_target[world, an]) * ka
-                    grad[world, pv] = grad[world, pv] + f
-                    sp = contact[world, pv]
-                    add_pair(world, hess, pv, pv, eye * ka, sp, sp, floor_n)
-            # the gradient restricted to the allowed directions, then solve H dx = -grad
+            # friction is an external force; the step restricted to the allowed directions: solve H dx = -grad
             for i in range(nv):
+                g = grad[world, i] - friction[world, i]
                 st = contact[world, i]
                 if st != CONTACT_FREE:
-                    grad[world, i] = dof_projector(st, floor_n) * grad[world, i]
+                    g = dof_projector(st, floor_n) * g
+                grad[world, i] = g
             band_cholesky_factor(world, nv, bw, hess)
             band_cholesky_solve(world, nv, bw, hess, grad)
             for i in range(nv):
@@ -320,12 +415,13 @@ def implicit_step(
 
         # 3. floor once more (vertices that reached it in the last step), velocities, crease angles, stability
         for i in range(nv):
-            # v = v' + (x − x̃) / dt with x − x̃ summed at its own precision (the difference of two ~0.1 m float32
-            # positions would carry ~1e-8 m of rounding, as large as a friction step)
+            # v = v' + (x − x̃) / dt with x − x̃ summed at its own precision (see floor_response); a vertex that
+            # reaches the floor only now gets its kinetic friction here
             vel = v[world, i] + delta[world, i] * inv_dt
             delta[world, i] = wp.vec3(0.0)
-            p, vel, st = contact_in_substep(x[world, i], vel, x_prev[world, i], contact[world, i], beta, mu_s, mu_k,
-                                            dt)
+            st0 = contact[world, i]
+            p, vel, st, depth = floor_response(x_prev[world, i], vel, st0, floor_n, mu_s, mu_k, dt,
+                                               st0 == CONTACT_FREE)
             if not (wp.length(vel) < speed_limit):  # NaN fails every comparison
                 bad = 1
             x[world, i] = p

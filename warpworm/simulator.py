@@ -63,8 +63,8 @@ class Simulator:
             sequentially in place; :mod:`warpworm.kernels.xpbd_gs`) or "jacobi" (every element of every world a
             thread, atomics and mass splitting, three launches per substep; :mod:`warpworm.kernels.xpbd`).
         iterations: Gauss–Seidel constraint passes per substep (multipliers accumulated); Jacobi: 1.
-        newton: implicit solver: Newton steps per substep (the first free, the others with the floor contacts
-            fixed; at least 2).
+        newton: implicit solver: Newton steps per substep (at least 2): the first free, the second with the
+            contacts the free step found, the others with the contacts' Coulomb test redone on the floor's force.
         limit_ratio: implicit solver: stiffness of the NoFoldThrough limit spring as a multiple of k_α.
     """
 
@@ -78,9 +78,9 @@ class Simulator:
         strain_limit: float = 0.5,
         speed_limit: float = 20.0,
         use_graph: bool | None = None,
-        solver: str = "gauss_seidel",
+        solver: str = "implicit",
         iterations: int = 1,
-        newton: int = 2,
+        newton: int = 3,
         limit_ratio: float = 100.0,
     ):
         from .kernels import implicit_euler, xpbd, xpbd_gs
@@ -210,7 +210,7 @@ class Simulator:
                                   m.mu_kinetic, self.dt_sub, int(num_substeps), self.newton, self.limit_ratio,
                                   self.strain_limit, self.speed_limit, state.external_force, state.anchor_target],
                           outputs=[state.positions, state.velocities, state.prev_positions, state.delta,
-                                   state.newton_matrix, state.newton_rhs, state.bar_strain, state.crease_angle,
+                                   state.friction_force, state.newton_matrix, state.newton_rhs, state.bar_strain, state.crease_angle,
                                    state.contact, state.unstable, state.step_count],
                           device=m.device, record_cmd=True)
             self._cmds[key] = (state, c)
