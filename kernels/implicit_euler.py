@@ -43,7 +43,8 @@ wp.set_module_options({"enable_backward": False})
 
 CONTACT_FREE = wp.constant(0)
 CONTACT_SLIDING = wp.constant(1)
-CONTACT_STUCK = wp.constant(2)
+CONTACT_TOUCHING = wp.constant(1)  # the implicit solver's contact: on the floor, moving along it, smooth friction
+CONTACT_STUCK = wp.constant(2)  # floor_response's static stick; in the Newton steps: a vertex of infinite mass
 
 
 @wp.func
@@ -77,6 +78,25 @@ def floor_response(p0: wp.vec3, vel: wp.vec3, status: int, n: wp.vec3, mu_s: flo
                 vel = vel - vt * (mu_k * depth / (dt * vt_len))
             out = CONTACT_SLIDING
     return p0 + vel * dt, vel, out, depth
+
+
+@wp.func
+def friction_law(speed: float, normal_force: float, mu_s: float, mu_k: float, slip_speed: float):
+    """Regularised Coulomb friction with a Stribeck drop: the magnitude [N] of the floor's tangential force on a
+    vertex sliding at ``speed`` [m/s] under ``normal_force`` [N], and that magnitude / speed [N·s/m] (the force is
+    −magnitude · v_t / |v_t|; the ratio is finite at rest).
+
+    Below ``slip_speed`` ε the force rises smoothly to mu_s F_n (F = mu_s F_n (2 s/ε − s²/ε²): static friction as a
+    stiff viscous law, so a worm held on a slope creeps at most ~ε); above it, it falls to mu_k F_n over a few ε.
+    """
+    if not (normal_force > 0.0):
+        return 0.0, 0.0
+    r = speed / slip_speed
+    if r < 1.0:
+        f = mu_s * normal_force * (2.0 - r) * r
+        return f, mu_s * normal_force * (2.0 - r) / slip_speed
+    f = normal_force * (mu_k + (mu_s - mu_k) * wp.exp(-(r - 1.0) / 4.0))
+    return f, f / speed
 
 
 @wp.func
@@ -126,18 +146,23 @@ def assemble(
     strain_limit: float,
     inv_dt: float,
     floor_n: wp.vec3,
+    mu_s: float,
+    mu_k: float,
+    slip_speed: float,
     with_hessian: bool,
     x: wp.array2d(dtype=wp.vec3),
+    v: wp.array2d(dtype=wp.vec3),
     delta: wp.array2d(dtype=wp.vec3),
     crease_angle: wp.array2d(dtype=float),
     contact: wp.array2d(dtype=wp.int32),
+    floor_force: wp.array2d(dtype=wp.vec3),
     bar_strain: wp.array2d(dtype=float),
     hess: wp.array3d(dtype=wp.mat33),
     grad: wp.array2d(dtype=wp.vec3),
 ):
-    """Gradient ∂Φ/∂x of the substep's objective (inertia, bars, creases, anchors; friction excluded) into
-    ``grad[world]`` and, ``with_hessian``, its Gauss–Newton Hessian projected on each vertex's allowed directions
-    into ``hess[world]``. ``crease_angle`` holds the angles at the start of the substep (damping, unwrapping).
+    """Gradient ∂Φ/∂x of the substep's objective (inertia, bars, creases, anchors and, ``with_hessian``, the floor
+    friction) into ``grad[world]`` and, ``with_hessian``, its Gauss–Newton Hessian projected on each vertex's allowed
+    directions into ``hess[world]``. ``crease_angle`` holds the angles at the start of the substep (damping, unwrapping).
     Returns 1 if a bar is strained beyond ``strain_limit`` (or non-finite), else 0."""
     nv = x.shape[1]
     bw = hess.shape[2] - 1
@@ -150,13 +175,22 @@ def assemble(
         if w_inv > 0.0:
             m_dt2 = inv_dt2 / w_inv
             g = delta[world, i] * m_dt2
-        grad[world, i] = g
         if with_hessian:
             # m/dt² on the diagonal in every direction, also the fixed ones (keeps the matrix definite; their rows
             # are decoupled by the projection and their update is zero)
-            hess[world, i, 0] = eye * m_dt2
+            diag = eye * m_dt2
+            if contact[world, i] == CONTACT_TOUCHING:
+                # friction against the substep's sliding velocity (lagged normal force), implicit
+                vel = v[world, i] + delta[world, i] * inv_dt
+                vt = vel - floor_n * wp.dot(vel, floor_n)
+                f_mag, slope = friction_law(wp.length(vt), wp.dot(floor_force[world, i], floor_n), mu_s, mu_k,
+                                            slip_speed)
+                g = g + vt * slope
+                diag = diag + (eye - wp.outer(floor_n, floor_n)) * (slope * inv_dt)
+            hess[world, i, 0] = diag
             for k in range(1, bw + 1):
                 hess[world, i, k] = wp.mat33(0.0)
+        grad[world, i] = g
     for e in range(edges.shape[0]):
         a = edges[e, 0]
         b = edges[e, 1]
@@ -257,6 +291,7 @@ def implicit_step(
     num_substeps: int,
     newton: int,
     limit_ratio: float,
+    slip_speed: float,
     strain_limit: float,
     speed_limit: float,
     # Data in:
@@ -267,7 +302,7 @@ def implicit_step(
     v: wp.array2d(dtype=wp.vec3),
     x_prev: wp.array2d(dtype=wp.vec3),
     delta: wp.array2d(dtype=wp.vec3),
-    friction: wp.array2d(dtype=wp.vec3),
+    floor_force: wp.array2d(dtype=wp.vec3),
     hess: wp.array3d(dtype=wp.mat33),
     grad: wp.array2d(dtype=wp.vec3),
     bar_strain: wp.array2d(dtype=float),
@@ -279,8 +314,9 @@ def implicit_step(
     """``num_substeps`` implicit-Euler substeps of length ``dt`` [s] of one world (module docstring). Launch dim (W,).
 
     Shapes as :class:`warpworm.model.Model` / :class:`warpworm.model.State`: ``x``, ``v`` (W, V) [m, m/s];
-    ``delta (W, V)`` x − x̃ of the current substep [m] (zero between substeps); ``friction (W, V)`` the kinetic
-    friction force on each sliding vertex in the last substep [N]; ``hess (W, V, B + 1)`` (mat33) and
+    ``delta (W, V)`` x − x̃ of the current substep [m] (zero between substeps); ``floor_force (W, V)`` the floor's
+    force on each vertex in the last substep (normal + friction) [N], also the next substep's first normal-force
+    estimate; ``hess (W, V, B + 1)`` (mat33) and
     ``grad (W, V)`` (vec3) the Newton system's scratch; ``crease_angle (W, H)`` [rad] unwrapped, at the end of the step;
     ``contact (W, V)`` 0 free, 1 sliding, 2 stuck (last substep).
     """
@@ -320,7 +356,6 @@ def implicit_step(
             x_prev[world, i] = p
             x[world, i] = p + dt * vel
             v[world, i] = vel
-            friction[world, i] = wp.vec3(0.0)
             # a vertex of infinite mass never moves: fixed in the Newton steps like a stuck one
             contact[world, i] = wp.where(w_inv > 0.0, CONTACT_FREE, CONTACT_STUCK)
 
@@ -328,73 +363,55 @@ def implicit_step(
         bad = int(0)
         for it in range(newton):
             if it == 1:
-                # the floor takes the vertices the free solution put below it: back onto it, stuck or sliding by
-                # eq. (8) with the penetration as the measure of the floor's push (F_n = m d / dt²)
+                # the floor takes the vertices the free step put below it: back onto it along n, and from now on
+                # they move only along it, against friction. Their normal force starts from the last substep's (or, for a new contact,
+                # from the penetration: m d / dt²) and is refined below.
                 for i in range(nv):
                     if contact[world, i] != CONTACT_FREE:
                         continue  # infinite mass
                     vel0 = v[world, i]
                     vel = vel0 + delta[world, i] * inv_dt
-                    p, vel, st, depth = floor_response(x_prev[world, i], vel, CONTACT_FREE, floor_n, mu_s, mu_k, dt,
-                                                       False)
-                    if st != CONTACT_FREE:
-                        if st == CONTACT_SLIDING:
-                            vt = vel - floor_n * wp.dot(vel, floor_n)
-                            friction[world, i] = vt * (-mu_k * depth * inv_dt2 / (inv_mass[im_row, i] * wp.length(vt)))
-                        x[world, i] = p
+                    depth = -(wp.dot(x_prev[world, i], floor_n) + dt * wp.dot(vel, floor_n))
+                    if depth > 0.0:
+                        # start it at rest tangentially: the friction solve converges from the static side (its
+                        # viscous branch is stiffest there) and only lets go if the load exceeds mu_s F_n
+                        vel = floor_n * (wp.dot(vel, floor_n) + depth * inv_dt)
+                        x[world, i] = x_prev[world, i] + vel * dt
                         delta[world, i] = (vel - vel0) * dt
-                        contact[world, i] = st
+                        contact[world, i] = CONTACT_TOUCHING
+                        fn = wp.dot(floor_force[world, i], floor_n)
+                        if not (fn > 0.0):
+                            fn = depth * inv_dt2 / inv_mass[im_row, i]
+                        floor_force[world, i] = floor_n * fn
             if it >= 2:
-                # the floor's force at each contact is now known exactly, F = ∂Φ/∂x there (what holds the vertex
-                # against the rest of the implicit step): Coulomb with it. A stuck vertex whose tangential load
-                # exceeds mu_s F_n slides, a sliding one feels mu_k F_n against its motion, one the floor would
-                # have to pull lets go.
+                # the floor's normal force at each contact is ∂Φ/∂x · n there (what holds the vertex against the
+                # rest of the implicit step); one the floor would have to pull lets go
                 bad = assemble(world, im_row, rl_row, ea_row, hr_row, hl_row, ak_row, inv_mass, edges, rest_length,
                                bar_stiffness, hinges, hinge_rest, hinge_length, hinge_label, k_hinge, c_hinge,
                                anchor_vertex, anchor_stiffness, anchor_target, limit_ratio, strain_limit, inv_dt,
-                               floor_n, False, x, delta, crease_angle, contact, bar_strain, hess, grad)
+                               floor_n, mu_s, mu_k, slip_speed, False, x, v, delta, crease_angle, contact,
+                               floor_force, bar_strain, hess, grad)
                 if bad != 0:
                     break
                 for i in range(nv):
-                    st = contact[world, i]
-                    w_inv = inv_mass[im_row, i]
-                    if st == CONTACT_FREE or not (w_inv > 0.0):
+                    if contact[world, i] != CONTACT_TOUCHING:
                         continue
-                    force = grad[world, i]
-                    fn = wp.dot(force, floor_n)
-                    ft = force - floor_n * fn
-                    ft_len = wp.length(ft)
-                    if fn <= 0.0:
-                        contact[world, i] = CONTACT_FREE
-                        friction[world, i] = wp.vec3(0.0)
-                    elif st == CONTACT_STUCK:
-                        if ft_len > mu_s * fn:
-                            contact[world, i] = CONTACT_SLIDING
-                            friction[world, i] = ft * (mu_k * fn / ft_len)
+                    fn = wp.dot(grad[world, i], floor_n)
+                    if fn > 0.0:
+                        floor_force[world, i] = floor_n * fn
                     else:
-                        vel = v[world, i] + delta[world, i] * inv_dt
-                        vn = wp.dot(vel, floor_n)
-                        # its tangential velocity without this substep's friction impulse (one-vertex estimate)
-                        vt = vel - floor_n * vn - friction[world, i] * (dt * w_inv)
-                        vt_len = wp.length(vt)
-                        if vt_len <= mu_s * fn * dt * w_inv:
-                            # static friction can stop it within the substep (eq. 8 at the position level): it sticks
-                            vel = floor_n * vn
-                            x[world, i] = x_prev[world, i] + vel * dt
-                            delta[world, i] = (vel - v[world, i]) * dt
-                            contact[world, i] = CONTACT_STUCK
-                            friction[world, i] = wp.vec3(0.0)
-                        else:
-                            friction[world, i] = vt * (-mu_k * fn / vt_len)
+                        contact[world, i] = CONTACT_FREE
+                        floor_force[world, i] = wp.vec3(0.0)
             bad = assemble(world, im_row, rl_row, ea_row, hr_row, hl_row, ak_row, inv_mass, edges, rest_length,
                            bar_stiffness, hinges, hinge_rest, hinge_length, hinge_label, k_hinge, c_hinge,
                            anchor_vertex, anchor_stiffness, anchor_target, limit_ratio, strain_limit, inv_dt, floor_n,
-                           True, x, delta, crease_angle, contact, bar_strain, hess, grad)
+                           mu_s, mu_k, slip_speed, True, x, v, delta, crease_angle, contact, floor_force, bar_strain,
+                           hess, grad)
             if bad != 0:
                 break
-            # friction is an external force; the step restricted to the allowed directions: solve H dx = -grad
+            # the step restricted to the allowed directions: solve H dx = -grad
             for i in range(nv):
-                g = grad[world, i] - friction[world, i]
+                g = grad[world, i]
                 st = contact[world, i]
                 if st != CONTACT_FREE:
                     g = dof_projector(st, floor_n) * g
@@ -415,18 +432,34 @@ def implicit_step(
 
         # 3. floor once more (vertices that reached it in the last step), velocities, crease angles, stability
         for i in range(nv):
-            # v = v' + (x − x̃) / dt with x − x̃ summed at its own precision (see floor_response); a vertex that
-            # reaches the floor only now gets its kinetic friction here
+            # v = v' + (x − x̃) / dt with x − x̃ summed at its own precision (see floor_response)
             vel = v[world, i] + delta[world, i] * inv_dt
             delta[world, i] = wp.vec3(0.0)
-            st0 = contact[world, i]
-            p, vel, st, depth = floor_response(x_prev[world, i], vel, st0, floor_n, mu_s, mu_k, dt,
-                                               st0 == CONTACT_FREE)
+            p0 = x_prev[world, i]
+            st = contact[world, i]
+            force = wp.vec3(0.0)
+            if st == CONTACT_FREE:
+                # a vertex that reaches the floor only in the last step: position-level contact and friction
+                p, vel, st1, depth = floor_response(p0, vel, CONTACT_FREE, floor_n, mu_s, mu_k, dt, True)
+                if st1 != CONTACT_FREE:
+                    st = CONTACT_TOUCHING
+                    force = floor_n * (depth * inv_dt2 / inv_mass[im_row, i])
+            elif st == CONTACT_TOUCHING:
+                depth = -(wp.dot(p0, floor_n) + dt * wp.dot(vel, floor_n))
+                if depth > 0.0:
+                    vel = vel + floor_n * (depth * inv_dt)
+                vt = vel - floor_n * wp.dot(vel, floor_n)
+                fn = wp.dot(floor_force[world, i], floor_n)
+                f_mag, slope = friction_law(wp.length(vt), fn, mu_s, mu_k, slip_speed)
+                force = floor_n * fn - vt * slope
+            else:
+                vel = wp.vec3(0.0)  # infinite mass
             if not (wp.length(vel) < speed_limit):  # NaN fails every comparison
                 bad = 1
-            x[world, i] = p
+            x[world, i] = p0 + vel * dt
             v[world, i] = vel
-            contact[world, i] = st
+            contact[world, i] = wp.where(st == CONTACT_STUCK, CONTACT_FREE, st)
+            floor_force[world, i] = force
         for h in range(nh):
             psi, g0, g1, g2, g3 = dihedral_angle_and_gradient(x[world, hinges[h, 0]], x[world, hinges[h, 1]],
                                                               x[world, hinges[h, 2]], x[world, hinges[h, 3]])

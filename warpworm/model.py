@@ -83,9 +83,9 @@ class State:
     constraint_lambda: wp.array
     """Accumulated XPBD multipliers of bars, hinges and anchors, shape (W, E + H + A), float (Gauss–Seidel scratch,
     used with more than one iteration per substep)."""
-    friction_force: wp.array
-    """Kinetic friction force of the floor on each sliding vertex in the last substep [N], shape (W, V), vec3
-    (implicit solver)."""
+    floor_force: wp.array
+    """Force of the floor on each vertex in the last substep (normal + friction) [N], shape (W, V), vec3 (implicit
+    solver; zero off the floor)."""
     newton_matrix: wp.array
     """Lower block band of the Newton matrix, shape (W, V, B + 1), mat33 (implicit solver scratch)."""
     newton_rhs: wp.array
@@ -357,7 +357,7 @@ class Model:
             step_count=z((W,), wp.int32),
             anchor_target=wp.array(targets.reshape(W, A, 3), dtype=wp.vec3, device=dev),
             constraint_lambda=z((W, E + H + A), float),
-            friction_force=z((W, V), wp.vec3),
+            floor_force=z((W, V), wp.vec3),
             newton_matrix=z((W, V, self.vertex_bandwidth + 1), wp.mat33),
             newton_rhs=z((W, V), wp.vec3),
         )
