@@ -43,8 +43,9 @@ wp.set_module_options({"enable_backward": False})
 
 CONTACT_FREE = wp.constant(0)
 CONTACT_SLIDING = wp.constant(1)
-CONTACT_TOUCHING = wp.constant(1)  # the implicit solver's contact: on the floor, moving along it, smooth friction
-CONTACT_STUCK = wp.constant(2)  # floor_response's static stick; in the Newton steps: a vertex of infinite mass
+CONTACT_STUCK = wp.constant(2)
+CONTACT_FIXED = wp.constant(3)  # a vertex of infinite mass (never moves; reported as free)
+CONTACT_SLIPPED = wp.constant(4)  # stuck at the start of this substep, sliding since (reported as sliding)
 
 
 @wp.func
@@ -81,31 +82,12 @@ def floor_response(p0: wp.vec3, vel: wp.vec3, status: int, n: wp.vec3, mu_s: flo
 
 
 @wp.func
-def friction_law(speed: float, normal_force: float, mu_s: float, mu_k: float, slip_speed: float):
-    """Regularised Coulomb friction with a Stribeck drop: the magnitude [N] of the floor's tangential force on a
-    vertex sliding at ``speed`` [m/s] under ``normal_force`` [N], and that magnitude / speed [N·s/m] (the force is
-    −magnitude · v_t / |v_t|; the ratio is finite at rest).
-
-    Below ``slip_speed`` ε the force rises smoothly to mu_s F_n (F = mu_s F_n (2 s/ε − s²/ε²): static friction as a
-    stiff viscous law, so a worm held on a slope creeps at most ~ε); above it, it falls to mu_k F_n over a few ε.
-    """
-    if not (normal_force > 0.0):
-        return 0.0, 0.0
-    r = speed / slip_speed
-    if r < 1.0:
-        f = mu_s * normal_force * (2.0 - r) * r
-        return f, mu_s * normal_force * (2.0 - r) / slip_speed
-    f = normal_force * (mu_k + (mu_s - mu_k) * wp.exp(-(r - 1.0) / 4.0))
-    return f, f / speed
-
-
-@wp.func
 def dof_projector(status: int, n: wp.vec3) -> wp.mat33:
     """The directions a vertex may move in a constrained Newton step: all (free), along the floor (sliding), none
-    (stuck, or a vertex of infinite mass: status CONTACT_STUCK as well)."""
-    if status == CONTACT_STUCK:
+    (stuck, or a vertex of infinite mass)."""
+    if status == CONTACT_STUCK or status == CONTACT_FIXED:
         return wp.mat33(0.0)
-    if status == CONTACT_SLIDING:
+    if status == CONTACT_SLIDING or status == CONTACT_SLIPPED:
         return wp.identity(n=3, dtype=float) - wp.outer(n, n)
     return wp.identity(n=3, dtype=float)
 
@@ -146,9 +128,6 @@ def assemble(
     strain_limit: float,
     inv_dt: float,
     floor_n: wp.vec3,
-    mu_s: float,
-    mu_k: float,
-    slip_speed: float,
     with_hessian: bool,
     x: wp.array2d(dtype=wp.vec3),
     v: wp.array2d(dtype=wp.vec3),
@@ -160,8 +139,8 @@ def assemble(
     hess: wp.array3d(dtype=wp.mat33),
     grad: wp.array2d(dtype=wp.vec3),
 ):
-    """Gradient ∂Φ/∂x of the substep's objective (inertia, bars, creases, anchors and, ``with_hessian``, the floor
-    friction) into ``grad[world]`` and, ``with_hessian``, its Gauss–Newton Hessian projected on each vertex's allowed
+    """Gradient ∂Φ/∂x of the substep's objective (inertia, bars, creases, anchors, minus the kinetic friction of the
+    sliding vertices) into ``grad[world]`` and, ``with_hessian``, its Gauss–Newton Hessian projected on each vertex's allowed
     directions into ``hess[world]``. ``crease_angle`` holds the angles at the start of the substep (damping, unwrapping).
     Returns 1 if a bar is strained beyond ``strain_limit`` (or non-finite), else 0."""
     nv = x.shape[1]
@@ -179,17 +158,13 @@ def assemble(
             # m/dt² on the diagonal in every direction, also the fixed ones (keeps the matrix definite; their rows
             # are decoupled by the projection and their update is zero)
             diag = eye * m_dt2
-            if contact[world, i] == CONTACT_TOUCHING:
-                # friction against the substep's sliding velocity (lagged normal force), implicit
-                vel = v[world, i] + delta[world, i] * inv_dt
-                vt = vel - floor_n * wp.dot(vel, floor_n)
-                f_mag, slope = friction_law(wp.length(vt), wp.dot(floor_force[world, i], floor_n), mu_s, mu_k,
-                                            slip_speed)
-                g = g + vt * slope
-                diag = diag + (eye - wp.outer(floor_n, floor_n)) * (slope * inv_dt)
             hess[world, i, 0] = diag
             for k in range(1, bw + 1):
                 hess[world, i, k] = wp.mat33(0.0)
+        if contact[world, i] == CONTACT_SLIDING or contact[world, i] == CONTACT_SLIPPED:
+            # kinetic friction: a constant force over the Newton steps (the floor force's tangential part)
+            ff = floor_force[world, i]
+            g = g - (ff - floor_n * wp.dot(ff, floor_n))
         grad[world, i] = g
     for e in range(edges.shape[0]):
         a = edges[e, 0]
@@ -291,7 +266,6 @@ def implicit_step(
     num_substeps: int,
     newton: int,
     limit_ratio: float,
-    slip_speed: float,
     strain_limit: float,
     speed_limit: float,
     # Data in:
@@ -346,7 +320,9 @@ def implicit_step(
     inv_dt2 = inv_dt * inv_dt
 
     for s in range(num_substeps):
-        # 1. predict x̃ (x starts there: delta = x − x̃ = 0)
+        # 1. predict x̃; x starts there, except that a vertex on the floor (touching at the end of the last
+        #    substep, or predicted below it) starts stuck on it, unless it is moving off it: every substep first
+        #    tries static friction, the Coulomb test below lets go where it cannot hold
         for i in range(nv):
             w_inv = inv_mass[im_row, i]
             vel = wp.vec3(0.0)
@@ -354,58 +330,100 @@ def implicit_step(
                 vel = (v[world, i] + dt * (gvec + f_ext[world, i] * w_inv)) * damp
             p = x[world, i]
             x_prev[world, i] = p
-            x[world, i] = p + dt * vel
             v[world, i] = vel
-            # a vertex of infinite mass never moves: fixed in the Newton steps like a stuck one
-            contact[world, i] = wp.where(w_inv > 0.0, CONTACT_FREE, CONTACT_STUCK)
+            h0 = wp.dot(p, floor_n)
+            vn = wp.dot(vel, floor_n)
+            start = vel
+            st = CONTACT_FREE
+            if not (w_inv > 0.0):
+                st = CONTACT_FIXED
+            elif vn < 0.0 and (contact[world, i] != CONTACT_FREE or h0 + dt * vn < 0.0):
+                if contact[world, i] == CONTACT_SLIDING:
+                    # keeps sliding (the kinetic force of the last substep), unless that force stops it
+                    st = CONTACT_SLIDING
+                    start = vel + floor_n * (wp.max(vn, -h0 * inv_dt) - vn)
+                else:
+                    st = CONTACT_STUCK
+                    start = floor_n * wp.max(vn, -h0 * inv_dt)
+                if contact[world, i] == CONTACT_FREE:
+                    floor_force[world, i] = floor_n * (-(h0 + dt * vn) * inv_dt2 / w_inv)
+            contact[world, i] = st
+            x[world, i] = p + dt * start
+            delta[world, i] = (start - vel) * dt
 
         # 2. Newton steps: the first free, then with the floor (module docstring)
         bad = int(0)
         for it in range(newton):
-            if it == 1:
-                # the floor takes the vertices the free step put below it: back onto it along n, and from now on
-                # they move only along it, against friction. Their normal force starts from the last substep's (or, for a new contact,
-                # from the penetration: m d / dt²) and is refined below.
-                for i in range(nv):
-                    if contact[world, i] != CONTACT_FREE:
-                        continue  # infinite mass
-                    vel0 = v[world, i]
-                    vel = vel0 + delta[world, i] * inv_dt
-                    depth = -(wp.dot(x_prev[world, i], floor_n) + dt * wp.dot(vel, floor_n))
-                    if depth > 0.0:
-                        # start it at rest tangentially: the friction solve converges from the static side (its
-                        # viscous branch is stiffest there) and only lets go if the load exceeds mu_s F_n
-                        vel = floor_n * (wp.dot(vel, floor_n) + depth * inv_dt)
-                        x[world, i] = x_prev[world, i] + vel * dt
-                        delta[world, i] = (vel - vel0) * dt
-                        contact[world, i] = CONTACT_TOUCHING
-                        fn = wp.dot(floor_force[world, i], floor_n)
-                        if not (fn > 0.0):
-                            fn = depth * inv_dt2 / inv_mass[im_row, i]
-                        floor_force[world, i] = floor_n * fn
-            if it >= 2:
-                # the floor's normal force at each contact is ∂Φ/∂x · n there (what holds the vertex against the
-                # rest of the implicit step); one the floor would have to pull lets go
+            if it >= 1:
+                # Coulomb at every contact with the floor's force F = ∂Φ/∂x there (what holds the vertex against the
+                # rest of the implicit step, its inertia included: the exact stick test of a time-stepped Coulomb
+                # law, not a one-vertex estimate): a contact the floor would have to pull lets go; a stuck one whose
+                # tangential load exceeds mu_s F_n slides, with a kinetic force mu_k F_n opposing that load; a free
+                # vertex the last step put below the floor lands on it, stuck
                 bad = assemble(world, im_row, rl_row, ea_row, hr_row, hl_row, ak_row, inv_mass, edges, rest_length,
                                bar_stiffness, hinges, hinge_rest, hinge_length, hinge_label, k_hinge, c_hinge,
                                anchor_vertex, anchor_stiffness, anchor_target, limit_ratio, strain_limit, inv_dt,
-                               floor_n, mu_s, mu_k, slip_speed, False, x, v, delta, crease_angle, contact,
-                               floor_force, bar_strain, hess, grad)
+                               floor_n, False, x, v, delta, crease_angle, contact, floor_force, bar_strain, hess, grad)
                 if bad != 0:
                     break
                 for i in range(nv):
-                    if contact[world, i] != CONTACT_TOUCHING:
+                    st = contact[world, i]
+                    if st == CONTACT_FIXED:
                         continue
-                    fn = wp.dot(grad[world, i], floor_n)
-                    if fn > 0.0:
-                        floor_force[world, i] = floor_n * fn
-                    else:
+                    vel0 = v[world, i]
+                    vel = vel0 + delta[world, i] * inv_dt
+                    vn = wp.dot(vel, floor_n)
+                    if st == CONTACT_FREE:
+                        depth = -(wp.dot(x_prev[world, i], floor_n) + dt * vn)
+                        if depth > 0.0:
+                            vel = floor_n * (vn + depth * inv_dt)
+                            x[world, i] = x_prev[world, i] + vel * dt
+                            delta[world, i] = (vel - vel0) * dt
+                            contact[world, i] = CONTACT_STUCK
+                            floor_force[world, i] = floor_n * (depth * inv_dt2 / inv_mass[im_row, i])
+                        continue
+                    force = grad[world, i]  # friction excluded: for a sliding vertex, the load it carries
+                    if st == CONTACT_SLIDING or st == CONTACT_SLIPPED:
+                        ff = floor_force[world, i]
+                        force = force + (ff - floor_n * wp.dot(ff, floor_n))
+                    fn = wp.dot(force, floor_n)
+                    ft = force - floor_n * fn
+                    ft_len = wp.length(ft)
+                    if not (fn > 0.0):
                         contact[world, i] = CONTACT_FREE
                         floor_force[world, i] = wp.vec3(0.0)
+                    elif st == CONTACT_STUCK:
+                        if ft_len > mu_s * fn:
+                            contact[world, i] = CONTACT_SLIPPED
+                            floor_force[world, i] = floor_n * fn + ft * (mu_k * fn / ft_len)
+                        else:
+                            floor_force[world, i] = force
+                    else:
+                        # sliding: kinetic friction mu_k F_n against its motion; if that force reversed the motion
+                        # it sticks (where the substep started)
+                        vt = vel - floor_n * vn
+                        ff = floor_force[world, i]
+                        fric = ff - floor_n * wp.dot(ff, floor_n)
+                        vt_len = wp.length(vt)
+                        if st == CONTACT_SLIPPED:
+                            # it only just let go: its first normal force came from the stuck solution (which may
+                            # hold an impulsive tipping load); it may not stick again before the next substep
+                            if vt_len > 0.0:
+                                floor_force[world, i] = floor_n * fn - vt * (mu_k * fn / vt_len)
+                            else:
+                                floor_force[world, i] = floor_n * fn + fric * (mu_k * fn / wp.max(wp.length(fric), 1.0e-30))
+                        elif wp.dot(vt, fric) >= 0.0 or vt_len == 0.0:
+                            vel = floor_n * vn
+                            x[world, i] = x_prev[world, i] + vel * dt
+                            delta[world, i] = (vel - vel0) * dt
+                            contact[world, i] = CONTACT_STUCK
+                            floor_force[world, i] = floor_n * fn + ft
+                        else:
+                            floor_force[world, i] = floor_n * fn - vt * (mu_k * fn / vt_len)
             bad = assemble(world, im_row, rl_row, ea_row, hr_row, hl_row, ak_row, inv_mass, edges, rest_length,
                            bar_stiffness, hinges, hinge_rest, hinge_length, hinge_label, k_hinge, c_hinge,
                            anchor_vertex, anchor_stiffness, anchor_target, limit_ratio, strain_limit, inv_dt, floor_n,
-                           mu_s, mu_k, slip_speed, True, x, v, delta, crease_angle, contact, floor_force, bar_strain,
+                           True, x, v, delta, crease_angle, contact, floor_force, bar_strain,
                            hess, grad)
             if bad != 0:
                 break
@@ -437,29 +455,24 @@ def implicit_step(
             delta[world, i] = wp.vec3(0.0)
             p0 = x_prev[world, i]
             st = contact[world, i]
-            force = wp.vec3(0.0)
             if st == CONTACT_FREE:
                 # a vertex that reaches the floor only in the last step: position-level contact and friction
-                p, vel, st1, depth = floor_response(p0, vel, CONTACT_FREE, floor_n, mu_s, mu_k, dt, True)
-                if st1 != CONTACT_FREE:
-                    st = CONTACT_TOUCHING
-                    force = floor_n * (depth * inv_dt2 / inv_mass[im_row, i])
-            elif st == CONTACT_TOUCHING:
-                depth = -(wp.dot(p0, floor_n) + dt * wp.dot(vel, floor_n))
-                if depth > 0.0:
-                    vel = vel + floor_n * (depth * inv_dt)
-                vt = vel - floor_n * wp.dot(vel, floor_n)
-                fn = wp.dot(floor_force[world, i], floor_n)
-                f_mag, slope = friction_law(wp.length(vt), fn, mu_s, mu_k, slip_speed)
-                force = floor_n * fn - vt * slope
+                p, vel, st, depth = floor_response(p0, vel, CONTACT_FREE, floor_n, mu_s, mu_k, dt, True)
+                floor_force[world, i] = floor_n * (depth * inv_dt2 / inv_mass[im_row, i])
+            elif st == CONTACT_STUCK:
+                vel = floor_n * wp.max(wp.dot(vel, floor_n), -wp.dot(p0, floor_n) * inv_dt)
+            elif st == CONTACT_SLIDING or st == CONTACT_SLIPPED:
+                st = CONTACT_SLIDING
+                vn = wp.dot(vel, floor_n)
+                vel = vel + floor_n * (wp.max(vn, -wp.dot(p0, floor_n) * inv_dt) - vn)
             else:
                 vel = wp.vec3(0.0)  # infinite mass
+                st = CONTACT_FREE
             if not (wp.length(vel) < speed_limit):  # NaN fails every comparison
                 bad = 1
             x[world, i] = p0 + vel * dt
             v[world, i] = vel
-            contact[world, i] = wp.where(st == CONTACT_STUCK, CONTACT_FREE, st)
-            floor_force[world, i] = force
+            contact[world, i] = st
         for h in range(nh):
             psi, g0, g1, g2, g3 = dihedral_angle_and_gradient(x[world, hinges[h, 0]], x[world, hinges[h, 1]],
                                                               x[world, hinges[h, 2]], x[world, hinges[h, 3]])

@@ -66,8 +66,6 @@ class Simulator:
         newton: implicit solver: Newton steps per substep (at least 2): the first free, the second with the
             contacts the free step found, the others with the contacts' Coulomb test redone on the floor's force.
         limit_ratio: implicit solver: stiffness of the NoFoldThrough limit spring as a multiple of k_α.
-        slip_speed: implicit solver: the regularisation speed ε of static friction [m/s] (below it friction is a
-            stiff viscous force rising to mu_s F_n; a worm held by friction creeps at most ~ε).
     """
 
     def __init__(
@@ -84,7 +82,6 @@ class Simulator:
         iterations: int = 1,
         newton: int = 3,
         limit_ratio: float = 100.0,
-        slip_speed: float = 2.0e-5,
     ):
         from .kernels import implicit_euler, xpbd, xpbd_gs
 
@@ -103,9 +100,6 @@ class Simulator:
         if self.newton < 2:
             raise ValueError(f"newton must be >= 2 (the first step is free, the floor enters the second), got {newton}")
         self.limit_ratio = float(limit_ratio)
-        self.slip_speed = float(slip_speed)
-        if not self.slip_speed > 0:
-            raise ValueError(f"slip_speed must be > 0 [m/s], got {slip_speed}")
         self.model = model
         self.dt = float(dt)
         self.substeps = int(substeps)
@@ -214,7 +208,7 @@ class Simulator:
                                   m.hinges, m.hinge_rest_angle, m.hinge_length, m.hinge_label, m.hinge_stiffness,
                                   m.hinge_damping, m.anchor_vertex, m.anchor_stiffness, m.floor_incline, m.mu_static,
                                   m.mu_kinetic, self.dt_sub, int(num_substeps), self.newton, self.limit_ratio,
-                                  self.slip_speed, self.strain_limit, self.speed_limit, state.external_force, state.anchor_target],
+                                  self.strain_limit, self.speed_limit, state.external_force, state.anchor_target],
                           outputs=[state.positions, state.velocities, state.prev_positions, state.delta,
                                    state.floor_force, state.newton_matrix, state.newton_rhs, state.bar_strain, state.crease_angle,
                                    state.contact, state.unstable, state.step_count],
