@@ -42,10 +42,9 @@ from .xpbd import LABEL_MOUNTAIN, LABEL_VALLEY, PI, dihedral_angle_and_gradient,
 wp.set_module_options({"enable_backward": False})
 
 CONTACT_FREE = wp.constant(0)
-CONTACT_SLIDING = wp.constant(1)
-CONTACT_STUCK = wp.constant(2)
+CONTACT_SLIDING = wp.constant(1)  # on the floor, kinetic friction
+CONTACT_STUCK = wp.constant(2)  # on the floor, static friction (regularised: a stiff viscous force)
 CONTACT_FIXED = wp.constant(3)  # a vertex of infinite mass (never moves; reported as free)
-CONTACT_SLIPPED = wp.constant(4)  # stuck at the start of this substep, sliding since (reported as sliding)
 
 
 @wp.func
@@ -82,12 +81,34 @@ def floor_response(p0: wp.vec3, vel: wp.vec3, status: int, n: wp.vec3, mu_s: flo
 
 
 @wp.func
+def friction_force(status: int, vt: wp.vec3, normal_force: float, mu_s: float, mu_k: float, slip_speed: float):
+    """The floor's friction on a vertex on it moving at tangential velocity ``vt`` [m/s] under ``normal_force``
+    [N]: (force [N], stiffness ∂f/∂v projected PSD [N·s/m] as a scalar on the tangent plane, and the unit direction
+    the stiffness excludes (the sliding direction; zero when stuck)).
+
+    Stuck (static, ``status`` CONTACT_STUCK): f = −(mu_s F_n / ε) v_t, a stiff viscous force that reaches mu_s F_n
+    at ε = ``slip_speed``, so a vertex held by friction creeps at most ~ε; one moving faster than ε has broken loose.
+    Sliding (kinetic): f = −mu_k F_n v_t / |v_t|, whose derivative is (mu_k F_n / |v_t|)(I − t tᵀ) on the plane.
+    """
+    if not (normal_force > 0.0):
+        return wp.vec3(0.0), 0.0, wp.vec3(0.0)
+    if status == CONTACT_STUCK:
+        c = mu_s * normal_force / slip_speed
+        return vt * (-c), c, wp.vec3(0.0)
+    speed = wp.length(vt)
+    if speed > 0.0:
+        c = mu_k * normal_force / speed
+        return vt * (-c), c, vt / speed
+    return wp.vec3(0.0), 0.0, wp.vec3(0.0)
+
+
+@wp.func
 def dof_projector(status: int, n: wp.vec3) -> wp.mat33:
-    """The directions a vertex may move in a constrained Newton step: all (free), along the floor (sliding), none
-    (stuck, or a vertex of infinite mass)."""
-    if status == CONTACT_STUCK or status == CONTACT_FIXED:
+    """The directions a vertex may move in a constrained Newton step: all (free), along the floor (on it), none (a
+    vertex of infinite mass)."""
+    if status == CONTACT_FIXED:
         return wp.mat33(0.0)
-    if status == CONTACT_SLIDING or status == CONTACT_SLIPPED:
+    if status == CONTACT_SLIDING or status == CONTACT_STUCK:
         return wp.identity(n=3, dtype=float) - wp.outer(n, n)
     return wp.identity(n=3, dtype=float)
 
@@ -128,6 +149,9 @@ def assemble(
     strain_limit: float,
     inv_dt: float,
     floor_n: wp.vec3,
+    mu_s: float,
+    mu_k: float,
+    slip_speed: float,
     with_hessian: bool,
     x: wp.array2d(dtype=wp.vec3),
     v: wp.array2d(dtype=wp.vec3),
@@ -139,8 +163,8 @@ def assemble(
     hess: wp.array3d(dtype=wp.mat33),
     grad: wp.array2d(dtype=wp.vec3),
 ):
-    """Gradient ∂Φ/∂x of the substep's objective (inertia, bars, creases, anchors, minus the kinetic friction of the
-    sliding vertices) into ``grad[world]`` and, ``with_hessian``, its Gauss–Newton Hessian projected on each vertex's allowed
+    """Gradient ∂Φ/∂x of the substep's objective (inertia, bars, creases, anchors; with the Hessian also the floor
+    friction, :func:`friction_force`) into ``grad[world]`` and, ``with_hessian``, its Gauss–Newton Hessian projected on each vertex's allowed
     directions into ``hess[world]``. ``crease_angle`` holds the angles at the start of the substep (damping, unwrapping).
     Returns 1 if a bar is strained beyond ``strain_limit`` (or non-finite), else 0."""
     nv = x.shape[1]
@@ -158,13 +182,16 @@ def assemble(
             # m/dt² on the diagonal in every direction, also the fixed ones (keeps the matrix definite; their rows
             # are decoupled by the projection and their update is zero)
             diag = eye * m_dt2
+            st = contact[world, i]
+            if st == CONTACT_SLIDING or st == CONTACT_STUCK:
+                vel = v[world, i] + delta[world, i] * inv_dt
+                vt = vel - floor_n * wp.dot(vel, floor_n)
+                f, c, t = friction_force(st, vt, wp.dot(floor_force[world, i], floor_n), mu_s, mu_k, slip_speed)
+                g = g - f
+                diag = diag + (eye - wp.outer(floor_n, floor_n) - wp.outer(t, t)) * (c * inv_dt)
             hess[world, i, 0] = diag
             for k in range(1, bw + 1):
                 hess[world, i, k] = wp.mat33(0.0)
-        if contact[world, i] == CONTACT_SLIDING or contact[world, i] == CONTACT_SLIPPED:
-            # kinetic friction: a constant force over the Newton steps (the floor force's tangential part)
-            ff = floor_force[world, i]
-            g = g - (ff - floor_n * wp.dot(ff, floor_n))
         grad[world, i] = g
     for e in range(edges.shape[0]):
         a = edges[e, 0]
@@ -266,6 +293,7 @@ def implicit_step(
     num_substeps: int,
     newton: int,
     limit_ratio: float,
+    slip_speed: float,
     strain_limit: float,
     speed_limit: float,
     # Data in:
@@ -338,13 +366,11 @@ def implicit_step(
             if not (w_inv > 0.0):
                 st = CONTACT_FIXED
             elif vn < 0.0 and (contact[world, i] != CONTACT_FREE or h0 + dt * vn < 0.0):
-                if contact[world, i] == CONTACT_SLIDING:
-                    # keeps sliding (the kinetic force of the last substep), unless that force stops it
-                    st = CONTACT_SLIDING
-                    start = vel + floor_n * (wp.max(vn, -h0 * inv_dt) - vn)
-                else:
-                    st = CONTACT_STUCK
-                    start = floor_n * wp.max(vn, -h0 * inv_dt)
+                # on the floor (still, or landing): moves along it, stuck or sliding as it was (a new contact stuck)
+                st = contact[world, i]
+                if st == CONTACT_FREE:  # landing: stuck or sliding by its speed along the floor
+                    st = wp.where(wp.length(vel - floor_n * vn) > slip_speed, CONTACT_SLIDING, CONTACT_STUCK)
+                start = vel + floor_n * (wp.max(vn, -h0 * inv_dt) - vn)
                 if contact[world, i] == CONTACT_FREE:
                     floor_force[world, i] = floor_n * (-(h0 + dt * vn) * inv_dt2 / w_inv)
             contact[world, i] = st
@@ -355,15 +381,15 @@ def implicit_step(
         bad = int(0)
         for it in range(newton):
             if it >= 1:
-                # Coulomb at every contact with the floor's force F = ∂Φ/∂x there (what holds the vertex against the
-                # rest of the implicit step, its inertia included: the exact stick test of a time-stepped Coulomb
-                # law, not a one-vertex estimate): a contact the floor would have to pull lets go; a stuck one whose
-                # tangential load exceeds mu_s F_n slides, with a kinetic force mu_k F_n opposing that load; a free
-                # vertex the last step put below the floor lands on it, stuck
+                # the floor's normal force at each contact is n · ∂Φ/∂x there (what holds the vertex against the
+                # rest of the implicit step); a contact the floor would have to pull lets go; a stuck vertex faster
+                # than the slip speed broke loose, a sliding one whose motion reversed (kinetic friction stopped it)
+                # or fell below half the slip speed sticks; a free vertex the last step put below the floor lands
                 bad = assemble(world, im_row, rl_row, ea_row, hr_row, hl_row, ak_row, inv_mass, edges, rest_length,
                                bar_stiffness, hinges, hinge_rest, hinge_length, hinge_label, k_hinge, c_hinge,
                                anchor_vertex, anchor_stiffness, anchor_target, limit_ratio, strain_limit, inv_dt,
-                               floor_n, False, x, v, delta, crease_angle, contact, floor_force, bar_strain, hess, grad)
+                               floor_n, mu_s, mu_k, slip_speed, False, x, v, delta, crease_angle, contact,
+                               floor_force, bar_strain, hess, grad)
                 if bad != 0:
                     break
                 for i in range(nv):
@@ -376,54 +402,31 @@ def implicit_step(
                     if st == CONTACT_FREE:
                         depth = -(wp.dot(x_prev[world, i], floor_n) + dt * vn)
                         if depth > 0.0:
-                            vel = floor_n * (vn + depth * inv_dt)
+                            vel = vel + floor_n * (depth * inv_dt)
                             x[world, i] = x_prev[world, i] + vel * dt
                             delta[world, i] = (vel - vel0) * dt
-                            contact[world, i] = CONTACT_STUCK
+                            vt_len = wp.length(vel - floor_n * wp.dot(vel, floor_n))
+                            contact[world, i] = wp.where(vt_len > slip_speed, CONTACT_SLIDING, CONTACT_STUCK)
                             floor_force[world, i] = floor_n * (depth * inv_dt2 / inv_mass[im_row, i])
                         continue
-                    force = grad[world, i]  # friction excluded: for a sliding vertex, the load it carries
-                    if st == CONTACT_SLIDING or st == CONTACT_SLIPPED:
-                        ff = floor_force[world, i]
-                        force = force + (ff - floor_n * wp.dot(ff, floor_n))
-                    fn = wp.dot(force, floor_n)
-                    ft = force - floor_n * fn
-                    ft_len = wp.length(ft)
+                    fn = wp.dot(grad[world, i], floor_n)  # friction is tangential: not in the normal balance
                     if not (fn > 0.0):
                         contact[world, i] = CONTACT_FREE
                         floor_force[world, i] = wp.vec3(0.0)
-                    elif st == CONTACT_STUCK:
-                        if ft_len > mu_s * fn:
-                            contact[world, i] = CONTACT_SLIPPED
-                            floor_force[world, i] = floor_n * fn + ft * (mu_k * fn / ft_len)
-                        else:
-                            floor_force[world, i] = force
-                    else:
-                        # sliding: kinetic friction mu_k F_n against its motion; if that force reversed the motion
-                        # it sticks (where the substep started)
-                        vt = vel - floor_n * vn
-                        ff = floor_force[world, i]
-                        fric = ff - floor_n * wp.dot(ff, floor_n)
-                        vt_len = wp.length(vt)
-                        if st == CONTACT_SLIPPED:
-                            # it only just let go: its first normal force came from the stuck solution (which may
-                            # hold an impulsive tipping load); it may not stick again before the next substep
-                            if vt_len > 0.0:
-                                floor_force[world, i] = floor_n * fn - vt * (mu_k * fn / vt_len)
-                            else:
-                                floor_force[world, i] = floor_n * fn + fric * (mu_k * fn / wp.max(wp.length(fric), 1.0e-30))
-                        elif wp.dot(vt, fric) >= 0.0 or vt_len == 0.0:
-                            vel = floor_n * vn
-                            x[world, i] = x_prev[world, i] + vel * dt
-                            delta[world, i] = (vel - vel0) * dt
-                            contact[world, i] = CONTACT_STUCK
-                            floor_force[world, i] = floor_n * fn + ft
-                        else:
-                            floor_force[world, i] = floor_n * fn - vt * (mu_k * fn / vt_len)
+                        continue
+                    vt = vel - floor_n * vn
+                    vt_len = wp.length(vt)
+                    ff = floor_force[world, i]
+                    if st == CONTACT_STUCK and vt_len > slip_speed:
+                        contact[world, i] = CONTACT_SLIDING
+                    elif st == CONTACT_SLIDING and (wp.dot(vt, ff) > 0.0 or vt_len < 0.5 * slip_speed):
+                        contact[world, i] = CONTACT_STUCK
+                    f, c, t = friction_force(contact[world, i], vt, fn, mu_s, mu_k, slip_speed)
+                    floor_force[world, i] = floor_n * fn + f
             bad = assemble(world, im_row, rl_row, ea_row, hr_row, hl_row, ak_row, inv_mass, edges, rest_length,
                            bar_stiffness, hinges, hinge_rest, hinge_length, hinge_label, k_hinge, c_hinge,
                            anchor_vertex, anchor_stiffness, anchor_target, limit_ratio, strain_limit, inv_dt, floor_n,
-                           True, x, v, delta, crease_angle, contact, floor_force, bar_strain,
+                           mu_s, mu_k, slip_speed, True, x, v, delta, crease_angle, contact, floor_force, bar_strain,
                            hess, grad)
             if bad != 0:
                 break
@@ -459,12 +462,13 @@ def implicit_step(
                 # a vertex that reaches the floor only in the last step: position-level contact and friction
                 p, vel, st, depth = floor_response(p0, vel, CONTACT_FREE, floor_n, mu_s, mu_k, dt, True)
                 floor_force[world, i] = floor_n * (depth * inv_dt2 / inv_mass[im_row, i])
-            elif st == CONTACT_STUCK:
-                vel = floor_n * wp.max(wp.dot(vel, floor_n), -wp.dot(p0, floor_n) * inv_dt)
-            elif st == CONTACT_SLIDING or st == CONTACT_SLIPPED:
-                st = CONTACT_SLIDING
+            elif st == CONTACT_STUCK or st == CONTACT_SLIDING:
                 vn = wp.dot(vel, floor_n)
                 vel = vel + floor_n * (wp.max(vn, -wp.dot(p0, floor_n) * inv_dt) - vn)
+                vt = vel - floor_n * wp.dot(vel, floor_n)
+                fn = wp.dot(floor_force[world, i], floor_n)
+                f, c, t = friction_force(st, vt, fn, mu_s, mu_k, slip_speed)
+                floor_force[world, i] = floor_n * fn + f
             else:
                 vel = wp.vec3(0.0)  # infinite mass
                 st = CONTACT_FREE

@@ -66,6 +66,9 @@ class Simulator:
         newton: implicit solver: Newton steps per substep (at least 2): the first free, the second with the
             contacts the free step found, the others with the contacts' Coulomb test redone on the floor's force.
         limit_ratio: implicit solver: stiffness of the NoFoldThrough limit spring as a multiple of k_α.
+        slip_speed: implicit solver: regularisation speed ε of static friction [m/s]: below it friction is a stiff
+            viscous force reaching mu_s F_n at ε, so a worm held by friction creeps at most ~ε (1e-5 m/s: < 0.02 mm
+            in 2 s).
     """
 
     def __init__(
@@ -82,6 +85,7 @@ class Simulator:
         iterations: int = 1,
         newton: int = 3,
         limit_ratio: float = 100.0,
+        slip_speed: float = 1.0e-5,
     ):
         from .kernels import implicit_euler, xpbd, xpbd_gs
 
@@ -100,6 +104,9 @@ class Simulator:
         if self.newton < 2:
             raise ValueError(f"newton must be >= 2 (the first step is free, the floor enters the second), got {newton}")
         self.limit_ratio = float(limit_ratio)
+        self.slip_speed = float(slip_speed)
+        if not self.slip_speed > 0:
+            raise ValueError(f"slip_speed must be > 0 [m/s], got {slip_speed}")
         self.model = model
         self.dt = float(dt)
         self.substeps = int(substeps)
@@ -208,7 +215,7 @@ class Simulator:
                                   m.hinges, m.hinge_rest_angle, m.hinge_length, m.hinge_label, m.hinge_stiffness,
                                   m.hinge_damping, m.anchor_vertex, m.anchor_stiffness, m.floor_incline, m.mu_static,
                                   m.mu_kinetic, self.dt_sub, int(num_substeps), self.newton, self.limit_ratio,
-                                  self.strain_limit, self.speed_limit, state.external_force, state.anchor_target],
+                                  self.slip_speed, self.strain_limit, self.speed_limit, state.external_force, state.anchor_target],
                           outputs=[state.positions, state.velocities, state.prev_positions, state.delta,
                                    state.floor_force, state.newton_matrix, state.newton_rhs, state.bar_strain, state.crease_angle,
                                    state.contact, state.unstable, state.step_count],
