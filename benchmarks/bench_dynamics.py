@@ -1,16 +1,17 @@
-"""Dynamics benchmark: worm-substeps per second of the batched XPBD solver on the CPU (and CUDA when present).
+"""Dynamics benchmark: worm-substeps per second of the batched solvers on the CPU (and CUDA when present).
 
-Rows (one per device, solver, magnet model and W), in the gait setting (``gaits.DEFAULT_DT`` /
-``gaits.DEFAULT_SUBSTEPS``):
-- ``substep_rate``: worm-substeps/s of the substeps alone (Gauss–Seidel: the one per-step launch of
-  ``xpbd_gs.gs_step``; Jacobi: the three substep kernels);
+Rows (one per device, solver, magnet model and W), in the gait setting (``gaits.DEFAULT_DT``; the implicit solver
+at ``gaits.DEFAULT_SUBSTEPS`` = 1 ms substeps, the XPBD solvers at the 50 µs they need):
+- ``substep_rate``: worm-substeps/s of the substeps alone (implicit / Gauss–Seidel: the one per-step launch of
+  ``implicit_euler.implicit_step`` / ``xpbd_gs.gs_step``; Jacobi: the three substep kernels);
 - ``wrench_ms_per_world``: one magnetic-wrench evaluation (poses, ``launch_world_wrenches``, distribution) per world;
 - ``step_rate``: worm-substeps/s of whole steps (1 wrench + ``substeps`` substeps, the gait setting dt = 4 ms,
   80 substeps), i.e. what a simulation actually gets;
 - ``realtime_factor``: simulated seconds per wall second per world at that rate (>= 1: real time for W = 1);
 - ``sim_s_per_wall_s``: simulated seconds per wall second of the whole batch (W × realtime_factor);
-- ``numpy_substep_rate`` and ``speedup_vs_numpy``: the same substep in NumPy (``numpy_substep.py``: a Gauss–Seidel
-  sweep vectorized over worlds, looping over elements; the Jacobi pass vectorized over worlds and elements), float64;
+- ``numpy_substep_rate`` and ``speedup_vs_numpy``: the same substep in NumPy (``numpy_substep.py``, float64: the
+  implicit step with a dense batched ``np.linalg.solve`` (floor contact left out), a Gauss–Seidel sweep vectorized
+  over worlds looping over elements, the Jacobi pass vectorized over worlds and elements);
 - ``launches_per_substep``, ``bytes_per_world``;
 - ``paper_ratio``: substep_rate(W) / 400, the paper's ~400 Kangaroo iterations per second for one worm.
 
@@ -47,20 +48,20 @@ def _timeit(fn, min_time=0.5, max_reps=200):
 
 
 def bench_one(W: int, magnet_model: str, device: str, with_numpy: bool, min_time: float,
-              solver: str = "gauss_seidel") -> dict:
-    from numpy_substep import NumpyGaussSeidel, NumpySubstep
+              solver: str = "implicit") -> dict:
+    from numpy_substep import NumpyGaussSeidel, NumpyImplicit, NumpySubstep
 
     from warpworm import gaits
     from warpworm.model import Model
     from warpworm.simulator import Simulator
 
     DT = gaits.DEFAULT_DT
-    SUBSTEPS = gaits.DEFAULT_SUBSTEPS if solver == "gauss_seidel" else 80  # Jacobi needs 50 us substeps
+    SUBSTEPS = gaits.DEFAULT_SUBSTEPS if solver == "implicit" else 80  # the XPBD solvers need 50 us substeps
     model = Model.from_params(gaits.preset_params("peristaltic", magnet_model=magnet_model), W, device)
     sim = Simulator(model, dt=DT, substeps=SUBSTEPS, solver=solver)
     state = sim.initial_state()
     sim.step(state, 1)
-    if solver == "gauss_seidel":
+    if solver in ("implicit", "gauss_seidel"):
         cmd = sim._gs_cmd(state, SUBSTEPS)
 
         def substeps():
@@ -94,7 +95,9 @@ def bench_one(W: int, magnet_model: str, device: str, with_numpy: bool, min_time
         "paper_ratio": (W / t_sub) / PAPER_ITERATIONS_PER_S,
     }
     if with_numpy:
-        if solver == "gauss_seidel":
+        if solver == "implicit":
+            ref = NumpyImplicit(model, sim.dt_sub, newton=sim.newton, limit_ratio=sim.limit_ratio)
+        elif solver == "gauss_seidel":
             ref = NumpyGaussSeidel(model, sim.dt_sub, iterations=sim.iterations)
         else:
             ref = NumpySubstep(model, sim.dt_sub, split_hinge=sim.split_hinge.numpy())
@@ -117,9 +120,10 @@ def run(quick: bool = False) -> list[dict]:
             for W in sizes:
                 with_numpy = W <= 4096
                 rows.append(bench_one(W, magnet_model, device, with_numpy, 0.2 if quick else 0.5))
-        # the Jacobi solver for comparison (analytic magnets; the substep does not depend on the magnet model)
-        for W in sizes[:3] if quick else [1, 256, 4096]:
-            rows.append(bench_one(W, "analytic", device, W <= 256, 0.2 if quick else 0.5, solver="jacobi"))
+        # the XPBD solvers for comparison (analytic magnets; the substep does not depend on the magnet model)
+        for solver in ("gauss_seidel", "jacobi"):
+            for W in sizes[:3] if quick else [1, 256, 4096]:
+                rows.append(bench_one(W, "analytic", device, W <= 256, 0.2 if quick else 0.5, solver=solver))
     return rows
 
 

@@ -2,7 +2,7 @@
 :mod:`warpworm.kernels.xpbd_gs` (Gauss–Seidel, :class:`NumpyGaussSeidel`) written in NumPy, vectorized over worlds: the benchmark's
 reference and a cross-check of the kernels (same math, float64).
 
-One substep = predict (gravity, external force, damping) -> one Jacobi pass over bars and hinges with mass
+One Jacobi substep = predict (gravity, external force, damping) -> one Jacobi pass over bars and hinges with mass
 splitting -> apply corrections, floor contact and friction in velocity space. Anchors and the stability check are
 left out (the benchmark uses neither). Usage::
 
@@ -240,3 +240,99 @@ class NumpyGaussSeidel(NumpySubstep):
         # contact and friction, velocities (in-place positions; velocity from the summed corrections)
         p_new, v_new = self._floor_contact(x, v + delta / dt, x_prev, dt)
         return p_new, v_new, angle
+
+
+class NumpyImplicit(NumpySubstep):
+    """The implicit-Euler substep of :mod:`warpworm.kernels.implicit_euler` in NumPy (float64), vectorized over
+    worlds, for a worm off the floor (contact and friction left out: compare with no vertex touching it): predict
+    x̃, then ``newton`` Gauss–Newton steps on ½|x − x̃|²_M/dt² + E(x) with a dense batched solve
+    (``np.linalg.solve`` on (W, 3V, 3V); the kernel factors a block band), then v = v' + (x − x̃)/dt.
+    E: bar springs (compressive geometric stiffness dropped), creases (spring, implicit damping, NoFoldThrough limit
+    spring ``limit_ratio`` k_α; curvature term dropped), anchors. The benchmark's reference and the kernel's
+    cross-check.
+
+    ``x, v, angle = ref.substep(x, v, angle, f_ext)`` as :class:`NumpySubstep`.
+    """
+
+    def __init__(self, model, dt_sub: float, newton: int = 3, limit_ratio: float = 100.0):
+        super().__init__(model, dt_sub, split_hinge=np.ones((1, model.num_vertices)))
+        self.newton = int(newton)
+        self.limit_ratio = float(limit_ratio)
+        self.anchor_vertex = model.anchor_vertex.numpy().astype(np.int64)
+        A = len(self.anchor_vertex)
+        self.anchor_k = np.broadcast_to(model.anchor_stiffness.numpy().astype(np.float64), (self.W, A))
+        self.anchor_target = None
+
+    def init(self, state):
+        self.anchor_target = state.anchor_target.numpy().astype(np.float64)
+        return super().init(state)
+
+    def _add_blocks(self, H, rows, cols, blocks):
+        """H (W, 3V, 3V) += blocks (W, n, 3, 3) at vertex rows (n,), cols (n,) and their transposes off the
+        diagonal (each unordered pair given once)."""
+        W = self.W
+        r3 = 3 * rows[:, None, None] + np.arange(3)[None, :, None]
+        c3 = 3 * cols[:, None, None] + np.arange(3)[None, None, :]
+        r3, c3 = np.broadcast_arrays(r3, c3)
+        wi = np.arange(W)[:, None, None, None]
+        np.add.at(H, (wi, r3[None], c3[None]), blocks)
+        off = rows != cols
+        np.add.at(H, (wi, c3[None, off].transpose(0, 1, 3, 2), r3[None, off].transpose(0, 1, 3, 2)),
+                  blocks[:, off].transpose(0, 1, 3, 2))
+
+    def substep(self, x, v, angle, f_ext):
+        from warpworm import crease
+
+        dt, w, W, V = self.dt, self.w, self.W, self.V
+        acc = f_ext * w[..., None]
+        acc[..., 2] -= self.g
+        v_pred = np.where(w[..., None] > 0, (v + dt * acc) / (1.0 + self.damping[..., None] * dt), 0.0)
+        xt = x + dt * v_pred
+        X = xt.copy()
+        m_dt2 = np.where(w > 0, 1.0 / np.maximum(w, 1e-300), 0.0) / dt**2  # (W, V)
+        e = self.edges
+        h = self.hinges
+        eye = np.eye(3)
+        k1, ch = self.k[:, 0], self.c_h[:, 0]
+        for _ in range(self.newton):
+            g = m_dt2[..., None] * (X - xt)
+            H = np.zeros((W, 3 * V, 3 * V))
+            idx = np.arange(3 * V)
+            H[:, idx, idx] += np.repeat(m_dt2, 3, axis=1)
+            # bars
+            d = X[:, e[:, 0]] - X[:, e[:, 1]]
+            L = np.linalg.norm(d, axis=-1)
+            n = d / L[..., None]
+            ka = self.EA / self.L0
+            f = n * (ka * (L - self.L0))[..., None]
+            np.add.at(g, (slice(None), e[:, 0]), f)
+            np.add.at(g, (slice(None), e[:, 1]), -f)
+            nn = n[..., :, None] * n[..., None, :]
+            kb = ka[..., None, None] * (nn + np.maximum(0.0, 1.0 - self.L0 / L)[..., None, None] * (eye - nn))
+            self._add_blocks(H, e[:, 0], e[:, 0], kb)
+            self._add_blocks(H, e[:, 1], e[:, 1], kb)
+            self._add_blocks(H, e[:, 0], e[:, 1], -kb)
+            # creases
+            psi = crease.dihedral_angles(X, h)
+            phi = angle + (psi - angle + np.pi) % (2 * np.pi) - np.pi
+            grads = crease.dihedral_gradients(X, h)  # (W, H, 4, 3)
+            torque = self.hlen * (k1[:, None] * (phi - self.rest) + ch[:, None] / dt * (phi - angle))
+            stiff = self.hlen * (k1[:, None] + ch[:, None] / dt)
+            bound = np.clip(phi, self.lo, self.hi)
+            out = phi != bound
+            torque = torque + np.where(out, self.limit_ratio * k1[:, None] * self.hlen * (phi - bound), 0.0)
+            stiff = stiff + np.where(out, self.limit_ratio * k1[:, None] * self.hlen, 0.0)
+            for a in range(4):
+                np.add.at(g, (slice(None), h[:, a]), grads[:, :, a] * torque[..., None])
+                for b in range(a + 1):
+                    blk = stiff[..., None, None] * grads[:, :, a, :, None] * grads[:, :, b, None, :]
+                    self._add_blocks(H, h[:, a], h[:, b], blk)
+            # anchors
+            for an, pv in enumerate(self.anchor_vertex.tolist()):
+                kk = self.anchor_k[:, an]
+                g[:, pv] += kk[:, None] * (X[:, pv] - self.anchor_target[:, an])
+                H[:, 3 * pv:3 * pv + 3, 3 * pv:3 * pv + 3] += kk[:, None, None] * eye
+            X = X + np.linalg.solve(H, -g.reshape(W, 3 * V, 1))[..., 0].reshape(W, V, 3)
+        psi = crease.dihedral_angles(X, h)
+        angle = angle + (psi - angle + np.pi) % (2 * np.pi) - np.pi
+        return X, v_pred + (X - xt) / dt, angle

@@ -44,8 +44,12 @@ class WormParams:
     hinge_stiffness: float | np.ndarray = 0.3
     """Crease stiffness k_α per metre of crease [N·m/rad/m = N/rad], shape () or (W,). 0.3 is calibrated so the
     three gait presets move (docs/dynamics.md); the paper's 11.55 is Kangaroo's unitless strength."""
-    bar_stiffness: float | np.ndarray = 1.0e4
-    """Axial rigidity EA of every bar but the valley rings [N] (force per unit Cauchy strain), shape () or (W,)."""
+    bar_stiffness: float | np.ndarray = 20.0
+    """Axial rigidity EA of every bar but the valley rings [N] (force per unit Cauchy strain), shape () or (W,).
+    Near-rigid: strains of ~1e-3 under the magnets' ~0.02 N. Not stiffer by default: the implicit solver reads the
+    floor's normal forces off the bar forces, and a float32 position (~4e-9 m rounding at 0.05 m) gives a bar of
+    EA / L0 ~ 1e6 N/m (EA = 1e4) a force noise of ~4 mN, more than a vertex's share of the worm's weight (~1 mN);
+    at 20 N it is ~8 µN (docs/dynamics.md)."""
     valley_bar_stiffness: float | np.ndarray = 2.0
     """Axial rigidity EA of the VALLEY-ring bars at the unit middles [N], shape () or (W,). The tube is isostatic
     (docs/crease.md): these bars stand for the panel bending near the mid creases that lets the paper bellows fold,
