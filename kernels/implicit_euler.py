@@ -4,7 +4,7 @@ Kernels only; the host orchestration is :class:`warpworm.simulator.Simulator` (`
 :func:`implicit_step` is launched 1-D over worlds (``world = wp.tid()``); each thread runs its world's substeps. A
 substep of length dt finds the positions x that minimise
 
-    ½ |x − x̃|²_M / dt² + E(x),      x̃ = x_n + dt v',   v' = (v_n + dt (g + M⁻¹ f_ext)) / (1 + c dt)
+    ½ |x − x̃|²_M / dt² + E(x),      x̃ = x_n + dt v',   v' = v_n / (1 + c dt) + dt (g + M⁻¹ f_ext)
 
 (implicit Euler: gravity, the step's magnetic force and the linear velocity damping c are in x̃), with E the elastic
 energy of the worm:
@@ -354,8 +354,11 @@ def implicit_step(
         for i in range(nv):
             w_inv = inv_mass[im_row, i]
             vel = wp.vec3(0.0)
+            v_old = v[world, i]
             if w_inv > 0.0:
-                vel = (v[world, i] + dt * (gvec + f_ext[world, i] * w_inv)) * damp
+                # linear damping on the velocity carried over, not on this substep's forces (damping them too
+                # would lower a hanging worm's weight on its anchors by the factor 1 / (1 + c dt))
+                vel = v_old * damp + dt * (gvec + f_ext[world, i] * w_inv)
             p = x[world, i]
             x_prev[world, i] = p
             v[world, i] = vel
@@ -368,9 +371,12 @@ def implicit_step(
             elif vn < 0.0 and (contact[world, i] != CONTACT_FREE or h0 + dt * vn < 0.0):
                 # on the floor (still, or landing): moves along it, stuck or sliding as it was (a new contact stuck)
                 st = contact[world, i]
-                if st == CONTACT_FREE:  # landing: stuck or sliding by its speed along the floor
-                    st = wp.where(wp.length(vel - floor_n * vn) > slip_speed, CONTACT_SLIDING, CONTACT_STUCK)
+                if st == CONTACT_FREE:  # landing: stuck or sliding by the speed along the floor it arrives with
+                    vt_old = v_old - floor_n * wp.dot(v_old, floor_n)
+                    st = wp.where(wp.length(vt_old) > slip_speed, CONTACT_SLIDING, CONTACT_STUCK)
                 start = vel + floor_n * (wp.max(vn, -h0 * inv_dt) - vn)
+                if st == CONTACT_STUCK:
+                    start = floor_n * wp.max(vn, -h0 * inv_dt)  # a stuck vertex starts where it is, tangentially
                 if contact[world, i] == CONTACT_FREE:
                     floor_force[world, i] = floor_n * (-(h0 + dt * vn) * inv_dt2 / w_inv)
             contact[world, i] = st
@@ -405,8 +411,8 @@ def implicit_step(
                             vel = vel + floor_n * (depth * inv_dt)
                             x[world, i] = x_prev[world, i] + vel * dt
                             delta[world, i] = (vel - vel0) * dt
-                            vt_len = wp.length(vel - floor_n * wp.dot(vel, floor_n))
-                            contact[world, i] = wp.where(vt_len > slip_speed, CONTACT_SLIDING, CONTACT_STUCK)
+                            # stuck: it lets go at the next update if static friction cannot hold it
+                            contact[world, i] = CONTACT_STUCK
                             floor_force[world, i] = floor_n * (depth * inv_dt2 / inv_mass[im_row, i])
                         continue
                     fn = wp.dot(grad[world, i], floor_n)  # friction is tangential: not in the normal balance
@@ -417,7 +423,10 @@ def implicit_step(
                     vt = vel - floor_n * vn
                     vt_len = wp.length(vt)
                     ff = floor_force[world, i]
-                    if st == CONTACT_STUCK and vt_len > slip_speed:
+                    fn_old = wp.dot(ff, floor_n)
+                    # the viscous static friction supplied (mu_s F_n,old / ε)|v_t|: more than mu_s F_n (the normal
+                    # force now known) means static friction cannot hold it
+                    if st == CONTACT_STUCK and vt_len * fn_old > slip_speed * fn:
                         contact[world, i] = CONTACT_SLIDING
                     elif st == CONTACT_SLIDING and (wp.dot(vt, ff) > 0.0 or vt_len < 0.5 * slip_speed):
                         contact[world, i] = CONTACT_STUCK

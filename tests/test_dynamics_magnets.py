@@ -62,14 +62,14 @@ def test_world_in_randomized_batch_equals_world_alone():
     W, pick, steps = 64, 17, 25
     base = gaits.preset_params("peristaltic")
     batch_params = randomized_params(base, W, seed=5)
-    sim_b = Simulator(Model.from_params(batch_params, W, "cpu"), dt=4e-3, substeps=80)
+    sim_b = Simulator(Model.from_params(batch_params, W, "cpu"), dt=4e-3, substeps=4)
     sb = sim_b.initial_state()
     sim_b.step(sb, steps)
     xb = sim_b.snapshot(sb)["positions"][pick]
 
     fields = list(RANDOMIZED) + ["mu_kinetic"]
     one = replace(batch_params, **{f: float(np.asarray(getattr(batch_params, f))[pick]) for f in fields})
-    sim_1 = Simulator(Model.from_params(one, 1, "cpu"), dt=4e-3, substeps=80)
+    sim_1 = Simulator(Model.from_params(one, 1, "cpu"), dt=4e-3, substeps=4)
     s1 = sim_1.initial_state()
     sim_1.step(s1, steps)
     x1 = sim_1.snapshot(s1)["positions"][0]

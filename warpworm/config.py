@@ -208,7 +208,7 @@ class SimConfig:
     """W: worlds simulated at once in one solver batch."""
     dt: float = 0.004
     """Solver time step [s] (the gait runs' warpworm.gaits.DEFAULT_DT)."""
-    substeps: int = 32
+    substeps: int = 4
     """Solver substeps per time step."""
     settle_time: float = 0.3
     """Time [s] the worm settles under gravity with the EPM parked at the path start."""
