@@ -370,10 +370,10 @@ def implicit_step(
                 st = CONTACT_FIXED
             elif vn < 0.0 and (contact[world, i] != CONTACT_FREE or h0 + dt * vn < 0.0):
                 # on the floor (still, or landing): moves along it, stuck or sliding as it was (a new contact stuck)
-                st = contact[world, i]
-                if st == CONTACT_FREE:  # landing: stuck or sliding by the speed along the floor it arrives with
-                    vt_old = v_old - floor_n * wp.dot(v_old, floor_n)
-                    st = wp.where(wp.length(vt_old) > slip_speed, CONTACT_SLIDING, CONTACT_STUCK)
+                # stuck or sliding by the speed along the floor it has (a contact moving along the floor is sliding,
+                # whatever it did in the last substep: e.g. a worm at rest that was kicked)
+                vt_old = v_old - floor_n * wp.dot(v_old, floor_n)
+                st = wp.where(wp.length(vt_old) > slip_speed, CONTACT_SLIDING, CONTACT_STUCK)
                 start = vel + floor_n * (wp.max(vn, -h0 * inv_dt) - vn)
                 if st == CONTACT_STUCK:
                     start = floor_n * wp.max(vn, -h0 * inv_dt)  # a stuck vertex starts where it is, tangentially
