@@ -15,21 +15,25 @@ energy of the worm:
 - every anchor ½ k |x − target|² (so the force plate reads k (x − target), the force it applies).
 
 ``newton`` Gauss–Newton steps (bar and crease Hessians kept positive semi-definite: the compressive geometric
-stiffness and the crease curvature terms dropped) solve it; each assembles the gradient and the 3V × 3V Hessian in a
-banded per-world scratch and factors it (:mod:`warpworm.kernels.band_cholesky`). The first step is unconstrained;
-the floor then decides who touches it (a vertex the free solution puts below the floor): those are pushed back onto
-it with position-level static / kinetic friction (eq. 8 of the paper, as :func:`warpworm.kernels.xpbd.floor_contact`),
-and in the following steps a stuck vertex is fixed and a sliding one moves only along the floor (the Newton step is
-projected there, P H P) against a kinetic friction force μ_k F_n (F_n = m · penetration / dt², the floor's push that
-the free step measured: as a force in the Newton problem, not a position correction that the inertia term of the
-next step would undo). A last contact pass catches vertices that reached the floor in the last step; then
-v = v' + (x − x̃) / dt.
+stiffness and the crease curvature terms dropped) solve it; each assembles the gradient and the 3V × 3V Hessian as
+3×3 vertex blocks in a banded per-world scratch and factors it (:mod:`warpworm.kernels.band_cholesky`).
 
-Why: the bars are ~1e6 N/m on 1e-5 kg vertices. An XPBD sweep per substep caps their stiffness near m/dt² (the
-Gauss–Seidel and Jacobi solvers of this package: "rigid" bars strain by percents), and explicit crease forces
-projected on rigid bars are only stable below ~100–200 µs and lose stability as the bellows approaches its
-snap-through. Implicit Euler with a direct solve is unconditionally stable, has the exact statics of E (no mass in
-the equilibrium, unlike a one-pass XPBD compliance) and converges at first order as dt is halved.
+Floor: a vertex on the floor (touching at the end of the last substep, or predicted below it) moves only along it
+(its rows of the Newton step are projected, P H P). Before every Newton step after the first, the floor's force at
+each contact is read from the gradient, F = ∂Φ/∂x (what holds the vertex against the rest of the implicit step): a
+contact the floor would have to pull lets go, a free vertex the last step put below the floor lands. Friction
+(eq. 8 of the paper) is a force in the Newton problem with that normal force F_n: static as a stiff viscous force
+−(mu_s F_n / ε) v_t reaching mu_s F_n at ε = ``slip_speed`` (a held worm creeps at most ~ε), kinetic as
+−mu_k F_n v_t / |v_t|; a stuck vertex breaks loose when the viscous force it needed exceeds mu_s F_n, a sliding one
+sticks when the kinetic force reverses its motion or when it starts a substep slower than ε. A last pass catches
+vertices that reached the floor in the last step; then v = v' + (x − x̃) / dt.
+
+Why: the bars are near-rigid on 1e-5 kg vertices. An XPBD sweep per substep caps their stiffness near m/dt² (the
+Gauss–Seidel and Jacobi solvers of this package: "rigid" bars strain by percents), a Gauss–Seidel crease sweep
+composed with a direct bar projection was linearly unstable, and explicit crease forces projected on rigid bars are
+only stable below ~100–200 µs and lose stability as the bellows approaches its snap-through (all measured:
+docs/dynamics.md). Implicit Euler with a direct solve is unconditionally stable, has the exact statics of E (no mass
+in the equilibrium, unlike a one-pass XPBD compliance) and converges at first order as dt is halved.
 """
 
 from __future__ import annotations
@@ -383,7 +387,7 @@ def implicit_step(
             x[world, i] = p + dt * start
             delta[world, i] = (start - vel) * dt
 
-        # 2. Newton steps: the first free, then with the floor (module docstring)
+        # 2. Newton steps, the contacts updated before each after the first (module docstring)
         bad = int(0)
         for it in range(newton):
             if it >= 1:

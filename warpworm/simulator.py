@@ -1,9 +1,10 @@
-"""Batched XPBD simulator of magnetically actuated origami worms (host orchestration of :mod:`warpworm.kernels.xpbd`).
+"""Batched simulator of magnetically actuated origami worms (host orchestration of :mod:`warpworm.kernels`).
 
 One :meth:`Simulator.step` = one magnetic-wrench evaluation (EPM pose from its path, IPM poses from their mounts,
 net force and torque on every magnet from :func:`warpworm.magnets.launch_world_wrenches`, distributed onto the
-mount vertices) followed by ``substeps`` XPBD substeps of three kernel launches each (predict, constraints,
-corrections + contact). All worlds are in every launch; nothing loops over worlds on the host.
+mount vertices) followed by ``substeps`` substeps: by default implicit Euler with Newton steps on a per-world
+banded direct solve, one launch for all substeps of all worlds (:mod:`warpworm.kernels.implicit_euler`); the first
+version's XPBD solvers are kept (Gauss–Seidel: one launch per step; Jacobi: three launches per substep). All worlds are in every launch; nothing loops over worlds on the host.
 
 The wrench is held constant over a step's substeps: it varies on the time scale of the magnets' motion (ms), not
 of the substep, and it is the most expensive kernel (see ``docs/dynamics.md`` for the profile and the dt study).
@@ -49,22 +50,25 @@ def launch_world_wrenches(model: Model, state: State, moment: wp.array) -> None:
 
 
 class Simulator:
-    """XPBD integrator for a :class:`~warpworm.model.Model` (all worlds at once, CPU or CUDA).
+    """Integrator for a :class:`~warpworm.model.Model` (all worlds at once, CPU or CUDA).
 
     Args:
         model: the batch.
         dt: step [s]: the magnetic wrench and the EPM pose are refreshed once per step.
-        substeps: XPBD substeps per step (one constraint iteration each); the substep is ``dt / substeps``.
+        substeps: substeps per step; the substep is ``dt / substeps`` (implicit: 1 ms is accurate for the gaits and
+            friction; the XPBD solvers need ~50 µs).
         magnet_every_substep: re-evaluate the magnetic wrench every substep (slower; for dt studies).
         strain_limit: a bar strained beyond this |ΔL/L0| flags its world unstable.
         speed_limit: a vertex faster than this [m/s] (or non-finite) flags its world unstable.
         use_graph: capture a step as a CUDA graph (default: on CUDA devices); ignored on CPU.
-        solver: "gauss_seidel" (default: one thread per world runs all substeps of a step, constraints projected
+        solver: "implicit" (default: implicit Euler, Newton on a per-world block-banded Cholesky, one thread per
+            world; :mod:`warpworm.kernels.implicit_euler`, docs/dynamics.md), "gauss_seidel" (XPBD: one thread per
+            world runs all substeps of a step, constraints projected
             sequentially in place; :mod:`warpworm.kernels.xpbd_gs`) or "jacobi" (every element of every world a
             thread, atomics and mass splitting, three launches per substep; :mod:`warpworm.kernels.xpbd`).
         iterations: Gauss–Seidel constraint passes per substep (multipliers accumulated); Jacobi: 1.
-        newton: implicit solver: Newton steps per substep (at least 2): the first free, the second with the
-            contacts the free step found, the others with the contacts' Coulomb test redone on the floor's force.
+        newton: implicit solver: Newton steps per substep (at least 2; contacts and friction are updated from the
+            floor's force before every step after the first).
         limit_ratio: implicit solver: stiffness of the NoFoldThrough limit spring as a multiple of k_α.
         slip_speed: implicit solver: regularisation speed ε of static friction [m/s]: below it friction is a stiff
             viscous force reaching mu_s F_n at ε, so a worm held by friction creeps at most ~ε (1e-5 m/s: < 0.02 mm
@@ -102,7 +106,7 @@ class Simulator:
             raise ValueError("the Jacobi solver does one iteration per substep (use more substeps)")
         self.newton = int(newton)
         if self.newton < 2:
-            raise ValueError(f"newton must be >= 2 (the first step is free, the floor enters the second), got {newton}")
+            raise ValueError(f"newton must be >= 2 (the contacts are updated between Newton steps), got {newton}")
         self.limit_ratio = float(limit_ratio)
         self.slip_speed = float(slip_speed)
         if not self.slip_speed > 0:
@@ -133,7 +137,7 @@ class Simulator:
     @property
     def launches_per_substep(self) -> float:
         """Kernel launches per substep: per step 5 for the magnets (EPM pose, IPM poses, wrench, zero f_ext,
-        distribution), plus 3 per substep (Jacobi) or 1 per step (Gauss–Seidel)."""
+        distribution), plus 3 per substep (Jacobi) or 1 per step (implicit, Gauss–Seidel)."""
         per_step = 5  # epm pose, ipm poses, wrench, zero f_ext, distribute
         if self.solver == "jacobi":
             return 3.0 + (per_step if self.magnet_every_substep else per_step / self.substeps)
@@ -202,7 +206,7 @@ class Simulator:
         return cmds
 
     def _gs_cmd(self, state: State, num_substeps: int):
-        """The per-world launch (block or Gauss–Seidel solver) of ``num_substeps`` substeps over all worlds, recorded
+        """The per-world launch (implicit or Gauss–Seidel solver) of ``num_substeps`` substeps over all worlds, recorded
         once per state."""
         key = (self.solver, id(state), num_substeps)
         cmd = self._cmds.get(key)
