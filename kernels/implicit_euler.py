@@ -119,11 +119,9 @@ def dof_projector(status: int, n: wp.vec3) -> wp.mat33:
 
 @wp.func
 def add_pair(world: int, mat: wp.array3d(dtype=wp.mat33), u: int, v: int, k: wp.mat33, su: int, sv: int, n: wp.vec3):
-    """Add Pu k Pv at (u, v) of the band, P from the vertices' contact status (:func:`dof_projector`)."""
-    if su == CONTACT_FREE and sv == CONTACT_FREE:
-        band_add_block(world, mat, u, v, k)  # the common case: no projection
-    else:
-        band_add_block(world, mat, u, v, dof_projector(su, n) * k * dof_projector(sv, n))
+    """Add k at (u, v) of the band (the contact projection is applied once per block afterwards, in
+    :func:`assemble`: ~270 blocks instead of ~1400 element contributions)."""
+    band_add_block(world, mat, u, v, k)
     return 0
 
 
@@ -270,6 +268,25 @@ def assemble(
             if with_hessian:
                 sp = contact[world, pv]
                 add_pair(world, hess, pv, pv, eye * ka, sp, sp, floor_n)
+    if with_hessian:
+        # the Newton step restricted to each vertex's allowed directions: block (u, v) -> P_u B P_v; the removed
+        # directions of a diagonal block get m/dt² back (keeps the matrix definite; their update is zero)
+        for u in range(nv):
+            su = contact[world, u]
+            for band in range(bw + 1):
+                vv = u - band
+                if vv >= 0:
+                    sv = contact[world, vv]
+                    if su != CONTACT_FREE or sv != CONTACT_FREE:
+                        pu = dof_projector(su, floor_n)
+                        blk = pu * hess[world, u, band] * dof_projector(sv, floor_n)
+                        if band == 0:
+                            w_inv = inv_mass[im_row, u]
+                            m_dt2 = float(1.0)
+                            if w_inv > 0.0:
+                                m_dt2 = inv_dt2 / w_inv
+                            blk = blk + (eye - pu) * m_dt2
+                        hess[world, u, band] = blk
     return 0
 
 
