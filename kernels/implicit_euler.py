@@ -52,25 +52,20 @@ CONTACT_FIXED = wp.constant(3)  # a vertex of infinite mass (never moves; report
 
 
 @wp.func
-def floor_response(p0: wp.vec3, vel: wp.vec3, status: int, n: wp.vec3, mu_s: float, mu_k: float, dt: float,
-                   kinetic: bool):
-    """Floor contact and position-level friction of one vertex at the end of a substep (eq. 8 of the paper).
+def floor_landing(p0: wp.vec3, vel: wp.vec3, n: wp.vec3, mu_s: float, mu_k: float, dt: float):
+    """Position-level floor contact and friction (eq. 8 of the paper) of a free vertex that reached the floor only in
+    the last Newton step of a substep.
 
     ``p0`` its position at the start of the substep, ``vel`` = (x − p0) / dt its velocity over the substep (kept
     apart from p0 so that a penetration of ~g dt² ≈ 2e-8 m at 50 µs is not lost in the float32 rounding of a ~0.1 m
     position), ``n`` the floor normal (floor through the origin). A penetration d is removed along n; the tangential
-    motion is cancelled if it is at most mu_s d (stick, status CONTACT_STUCK; a vertex already stuck in this substep
-    stays stuck), otherwise the vertex slides (CONTACT_SLIDING) and, with ``kinetic``, its tangential speed is
-    reduced by mu_k d / dt (f = mu_k F_n over the substep with F_n = m d / dt²). Returns (p, vel, status, d).
+    motion is cancelled if it is at most mu_s d (stuck), otherwise reduced by mu_k d / dt (sliding: f = mu_k F_n
+    over the substep with F_n = m d / dt²). Returns (p, vel, status, d), status CONTACT_FREE when it did not touch.
     """
-    h = wp.dot(p0, n) + dt * wp.dot(vel, n)
-    depth = wp.max(-h, 0.0)
-    out = status
+    depth = wp.max(-(wp.dot(p0, n) + dt * wp.dot(vel, n)), 0.0)
+    out = CONTACT_FREE
     if depth > 0.0:
         vel = vel + n * (depth / dt)
-    if status == CONTACT_STUCK:
-        vel = n * wp.dot(vel, n)
-    elif depth > 0.0:
         vn = wp.dot(vel, n)
         vt = vel - n * vn
         vt_len = wp.length(vt)
@@ -78,8 +73,7 @@ def floor_response(p0: wp.vec3, vel: wp.vec3, status: int, n: wp.vec3, mu_s: flo
             vel = n * vn  # stick: tangentially back to exactly where the substep started
             out = CONTACT_STUCK
         else:
-            if kinetic:
-                vel = vel - vt * (mu_k * depth / (dt * vt_len))
+            vel = vel - vt * (mu_k * depth / (dt * vt_len))
             out = CONTACT_SLIDING
     return p0 + vel * dt, vel, out, depth
 
@@ -115,14 +109,6 @@ def dof_projector(status: int, n: wp.vec3) -> wp.mat33:
     if status == CONTACT_SLIDING or status == CONTACT_STUCK:
         return wp.identity(n=3, dtype=float) - wp.outer(n, n)
     return wp.identity(n=3, dtype=float)
-
-
-@wp.func
-def add_pair(world: int, mat: wp.array3d(dtype=wp.mat33), u: int, v: int, k: wp.mat33, su: int, sv: int, n: wp.vec3):
-    """Add k at (u, v) of the band (the contact projection is applied once per block afterwards, in
-    :func:`assemble`: ~270 blocks instead of ~1400 element contributions)."""
-    band_add_block(world, mat, u, v, k)
-    return 0
 
 
 @wp.func
@@ -214,11 +200,9 @@ def assemble(
             nn = wp.outer(n, n)
             # the compressive geometric stiffness is dropped (keeps the matrix positive definite)
             kb = ka * nn + (ka * wp.max(0.0, 1.0 - l0 / length)) * (eye - nn)
-            sa = contact[world, a]
-            sb = contact[world, b]
-            add_pair(world, hess, a, a, kb, sa, sa, floor_n)
-            add_pair(world, hess, b, b, kb, sb, sb, floor_n)
-            add_pair(world, hess, a, b, -kb, sa, sb, floor_n)
+            band_add_block(world, hess, a, a, kb)
+            band_add_block(world, hess, b, b, kb)
+            band_add_block(world, hess, a, b, -kb)
     for h in range(hinges.shape[0]):
         i0 = hinges[h, 0]
         i1 = hinges[h, 1]
@@ -246,28 +230,23 @@ def assemble(
         grad[world, i3] = grad[world, i3] + g3 * torque
         if with_hessian:
             # Gauss–Newton: the angle's curvature term (torque ∇²φ) is dropped
-            p0 = contact[world, i0]
-            p1 = contact[world, i1]
-            p2 = contact[world, i2]
-            p3 = contact[world, i3]
-            add_pair(world, hess, i0, i0, stiff * wp.outer(g0, g0), p0, p0, floor_n)
-            add_pair(world, hess, i1, i1, stiff * wp.outer(g1, g1), p1, p1, floor_n)
-            add_pair(world, hess, i2, i2, stiff * wp.outer(g2, g2), p2, p2, floor_n)
-            add_pair(world, hess, i3, i3, stiff * wp.outer(g3, g3), p3, p3, floor_n)
-            add_pair(world, hess, i1, i0, stiff * wp.outer(g1, g0), p1, p0, floor_n)
-            add_pair(world, hess, i2, i0, stiff * wp.outer(g2, g0), p2, p0, floor_n)
-            add_pair(world, hess, i3, i0, stiff * wp.outer(g3, g0), p3, p0, floor_n)
-            add_pair(world, hess, i2, i1, stiff * wp.outer(g2, g1), p2, p1, floor_n)
-            add_pair(world, hess, i3, i1, stiff * wp.outer(g3, g1), p3, p1, floor_n)
-            add_pair(world, hess, i3, i2, stiff * wp.outer(g3, g2), p3, p2, floor_n)
+            band_add_block(world, hess, i0, i0, stiff * wp.outer(g0, g0))
+            band_add_block(world, hess, i1, i1, stiff * wp.outer(g1, g1))
+            band_add_block(world, hess, i2, i2, stiff * wp.outer(g2, g2))
+            band_add_block(world, hess, i3, i3, stiff * wp.outer(g3, g3))
+            band_add_block(world, hess, i1, i0, stiff * wp.outer(g1, g0))
+            band_add_block(world, hess, i2, i0, stiff * wp.outer(g2, g0))
+            band_add_block(world, hess, i3, i0, stiff * wp.outer(g3, g0))
+            band_add_block(world, hess, i2, i1, stiff * wp.outer(g2, g1))
+            band_add_block(world, hess, i3, i1, stiff * wp.outer(g3, g1))
+            band_add_block(world, hess, i3, i2, stiff * wp.outer(g3, g2))
     for an in range(anchor_vertex.shape[0]):
         pv = anchor_vertex[an]
         ka = anchor_stiffness[ak_row, an]
         if ka > 0.0:
             grad[world, pv] = grad[world, pv] + (x[world, pv] - anchor_target[world, an]) * ka
             if with_hessian:
-                sp = contact[world, pv]
-                add_pair(world, hess, pv, pv, eye * ka, sp, sp, floor_n)
+                band_add_block(world, hess, pv, pv, eye * ka)
     if with_hessian:
         # the Newton step restricted to each vertex's allowed directions: block (u, v) -> P_u B P_v; the removed
         # directions of a diagonal block get m/dt² back (keeps the matrix definite; their update is zero)
@@ -483,14 +462,14 @@ def implicit_step(
 
         # 3. floor once more (vertices that reached it in the last step), velocities, crease angles, stability
         for i in range(nv):
-            # v = v' + (x − x̃) / dt with x − x̃ summed at its own precision (see floor_response)
+            # v = v' + (x − x̃) / dt with x − x̃ summed at its own precision (see floor_landing)
             vel = v[world, i] + delta[world, i] * inv_dt
             delta[world, i] = wp.vec3(0.0)
             p0 = x_prev[world, i]
             st = contact[world, i]
             if st == CONTACT_FREE:
                 # a vertex that reaches the floor only in the last step: position-level contact and friction
-                p, vel, st, depth = floor_response(p0, vel, CONTACT_FREE, floor_n, mu_s, mu_k, dt, True)
+                p, vel, st, depth = floor_landing(p0, vel, floor_n, mu_s, mu_k, dt)
                 floor_force[world, i] = floor_n * (depth * inv_dt2 / inv_mass[im_row, i])
             elif st == CONTACT_STUCK or st == CONTACT_SLIDING:
                 vn = wp.dot(vel, floor_n)
