@@ -62,7 +62,7 @@ def bench_one(W: int, magnet_model: str, device: str, with_numpy: bool, min_time
     state = sim.initial_state()
     sim.step(state, 1)
     if solver in ("implicit", "gauss_seidel"):
-        cmd = sim._gs_cmd(state, SUBSTEPS)
+        cmd = sim._world_cmd(state, SUBSTEPS)
 
         def substeps():
             cmd.launch()

@@ -1,6 +1,6 @@
-"""The XPBD substeps of :mod:`warpworm.kernels.xpbd` (Jacobi, :class:`NumpySubstep`) and
-:mod:`warpworm.kernels.xpbd_gs` (Gauss–Seidel, :class:`NumpyGaussSeidel`) written in NumPy, vectorized over worlds: the benchmark's
-reference and a cross-check of the kernels (same math, float64).
+"""The substeps of :mod:`warpworm.kernels.xpbd` (Jacobi, :class:`NumpySubstep`), :mod:`warpworm.kernels.xpbd_gs`
+(Gauss–Seidel, :class:`NumpyGaussSeidel`) and :mod:`warpworm.kernels.implicit_euler` (:class:`NumpyImplicit`) written
+in NumPy, vectorized over worlds: the benchmark's reference and a cross-check of the kernels (same math, float64).
 
 One Jacobi substep = predict (gravity, external force, damping) -> one Jacobi pass over bars and hinges with mass
 splitting -> apply corrections, floor contact and friction in velocity space. Anchors and the stability check are

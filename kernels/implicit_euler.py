@@ -41,7 +41,7 @@ from __future__ import annotations
 import warp as wp
 
 from .band_cholesky import band_add_block, band_cholesky_factor, band_cholesky_solve
-from .xpbd import LABEL_MOUNTAIN, LABEL_VALLEY, PI, dihedral_angle_and_gradient, pw, wrap_angle
+from .xpbd import dihedral_angle_and_gradient, fold_range, freeze_world, pw, wrap_angle
 
 wp.set_module_options({"enable_backward": False})
 
@@ -49,6 +49,15 @@ CONTACT_FREE = wp.constant(0)
 CONTACT_SLIDING = wp.constant(1)  # on the floor, kinetic friction
 CONTACT_STUCK = wp.constant(2)  # on the floor, static friction (regularised: a stiff viscous force)
 CONTACT_FIXED = wp.constant(3)  # a vertex of infinite mass (never moves; reported as free)
+
+
+@wp.func
+def mass_over_dt2(w_inv: float, inv_dt2: float) -> float:
+    """m / dt² [N/m] of a vertex of inverse mass ``w_inv`` (1 for a vertex of infinite mass, which never moves: it
+    only keeps the Newton matrix definite)."""
+    if w_inv > 0.0:
+        return inv_dt2 / w_inv
+    return 1.0
 
 
 @wp.func
@@ -152,20 +161,17 @@ def assemble(
     grad: wp.array2d(dtype=wp.vec3),
 ):
     """Gradient ∂Φ/∂x of the substep's objective (inertia, bars, creases, anchors; with the Hessian also the floor
-    friction, :func:`friction_force`) into ``grad[world]`` and, ``with_hessian``, its Gauss–Newton Hessian projected on each vertex's allowed
-    directions into ``hess[world]``. ``crease_angle`` holds the angles at the start of the substep (damping, unwrapping).
+    friction, :func:`friction_force`) into ``grad[world]`` and, ``with_hessian``, its Gauss–Newton Hessian projected
+    on each vertex's allowed directions into ``hess[world]``. ``crease_angle`` holds the angles at the start of the
+    substep (damping, unwrapping).
     Returns 1 if a bar is strained beyond ``strain_limit`` (or non-finite), else 0."""
     nv = x.shape[1]
     bw = hess.shape[2] - 1
     eye = wp.identity(n=3, dtype=float)
     inv_dt2 = inv_dt * inv_dt
     for i in range(nv):
-        w_inv = inv_mass[im_row, i]
-        m_dt2 = float(1.0)
-        g = wp.vec3(0.0)
-        if w_inv > 0.0:
-            m_dt2 = inv_dt2 / w_inv
-            g = delta[world, i] * m_dt2
+        m_dt2 = mass_over_dt2(inv_mass[im_row, i], inv_dt2)
+        g = delta[world, i] * m_dt2  # delta is 0 for a vertex of infinite mass
         if with_hessian:
             # m/dt² on the diagonal in every direction, also the fixed ones (keeps the matrix definite; their rows
             # are decoupled by the projection and their update is zero)
@@ -214,13 +220,7 @@ def assemble(
         lh = hinge_length[hl_row, h]
         torque = lh * (k_hinge * (phi - hinge_rest[hr_row, h]) + c_hinge * inv_dt * (phi - prev))
         stiff = lh * (k_hinge + c_hinge * inv_dt)
-        label = hinge_label[h]
-        lo = -PI
-        hi = PI
-        if label == LABEL_MOUNTAIN:
-            hi = 0.0
-        if label == LABEL_VALLEY:
-            lo = 0.0
+        lo, hi = fold_range(hinge_label[h])
         if phi < lo or phi > hi:
             torque += limit_ratio * k_hinge * lh * (phi - wp.where(phi < lo, lo, hi))
             stiff += limit_ratio * k_hinge * lh
@@ -260,11 +260,7 @@ def assemble(
                         pu = dof_projector(su, floor_n)
                         blk = pu * hess[world, u, band] * dof_projector(sv, floor_n)
                         if band == 0:
-                            w_inv = inv_mass[im_row, u]
-                            m_dt2 = float(1.0)
-                            if w_inv > 0.0:
-                                m_dt2 = inv_dt2 / w_inv
-                            blk = blk + (eye - pu) * m_dt2
+                            blk = blk + (eye - pu) * mass_over_dt2(inv_mass[im_row, u], inv_dt2)
                         hess[world, u, band] = blk
     return 0
 
@@ -326,9 +322,7 @@ def implicit_step(
     if unstable[world] != 0:
         return
     nv = x.shape[1]
-    ne = edges.shape[0]
     nh = hinges.shape[0]
-    na = anchor_vertex.shape[0]
     bw = hess.shape[2] - 1
     im_row = world % inv_mass.shape[0]
     rl_row = world % rest_length.shape[0]
@@ -369,16 +363,16 @@ def implicit_step(
             if not (w_inv > 0.0):
                 st = CONTACT_FIXED
             elif vn < 0.0 and (contact[world, i] != CONTACT_FREE or h0 + dt * vn < 0.0):
-                # on the floor (still, or landing): moves along it, stuck or sliding as it was (a new contact stuck)
-                # stuck or sliding by the speed along the floor it has (a contact moving along the floor is sliding,
-                # whatever it did in the last substep: e.g. a worm at rest that was kicked)
+                # on the floor (still, or landing): stuck or sliding by the speed along the floor it has (a contact
+                # moving along the floor is sliding whatever it did in the last substep, e.g. a worm kicked at rest);
+                # a stuck vertex starts where it is tangentially, a sliding one moves on; neither goes below it
                 vt_old = v_old - floor_n * wp.dot(v_old, floor_n)
                 st = wp.where(wp.length(vt_old) > slip_speed, CONTACT_SLIDING, CONTACT_STUCK)
-                start = vel + floor_n * (wp.max(vn, -h0 * inv_dt) - vn)
-                if st == CONTACT_STUCK:
-                    start = floor_n * wp.max(vn, -h0 * inv_dt)  # a stuck vertex starts where it is, tangentially
+                start = floor_n * wp.max(vn, -h0 * inv_dt)
+                if st == CONTACT_SLIDING:
+                    start = start + (vel - floor_n * vn)
                 if contact[world, i] == CONTACT_FREE:
-                    floor_force[world, i] = floor_n * (-(h0 + dt * vn) * inv_dt2 / w_inv)
+                    floor_force[world, i] = floor_n * (-(h0 + dt * vn) * mass_over_dt2(w_inv, inv_dt2))
             contact[world, i] = st
             x[world, i] = p + dt * start
             delta[world, i] = (start - vel) * dt
@@ -413,7 +407,7 @@ def implicit_step(
                             delta[world, i] = (vel - vel0) * dt
                             # stuck: it lets go at the next update if static friction cannot hold it
                             contact[world, i] = CONTACT_STUCK
-                            floor_force[world, i] = floor_n * (depth * inv_dt2 / inv_mass[im_row, i])
+                            floor_force[world, i] = floor_n * (depth * mass_over_dt2(inv_mass[im_row, i], inv_dt2))
                         continue
                     fn = wp.dot(grad[world, i], floor_n)  # friction is tangential: not in the normal balance
                     if not (fn > 0.0):
@@ -453,11 +447,7 @@ def implicit_step(
                 x[world, i] = x[world, i] + dx
                 delta[world, i] = delta[world, i] + dx
         if bad != 0:
-            unstable[world] = 1
-            for i in range(nv):
-                x[world, i] = x_prev[world, i]
-                v[world, i] = wp.vec3(0.0)
-                delta[world, i] = wp.vec3(0.0)
+            freeze_world(world, nv, x, v, x_prev, delta, unstable)
             return
 
         # 3. floor once more (vertices that reached it in the last step), velocities, crease angles, stability
@@ -470,7 +460,7 @@ def implicit_step(
             if st == CONTACT_FREE:
                 # a vertex that reaches the floor only in the last step: position-level contact and friction
                 p, vel, st, depth = floor_landing(p0, vel, floor_n, mu_s, mu_k, dt)
-                floor_force[world, i] = floor_n * (depth * inv_dt2 / inv_mass[im_row, i])
+                floor_force[world, i] = floor_n * (depth * mass_over_dt2(inv_mass[im_row, i], inv_dt2))
             elif st == CONTACT_STUCK or st == CONTACT_SLIDING:
                 vn = wp.dot(vel, floor_n)
                 vel = vel + floor_n * (wp.max(vn, -wp.dot(p0, floor_n) * inv_dt) - vn)
@@ -492,9 +482,6 @@ def implicit_step(
             prev = crease_angle[world, h]
             crease_angle[world, h] = prev + wrap_angle(psi - prev)
         if bad != 0:
-            unstable[world] = 1
-            for i in range(nv):
-                x[world, i] = x_prev[world, i]
-                v[world, i] = wp.vec3(0.0)
+            freeze_world(world, nv, x, v, x_prev, delta, unstable)
             return
         step_count[world] = step_count[world] + 1

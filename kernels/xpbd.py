@@ -53,6 +53,31 @@ def wrap_angle(a: float) -> float:
 
 
 @wp.func
+def fold_range(label: int):
+    """NoFoldThrough range (lo, hi) [rad] of a crease's signed angle: mountain [−π, 0], valley [0, π], flat [−π, π]."""
+    lo = -PI
+    hi = PI
+    if label == LABEL_MOUNTAIN:
+        hi = 0.0
+    if label == LABEL_VALLEY:
+        lo = 0.0
+    return lo, hi
+
+
+@wp.func
+def freeze_world(world: int, num_vertices: int, x: wp.array2d(dtype=wp.vec3), v: wp.array2d(dtype=wp.vec3),
+                 x_prev: wp.array2d(dtype=wp.vec3), delta: wp.array2d(dtype=wp.vec3),
+                 unstable: wp.array(dtype=wp.int32)):
+    """Flag ``world`` unstable and put it back, finite, to the start of the substep at rest (per-world solvers)."""
+    unstable[world] = 1
+    for i in range(num_vertices):
+        x[world, i] = x_prev[world, i]
+        v[world, i] = wp.vec3(0.0)
+        delta[world, i] = wp.vec3(0.0)
+    return 0
+
+
+@wp.func
 def dihedral_angle_and_gradient(xi: wp.vec3, xj: wp.vec3, xk: wp.vec3, xl: wp.vec3):
     """Signed fold angle psi [rad] of the hinge stencil (i, j, k, l) (shared edge j-k; 0 flat, > 0 valley) and its
     exact gradient w.r.t. (x_i, x_j, x_k, x_l) [rad/m], sharing their cross products.
@@ -261,13 +286,7 @@ def solve_constraints(
         wj = inv_mass[im_row, j]
         wk = inv_mass[im_row, k]
         wl = inv_mass[im_row, l]
-        label = hinge_label[h]
-        lo = -PI
-        hi = PI
-        if label == LABEL_MOUNTAIN:
-            hi = 0.0
-        if label == LABEL_VALLEY:
-            lo = 0.0
+        lo, hi = fold_range(hinge_label[h])
         dlam = float(0.0)
         if phi < lo or phi > hi:
             # rigid NoFoldThrough limit: split over every constraint at the vertex

@@ -24,22 +24,9 @@ from __future__ import annotations
 
 import warp as wp
 
-from .xpbd import LABEL_MOUNTAIN, LABEL_VALLEY, PI, dihedral_angle_and_gradient, floor_contact, pw, wrap_angle
+from .xpbd import dihedral_angle_and_gradient, floor_contact, fold_range, freeze_world, pw, wrap_angle
 
 wp.set_module_options({"enable_backward": False})
-
-
-@wp.func
-def freeze_world(world: int, num_vertices: int, x: wp.array2d(dtype=wp.vec3), v: wp.array2d(dtype=wp.vec3),
-                 x_prev: wp.array2d(dtype=wp.vec3), delta: wp.array2d(dtype=wp.vec3),
-                 unstable: wp.array(dtype=wp.int32)):
-    """Flag ``world`` unstable and put it back, finite, to the start of the substep at rest."""
-    unstable[world] = 1
-    for i in range(num_vertices):
-        x[world, i] = x_prev[world, i]
-        v[world, i] = wp.vec3(0.0)
-        delta[world, i] = wp.vec3(0.0)
-    return 0
 
 
 @wp.kernel
@@ -178,13 +165,7 @@ def gs_step(
                 wk = inv_mass[im_row, k]
                 wl = inv_mass[im_row, l]
                 wsum = wi * wp.length_sq(gi) + wj * wp.length_sq(gj) + wk * wp.length_sq(gk) + wl * wp.length_sq(gl)
-                label = hinge_label[h]
-                lo = -PI
-                hi = PI
-                if label == LABEL_MOUNTAIN:
-                    hi = 0.0
-                if label == LABEL_VALLEY:
-                    lo = 0.0
+                lo, hi = fold_range(hinge_label[h])
                 dlam = float(0.0)
                 if phi < lo or phi > hi:
                     # rigid NoFoldThrough limit

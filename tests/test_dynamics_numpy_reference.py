@@ -59,7 +59,7 @@ def test_warp_gauss_seidel_substeps_match_numpy_reference(iterations):
     ref = NumpyGaussSeidel(model, sim.dt_sub, iterations=iterations)
     x, v, ang = ref.init(state)
     f = state.external_force.numpy().astype(np.float64)
-    sim._gs_cmd(state, 10).launch()
+    sim._world_cmd(state, 10).launch()
     for _ in range(10):
         x, v, ang = ref.substep(x, v, ang, f)
     assert not state.unstable.numpy().any()
@@ -130,14 +130,18 @@ def test_warp_implicit_substeps_match_numpy_reference():
     sim.update_magnets(state)
     ref = NumpyImplicit(model, sim.dt_sub, newton=sim.newton, limit_ratio=sim.limit_ratio)
     x, v, ang = ref.init(state)
+    x_start = x.copy()
     f = state.external_force.numpy().astype(np.float64)
-    sim._gs_cmd(state, 10).launch()
+    sim._world_cmd(state, 10).launch()
     for _ in range(10):
         x, v, ang = ref.substep(x, v, ang, f)
     assert not state.unstable.numpy().any() and not state.contact.numpy().any()
-    xw = state.positions.numpy()
-    assert np.abs(xw - x).max() < 1e-6, np.abs(xw - x).max()
-    assert np.abs(state.velocities.numpy() - v).max() < 2e-3 * np.abs(v).max(), (np.abs(state.velocities.numpy() - v).max(), np.abs(v).max())
+    # float32 against float64 through a stiff solve (bars ~2000 N/m against m/dt² ~50 N/m: condition ~1e4, times
+    # float32's 6e-8): agreement to ~1e-3 of the motion of these 10 substeps (measured 5e-4 in x, 6e-4 in v)
+    moved = np.abs(x - x_start).max()
+    assert np.abs(state.positions.numpy() - x).max() < 2e-3 * moved, (np.abs(state.positions.numpy() - x).max(), moved)
+    dv = np.abs(state.velocities.numpy() - v).max()
+    assert dv < 2e-3 * np.abs(v).max(), (dv, np.abs(v).max())
     assert np.abs(state.crease_angle.numpy() - ang).max() < 1e-4
 
 
@@ -166,10 +170,11 @@ def test_implicit_fold_through_limit_matches_numpy_and_pushes_back():
         x, v, ang = ref.init(state)
         a0 = ang[0, flip].copy()
         f = np.zeros_like(x)
-        sim._gs_cmd(state, 10).launch()
+        sim._world_cmd(state, 10).launch()
         for _ in range(10):
             x, v, ang = ref.substep(x, v, ang, f)
-        assert np.abs(state.positions.numpy() - x).max() < 1e-6, np.abs(state.positions.numpy() - x).max()
-        assert np.abs(state.crease_angle.numpy() - ang).max() < 1e-4
+        # small, slow motion (a few µm): measured 6e-9 m and 3e-6 rad apart; the limit's turn is ~1e-3 rad
+        assert np.abs(state.positions.numpy() - x).max() < 1e-7, np.abs(state.positions.numpy() - x).max()
+        assert np.abs(state.crease_angle.numpy() - ang).max() < 3e-5
         turned[ratio] = float(np.mean(state.crease_angle.numpy()[0, flip] - a0))
     assert turned[1.0] > 1e-3 and abs(turned[0.0]) < 1e-5, turned

@@ -11,7 +11,7 @@ device, SI units (m, kg, s, N, rad). Build with :meth:`Model.from_params`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 import warp as wp

@@ -4,7 +4,8 @@ One :meth:`Simulator.step` = one magnetic-wrench evaluation (EPM pose from its p
 net force and torque on every magnet from :func:`warpworm.magnets.launch_world_wrenches`, distributed onto the
 mount vertices) followed by ``substeps`` substeps: by default implicit Euler with Newton steps on a per-world
 banded direct solve, one launch for all substeps of all worlds (:mod:`warpworm.kernels.implicit_euler`); the first
-version's XPBD solvers are kept (Gauss–Seidel: one launch per step; Jacobi: three launches per substep). All worlds are in every launch; nothing loops over worlds on the host.
+version's XPBD solvers are kept (Gauss–Seidel: one launch per step; Jacobi: three launches per substep). All worlds
+are in every launch; nothing loops over worlds on the host.
 
 The wrench is held constant over a step's substeps: it varies on the time scale of the magnets' motion (ms), not
 of the substep, and it is the most expensive kernel (see ``docs/dynamics.md`` for the profile and the dt study).
@@ -102,8 +103,9 @@ class Simulator:
         self.iterations = int(iterations)
         if self.iterations < 1:
             raise ValueError("iterations must be >= 1")
-        if solver == "jacobi" and self.iterations != 1:
-            raise ValueError("the Jacobi solver does one iteration per substep (use more substeps)")
+        if solver != "gauss_seidel" and self.iterations != 1:
+            raise ValueError(f"iterations={iterations} is a Gauss–Seidel setting; the {solver} solver does not take it "
+                             "(implicit: set newton; Jacobi: use more substeps)")
         self.newton = int(newton)
         if self.newton < 2:
             raise ValueError(f"newton must be >= 2 (the contacts are updated between Newton steps), got {newton}")
@@ -205,7 +207,7 @@ class Simulator:
         self._cmds[key] = (state, cmds)
         return cmds
 
-    def _gs_cmd(self, state: State, num_substeps: int):
+    def _world_cmd(self, state: State, num_substeps: int):
         """The per-world launch (implicit or Gauss–Seidel solver) of ``num_substeps`` substeps over all worlds, recorded
         once per state."""
         key = (self.solver, id(state), num_substeps)
@@ -219,10 +221,11 @@ class Simulator:
                                   m.hinges, m.hinge_rest_angle, m.hinge_length, m.hinge_label, m.hinge_stiffness,
                                   m.hinge_damping, m.anchor_vertex, m.anchor_stiffness, m.floor_incline, m.mu_static,
                                   m.mu_kinetic, self.dt_sub, int(num_substeps), self.newton, self.limit_ratio,
-                                  self.slip_speed, self.strain_limit, self.speed_limit, state.external_force, state.anchor_target],
+                                  self.slip_speed, self.strain_limit, self.speed_limit, state.external_force,
+                                  state.anchor_target],
                           outputs=[state.positions, state.velocities, state.prev_positions, state.delta,
-                                   state.floor_force, state.newton_matrix, state.newton_rhs, state.bar_strain, state.crease_angle,
-                                   state.contact, state.unstable, state.step_count],
+                                   state.floor_force, state.newton_matrix, state.newton_rhs, state.bar_strain,
+                                   state.crease_angle, state.contact, state.unstable, state.step_count],
                           device=m.device, record_cmd=True)
             self._cmds[key] = (state, c)
             return c
@@ -242,13 +245,13 @@ class Simulator:
     def _one_step(self, state: State, moment: wp.array) -> None:
         if self.solver in ("implicit", "gauss_seidel"):
             if self.magnet_every_substep:
-                cmd = self._gs_cmd(state, 1)
+                cmd = self._world_cmd(state, 1)
                 for _ in range(self.substeps):
                     self._wrench(state, moment)
                     cmd.launch()
             else:
                 self._wrench(state, moment)
-                self._gs_cmd(state, self.substeps).launch()
+                self._world_cmd(state, self.substeps).launch()
             return
         cmds = self._substep_cmds(state)
         for s in range(self.substeps):
@@ -271,7 +274,7 @@ class Simulator:
                 if self.solver == "jacobi":
                     self._substep_cmds(state)
                 else:
-                    self._gs_cmd(state, 1 if self.magnet_every_substep else self.substeps)
+                    self._world_cmd(state, 1 if self.magnet_every_substep else self.substeps)
                 with wp.ScopedCapture(device=self.model.device) as capture:
                     self._one_step(state, moment)
                 g = (state, capture.graph)
