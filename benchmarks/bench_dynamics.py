@@ -96,7 +96,7 @@ def bench_one(W: int, magnet_model: str, device: str, with_numpy: bool, min_time
     }
     if with_numpy:
         if solver == "implicit":
-            ref = NumpyImplicit(model, sim.dt_sub, newton=sim.newton, limit_ratio=sim.limit_ratio)
+            ref = NumpyImplicit(model, sim.dt_sub, newton=sim.newton)
         elif solver == "gauss_seidel":
             ref = NumpyGaussSeidel(model, sim.dt_sub, iterations=sim.iterations)
         else:

@@ -248,16 +248,16 @@ class NumpyImplicit(NumpySubstep):
     x̃, then ``newton`` Gauss–Newton steps on ½|x − x̃|²_M/dt² + E(x) with a dense batched solve
     (``np.linalg.solve`` on (W, 3V, 3V); the kernel factors a block band), then v = v' + (x − x̃)/dt.
     E: bar springs (compressive geometric stiffness dropped), creases (spring, implicit damping, NoFoldThrough limit
-    spring ``limit_ratio`` k_α; curvature term dropped), anchors. The benchmark's reference and the kernel's
+    spring k_lim of ``model.fold_limit_stiffness``; curvature term dropped), anchors. The benchmark's reference and the kernel's
     cross-check.
 
     ``x, v, angle = ref.substep(x, v, angle, f_ext)`` as :class:`NumpySubstep`.
     """
 
-    def __init__(self, model, dt_sub: float, newton: int = 3, limit_ratio: float = 100.0):
+    def __init__(self, model, dt_sub: float, newton: int = 3):
         super().__init__(model, dt_sub, split_hinge=np.ones((1, model.num_vertices)))
         self.newton = int(newton)
-        self.limit_ratio = float(limit_ratio)
+        self.k_limit = np.broadcast_to(model.fold_limit_stiffness.numpy().astype(np.float64), (self.W,))
         self.anchor_vertex = model.anchor_vertex.numpy().astype(np.int64)
         A = len(self.anchor_vertex)
         self.anchor_k = np.broadcast_to(model.anchor_stiffness.numpy().astype(np.float64), (self.W, A))
@@ -320,8 +320,8 @@ class NumpyImplicit(NumpySubstep):
             stiff = self.hlen * (k1[:, None] + ch[:, None] / dt)
             bound = np.clip(phi, self.lo, self.hi)
             out = phi != bound
-            torque = torque + np.where(out, self.limit_ratio * k1[:, None] * self.hlen * (phi - bound), 0.0)
-            stiff = stiff + np.where(out, self.limit_ratio * k1[:, None] * self.hlen, 0.0)
+            torque = torque + np.where(out, self.k_limit[:, None] * self.hlen * (phi - bound), 0.0)
+            stiff = stiff + np.where(out, self.k_limit[:, None] * self.hlen, 0.0)
             for a in range(4):
                 np.add.at(g, (slice(None), h[:, a]), grads[:, :, a] * torque[..., None])
                 for b in range(a + 1):

@@ -11,7 +11,9 @@ energy of the worm:
 
 - every bar a spring ½ (EA / L0)(L − L0)² (stiff bars near-rigid, the valley rings soft; Cauchy strain reported);
 - every crease ½ k_α L (φ − φ0)² plus its damping as the implicit dissipation ½ (c_α L / dt)(φ − φ_n)², and the
-  NoFoldThrough limits as a one-sided spring ``limit_ratio`` × k_α beyond the bound (0 for mountain/valley creases);
+  NoFoldThrough limits as a one-sided spring k_lim L beyond the bound (0 for mountain/valley creases), with k_lim
+  (``fold_limit_stiffness``) its own material constant: a barrier that scaled with k_α would soften with the crease
+  and let a soft worm fold through;
 - every anchor ½ k |x − target|² (so the force plate reads k (x − target), the force it applies).
 
 ``newton`` Gauss–Newton steps (bar and crease Hessians kept positive semi-definite: the compressive geometric
@@ -142,8 +144,8 @@ def assemble(
     anchor_vertex: wp.array(dtype=wp.int32),
     anchor_stiffness: wp.array2d(dtype=float),
     anchor_target: wp.array2d(dtype=wp.vec3),
-    limit_ratio: float,
-    strain_limit: float,
+    k_limit: float,
+    strain_limit: wp.array(dtype=float),
     inv_dt: float,
     floor_n: wp.vec3,
     mu_s: float,
@@ -164,7 +166,7 @@ def assemble(
     friction, :func:`friction_force`) into ``grad[world]`` and, ``with_hessian``, its Gauss–Newton Hessian projected
     on each vertex's allowed directions into ``hess[world]``. ``crease_angle`` holds the angles at the start of the
     substep (damping, unwrapping).
-    Returns 1 if a bar is strained beyond ``strain_limit`` (or non-finite), else 0."""
+    Returns 1 if a bar is strained beyond its ``strain_limit`` (per bar; or non-finite), else 0."""
     nv = x.shape[1]
     bw = hess.shape[2] - 1
     eye = wp.identity(n=3, dtype=float)
@@ -195,7 +197,7 @@ def assemble(
         l0 = rest_length[rl_row, e]
         strain = (length - l0) / l0
         bar_strain[world, e] = strain
-        if not (wp.abs(strain) < strain_limit):  # also catches NaN
+        if not (wp.abs(strain) < strain_limit[e]):  # also catches NaN
             return 1
         n = d / length
         ka = bar_stiffness[ea_row, e] / l0
@@ -222,8 +224,8 @@ def assemble(
         stiff = lh * (k_hinge + c_hinge * inv_dt)
         lo, hi = fold_range(hinge_label[h])
         if phi < lo or phi > hi:
-            torque += limit_ratio * k_hinge * lh * (phi - wp.where(phi < lo, lo, hi))
-            stiff += limit_ratio * k_hinge * lh
+            torque += k_limit * lh * (phi - wp.where(phi < lo, lo, hi))
+            stiff += k_limit * lh
         grad[world, i0] = grad[world, i0] + g0 * torque
         grad[world, i1] = grad[world, i1] + g1 * torque
         grad[world, i2] = grad[world, i2] + g2 * torque
@@ -280,6 +282,7 @@ def implicit_step(
     hinge_label: wp.array(dtype=wp.int32),
     hinge_stiffness: wp.array(dtype=float),
     hinge_damping: wp.array(dtype=float),
+    fold_limit_stiffness: wp.array(dtype=float),
     anchor_vertex: wp.array(dtype=wp.int32),
     anchor_stiffness: wp.array2d(dtype=float),
     floor_incline: wp.array(dtype=float),
@@ -288,9 +291,8 @@ def implicit_step(
     dt: float,
     num_substeps: int,
     newton: int,
-    limit_ratio: float,
     slip_speed: float,
-    strain_limit: float,
+    strain_limit: wp.array(dtype=float),
     speed_limit: float,
     # Data in:
     f_ext: wp.array2d(dtype=wp.vec3),
@@ -334,6 +336,7 @@ def implicit_step(
     damp = 1.0 / (1.0 + pw(damping, world) * dt)
     k_hinge = pw(hinge_stiffness, world)
     c_hinge = pw(hinge_damping, world)
+    k_limit = pw(fold_limit_stiffness, world)
     beta = pw(floor_incline, world)
     floor_n = wp.vec3(-wp.sin(beta), 0.0, wp.cos(beta))
     mu_s = pw(mu_static, world)
@@ -387,7 +390,7 @@ def implicit_step(
                 # or fell below half the slip speed sticks; a free vertex the last step put below the floor lands
                 bad = assemble(world, im_row, rl_row, ea_row, hr_row, hl_row, ak_row, inv_mass, edges, rest_length,
                                bar_stiffness, hinges, hinge_rest, hinge_length, hinge_label, k_hinge, c_hinge,
-                               anchor_vertex, anchor_stiffness, anchor_target, limit_ratio, strain_limit, inv_dt,
+                               anchor_vertex, anchor_stiffness, anchor_target, k_limit, strain_limit, inv_dt,
                                floor_n, mu_s, mu_k, slip_speed, False, x, v, delta, crease_angle, contact,
                                floor_force, bar_strain, hess, grad)
                 if bad != 0:
@@ -428,7 +431,7 @@ def implicit_step(
                     floor_force[world, i] = floor_n * fn + f
             bad = assemble(world, im_row, rl_row, ea_row, hr_row, hl_row, ak_row, inv_mass, edges, rest_length,
                            bar_stiffness, hinges, hinge_rest, hinge_length, hinge_label, k_hinge, c_hinge,
-                           anchor_vertex, anchor_stiffness, anchor_target, limit_ratio, strain_limit, inv_dt, floor_n,
+                           anchor_vertex, anchor_stiffness, anchor_target, k_limit, strain_limit, inv_dt, floor_n,
                            mu_s, mu_k, slip_speed, True, x, v, delta, crease_angle, contact, floor_force, bar_strain,
                            hess, grad)
             if bad != 0:

@@ -411,7 +411,7 @@ def epm_sine_pose(
     start_y: wp.array(dtype=float),
     wavelength: wp.array(dtype=float),
     amplitude: wp.array(dtype=float),
-    closest: wp.array(dtype=float),
+    depth: wp.array(dtype=float),
     theta: wp.array(dtype=float),
     period: wp.array(dtype=float),
     direction: wp.array(dtype=float),
@@ -425,15 +425,16 @@ def epm_sine_pose(
 ):
     """Kinematic EPM on the paper's sinusoidal path (§IV-C). Launch dim (W,).
 
-    s = t / period + phase (cycles); x = x0 + direction * w * s; z = h + a (1 + cos 2 pi s) / 2, so the EPM starts
-    high (h + a), reaches its closest approach h (height of its centre) at half a cycle, and advances w per cycle.
+    s = t / period + phase (cycles); x = x0 + direction * w * s; z = -(depth + a (1 + cos 2 pi s) / 2): the EPM
+    moves beneath the floor, starts far (a below its closest approach), comes closest (its centre ``depth`` below
+    z = 0, i.e. its top face h below the origami base) at half a cycle, and advances w per cycle.
     Orientation: the EPM's own +z (its magnetization) at angle theta from +x toward +z in the x-z plane.
     """
     world = wp.tid()
     t = float(step_count[world]) * dt_sub
     s = t / pw(period, world) + pw(phase, world)
     px = pw(start_x, world) + pw(direction, world) * pw(wavelength, world) * s
-    pz = pw(closest, world) + pw(amplitude, world) * 0.5 * (1.0 + wp.cos(TWO_PI * s))
+    pz = -(pw(depth, world) + pw(amplitude, world) * 0.5 * (1.0 + wp.cos(TWO_PI * s)))
     magnet_pos[world, 0] = wp.vec3(px, pw(start_y, world), pz)
     # rotation about +y by (pi/2 - theta) takes +z to (cos theta, 0, sin theta)
     magnet_rot[world, 0] = wp.quat_from_axis_angle(wp.vec3(0.0, 1.0, 0.0), 0.5 * PI - pw(theta, world))

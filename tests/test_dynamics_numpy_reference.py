@@ -128,7 +128,7 @@ def test_warp_implicit_substeps_match_numpy_reference():
     sim.set_anchor_targets(state, lifted[:, [4]])
     sim.step(state, 3)  # get it moving: falling, magnets, creases
     sim.update_magnets(state)
-    ref = NumpyImplicit(model, sim.dt_sub, newton=sim.newton, limit_ratio=sim.limit_ratio)
+    ref = NumpyImplicit(model, sim.dt_sub, newton=sim.newton)
     x, v, ang = ref.init(state)
     x_start = x.copy()
     f = state.external_force.numpy().astype(np.float64)
@@ -146,26 +146,27 @@ def test_warp_implicit_substeps_match_numpy_reference():
 
 
 def test_implicit_fold_through_limit_matches_numpy_and_pushes_back():
-    """The NoFoldThrough limit (a one-sided spring of limit_ratio × k_α beyond the bound): relabel three mountain
-    creases as valleys, so that their angle (≈ −67°, at rest) lies outside the valley range [0, π]; the kernel and
-    the NumPy reference then agree over 10 substeps, and the limit turns those creases toward 0 while without it
-    (limit_ratio = 0) they stay at rest. (limit_ratio 1 here: the default 100 makes the relabelled creases snap,
+    """The NoFoldThrough limit (a one-sided spring k_lim L beyond the bound, k_lim = fold_limit_stiffness): relabel
+    three mountain creases as valleys, so that their angle (≈ −67°, at rest) lies outside the valley range [0, π];
+    the kernel and the NumPy reference then agree over 10 substeps, and the limit turns those creases toward 0 while
+    without it (k_lim = 0) they stay at rest. (k_lim 0.3 N/rad here: the default makes the relabelled creases snap,
     a violent motion where two float precisions part ways.)"""
     from numpy_substep import NumpyImplicit
 
-    p = gaits.preset_params("peristaltic", gravity=0.0, epm_moment=0.0, ipm_moment=np.zeros(3))
     turned = {}
-    for ratio in (1.0, 0.0):
+    for ratio in (0.3, 0.0):
+        p = gaits.preset_params("peristaltic", gravity=0.0, epm_moment=0.0, ipm_moment=np.zeros(3),
+                                hinge_stiffness=0.3, fold_limit_stiffness=ratio)
         model = Model.from_params(p, 1, "cpu")
         labels = model.hinge_label.numpy()
         flip = np.flatnonzero(labels == crease.MOUNTAIN)[:3]
         labels[flip] = crease.VALLEY
         model.hinge_label.assign(labels)
-        sim = Simulator(model, dt=1e-3, substeps=1, solver="implicit", limit_ratio=ratio)
+        sim = Simulator(model, dt=1e-3, substeps=1, solver="implicit")
         state = sim.initial_state()
         lifted = state.positions.numpy() + np.array([0.0, 0.0, 0.03], np.float32)  # no floor contact
         state.positions.assign(lifted)
-        ref = NumpyImplicit(model, sim.dt_sub, newton=sim.newton, limit_ratio=ratio)
+        ref = NumpyImplicit(model, sim.dt_sub, newton=sim.newton)
         ref.lo[flip], ref.hi[flip] = 0.0, np.pi
         x, v, ang = ref.init(state)
         a0 = ang[0, flip].copy()
@@ -177,4 +178,4 @@ def test_implicit_fold_through_limit_matches_numpy_and_pushes_back():
         assert np.abs(state.positions.numpy() - x).max() < 1e-7, np.abs(state.positions.numpy() - x).max()
         assert np.abs(state.crease_angle.numpy() - ang).max() < 3e-5
         turned[ratio] = float(np.mean(state.crease_angle.numpy()[0, flip] - a0))
-    assert turned[1.0] > 1e-3 and abs(turned[0.0]) < 1e-5, turned
+    assert turned[0.3] > 1e-3 and abs(turned[0.0]) < 1e-5, turned

@@ -1,34 +1,39 @@
 """EPM paths: the paper's sinusoidal path (§IV-C), keyframed paths, and the gait presets (§III-A–C).
 
-The EPM is kinematic: its pose is a function of time evaluated on the device each step
-(:func:`warpworm.kernels.xpbd.epm_sine_pose` / ``epm_keyframe_pose``).
+The worm walks on the top face of a support plate (the floor, z = 0, ``WormParams.support_thickness`` thick); the EPM
+moves **beneath** it (§III-B: the EPM's repulsion "pushes the middle of the origami upward"; §IV-C: h is the "closest
+approach from the origami base"). The EPM is kinematic: its pose is a function of time evaluated on the device each
+step (:func:`warpworm.kernels.xpbd.epm_sine_pose` / ``epm_keyframe_pose``).
 
 Sinusoidal path (per world; s = t / period + phase, in cycles)::
 
-    x(t) = x0 + direction · w · s                  advances one wavelength w per cycle
-    z(t) = h + a · (1 + cos 2πs) / 2               starts high (h + a), closest approach h at s = 1/2
-    moment direction = (cos θ, 0, sin θ)           θ from +x toward +z, in the x–z plane
+    x(t) = x0 + direction · w · s                        advances one wavelength w per cycle
+    gap(t) = h + a · (1 + cos 2πs) / 2                   far (h + a) at s = 0, closest approach h at s = 1/2
+    z(t) = −(gap(t) + e(θ))                              the EPM's top face ``gap`` below the origami base z = 0
+    moment direction = (cos θ, 0, sin θ)                 θ from +x toward +z (up), in the x–z plane
 
-``h`` is the height of the EPM's *centre* above the floor (``WormParams.closest_approach``); ``a`` the vertical
-swing above it. x0 is chosen so that the first closest approach (s = 1/2) happens at the gait's placement point.
+``h`` (``WormParams.closest_approach``) is the gap from the origami base to the EPM's nearest (top) face, at least
+the plate's thickness; e(θ) = ½ (L_z |sin θ| + L_x |cos θ|) is the half-height of the tilted EPM cuboid (L_z along its
+moment). x0 puts the first closest approach (s = 1/2) at the gait's placement point.
 
-Gait presets (IPM moments: tail −x, centre +x, head −x; forward = +x):
+Gait presets (IPM moments: tail −x, centre +x, head −x: the anterior IPMs face each other with their north poles,
+the posterior ones with their south poles; forward = +x):
 
-=============  ======================================  =====================================  ==================
-gait           forward: EPM orientation                placement                              backward
-=============  ======================================  =====================================  ==================
-peristaltic    vertical, south pole down (θ = +π/2)    between centre and head IPMs, nearer   north pole down
-                                                       the centre                             (θ = −π/2), between
-                                                                                              centre and tail
-omega          flat, north pole forward (θ = 0)        over the centre IPM                    north pole backward
-                                                                                              (θ = π)
-inchworm       north pole down (θ = −π/2)              between centre and head, nearer the    south pole down
-                                                       centre                                 (θ = +π/2), between
-                                                                                              centre and tail
-=============  ======================================  =====================================  ==================
+=============  ===========================================  ====================================  =====================
+gait           forward: EPM orientation (θ)                 placement (first closest approach)    backward (θ)
+=============  ===========================================  ====================================  =====================
+peristaltic    south pole up (θ = −π/2): attracts the two   between centre and head IPMs, nearer  north pole up
+               anterior north poles, the anterior half      the centre                            (θ = +π/2), between
+               contracts                                                                          centre and tail
+omega          flat, north pole forward (θ = 0): centre     under the centre IPM                  north pole backward
+               repelled up, ends pulled in                                                        (θ = π)
+inchworm       north pole up (θ = +π/2): anterior half an   between centre and head, nearer the   south pole up
+               inverted U                                   centre                                (θ = −π/2), between
+                                                                                                  centre and tail
+=============  ===========================================  ====================================  =====================
 
-:func:`preset_params` returns :class:`~warpworm.params.WormParams` with a gait's tuned path (w, a, h, period) and
-crease parameters; the tuning (a small grid search, as the paper did) is documented in ``docs/dynamics.md``.
+:func:`preset_params` returns :class:`~warpworm.params.WormParams` with a gait's tuned path (w, a, h, period); the
+tuning (``warpworm search-gait``, a batched grid search as the paper's Table I) is documented in ``docs/dynamics.md``.
 """
 
 from __future__ import annotations
@@ -45,15 +50,15 @@ DEFAULT_SUBSTEPS = 4
 """Implicit substeps per step in the gait runs (1 ms): the implicit solver's friction matches Coulomb's law to 0.1 %
 from 50 µs to 1 ms and the six presets give the same displacements at 250 µs (docs/dynamics.md)."""
 
-SINE_FIELDS = ("start_x", "start_y", "wavelength", "amplitude", "closest", "theta", "period", "direction", "phase")
+SINE_FIELDS = ("start_x", "start_y", "wavelength", "amplitude", "depth", "theta", "period", "direction", "phase")
 """Order of the sinusoidal path's per-world arrays as the kernel takes them."""
 
 # theta (forward, backward) and where the first closest approach is, as a fraction of the way from the centre IPM
 # toward the head IPM (forward) or toward the tail IPM (backward); 0 = over the centre IPM.
 GAIT_ORIENTATION = {
-    "peristaltic": (0.5 * np.pi, -0.5 * np.pi),
-    "omega": (np.pi, np.pi),
-    "inchworm": (-0.5 * np.pi, 0.5 * np.pi),
+    "peristaltic": (-0.5 * np.pi, 0.5 * np.pi),
+    "omega": (0.0, np.pi),
+    "inchworm": (0.5 * np.pi, -0.5 * np.pi),
 }
 GAIT_PLACEMENT = {"peristaltic": 0.4, "omega": 0.0, "inchworm": 0.2}
 
@@ -70,7 +75,8 @@ class EpmPath:
     """A kinematic EPM path for W worlds.
 
     ``kind == "sine"``: the fields of :data:`SINE_FIELDS`, each shape (1,) or (W,) [m, rad, s; direction ±1;
-    phase in cycles]. ``kind == "keyframes"``: ``key_time (K,)`` [s] ascending, ``key_pos (K, 3)`` or (W, K, 3) [m],
+    phase in cycles]; ``depth`` is how far below the origami base (z = 0) the EPM's *centre* is at closest approach
+    (h + the half-height e(θ) of the tilted cuboid). ``kind == "keyframes"``: ``key_time (K,)`` [s] ascending, ``key_pos (K, 3)`` or (W, K, 3) [m],
     ``key_rot (K, 3, 3)`` or (W, K, 3, 3) (magnet -> world); linear / slerp between keys, held outside.
     """
 
@@ -79,7 +85,7 @@ class EpmPath:
     start_y: np.ndarray = field(default_factory=lambda: np.zeros(1))
     wavelength: np.ndarray = field(default_factory=lambda: np.full(1, 0.02))
     amplitude: np.ndarray = field(default_factory=lambda: np.full(1, 0.03))
-    closest: np.ndarray = field(default_factory=lambda: np.full(1, 0.05))
+    depth: np.ndarray = field(default_factory=lambda: np.full(1, 0.04))
     theta: np.ndarray = field(default_factory=lambda: np.zeros(1))
     period: np.ndarray = field(default_factory=lambda: np.ones(1))
     direction: np.ndarray = field(default_factory=lambda: np.ones(1))
@@ -93,7 +99,7 @@ class EpmPath:
         f = {k: np.atleast_1d(np.asarray(getattr(self, k), np.float64)) for k in SINE_FIELDS}
         s = np.asarray(t, np.float64) / f["period"] + f["phase"]
         x = f["start_x"] + f["direction"] * f["wavelength"] * s
-        z = f["closest"] + f["amplitude"] * 0.5 * (1.0 + np.cos(2 * np.pi * s))
+        z = -(f["depth"] + f["amplitude"] * 0.5 * (1.0 + np.cos(2 * np.pi * s)))
         x, y, z = np.broadcast_arrays(x, f["start_y"], z)
         phi = 0.5 * np.pi - f["theta"]
         c, sn = np.cos(phi), np.sin(phi)
@@ -110,6 +116,14 @@ def keyframe_path(times, positions, rotations) -> EpmPath:
         raise ValueError("keyframe_path: need at least one key and ascending times")
     return EpmPath(kind="keyframes", key_time=t, key_pos=np.asarray(positions, np.float64),
                    key_rot=np.asarray(rotations, np.float64))
+
+
+def epm_half_height(epm_size: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    """Half the vertical extent e(θ) [m] of the EPM cuboid (extents ``epm_size (W, 3)`` [m] in its own frame, moment
+    along its own +z) when its moment is tilted to θ in the x–z plane, shape (W,): its own z axis is
+    (cos θ, 0, sin θ) and its own x axis (sin θ, 0, −cos θ), so e = ½ (L_z |sin θ| + L_x |cos θ|)."""
+    size = np.asarray(epm_size, np.float64)
+    return 0.5 * (size[..., 2] * np.abs(np.sin(theta)) + size[..., 0] * np.abs(np.cos(theta)))
 
 
 def gait_theta(gait: str, backward: bool) -> float:
@@ -131,6 +145,13 @@ def sine_path(params: WormParams, ipm_x: np.ndarray, num_worlds: int) -> EpmPath
     ipm_x = np.broadcast_to(np.asarray(ipm_x, np.float64), (W, 3))
     theta = per_world(params.orientation, W)
     theta = np.where(np.isnan(theta), gait_theta(params.gait, params.backward), theta)
+    h = per_world(params.closest_approach, W)
+    plate = per_world(params.support_thickness, W)
+    if np.any(~(h >= plate)):
+        bad = float(np.asarray(h)[~(h >= plate)][0])
+        raise ValueError(f"worm.closest_approach: {bad} m puts the EPM inside the support plate; expected >= "
+                         f"worm.support_thickness ({float(np.max(plate))} m): h is the gap from the origami base "
+                         "(z = 0) to the EPM's top face, and the EPM moves beneath the plate")
     frac = GAIT_PLACEMENT[params.gait]
     end = ipm_x[:, 0] if params.backward else ipm_x[:, 2]
     place = ipm_x[:, 1] + frac * (end - ipm_x[:, 1])
@@ -142,7 +163,7 @@ def sine_path(params: WormParams, ipm_x: np.ndarray, num_worlds: int) -> EpmPath
         start_y=np.zeros(W),
         wavelength=w,
         amplitude=per_world(params.amplitude, W),
-        closest=per_world(params.closest_approach, W),
+        depth=h + epm_half_height(per_world(params.epm_size, W, (3,)), theta),
         theta=theta,
         period=per_world(params.cycle_period, W),
         direction=np.full(W, direction),

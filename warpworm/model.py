@@ -255,6 +255,8 @@ class Model:
         """Crease stiffness k_alpha per metre of crease [N·m/rad/m], shape (R,)."""
         self.hinge_damping = sp("hinge_damping")
         """Crease damping per metre of crease [N·m·s/rad/m], shape (R,)."""
+        self.fold_limit_stiffness = sp("fold_limit_stiffness")
+        """NoFoldThrough barrier stiffness per metre of crease [N·m/rad/m], shape (R,): independent of k_alpha."""
         self.damping = sp("damping")
         """Linear velocity damping rate [1/s], shape (R,)."""
         self.mu_static = sp("mu_static")

@@ -41,19 +41,24 @@ class WormParams:
     # --- sheet and creases ---
     sheet_density: float | np.ndarray = 0.15
     """Areal density of the sheet [kg/m²] (mineral paper ≈ 0.15), shape () or (W,)."""
-    hinge_stiffness: float | np.ndarray = 0.3
-    """Crease stiffness k_α per metre of crease [N·m/rad/m = N/rad], shape () or (W,). 0.3 is calibrated so the
-    three gait presets move (docs/dynamics.md); the paper's 11.55 is Kangaroo's unitless strength."""
+    hinge_stiffness: float | np.ndarray = 0.005
+    """Crease stiffness k_α per metre of crease [N·m/rad/m = N/rad], shape () or (W,): the default material,
+    mineral paper (warpworm.materials; the paper's 11.55 is Kangaroo's unitless strength and does not convert)."""
     bar_stiffness: float | np.ndarray = 20.0
     """Axial rigidity EA of every bar but the valley rings [N] (force per unit Cauchy strain), shape () or (W,).
     Near-rigid: strains of ~1e-3 under the magnets' ~0.02 N. Not stiffer by default: the implicit solver reads the
     floor's normal forces off the bar forces, and a float32 position (~4e-9 m rounding at 0.05 m) gives a bar of
     EA / L0 ~ 1e6 N/m (EA = 1e4) a force noise of ~4 mN, more than a vertex's share of the worm's weight (~1 mN);
     at 20 N it is ~8 µN (docs/dynamics.md)."""
-    valley_bar_stiffness: float | np.ndarray = 2.0
-    """Axial rigidity EA of the VALLEY-ring bars at the unit middles [N], shape () or (W,). The tube is isostatic
-    (docs/crease.md): these bars stand for the panel bending near the mid creases that lets the paper bellows fold,
-    so they must be far softer than ``bar_stiffness`` for the worm to shorten under the magnets."""
+    valley_bar_stiffness: float | np.ndarray = 0.3
+    """Axial rigidity EA_w of the VALLEY-ring (waist) bars at the unit middles [N], shape () or (W,): the sheet's
+    in-plane compliance. The tube is isostatic (docs/crease.md): these bars stand for the panel bending near the
+    waists that lets the paper bellows fold, so they must be far softer than ``bar_stiffness`` for the worm to
+    shorten under the magnets (default: mineral paper, warpworm.materials)."""
+    fold_limit_stiffness: float | np.ndarray = 2.0
+    """NoFoldThrough barrier k_lim per metre of crease [N·m/rad/m = N/rad], shape () or (W,): a crease past its range
+    (mountain [−π, 0], valley [0, π]) feels k_lim L (φ − bound). A material constant of its own, not a multiple of
+    k_α, so softening the crease does not soften the barrier (MERLIN stiffens the hinge outside its range likewise)."""
     damping: float | np.ndarray = 2.0
     """Linear velocity damping rate [1/s], shape () or (W,)."""
     hinge_damping: float | np.ndarray = 0.0
@@ -67,6 +72,9 @@ class WormParams:
     """Kinetic friction coefficient, <= mu_static, shape () or (W,)."""
     floor_incline: float | np.ndarray = 0.0
     """Floor slope about world +y [rad]; positive raises the floor toward +x (the worm climbs going forward)."""
+    support_thickness: float | np.ndarray = 0.003
+    """Thickness of the support plate the worm walks on [m] (its top face is the floor, z = 0; the EPM moves
+    beneath it, so the closest approach h is at least this), shape () or (W,)."""
     gravity: float | np.ndarray = 9.81
     """Gravitational acceleration magnitude [m/s²], along −z, shape () or (W,)."""
 
@@ -98,11 +106,13 @@ class WormParams:
     wavelength: float | np.ndarray = 0.02
     """EPM path wavelength w [m]: distance the EPM advances per cycle, shape () or (W,)."""
     amplitude: float | np.ndarray = 0.03
-    """EPM path amplitude a [m]: vertical swing above the closest approach, shape () or (W,)."""
-    closest_approach: float | np.ndarray = 0.03
-    """EPM closest approach h [m]: lowest height of the EPM's centre above the floor, shape () or (W,)."""
+    """EPM path amplitude a [m]: vertical swing of the EPM away from (below) its closest approach, shape () or (W,)."""
+    closest_approach: float | np.ndarray = 0.015
+    """EPM closest approach h [m]: the smallest gap between the origami base (the floor, z = 0) and the nearest face
+    of the EPM, which moves beneath the support plate (>= ``support_thickness``), shape () or (W,)."""
     orientation: float | np.ndarray = float("nan")
-    """EPM moment angle θ in the x–z plane from +x toward +z [rad]; NaN takes the gait preset's value."""
+    """EPM moment angle θ in the x–z plane from +x toward +z (up) [rad]: −π/2 south pole up, 0 north pole forward,
+    +π/2 north pole up; NaN takes the gait preset's value (warpworm.gaits.GAIT_ORIENTATION)."""
     cycle_period: float | np.ndarray = 1.0
     """Duration of one EPM cycle [s], shape () or (W,)."""
 

@@ -59,7 +59,8 @@ class Simulator:
         substeps: substeps per step; the substep is ``dt / substeps`` (implicit: 1 ms is accurate for the gaits and
             friction; the XPBD solvers need ~50 µs).
         magnet_every_substep: re-evaluate the magnetic wrench every substep (slower; for dt studies).
-        strain_limit: a bar strained beyond this |ΔL/L0| flags its world unstable.
+        strain_limit: a bar strained beyond this |ΔL/L0| flags its world unstable (the soft VALLEY waist bars, which
+            stand for panel bending, at ``max(strain_limit, 0.9)``: only a waist that collapses or triples fails).
         speed_limit: a vertex faster than this [m/s] (or non-finite) flags its world unstable.
         use_graph: capture a step as a CUDA graph (default: on CUDA devices); ignored on CPU.
         solver: "implicit" (default: implicit Euler, Newton on a per-world block-banded Cholesky, one thread per
@@ -70,7 +71,6 @@ class Simulator:
         iterations: Gauss–Seidel constraint passes per substep (multipliers accumulated); Jacobi: 1.
         newton: implicit solver: Newton steps per substep (at least 2; contacts and friction are updated from the
             floor's force before every step after the first).
-        limit_ratio: implicit solver: stiffness of the NoFoldThrough limit spring as a multiple of k_α.
         slip_speed: implicit solver: regularisation speed ε of static friction [m/s]: below it friction is a stiff
             viscous force reaching mu_s F_n at ε, so a worm held by friction creeps at most ~ε (1e-5 m/s: < 0.02 mm
             in 2 s).
@@ -89,7 +89,6 @@ class Simulator:
         solver: str = "implicit",
         iterations: int = 1,
         newton: int = 3,
-        limit_ratio: float = 100.0,
         slip_speed: float = 1.0e-5,
     ):
         from .kernels import implicit_euler, xpbd, xpbd_gs
@@ -109,7 +108,6 @@ class Simulator:
         self.newton = int(newton)
         if self.newton < 2:
             raise ValueError(f"newton must be >= 2 (the contacts are updated between Newton steps), got {newton}")
-        self.limit_ratio = float(limit_ratio)
         self.slip_speed = float(slip_speed)
         if not self.slip_speed > 0:
             raise ValueError(f"slip_speed must be > 0 [m/s], got {slip_speed}")
@@ -121,6 +119,12 @@ class Simulator:
         self.dt_sub = self.dt / self.substeps
         self.magnet_every_substep = bool(magnet_every_substep)
         self.strain_limit = float(strain_limit)
+        from . import crease
+
+        waist = model.pattern.edge_label == crease.VALLEY
+        self.bar_strain_limit = wp.array(np.where(waist, max(self.strain_limit, 0.9), self.strain_limit)
+                                         .astype(np.float32), dtype=float, device=model.device)
+        """Strain beyond which a bar flags its world unstable, shape (E,), float."""
         self.speed_limit = float(speed_limit)
         self.split_hinge = wp.array(model.hinge_split(self.dt_sub).astype(np.float32), dtype=float,
                                     device=model.device)
@@ -219,9 +223,10 @@ class Simulator:
             c = wp.launch(self._ki.implicit_step, dim=m.num_worlds,
                           inputs=[m.inv_mass, m.gravity, m.damping, m.edges, m.rest_length, m.bar_stiffness,
                                   m.hinges, m.hinge_rest_angle, m.hinge_length, m.hinge_label, m.hinge_stiffness,
-                                  m.hinge_damping, m.anchor_vertex, m.anchor_stiffness, m.floor_incline, m.mu_static,
-                                  m.mu_kinetic, self.dt_sub, int(num_substeps), self.newton, self.limit_ratio,
-                                  self.slip_speed, self.strain_limit, self.speed_limit, state.external_force,
+                                  m.hinge_damping, m.fold_limit_stiffness, m.anchor_vertex, m.anchor_stiffness,
+                                  m.floor_incline, m.mu_static, m.mu_kinetic, self.dt_sub, int(num_substeps),
+                                  self.newton,
+                                  self.slip_speed, self.bar_strain_limit, self.speed_limit, state.external_force,
                                   state.anchor_target],
                           outputs=[state.positions, state.velocities, state.prev_positions, state.delta,
                                    state.floor_force, state.newton_matrix, state.newton_rhs, state.bar_strain,
