@@ -76,6 +76,7 @@ def test_gait_experiments_run_and_report():
     assert st["max_abs"].shape == (W, rec["model"].num_edges) and np.all(np.isfinite(st["max_abs"]))
     fp = ex.force_plate(duration=0.04, settle=0.02)
     assert fp["force"].shape[1:] == (W, 3) and np.all(np.isfinite(fp["force"]))
+    assert len(fp["summary"]["rise_time_10_90_ms"]) == W and len(fp["summary"]["fall_time_90_10_trough_ms"]) == W
     json.dumps(ex.to_jsonable(d)), json.dumps(ex.to_jsonable(fp))
 
 
@@ -88,3 +89,40 @@ def test_cli_writes_png_and_json(tmp_path, capsys):
     data = json.loads((tmp_path / "force-distance.json").read_text())
     assert data["summary"]["analytic_max_rel_err_vs_table"] < 1e-4
     assert "force-distance" in capsys.readouterr().out
+
+
+def _raised_cosine_pulses(t, period, rise, fall, start, peaks, base=0.0):
+    """A pulse per cycle: raised-cosine rise over ``rise`` [s] from ``start`` into the cycle, raised-cosine fall over
+    ``fall``; 10 %→90 % of a raised-cosine edge of length D takes D (acos(−0.8) − acos(0.8)) / π (analytic)."""
+    y = np.full_like(t, base)
+    for c, p in enumerate(peaks):
+        s = t - c * period - start
+        up, dn = (s >= 0) & (s < rise), (s >= rise) & (s < rise + fall)
+        y[up] = base + (p - base) * (1 - np.cos(np.pi * s[up] / rise)) / 2
+        y[dn] = base + (p - base) * (1 + np.cos(np.pi * (s[dn] - rise) / fall)) / 2
+    return y
+
+
+def test_rise_fall_times_of_an_analytic_pulse_train():
+    T, dt = 1.0, 1.0e-3
+    t = np.arange(0.0, 4 * T + 0.5 * dt, dt)
+    edge = lambda D: D * (np.arccos(-0.8) - np.arccos(0.8)) / np.pi  # noqa: E731
+    # a steep rise and a smooth fall (the paper's inchworm), peaks varying per cycle; the first cycle is a different
+    # shape (a start-up transient) and must not enter the means
+    y = _raised_cosine_pulses(t, T, 0.1, 0.4, 0.3, [1.0, 1.2, 1.4, 1.6])
+    y[t < T] = _raised_cosine_pulses(t[t < T], T, 0.3, 0.3, 0.1, [2.0])
+    r = ex.rise_fall_times(t, y, T)
+    assert len(r["rise"]) == 4
+    np.testing.assert_allclose(r["rise"][1:], edge(0.1), rtol=5e-3)
+    np.testing.assert_allclose(r["fall"][1:], edge(0.4), rtol=5e-3)
+    np.testing.assert_allclose(r["rise"][0], edge(0.3), rtol=5e-3)
+    assert abs(r["rise_mean"] / edge(0.1) - 1) < 5e-3 and abs(r["fall_mean"] / edge(0.4) - 1) < 5e-3
+    # the reverse (omega in the paper) on a negative offset: levels from the fixed baseline, or from each edge's
+    # trough, give the same times; a zero baseline under a pulse that never rises above 0 gives NaN
+    y2 = _raised_cosine_pulses(t, T, 0.35, 0.05, 0.2, [0.5, 0.5, 0.5, 0.5], base=-0.3)
+    for bl in (-0.3, "trough"):
+        r2 = ex.rise_fall_times(t, y2, T, baseline=bl)
+        assert abs(r2["rise_mean"] / edge(0.35) - 1) < 5e-3 and abs(r2["fall_mean"] / edge(0.05) - 1) < 1e-2, bl
+    assert np.isnan(ex.rise_fall_times(t, y2 - 1.0, T)["rise_mean"])
+    # fewer than two whole cycles: no mean
+    assert np.isnan(ex.rise_fall_times(t[t <= 1.5], y[t <= 1.5], T)["rise_mean"])

@@ -44,6 +44,9 @@ CUBE_TABLE = {
 """Closed-form attraction [N] of two coaxial 10 mm cubes, 0.9 A·m² each, unlike poles facing, by face gap [mm]
 (shared/DESIGN-NOTES.md; closed form and magpylib agree to 3e-7)."""
 
+DEFAULT_HINGE_SWEEP = (0.0025, 0.005, 0.01, 0.02, 0.04)
+"""Default k_α sweep [N/rad] of compression / flexure: around the default material's 0.005 (warpworm.materials)."""
+
 NO_MAGNETS = dict(ipm_moment=np.zeros(3), epm_moment=0.0)
 """Overrides that switch every magnet off (mechanical tests: compression, flexure, slope)."""
 
@@ -286,6 +289,16 @@ def _quasi_static(model, params, anchors_moving, direction, displacements, *, li
             "final_positions": snaps["positions"]}
 
 
+def _steps(max_displacement, increments, displacements) -> np.ndarray:
+    """Prescribed displacement steps (K,) [m]: ``displacements`` if given (ascending, > 0), else uniform."""
+    if displacements is None:
+        return np.linspace(0.0, max_displacement, increments + 1)[1:]
+    d = np.asarray(displacements, np.float64).reshape(-1)
+    if d.size == 0 or not np.all(np.isfinite(d)) or np.any(d <= 0) or np.any(np.diff(d) <= 0):
+        raise ValueError(f"displacements: expected ascending finite values > 0 [m], got {d.tolist()}")
+    return d
+
+
 def _stiffness_sweep(hinge_stiffness, base: WormParams | None, overrides: dict):
     """Quasi-static rigs: one world per k_α (W,), magnets off, damping raised so each hold ends near equilibrium.
     Returns (k_α (W,), W, WormParams)."""
@@ -296,8 +309,8 @@ def _stiffness_sweep(hinge_stiffness, base: WormParams | None, overrides: dict):
     return ks, len(ks), replace(base or WormParams(), hinge_stiffness=ks, **kw)
 
 
-def compression(hinge_stiffness=(0.01, 0.02, 0.04, 0.08), max_displacement: float = 2.0e-3, increments: int = 8,
-                *, base: WormParams | None = None, hold: float = 0.1, settle: float = 0.2,
+def compression(hinge_stiffness=DEFAULT_HINGE_SWEEP, max_displacement: float = 2.0e-3, increments: int = 8,
+                *, displacements=None, base: WormParams | None = None, hold: float = 0.1, settle: float = 0.2,
                 anchor_stiffness: float = 1.0e4, dt=None, substeps=None, device="cpu", **overrides) -> dict:
     """Compression test (§IV-B): tail section (3 vertices) anchored, head section pushed along −x; one world per k_α.
 
@@ -306,6 +319,8 @@ def compression(hinge_stiffness=(0.01, 0.02, 0.04, 0.08), max_displacement: floa
     raised to 50/s so each hold ends near equilibrium). ``force`` is the head anchors' resisting force along +x
     minus its value before loading [N]; ``displacement`` the head section's measured shortening [m]; ``linear`` the
     independent linear quasi-static prediction (no gravity, no friction) at the prescribed displacement.
+    ``displacements`` (K,) [m], ascending and > 0, replaces the uniform ``max_displacement`` / ``increments`` steps
+    (:mod:`warpworm.material_fit` prescribes a measured table's displacements).
     """
     from .model import Model
 
@@ -313,7 +328,7 @@ def compression(hinge_stiffness=(0.01, 0.02, 0.04, 0.08), max_displacement: floa
     n = int(p.n_units)
     tail, head = section_vertices(n, 0), section_vertices(n, 2 * n)
     model = Model.from_params(p, W, device, anchors=np.concatenate([tail, head]), anchor_stiffness=anchor_stiffness)
-    steps = np.linspace(0.0, max_displacement, increments + 1)[1:]
+    steps = _steps(max_displacement, increments, displacements)
     r = _quasi_static(model, p, head, (-1.0, 0.0, 0.0), steps, settle=settle, hold=hold, dt=dt, substeps=substeps)
     lin = np.zeros_like(r["force"])
     for w in range(W):  # host reference, one small dense solve per stiffness (not the simulation)
@@ -336,8 +351,8 @@ def compression(hinge_stiffness=(0.01, 0.02, 0.04, 0.08), max_displacement: floa
     return r
 
 
-def flexure(hinge_stiffness=(0.01, 0.02, 0.04, 0.08), max_deflection: float = 2.0e-3, increments: int = 8, *,
-            lift: float = 0.02, base: WormParams | None = None, hold: float = 0.1, settle: float = 0.2,
+def flexure(hinge_stiffness=DEFAULT_HINGE_SWEEP, max_deflection: float = 2.0e-3, increments: int = 8, *,
+            displacements=None, lift: float = 0.02, base: WormParams | None = None, hold: float = 0.1, settle: float = 0.2,
             anchor_stiffness: float = 1.0e4, dt=None, substeps=None, device="cpu", **overrides) -> dict:
     """3-point flexure (§IV-B): worm lifted ``lift`` [m] off the floor, held at the bottom corners of the sections
     next to both ends (two line supports free to rotate about y), centre section pushed down; one world per k_α.
@@ -345,6 +360,7 @@ def flexure(hinge_stiffness=(0.01, 0.02, 0.04, 0.08), max_deflection: float = 2.
     Gravity is on: ``force`` is the load anchors' resisting force (+z) minus the unloaded preload [N] against the
     measured deflection [m]. The supports are anchors (pins, not rollers), so at large deflection the span's stretch
     adds a membrane stiffening that a roller test would not have; ``linear`` is the linear prediction.
+    ``displacements`` (K,) [m], ascending and > 0, replaces the uniform ``max_deflection`` / ``increments`` steps.
     """
     from .model import Model
 
@@ -353,7 +369,7 @@ def flexure(hinge_stiffness=(0.01, 0.02, 0.04, 0.08), max_deflection: float = 2.
     sup = np.concatenate([section_vertices(n, 1, (0, 1)), section_vertices(n, 2 * n - 1, (0, 1))])
     load = section_vertices(n, n)
     model = Model.from_params(p, W, device, anchors=np.concatenate([sup, load]), anchor_stiffness=anchor_stiffness)
-    steps = np.linspace(0.0, max_deflection, increments + 1)[1:]
+    steps = _steps(max_deflection, increments, displacements)
     r = _quasi_static(model, p, load, (0.0, 0.0, -1.0), steps, lift=lift, settle=settle, hold=hold, dt=dt,
                       substeps=substeps)
     lin = np.zeros_like(r["force"])
@@ -442,11 +458,90 @@ def slope(offsets_deg=(-4.0, -2.0, -1.0, 1.0, 2.0, 4.0), duration: float = 0.5, 
 # 5.-7. gait experiments (§IV-D, E, G)
 
 
+def _crossing(t, y, j, level) -> float:
+    """Time [s] where the segment (t[j], y[j]) – (t[j + 1], y[j + 1]) crosses ``level`` (linear interpolation)."""
+    dy = y[j + 1] - y[j]
+    return float(t[j] + (t[j + 1] - t[j]) * ((level - y[j]) / dy if dy != 0 else 0.5))
+
+
+def rise_fall_times(t, y, period: float, *, t0: float = 0.0, lo: float = 0.1, hi: float = 0.9,
+                    baseline: float | str = 0.0) -> dict:
+    """Per-cycle rise and fall times of a pulsed signal (the force plate's pull, paper Fig. 10).
+
+    The record is cut into cycles [t0 + c T, t0 + (c + 1) T) (T = ``period`` [s]; only whole cycles). In each cycle
+    the peak is the largest sample; the levels are baseline + ``lo`` / ``hi`` × (peak − baseline), with ``baseline``
+    0 by default (10 % and 90 % of the cycle's peak: a force plate reads 0 unloaded; a cycle whose peak is not above
+    the baseline gives NaN), any fixed value, or ``"trough"``: each edge from its own trough, the smallest sample
+    within one period before the peak (rise) or after it (fall), which follows a drifting offset. The rise time is
+    from the last
+    upward crossing of the low level before the peak to the last crossing of the high level before it; the fall time
+    from the first downward crossing of the high level after the peak to the first crossing of the low level after
+    it. Crossings are linearly interpolated between samples and searched within one period of the peak (so a pulse
+    may straddle a cycle boundary); a crossing not found gives NaN.
+
+    Args:
+        t: sample times [s], shape (S,), ascending.
+        y: the signal (any unit), shape (S,).
+        period: cycle length T [s].
+        t0: start of the first cycle [s] (the EPM path's s = 0; ``Simulator.settle`` restarts the clock at 0).
+
+    Returns: ``rise (C,)``, ``fall (C,)`` [s], ``peak (C,)``, ``baseline (C,)``, ``peak_time (C,)`` [s] per whole cycle,
+    and ``rise_mean`` / ``fall_mean`` [s]: the NaN-ignoring means over the cycles after the first (NaN when there is
+    only one cycle).
+    """
+    t = np.asarray(t, np.float64).reshape(-1)
+    y = np.asarray(y, np.float64).reshape(-1)
+    T = float(period)
+    n_cyc = int(np.floor((t[-1] - t0) / T + 1e-9)) if len(t) else 0
+    out = {k: np.full(n_cyc, np.nan) for k in ("rise", "fall", "peak", "baseline", "peak_time")}
+    for c in range(n_cyc):  # host analysis of a recorded signal (a few cycles), not a loop over worlds
+        a, b = t0 + c * T, t0 + (c + 1) * T
+        idx = np.nonzero((t >= a - 1e-12) & (t < b - 1e-12))[0]
+        if len(idx) < 3:
+            continue
+        ip = idx[np.argmax(y[idx])]
+        peak = y[ip]
+        win = (t >= t[ip] - T) & (t <= t[ip] + T)
+        if isinstance(baseline, str):
+            if baseline != "trough":
+                raise ValueError(f"baseline: expected a number or 'trough', got {baseline!r}")
+            base_r, base_f = y[:ip + 1][win[:ip + 1]].min(), y[ip:][win[ip:]].min()
+        else:
+            base_r = base_f = float(baseline)
+        out["peak"][c], out["baseline"][c], out["peak_time"][c] = peak, base_r, t[ip]
+        if peak > base_r:
+            l_lo, l_hi = base_r + lo * (peak - base_r), base_r + hi * (peak - base_r)
+            before = np.nonzero(win[:ip] & (y[:ip] < l_hi))[0]
+            before_lo = np.nonzero(win[:ip] & (y[:ip] < l_lo))[0]
+            if len(before) and len(before_lo):
+                out["rise"][c] = _crossing(t, y, before[-1], l_hi) - _crossing(t, y, before_lo[-1], l_lo)
+        if peak > base_f:
+            l_lo, l_hi = base_f + lo * (peak - base_f), base_f + hi * (peak - base_f)
+            after = ip + 1 + np.nonzero(win[ip + 1:] & (y[ip + 1:] < l_hi))[0]
+            after_lo = ip + 1 + np.nonzero(win[ip + 1:] & (y[ip + 1:] < l_lo))[0]
+            if len(after) and len(after_lo):
+                out["fall"][c] = _crossing(t, y, after_lo[0] - 1, l_lo) - _crossing(t, y, after[0] - 1, l_hi)
+
+    def _mean(v):
+        v = v[1:]
+        return float(np.nanmean(v)) if np.isfinite(v).any() else float("nan")
+
+    out["rise_mean"], out["fall_mean"] = _mean(out["rise"]), _mean(out["fall"])
+    return out
+
+
 def force_plate(gait_list=GAITS, duration: float = 2.0, *, anchor_stiffness: float = 1.0e4, sample_every: int = 2,
                 settle: float = 0.2, record: dict | None = None, **kw) -> dict:
     """Force plate (§IV-D): the tail section's 3 vertices tied by anchors (strength ``anchor_stiffness`` [N/m]) to
     their settled rest points while each gait runs. ``force (S, W, 3)`` [N] is the summed anchor force (the worm's
-    pull on the plate; +x = forward pull), ``pull (S, W)`` its x component."""
+    pull on the plate; +x = forward pull), ``pull (S, W)`` its x component.
+
+    Pulse shape (Fig. 10: the paper's inchworm rises steeply and falls smoothly, omega the reverse): per gait the
+    10 %→90 % rise time and 90 %→10 % fall time of the pull in each EPM cycle (:func:`rise_fall_times`),
+    ``rise_time (C, W)`` / ``fall_time (C, W)`` [s] with levels at 10 % / 90 % of the cycle's peak (zero baseline;
+    NaN in a cycle whose peak pull is not > 0), ``rise_time_trough`` / ``fall_time_trough`` with each edge measured
+    from its own trough (robust to a drifting offset), and in the summary their means over the cycles after the
+    first (NaN / null with fewer than two whole cycles: ``duration`` ≥ 2 periods)."""
     if record is None:
         n = int((kw.get("base") or WormParams()).n_units)
         record = run_gaits(gait_list, duration, sample_every=sample_every, settle=settle,
@@ -460,8 +555,25 @@ def force_plate(gait_list=GAITS, duration: float = 2.0, *, anchor_stiffness: flo
                "min_pull_mN": (1e3 * pull.min(axis=0)).tolist(),
                "max_abs_force_mN": (1e3 * np.linalg.norm(F, axis=-1).max(axis=0)).tolist(),
                "unstable": record["unstable"].tolist()}
+    W = pull.shape[1]
+    params = record.get("params")
+    periods = (np.broadcast_to(np.asarray(params.cycle_period, np.float64), (W,)) if params is not None
+               else np.ones(W))
+    res = {}
+    for tag, bl in (("", 0.0), ("_trough", "trough")):
+        shapes = [rise_fall_times(t, pull[:, w], periods[w], baseline=bl) for w in range(W)]  # host analysis
+        C = min(len(s["rise"]) for s in shapes)
+        res["rise_time" + tag] = np.stack([s["rise"][:C] for s in shapes], axis=1) if C else np.zeros((0, W))
+        res["fall_time" + tag] = np.stack([s["fall"][:C] for s in shapes], axis=1) if C else np.zeros((0, W))
+        rm, fm = np.array([s["rise_mean"] for s in shapes]), np.array([s["fall_mean"] for s in shapes])
+        summary.update({
+            f"rise_time_10_90{tag}_ms": (1e3 * rm).tolist(),
+            f"fall_time_90_10{tag}_ms": (1e3 * fm).tolist(),
+            f"rise_over_fall{tag}": np.where(fm > 0, rm / np.where(fm > 0, fm, 1.0), np.nan).tolist(),
+        })
+    summary.update(cycle_period_s=periods.tolist(), whole_cycles=int(res["rise_time"].shape[0]))
     return {"time": t, "force": F, "pull": pull, "gaits": list(record["gaits"]), "unstable": record["unstable"],
-            "summary": summary}
+            **res, "summary": summary}
 
 
 def strain(gait_list=GAITS, duration: float = 2.0, *, sample_every: int = 2, settle: float = 0.2,

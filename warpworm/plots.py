@@ -170,6 +170,30 @@ def plot_deformation(r: dict, path) -> Path:
     return _save(fig, path)
 
 
+def plot_fit(r: dict, path) -> Path:
+    """k_α calibration (:func:`warpworm.material_fit.fit_hinge_stiffness`): measured vs fitted curve, and the RMS
+    residual of every candidate of the coarse and fine batches."""
+    plt = _plt()
+    fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4.2))
+    s = r["summary"]
+    xl = "shortening [mm]" if r["test"] == "compression" else "centre deflection [mm]"
+    a.plot(1e3 * r["displacement"], 1e3 * r["force"], "ko", mfc="none", label="measured (table)")
+    a.plot(1e3 * r["displacement"], 1e3 * r["fitted_force"], "r-",
+           label=f"simulated, k_α = {r['hinge_stiffness']:.4g} N/rad")
+    a.set_xlabel(xl), a.set_ylabel("force [mN]")
+    a.set_title(f"{r['test']} fit: RMS residual {1e3 * r['rms_residual_n']:.3g} mN "
+                f"({100 * r['relative_residual']:.2f} %)")
+    a.legend(fontsize=8), a.grid(alpha=0.3)
+    b.plot(r["coarse"]["k"], 1e3 * r["coarse"]["rms"], "o-", ms=3, label="coarse batch")
+    b.plot(r["fine"]["k"], 1e3 * r["fine"]["rms"], "s-", ms=3, label="fine batch")
+    b.axvline(r["hinge_stiffness"], color="r", ls="--", label="fit")
+    b.set_xscale("log"), b.set_yscale("log")
+    b.set_xlabel("k_α [N/rad]"), b.set_ylabel("RMS residual [mN]")
+    b.set_title(f"one world per candidate ({s['coarse_worlds']} + {s['fine_worlds']})")
+    b.legend(fontsize=8), b.grid(alpha=0.3, which="both")
+    return _save(fig, path)
+
+
 PLOTS = {
     "force-distance": plot_force_distance, "compression": plot_compression, "flexure": plot_flexure,
     "slope": plot_slope, "force-plate": plot_force_plate, "strain": plot_strain, "deformation": plot_deformation,

@@ -12,11 +12,20 @@ def add_arguments(parser) -> None:
     parser.add_argument("name", choices=NAMES + ("all",), help="which experiment ('all' runs every one)")
     parser.add_argument("--out", default="out/experiments", help="output folder (default out/experiments)")
     parser.add_argument("--worlds", type=int, default=None,
-                        help="sweep size: k_α values (compression, flexure) or slopes (slope); default 4 / 6. "
+                        help="sweep size: k_α values (compression, flexure; geometric 0.0025-0.04 N/rad) or slopes "
+                             "(slope); default 5 / 6; with --fit the coarse batch (default 24). "
                              "Gait experiments always run one world per gait (3)")
     parser.add_argument("--quick", action="store_true", help="short horizons and few increments (smoke runs)")
     parser.add_argument("--duration", type=float, default=None, help="gait run length [s] (default 2, quick 0.3)")
     parser.add_argument("--no-plot", action="store_true", help="write the JSON only (no matplotlib needed)")
+    parser.add_argument("--material", default="mineral_paper",
+                        help="sheet material of the worm (warpworm.materials.MATERIALS: bopet, mineral_paper, "
+                             "tracing_paper; default mineral_paper)")
+    parser.add_argument("--fit", metavar="TABLE.csv", default=None,
+                        help="compression / flexure only: fit k_α to a measured curve, a CSV with columns "
+                             "displacement_m,force_n (header line optional); writes <name>-fit.json / .png")
+    parser.add_argument("--k-range", nargs=2, type=float, metavar=("LO", "HI"), default=(5.0e-4, 0.1),
+                        help="--fit search range for k_α [N/rad] (default 5e-4 0.1)")
 
 
 def _sweep(lo: float, hi: float, n: int):
@@ -25,7 +34,7 @@ def _sweep(lo: float, hi: float, n: int):
     return np.geomspace(lo, hi, n) if n > 1 else np.array([lo])
 
 
-def _run(name: str, args, cache: dict):
+def _run(name: str, args, cache: dict, base=None):
     import numpy as np
 
     from warpworm import experiments as ex
@@ -35,17 +44,17 @@ def _run(name: str, args, cache: dict):
     if name == "force-distance":
         return ex.force_distance(gaps=np.geomspace(0.5e-3, 40e-3, 20 if q else 60))
     if name in ("compression", "flexure"):
-        ks = _sweep(0.01, 0.08, args.worlds or (2 if q else 4))
+        ks = _sweep(0.0025, 0.04, args.worlds or (2 if q else 5))
         fn = ex.compression if name == "compression" else ex.flexure
-        return fn(ks, increments=3 if q else 8, hold=0.05 if q else 0.1, settle=0.1 if q else 0.2)
+        return fn(ks, increments=3 if q else 8, hold=0.05 if q else 0.1, settle=0.1 if q else 0.2, base=base)
     if name == "slope":
         n = args.worlds or (2 if q else 6)
         offs = np.array([-2.0, 2.0]) if n == 2 else np.linspace(-4.0, 4.0, n)
-        return ex.slope(offs, duration=0.2 if q else 0.5, settle=0.1 if q else 0.2)
+        return ex.slope(offs, duration=0.2 if q else 0.5, settle=0.1 if q else 0.2, base=base)
     if name == "force-plate":
-        return ex.force_plate(duration=dur, settle=0.1 if q else 0.2)
+        return ex.force_plate(duration=dur, settle=0.1 if q else 0.2, base=base)
     if "free" not in cache:  # strain and deformation share one free-worm run
-        cache["free"] = ex.run_gaits(duration=dur, settle=0.1 if q else 0.2)
+        cache["free"] = ex.run_gaits(duration=dur, settle=0.1 if q else 0.2, base=base)
     fn = ex.strain if name == "strain" else ex.deformation
     return fn(record=cache["free"])
 
@@ -60,18 +69,83 @@ def _fmt(v):
     return str(v)
 
 
-def main(args) -> int:
+def _fit(args, base) -> int:
+    """``--fit TABLE.csv``: check the table (before any simulation), fit k_α, print and write JSON / PNG."""
+    import importlib.util
+    import sys
     import time
     from pathlib import Path
 
     from warpworm import experiments as ex
+    from warpworm import material_fit as mf
 
+    if args.name not in mf.TESTS:
+        print(f"error: --fit works with compression or flexure, not {args.name!r}", file=sys.stderr)
+        return 2
+    try:
+        d, f = mf.read_curve(args.fit)
+    except mf.CurveError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    t0 = time.perf_counter()
+    kw = dict(k_range=tuple(args.k_range))
+    if args.worlds:
+        kw["coarse"] = args.worlds
+    if args.quick:
+        kw.update(coarse=args.worlds or 12, fine=6)
+    try:
+        r = mf.fit_hinge_stiffness(args.name, d, f, base=base, **kw)
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    r["summary"].update(material=args.material, table=str(args.fit))
+    out = Path(args.out)
+    stem = f"{args.name}-fit"
+    written = [str(ex.save_json(r, out / f"{stem}.json"))]
+    note = None
+    if not args.no_plot:
+        if importlib.util.find_spec("matplotlib") is None:
+            note = "note: matplotlib is not installed (the 'plots' extra): PNG skipped"
+        else:
+            from warpworm.plots import plot_fit
+
+            written.append(str(plot_fit(r, out / f"{stem}.png")))
+    print(f"== {stem} ({time.perf_counter() - t0:.1f} s): " + ", ".join(written))
+    if note:
+        print(note)
+    s = r["summary"]
+    print(f"   fitted k_α = {s['hinge_stiffness_N_per_rad']:.5g} N/rad ({args.material}, every other parameter "
+          "held)")
+    print(f"   RMS residual = {s['rms_residual_N']:.4g} N ({100 * s['relative_residual']:.2f} % of the RMS "
+          "measured force)")
+    if s["at_search_bound"]:
+        print("   warning: the best coarse candidate is at an end of --k-range: widen it")
+    for k, v in s.items():
+        print(f"   {k}: {_fmt(v)}")
+    return 0
+
+
+def main(args) -> int:
+    import sys
+    import time
+    from pathlib import Path
+
+    from warpworm import experiments as ex
+    from warpworm.materials import material_params
+
+    try:
+        base = material_params(args.material)
+    except ValueError as exc:
+        print(f"error: --{exc}", file=sys.stderr)
+        return 2
+    if args.fit is not None:
+        return _fit(args, base)
     out = Path(args.out)
     names = NAMES if args.name == "all" else (args.name,)
     cache: dict = {}
     for name in names:
         t0 = time.perf_counter()
-        r = _run(name, args, cache)
+        r = _run(name, args, cache, base)
         jpath = ex.save_json(r, out / f"{name}.json")
         written = [str(jpath)]
         if not args.no_plot:

@@ -1,0 +1,91 @@
+"""k_α calibration from a force–displacement table (warpworm.material_fit) against planted truths.
+
+Truth: a k_α planted in a simulated curve (the default material, mineral paper, every other parameter held), with
+2 % multiplicative Gaussian noise (fixed seed), written to CSV and fitted back through the file reader.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from warpworm import experiments as ex
+from warpworm import material_fit as mf
+from warpworm.materials import material_params
+
+K_PLANTED = 0.008  # N/rad, between mineral paper (0.005) and tracing paper (0.010)
+FAST = dict(coarse=16, fine=8)  # 16 + 8 + 1 worlds: three batches
+
+
+def _planted_table(tmp_path, test, seed=0):
+    base = material_params("mineral_paper")
+    fn = ex.compression if test == "compression" else ex.flexure
+    r = fn((K_PLANTED,), increments=8, base=base, **mf.FIT_SETTINGS[test])
+    d, f = r["displacement"][:, 0].copy(), r["force"][:, 0]
+    d[0] = 0.0  # the unloaded row (measured ~1e-7 m, float32)
+    noisy = f * (1.0 + 0.02 * np.random.default_rng(seed).standard_normal(f.shape))
+    return mf.write_curve(tmp_path / f"{test}.csv", d, noisy), base
+
+
+@pytest.fixture(scope="module")
+def fits(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("fit")
+    out = {}
+    for test in mf.TESTS:
+        path, base = _planted_table(tmp, test)
+        d, f = mf.read_curve(path)
+        out[test] = mf.fit_hinge_stiffness(test, d, f, base=base, **FAST)
+    return out
+
+
+def test_compression_fit_recovers_planted_hinge_stiffness(fits):
+    fit = fits["compression"]
+    assert not fit["at_bound"] and fit["summary"]["unstable_worlds"] == 0
+    assert abs(fit["hinge_stiffness"] / K_PLANTED - 1.0) < 0.05, fit["summary"]
+    # the residual is the planted noise (2 % per point), not a misfit
+    assert fit["relative_residual"] < 0.03, fit["summary"]
+    assert fit["sensitivity"] > 0.3, fit["summary"]  # the curve does depend on k_α at this material
+
+
+def test_compression_and_flexure_fits_agree(fits):
+    kc, kf = fits["compression"]["hinge_stiffness"], fits["flexure"]["hinge_stiffness"]
+    assert abs(kf / K_PLANTED - 1.0) < 0.05, fits["flexure"]["summary"]
+    assert abs(kc / kf - 1.0) < 0.10, (kc, kf)
+
+
+def _write(path, text):
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize("text, match", [
+    ("displacement_m,force\n0,0\n1e-3,1e-2\n2e-3,2e-2\n", r"lacks column\(s\) \['force_n'\]"),
+    ("0,0,0\n1e-3,1e-2,0\n2e-3,2e-2,0\n", "3 columns and no header"),
+    ("displacement_m,force_n\n0,0\n1e-3,1e-2\n", "2 data row.*at least 3"),
+    ("displacement_m,force_n\n0,0\n1e-3,nan\n2e-3,2e-2\n", r"line 3, column 'force_n': 'nan' is not finite"),
+    ("displacement_m,force_n\n0,0\n1e-3,abc\n2e-3,2e-2\n", r"line 3, column 'force_n': 'abc' is not a number"),
+    ("displacement_m,force_n\n0,0\n2e-3,1e-2\n1e-3,2e-2\n", r"line 4, column 'displacement_m'.*strictly ascending"),
+    ("displacement_m,force_n\n-1e-3,0\n1e-3,1e-2\n2e-3,2e-2\n", "negative"),
+])
+def test_bad_tables_raise_clear_errors(tmp_path, text, match):
+    path = _write(tmp_path / "bad.csv", text)
+    with pytest.raises(mf.CurveError, match=match) as exc:
+        mf.read_curve(path)
+    assert str(path) in str(exc.value)
+
+
+def test_missing_file_and_headerless_table(tmp_path):
+    with pytest.raises(mf.CurveError, match="no such file"):
+        mf.read_curve(tmp_path / "nope.csv")
+    d, f = mf.read_curve(_write(tmp_path / "ok.csv", "# comment\n0,0\n\n1e-3,1e-2\n2e-3,2.5e-2\n"))
+    np.testing.assert_array_equal(d, [0.0, 1e-3, 2e-3])
+    np.testing.assert_array_equal(f, [0.0, 1e-2, 2.5e-2])
+
+
+def test_cli_fit_rejects_bad_table_before_simulating(tmp_path, capsys):
+    from warpworm.cli import main
+
+    bad = _write(tmp_path / "bad.csv", "displacement_m,force_n\n0,0\n1e-3,1e-2\n")
+    assert main(["experiment", "compression", "--fit", str(bad), "--out", str(tmp_path / "o")]) == 2
+    assert "at least 3" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
