@@ -71,7 +71,6 @@ def _fmt(v):
 
 def _fit(args, base) -> int:
     """``--fit TABLE.csv``: check the table (before any simulation), fit k_α, print and write JSON / PNG."""
-    import importlib.util
     import sys
     import time
     from pathlib import Path
@@ -104,7 +103,9 @@ def _fit(args, base) -> int:
     written = [str(ex.save_json(r, out / f"{stem}.json"))]
     note = None
     if not args.no_plot:
-        if importlib.util.find_spec("matplotlib") is None:
+        try:
+            import matplotlib  # noqa: F401
+        except ImportError:
             note = "note: matplotlib is not installed (the 'plots' extra): PNG skipped"
         else:
             from warpworm.plots import plot_fit
