@@ -257,6 +257,9 @@ class NumpyImplicit(NumpySubstep):
     def __init__(self, model, dt_sub: float, newton: int = 3):
         super().__init__(model, dt_sub, split_hinge=np.ones((1, model.num_vertices)))
         self.newton = int(newton)
+        E = model.num_edges
+        self.stop_strain = np.broadcast_to(model.bar_stop_strain.numpy().astype(np.float64), (self.W, E))
+        self.stop_k = np.broadcast_to(model.bar_stop_stiffness.numpy().astype(np.float64), (self.W, E))
         self.k_limit = np.broadcast_to(model.fold_limit_stiffness.numpy().astype(np.float64), (self.W,))
         self.anchor_vertex = model.anchor_vertex.numpy().astype(np.int64)
         A = len(self.anchor_vertex)
@@ -305,10 +308,14 @@ class NumpyImplicit(NumpySubstep):
             n = d / L[..., None]
             ka = self.EA / self.L0
             f = n * (ka * (L - self.L0))[..., None]
+            strain = (L - self.L0) / self.L0
+            l_stop = self.L0 * (1.0 + np.where(strain < 0, -self.stop_strain, self.stop_strain))
+            ks = np.where(np.abs(strain) > self.stop_strain, self.stop_k / self.L0, 0.0)
+            f = f + n * (ks * (L - l_stop))[..., None]
             np.add.at(g, (slice(None), e[:, 0]), f)
             np.add.at(g, (slice(None), e[:, 1]), -f)
             nn = n[..., :, None] * n[..., None, :]
-            kb = ka[..., None, None] * (nn + np.maximum(0.0, 1.0 - self.L0 / L)[..., None, None] * (eye - nn))
+            kb = (ka + ks)[..., None, None] * nn + (ka * np.maximum(0.0, 1.0 - self.L0 / L))[..., None, None] * (eye - nn)
             self._add_blocks(H, e[:, 0], e[:, 0], kb)
             self._add_blocks(H, e[:, 1], e[:, 1], kb)
             self._add_blocks(H, e[:, 0], e[:, 1], -kb)

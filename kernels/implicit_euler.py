@@ -9,7 +9,8 @@ substep of length dt finds the positions x that minimise
 (implicit Euler: gravity, the step's magnetic force and the linear velocity damping c are in x̃), with E the elastic
 energy of the worm:
 
-- every bar a spring ½ (EA / L0)(L − L0)² (stiff bars near-rigid, the valley rings soft; Cauchy strain reported);
+- every bar a spring ½ (EA / L0)(L − L0)² (stiff bars near-rigid, the valley rings soft; Cauchy strain reported),
+  and a soft waist bar strained past its stop |ε| = ε_s a one-sided spring ½ (EA_s / L0)(L − L0(1 ± ε_s))²;
 - every crease ½ k_α L (φ − φ0)² plus its damping as the implicit dissipation ½ (c_α L / dt)(φ − φ_n)², and the
   NoFoldThrough limits as a one-sided spring k_lim L beyond the bound (0 for mountain/valley creases), with k_lim
   (``fold_limit_stiffness``) its own material constant: a barrier that scaled with k_α would soften with the crease
@@ -51,6 +52,7 @@ CONTACT_FREE = wp.constant(0)
 CONTACT_SLIDING = wp.constant(1)  # on the floor, kinetic friction
 CONTACT_STUCK = wp.constant(2)  # on the floor, static friction (regularised: a stiff viscous force)
 CONTACT_FIXED = wp.constant(3)  # a vertex of infinite mass (never moves; reported as free)
+WORLD_CRUMPLED = wp.constant(2)  # ``unstable`` flag of a world whose creases folded through (1: exploded)
 
 
 @wp.func
@@ -135,6 +137,8 @@ def assemble(
     edges: wp.array2d(dtype=wp.int32),
     rest_length: wp.array2d(dtype=float),
     bar_stiffness: wp.array2d(dtype=float),
+    bar_stop_strain: wp.array2d(dtype=float),
+    bar_stop_stiffness: wp.array2d(dtype=float),
     hinges: wp.array2d(dtype=wp.int32),
     hinge_rest: wp.array2d(dtype=float),
     hinge_length: wp.array2d(dtype=float),
@@ -202,12 +206,22 @@ def assemble(
         n = d / length
         ka = bar_stiffness[ea_row, e] / l0
         f = n * (ka * (length - l0))
+        k_axial = ka
+        # a soft waist bar strained past its stop |ε| = ε_s turns rigid: the sheet's panels, which the soft bar
+        # stands for, bend only so far before they stretch (without it a hard squeeze flattens the waist triangles
+        # into slivers, whose crease gradients blow up, or pinches the waist through the axis)
+        stop = bar_stop_strain[world % bar_stop_strain.shape[0], e]
+        l_stop = l0 * (1.0 + wp.where(strain < 0.0, -stop, stop))
+        if wp.abs(strain) > stop:
+            ks = bar_stop_stiffness[ea_row % bar_stop_stiffness.shape[0], e] / l0
+            f = f + n * (ks * (length - l_stop))
+            k_axial = k_axial + ks
         grad[world, a] = grad[world, a] + f
         grad[world, b] = grad[world, b] - f
         if with_hessian:
             nn = wp.outer(n, n)
             # the compressive geometric stiffness is dropped (keeps the matrix positive definite)
-            kb = ka * nn + (ka * wp.max(0.0, 1.0 - l0 / length)) * (eye - nn)
+            kb = k_axial * nn + (ka * wp.max(0.0, 1.0 - l0 / length)) * (eye - nn)
             band_add_block(world, hess, a, a, kb)
             band_add_block(world, hess, b, b, kb)
             band_add_block(world, hess, a, b, -kb)
@@ -276,6 +290,8 @@ def implicit_step(
     edges: wp.array2d(dtype=wp.int32),
     rest_length: wp.array2d(dtype=float),
     bar_stiffness: wp.array2d(dtype=float),
+    bar_stop_strain: wp.array2d(dtype=float),
+    bar_stop_stiffness: wp.array2d(dtype=float),
     hinges: wp.array2d(dtype=wp.int32),
     hinge_rest: wp.array2d(dtype=float),
     hinge_length: wp.array2d(dtype=float),
@@ -294,6 +310,7 @@ def implicit_step(
     slip_speed: float,
     strain_limit: wp.array(dtype=float),
     speed_limit: float,
+    fold_tolerance: float,
     # Data in:
     f_ext: wp.array2d(dtype=wp.vec3),
     anchor_target: wp.array2d(dtype=wp.vec3),
@@ -389,7 +406,7 @@ def implicit_step(
                 # than the slip speed broke loose, a sliding one whose motion reversed (kinetic friction stopped it)
                 # or fell below half the slip speed sticks; a free vertex the last step put below the floor lands
                 bad = assemble(world, im_row, rl_row, ea_row, hr_row, hl_row, ak_row, inv_mass, edges, rest_length,
-                               bar_stiffness, hinges, hinge_rest, hinge_length, hinge_label, k_hinge, c_hinge,
+                               bar_stiffness, bar_stop_strain, bar_stop_stiffness, hinges, hinge_rest, hinge_length, hinge_label, k_hinge, c_hinge,
                                anchor_vertex, anchor_stiffness, anchor_target, k_limit, strain_limit, inv_dt,
                                floor_n, mu_s, mu_k, slip_speed, False, x, v, delta, crease_angle, contact,
                                floor_force, bar_strain, hess, grad)
@@ -430,7 +447,7 @@ def implicit_step(
                     f, c, t = friction_force(contact[world, i], vt, fn, mu_s, mu_k, slip_speed)
                     floor_force[world, i] = floor_n * fn + f
             bad = assemble(world, im_row, rl_row, ea_row, hr_row, hl_row, ak_row, inv_mass, edges, rest_length,
-                           bar_stiffness, hinges, hinge_rest, hinge_length, hinge_label, k_hinge, c_hinge,
+                           bar_stiffness, bar_stop_strain, bar_stop_stiffness, hinges, hinge_rest, hinge_length, hinge_label, k_hinge, c_hinge,
                            anchor_vertex, anchor_stiffness, anchor_target, k_limit, strain_limit, inv_dt, floor_n,
                            mu_s, mu_k, slip_speed, True, x, v, delta, crease_angle, contact, floor_force, bar_strain,
                            hess, grad)
@@ -479,12 +496,22 @@ def implicit_step(
             x[world, i] = p0 + vel * dt
             v[world, i] = vel
             contact[world, i] = st
+        crumpled = int(0)
         for h in range(nh):
             psi, g0, g1, g2, g3 = dihedral_angle_and_gradient(x[world, hinges[h, 0]], x[world, hinges[h, 1]],
                                                               x[world, hinges[h, 2]], x[world, hinges[h, 3]])
             prev = crease_angle[world, h]
-            crease_angle[world, h] = prev + wrap_angle(psi - prev)
+            phi = prev + wrap_angle(psi - prev)
+            crease_angle[world, h] = phi
+            lo, hi = fold_range(hinge_label[h])
+            if phi < lo - fold_tolerance or phi > hi + fold_tolerance:
+                crumpled = 1
         if bad != 0:
             freeze_world(world, nv, x, v, x_prev, delta, unstable)
+            return
+        if crumpled != 0:
+            # a crease folded through its range by more than the tolerance: the sheet crumpled (flag 2)
+            freeze_world(world, nv, x, v, x_prev, delta, unstable)
+            unstable[world] = WORLD_CRUMPLED
             return
         step_count[world] = step_count[world] + 1

@@ -17,6 +17,7 @@ COMMANDS = {
     "field": "field",
     "calibrate": "calibrate",
     "simulate": "simulate",
+    "search-gait": "search_gait",
     "experiment": "experiment",
     "render": "render",
     "generate": "generate",

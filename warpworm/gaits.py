@@ -16,6 +16,12 @@ Sinusoidal path (per world; s = t / period + phase, in cycles)::
 the plate's thickness; e(θ) = ½ (L_z |sin θ| + L_x |cos θ|) is the half-height of the tilted EPM cuboid (L_z along its
 moment). x0 puts the first closest approach (s = 1/2) at the gait's placement point.
 
+Backward is the mirror image x → −x of forward. A magnetic moment is an axial vector: under that mirror its x
+component stays and its z component flips, so θ → −θ (south-up ↔ north-up, "the opposite pole between the posterior
+IPMs"), while the IPM configuration (tail −x, centre +x, head −x) maps onto itself. Omega's θ = 0 is its own mirror
+image: backward omega keeps the EPM's pose and reverses its path (θ = π would turn every force around, pulling the
+centre down instead of repelling it up).
+
 Gait presets (IPM moments: tail −x, centre +x, head −x: the anterior IPMs face each other with their north poles,
 the posterior ones with their south poles; forward = +x):
 
@@ -25,8 +31,8 @@ gait           forward: EPM orientation (θ)                 placement (first cl
 peristaltic    south pole up (θ = −π/2): attracts the two   between centre and head IPMs, nearer  north pole up
                anterior north poles, the anterior half      the centre                            (θ = +π/2), between
                contracts                                                                          centre and tail
-omega          flat, north pole forward (θ = 0): centre     under the centre IPM                  north pole backward
-               repelled up, ends pulled in                                                        (θ = π)
+omega          flat, north pole forward (θ = 0): centre     under the centre IPM                  the same pose, the
+               repelled up, ends pulled in                                                        path reversed
 inchworm       north pole up (θ = +π/2): anterior half an   between centre and head, nearer the   south pole up
                inverted U                                   centre                                (θ = −π/2), between
                                                                                                   centre and tail
@@ -57,7 +63,7 @@ SINE_FIELDS = ("start_x", "start_y", "wavelength", "amplitude", "depth", "theta"
 # toward the head IPM (forward) or toward the tail IPM (backward); 0 = over the centre IPM.
 GAIT_ORIENTATION = {
     "peristaltic": (-0.5 * np.pi, 0.5 * np.pi),
-    "omega": (0.0, np.pi),
+    "omega": (0.0, 0.0),
     "inchworm": (0.5 * np.pi, -0.5 * np.pi),
 }
 GAIT_PLACEMENT = {"peristaltic": 0.4, "omega": 0.0, "inchworm": 0.2}

@@ -75,7 +75,8 @@ class State:
     contact: wp.array
     """1 where a vertex touched the floor in the last substep, shape (W, V), int32."""
     unstable: wp.array
-    """1 for a world flagged unstable (frozen from then on), shape (W,), int32."""
+    """Non-zero for a world flagged unstable (frozen from then on): 1 exploded (strain, speed, non-finite), 2 crumpled
+    (a crease folded through its range), shape (W,), int32."""
     step_count: wp.array
     """Substeps taken by each world since t = 0, shape (W,), int32 (time = step_count · dt_sub, exact)."""
     anchor_target: wp.array
@@ -251,6 +252,14 @@ class Model:
         ea = np.where(is_valley[None, :], ea_valley[:, None], ea_rigid[:, None])
         self.bar_stiffness = wp.array(ea.astype(np.float32), dtype=float, device=dev)
         """Axial rigidity EA of each bar [N], shape (R, E), float (valley-ring bars: ``valley_bar_stiffness``)."""
+        stop_w = _scalar_param(p.waist_stop_strain, W, "waist_stop_strain")
+        stop = np.where(is_valley[None, :], stop_w[:, None], 1e3)
+        self.bar_stop_strain = wp.array(stop.astype(np.float32), dtype=float, device=dev)
+        """|strain| beyond which a bar meets its stop, shape (R, E), float: ``waist_stop_strain`` for the waist
+        (VALLEY) bars, none (1e3) for the others."""
+        self.bar_stop_stiffness = wp.array(np.where(is_valley[None, :], ea_rigid[:, None], 0.0).astype(np.float32),
+                                           dtype=float, device=dev)
+        """Axial rigidity of the stop [N], shape (R, E), float: the rigid bars' EA on the waist bars, 0 elsewhere."""
         self.hinge_stiffness = sp("hinge_stiffness")
         """Crease stiffness k_alpha per metre of crease [N·m/rad/m], shape (R,)."""
         self.hinge_damping = sp("hinge_damping")

@@ -55,6 +55,11 @@ class WormParams:
     in-plane compliance. The tube is isostatic (docs/crease.md): these bars stand for the panel bending near the
     waists that lets the paper bellows fold, so they must be far softer than ``bar_stiffness`` for the worm to
     shorten under the magnets (default: mineral paper, warpworm.materials)."""
+    waist_stop_strain: float | np.ndarray = 0.3
+    """Strain |ε_s| [1] beyond which a waist (VALLEY) bar turns as stiff as the rigid ones (``bar_stiffness``), shared
+    shape () or (W,): the panels it stands for bend only so far. Without the stop a hard squeeze flattens the waist
+    triangles into slivers (their crease gradients blow up) or pinches the waist through the axis (docs/crease.md:
+    the waist closes at α = 92.4°)."""
     fold_limit_stiffness: float | np.ndarray = 2.0
     """NoFoldThrough barrier k_lim per metre of crease [N·m/rad/m = N/rad], shape () or (W,): a crease past its range
     (mountain [−π, 0], valley [0, π]) feels k_lim L (φ − bound). A material constant of its own, not a multiple of

@@ -62,6 +62,9 @@ class Simulator:
         strain_limit: a bar strained beyond this |ΔL/L0| flags its world unstable (the soft VALLEY waist bars, which
             stand for panel bending, at ``max(strain_limit, 0.9)``: only a waist that collapses or triples fails).
         speed_limit: a vertex faster than this [m/s] (or non-finite) flags its world unstable.
+        fold_tolerance: a crease more than this [rad] outside its NoFoldThrough range (mountain [−π, 0], valley
+            [0, π]) means the sheet crumpled: the world is frozen and flagged (``State.unstable`` = 2; 1 is an
+            explosion). Default 5°.
         use_graph: capture a step as a CUDA graph (default: on CUDA devices); ignored on CPU.
         solver: "implicit" (default: implicit Euler, Newton on a per-world block-banded Cholesky, one thread per
             world; :mod:`warpworm.kernels.implicit_euler`, docs/dynamics.md), "gauss_seidel" (XPBD: one thread per
@@ -84,6 +87,7 @@ class Simulator:
         *,
         magnet_every_substep: bool = False,
         strain_limit: float = 0.5,
+        fold_tolerance: float = np.radians(5.0),
         speed_limit: float = 20.0,
         use_graph: bool | None = None,
         solver: str = "implicit",
@@ -119,6 +123,7 @@ class Simulator:
         self.dt_sub = self.dt / self.substeps
         self.magnet_every_substep = bool(magnet_every_substep)
         self.strain_limit = float(strain_limit)
+        self.fold_tolerance = float(fold_tolerance)
         from . import crease
 
         waist = model.pattern.edge_label == crease.VALLEY
@@ -222,11 +227,13 @@ class Simulator:
         if self.solver == "implicit":
             c = wp.launch(self._ki.implicit_step, dim=m.num_worlds,
                           inputs=[m.inv_mass, m.gravity, m.damping, m.edges, m.rest_length, m.bar_stiffness,
+                                  m.bar_stop_strain, m.bar_stop_stiffness,
                                   m.hinges, m.hinge_rest_angle, m.hinge_length, m.hinge_label, m.hinge_stiffness,
                                   m.hinge_damping, m.fold_limit_stiffness, m.anchor_vertex, m.anchor_stiffness,
                                   m.floor_incline, m.mu_static, m.mu_kinetic, self.dt_sub, int(num_substeps),
                                   self.newton,
-                                  self.slip_speed, self.bar_strain_limit, self.speed_limit, state.external_force,
+                                  self.slip_speed, self.bar_strain_limit, self.speed_limit, self.fold_tolerance,
+                                  state.external_force,
                                   state.anchor_target],
                           outputs=[state.positions, state.velocities, state.prev_positions, state.delta,
                                    state.floor_force, state.newton_matrix, state.newton_rhs, state.bar_strain,
@@ -312,7 +319,8 @@ class Simulator:
         ``magnet_rot (W, 4, 3, 3)`` (magnet -> world; slots EPM, tail, centre, head); ``magnet_force``,
         ``magnet_torque (W, 4, 3)`` [N, N·m]; ``crease_angle (W, H)`` [rad]; ``bar_strain (W, E)``;
         ``anchor_force (W, A, 3)`` [N]: the force each anchor applies, the pull of the worm on it (force plate);
-        ``contact (W, V)`` bool; ``unstable (W,)`` bool; ``time (W,)`` [s].
+        ``contact (W, V)`` bool; ``unstable (W,)`` bool (exploded or crumpled); ``crumpled (W,)`` bool (a crease
+        folded through its range by more than ``fold_tolerance``); ``time (W,)`` [s].
         """
         m = self.model
         self._magnet_poses(state)  # poses at the current time (the wrench kept the step's starting ones)
@@ -345,6 +353,7 @@ class Simulator:
             "anchor_force": anchor_force.astype(np.float32),
             "contact": state.contact.numpy().astype(bool),
             "unstable": state.unstable.numpy().astype(bool),
+            "crumpled": state.unstable.numpy() == 2,
             "time": (state.step_count.numpy().astype(np.float64) * self.dt_sub),
         }
 

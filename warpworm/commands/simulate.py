@@ -70,9 +70,13 @@ def axis_displacement(x0: np.ndarray, x1: np.ndarray, incline) -> np.ndarray:
 
 def run_gait(params, num_worlds: int, cycles: float, *, device="cpu", dt=None, substeps=None, settle=0.2,
              fps: float | None = 30.0, save_worlds: int = 4):
-    """Settle, then run ``cycles`` EPM cycles. Returns a dict: displacement_m (W,), unstable (W,), sim_time_s,
-    wall_time_s, frames (dict of stacked snapshot arrays of the first ``save_worlds`` worlds, or None), model, sim."""
+    """Settle, then run ``cycles`` EPM cycles, recording every world at ``fps`` frames per second.
+
+    Returns a dict: displacement_m (W,), unstable (W,), sim_time_s, wall_time_s, metrics (per-world gait measures,
+    :func:`warpworm.gait_metrics.gait_metrics`; None without ``fps``), frames (stacked snapshots of the first
+    ``save_worlds`` worlds, or None), model, sim."""
     from warpworm import gaits
+    from warpworm.gait_metrics import gait_metrics
     from warpworm.model import Model
     from warpworm.simulator import Simulator
 
@@ -88,24 +92,30 @@ def run_gait(params, num_worlds: int, cycles: float, *, device="cpu", dt=None, s
     period = float(np.max(np.asarray(params.cycle_period)))
     sim_time = cycles * period
     n_steps = int(round(sim_time / dt))
-    frames = None
-    keys = ("positions", "magnet_pos", "magnet_rot", "crease_angle", "bar_strain", "time")
+    frames = metrics = None
+    every_world = ("positions", "magnet_pos", "crease_angle")  # what the metrics need, for all worlds
+    saved_only = ("magnet_rot", "bar_strain")  # the trajectory file's extras, first save_worlds worlds
     if fps:
         every = max(1, int(round(1.0 / (fps * dt))))
         S = min(save_worlds, num_worlds)
-        frames = {k: [] for k in keys}
+        rec = {k: [] for k in every_world + saved_only + ("time",)}
         done = 0
         while True:
             snap = sim.snapshot(state)
-            for k in keys:
-                frames[k].append(snap[k][:S])
+            for k in every_world:
+                rec[k].append(snap[k])
+            for k in saved_only:
+                rec[k].append(snap[k][:S])
+            rec["time"].append(done * dt)  # host clock: an unstable world's own step count stops
             if done >= n_steps:
                 break
             n = min(every, n_steps - done)
             sim.step(state, n)
             done += n
-        frames = {k: np.stack(v) for k, v in frames.items()}
-        frames["time"] = frames["time"][:, 0]
+        rec = {k: np.stack(v) for k, v in rec.items()}
+        metrics = gait_metrics(model.pattern, model.pattern.hinge_label, rec, params.cycle_period,
+                               params.floor_incline)
+        frames = {k: (v[:, :S] if v.ndim > 1 else v) for k, v in rec.items()}
     else:
         sim.step(state, n_steps)
     snap = sim.snapshot(state)
@@ -113,16 +123,20 @@ def run_gait(params, num_worlds: int, cycles: float, *, device="cpu", dt=None, s
     return {
         "displacement_m": disp,
         "unstable": snap["unstable"],
+        "crumpled": snap["crumpled"],
         "sim_time_s": n_steps * dt,
         "wall_time_s": time.perf_counter() - t_wall,
+        "metrics": metrics,
         "frames": frames,
         "model": model,
         "sim": sim,
     }
 
 
-def _draw_frame(x, tri, mpos, mrot, msize, width=640, height=360, xlim=(-0.03, 0.14), zlim=(-0.01, 0.10)):
-    """Side view (x right, z up) of one world: facets, floor, magnets (EPM red rectangle, IPMs blue bars)."""
+def _draw_frame(x, tri, mpos, mrot, msize, width=640, height=360, xlim=(-0.03, 0.14), zlim=(-0.01, 0.10), *,
+                edges=None, edge_colour=None):
+    """Side view (x right, z up) of one world: facets, floor line (z = 0; the EPM moves beneath it), magnets (EPM red,
+    IPMs orange); with ``edges`` (E, 2) and ``edge_colour`` (E, 3) BGR the bars are drawn in those colours."""
     import cv2
 
     img = np.full((height, width, 3), 255, np.uint8)
@@ -139,6 +153,10 @@ def _draw_frame(x, tri, mpos, mrot, msize, width=640, height=360, xlim=(-0.03, 0
     for poly in pts:  # back-to-front order is irrelevant for a flat-shaded outline view
         cv2.fillConvexPoly(img, poly, (225, 235, 240))
         cv2.polylines(img, [poly], True, (120, 120, 120), 1, cv2.LINE_AA)
+    if edges is not None:
+        ends = px(x[np.asarray(edges)])
+        for (a, b), c in zip(ends, edge_colour):
+            cv2.line(img, (int(a[0]), int(a[1])), (int(b[0]), int(b[1])), tuple(int(v) for v in c), 2, cv2.LINE_AA)
     for m in range(4):
         half = 0.5 * msize[m]
         corners = np.array([[sx_, sy_, sz_] for sx_ in (-1, 1) for sy_ in (-1, 1) for sz_ in (-1, 1)]) * half
@@ -149,6 +167,56 @@ def _draw_frame(x, tri, mpos, mrot, msize, width=640, height=360, xlim=(-0.03, 0
         cv2.arrowedLine(img, tuple(int(v) for v in px(mpos[m])), tuple(int(v) for v in tip), (0, 0, 0), 1,
                         cv2.LINE_AA, tipLength=0.3)
     return img
+
+
+def strain_colour(strain: np.ndarray, scale: float) -> np.ndarray:
+    """BGR colours (E, 3) uint8 from blue (no strain) to red (|strain| >= ``scale``), as the paper's Fig. 12."""
+    u = np.clip(np.abs(strain) / max(scale, 1e-12), 0.0, 1.0)[:, None]
+    return ((1.0 - u) * np.array([220.0, 80.0, 30.0]) + u * np.array([30.0, 30.0, 230.0])).astype(np.uint8)
+
+
+def write_filmstrip(path: Path, frames: dict, model, params, world: int = 0, count: int = 8) -> Path:
+    """A side-view filmstrip of ``world``: ``count`` frames over the last whole EPM cycle, bars coloured by their
+    Cauchy strain (blue none → red the largest in the strip), the EPM (red) and IPMs (orange) drawn, the floor line at
+    z = 0; time, the four deformation ratios and the head–tail length under each frame."""
+    import cv2
+
+    from warpworm.gait_metrics import segment_ratios
+
+    pat = model.pattern
+    t = frames["time"]
+    period = float(np.max(np.asarray(params.cycle_period)))
+    start = max(0.0, (np.floor(t[-1] / period + 1e-9) - 1.0) * period)
+    pick = [int(np.argmin(np.abs(t - (start + period * k / count)))) for k in range(count)]
+    x = frames["positions"][:, world].astype(np.float64)
+    mpos = frames["magnet_pos"][:, world]
+    ratios = segment_ratios(pat, frames["positions"][:, world:world + 1])[:, 0]
+    strain = frames["bar_strain"][:, world]
+    scale = float(np.abs(strain[pick]).max())
+    lo = min(x[pick][..., 0].min(), mpos[pick, 0, 0].min()) - 0.01
+    hi = max(x[pick][..., 0].max(), mpos[pick, 0, 0].max()) + 0.01
+    zlo = min(-0.02, float(mpos[pick, 0, 2].min()) - 0.025)
+    ztop = max(0.05, float(x[pick][..., 2].max()) + 0.01)
+    size = model.magnet_size_host[world]
+    tiles = []
+    for f in pick:
+        img = _draw_frame(x[f], pat.triangles, mpos[f], frames["magnet_rot"][f, world], size, width=420, height=300,
+                          xlim=(lo, hi), zlim=(zlo, ztop), edges=pat.edges, edge_colour=strain_colour(strain[f], scale))
+        length = np.linalg.norm(x[f, -3:].mean(0) - x[f, :3].mean(0))
+        cv2.putText(img, f"t = {t[f]:.2f} s   L = {1e3 * length:.1f} mm", (8, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.45,
+                    (0, 0, 0), 1, cv2.LINE_AA)
+        cv2.putText(img, "ratios " + " ".join(f"{r:.2f}" for r in ratios[f]), (8, 36), cv2.FONT_HERSHEY_SIMPLEX,
+                    0.45, (0, 0, 0), 1, cv2.LINE_AA)
+        tiles.append(img)
+    rows = [np.concatenate(tiles[i:i + 4], axis=1) for i in range(0, len(tiles), 4)]
+    sheet = np.concatenate(rows, axis=0)
+    title = np.full((30, sheet.shape[1], 3), 255, np.uint8)
+    cv2.putText(title, f"{params.gait}{' backward' if params.backward else ''}: one EPM cycle, bars coloured by strain "
+                f"(blue 0 -> red {100 * scale:.1f} %)", (8, 21), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (0, 0, 0), 1,
+                cv2.LINE_AA)
+    path = Path(path)
+    cv2.imwrite(str(path), np.concatenate([title, sheet], axis=0))
+    return path
 
 
 def write_outputs(out: Path, result: dict, params, num_worlds: int) -> list[Path]:
@@ -188,6 +256,7 @@ def write_outputs(out: Path, result: dict, params, num_worlds: int) -> list[Path
     strip = out / "preview_strip.png"
     cv2.imwrite(str(strip), np.concatenate([imgs[i][:, :, :] for i in pick], axis=1))
     paths.append(strip)
+    paths.append(write_filmstrip(out / "filmstrip.png", fr, model, params))
     return paths
 
 
@@ -203,7 +272,7 @@ def main(args) -> int:
     device = "cuda:0" if args.device == "cuda" else args.device
     want_files = not args.no_output
     result = run_gait(params, args.worlds, args.cycles, device=device, dt=args.dt, substeps=args.substeps,
-                      settle=args.settle, fps=args.fps if want_files else None, save_worlds=args.save_worlds)
+                      settle=args.settle, fps=args.fps, save_worlds=args.save_worlds)
     disp = result["displacement_m"]
     unstable = result["unstable"]
     paths = write_outputs(Path(args.out), result, params, args.worlds) if want_files else []
@@ -213,9 +282,12 @@ def main(args) -> int:
             "worlds": args.worlds,
             "displacement_m": [float(d) for d in disp],
             "unstable": [bool(u) for u in unstable],
+            "crumpled": [bool(c) for c in result["crumpled"]],
             "sim_time_s": float(result["sim_time_s"]),
             "wall_time_s": float(result["wall_time_s"]),
         }
+        if result["metrics"] is not None:
+            summary.update({k: np.asarray(v).tolist() for k, v in result["metrics"].items()})
         sys.stdout.write(json.dumps(summary) + "\n")
         return 0
     direction = "backward" if args.backward else "forward"
@@ -224,6 +296,13 @@ def main(args) -> int:
     for w, (d, u) in enumerate(zip(disp, unstable)):
         print(f"  world {w:4d}: net displacement along the worm axis {1e3 * d:+8.2f} mm"
               f"  ({1e3 * d / max(result['sim_time_s'], 1e-12):+.2f} mm/s){'  UNSTABLE (frozen)' if u else ''}")
+    m = result["metrics"]
+    if m is not None:
+        for w in range(min(args.worlds, 8)):
+            print(f"  world {w:4d}: ratios min {np.round(m['deformation_ratio_min'][w], 3).tolist()}, crease swing "
+                  f"{m['crease_angle_range_deg'][w]:.1f} deg, tail {1e3 * m['tail_displacement_m'][w]:+.1f} mm, head "
+                  f"{1e3 * m['head_displacement_m'][w]:+.1f} mm, centre lift {1e3 * m['centre_ipm_max_lift_m'][w]:.1f} "
+                  f"mm, fold violation {m['max_fold_violation_deg'][w]:.1f} deg")
     for p in paths:
         print(f"  wrote {p}")
     return 0

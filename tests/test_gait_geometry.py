@@ -1,0 +1,98 @@
+"""The actuation geometry of the paper (§III, §IV-C): the EPM beneath the support plate, and the wrench-sign table.
+
+Independent truths: the EPM cuboid's corners (its top face is exactly h below the origami base at closest approach,
+for every θ), the sentences of §III-A–C as signs of the exact (analytic) magnetic wrench at each preset's closest
+approach, and mirror symmetry (backward = forward mirrored x → −x: polar F_x and axial T_y flip, tail ↔ head).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from warpworm import gaits, quiet_warp
+from warpworm.model import Model
+from warpworm.params import WormParams
+from warpworm.simulator import Simulator
+from warpworm.transforms import quat_wxyz_to_matrix, quat_xyzw_to_wxyz
+
+quiet_warp()
+
+TAIL, CENTRE, HEAD = 1, 2, 3
+
+
+def closest_approach_wrench(gait: str, backward: bool, **overrides):
+    """Analytic force [N] and torque [N·m] on the (EPM, tail, centre, head) magnets, (4, 3) each, and the EPM pose,
+    with the rest worm and the EPM at its first closest approach (half a cycle)."""
+    p = gaits.preset_params(gait, backward, magnet_model="analytic", **overrides)
+    model = Model.from_params(p, 1, "cpu")
+    sim = Simulator(model, dt=4e-3, substeps=4)
+    state = sim.initial_state()
+    state.step_count.assign(np.array([round(0.5 * float(p.cycle_period) / sim.dt_sub)], np.int32))
+    sim.update_magnets(state)
+    q = state.magnet_rot.numpy()[0, 0]
+    R = quat_wxyz_to_matrix(quat_xyzw_to_wxyz(q))
+    return (state.magnet_force.numpy()[0].astype(np.float64), state.magnet_torque.numpy()[0].astype(np.float64),
+            state.magnet_pos.numpy()[0, 0].astype(np.float64), R, model)
+
+
+@pytest.mark.parametrize("theta", [-0.5 * np.pi, 0.0, 0.3, 0.5 * np.pi, np.pi])
+def test_epm_top_face_is_h_below_the_origami_base(theta):
+    h = 0.012
+    *_, pos, R, model = closest_approach_wrench("peristaltic", False, closest_approach=h, orientation=theta)
+    size = model.magnet_size_host[0, 0]
+    corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * 0.5 * size
+    top = (pos + corners @ R.T)[:, 2].max()
+    assert top == pytest.approx(-h, abs=2e-6)
+    # the moment points along (cos θ, 0, sin θ)
+    np.testing.assert_allclose(R[:, 2], [np.cos(theta), 0.0, np.sin(theta)], atol=1e-6)
+
+
+def test_closest_approach_inside_the_plate_is_refused():
+    p = gaits.preset_params("omega", closest_approach=0.002, support_thickness=0.003)
+    with pytest.raises(ValueError, match=r"worm.closest_approach.*0.002.*support_thickness"):
+        Model.from_params(p, 1, "cpu")
+
+
+def test_peristaltic_wrench_signs():
+    """§III-A: the EPM's south pole (up, beneath the anterior half, nearer the centre) attracts the two anterior north
+    poles: the centre IPM is pulled forward, the head IPM back (the anterior half contracts), both pressed down; the
+    tail IPM, far from it, is pulled less than either."""
+    F, T, *_ = closest_approach_wrench("peristaltic", False)
+    assert F[CENTRE, 0] > 0 > F[HEAD, 0], F
+    assert F[CENTRE, 2] < 0 and F[HEAD, 2] < 0, F
+    assert abs(F[TAIL, 0]) < min(abs(F[CENTRE, 0]), abs(F[HEAD, 0])), F
+
+
+def test_omega_wrench_signs():
+    """§III-B: flat, north pole forward, under the centre: the centre IPM is repelled upward with negligible torque;
+    the end IPMs are drawn in toward the middle, with torques of opposite sign."""
+    F, T, *_ = closest_approach_wrench("omega", False)
+    assert F[CENTRE, 2] > 0, F
+    assert F[TAIL, 0] > 0 > F[HEAD, 0], F
+    assert T[TAIL, 1] * T[HEAD, 1] < 0, T
+    assert abs(T[CENTRE, 1]) < 0.05 * min(abs(T[TAIL, 1]), abs(T[HEAD, 1])), T
+
+
+def test_inchworm_wrench_signs():
+    """§III-C: north pole up beneath the anterior half, nearer the centre: the centre IPM and the head IPM feel
+    torques of opposite sign (the inverted U of the anterior half), the centre's the larger, and the centre is
+    lifted."""
+    F, T, *_ = closest_approach_wrench("inchworm", False)
+    assert T[CENTRE, 1] * T[HEAD, 1] < 0, T
+    assert abs(T[CENTRE, 1]) > abs(T[HEAD, 1]), T
+    assert F[CENTRE, 2] > 0, F
+
+
+@pytest.mark.parametrize("gait", ["peristaltic", "omega", "inchworm"])
+def test_backward_is_the_mirror_image_of_forward(gait):
+    Ff, Tf, pf, *_ = closest_approach_wrench(gait, False)
+    Fb, Tb, pb, *_ = closest_approach_wrench(gait, True)
+    l0 = WormParams().l0
+    mirror = [0, HEAD, CENTRE, TAIL]  # slot in the mirrored worm
+    scale = np.abs(Ff).max()
+    for s in range(1, 4):
+        m = mirror[s]
+        np.testing.assert_allclose(Fb[m], Ff[s] * [-1, 1, 1], atol=2e-3 * scale)
+        np.testing.assert_allclose(Tb[m, 1], -Tf[s, 1], atol=2e-3 * np.abs(Tf).max())
+    assert pb[0] == pytest.approx(l0 - pf[0], abs=1e-4) and pb[2] == pytest.approx(pf[2], abs=1e-6)

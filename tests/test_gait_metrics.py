@@ -1,0 +1,82 @@
+"""Gait measures against trajectories built by hand, whose answers are known in closed form."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from warpworm import crease
+from warpworm.gait_metrics import fold_violation, gait_metrics, segment_ratios
+from warpworm.gait_search import grid_points, parse_grid
+
+
+def _worm():
+    return crease.build_worm(0.02, 0.008, 6, l0=0.08)
+
+
+def test_segment_ratios_of_a_uniform_axial_stretch_equal_the_stretch():
+    pat = _worm()
+    x = pat.vertices
+    s = np.array([1.0, 0.8, 1.2])
+    frames = np.stack([x * [k, 1.0, 1.0] for k in s])[:, None]  # (F, 1, V, 3)
+    np.testing.assert_allclose(segment_ratios(pat, frames)[:, 0], np.repeat(s[:, None], 4, 1), rtol=1e-12)
+
+
+def test_fold_violation_is_the_distance_outside_the_range():
+    lab = np.array([crease.MOUNTAIN, crease.MOUNTAIN, crease.VALLEY, crease.VALLEY, crease.FLAT])
+    ang = np.array([-1.0, 0.2, 0.5, -0.3, 3.0])
+    np.testing.assert_allclose(fold_violation(lab, ang), [0.0, 0.2, 0.0, 0.3, 0.0])
+
+
+def test_inchworm_like_trajectory_measures():
+    """Two cycles of T = 1 s: in each, the head advances 10 mm while the tail holds (the worm stretches), then the
+    tail catches up while the head holds (it contracts); nothing moves within 0.1 cycle of the far points."""
+    pat = _worm()
+    x0 = pat.vertices
+    t = np.linspace(0.0, 2.0, 81)
+    V = len(x0)
+    frames = np.zeros((len(t), 1, V, 3))
+    xa = x0[:, 0]
+    for f, tt in enumerate(t):
+        c, ph = divmod(tt, 1.0)
+        c = min(c, 1.0) if tt < 2.0 else 2.0
+        # front half squeezed then released; whole worm advanced by 10 mm per cycle, head first
+        # the head moves over s in [0.1, 0.5] of each cycle, the tail over [0.5, 0.9]: still around the far points
+        head_adv = 0.010 * (c + (np.clip((ph - 0.1) / 0.4, 0.0, 1.0) if tt < 2.0 else 0.0))
+        tail_adv = 0.010 * (c + (np.clip((ph - 0.5) / 0.4, 0.0, 1.0) if tt < 2.0 else 0.0))
+        u = xa / xa.max()
+        shift = tail_adv + (head_adv - tail_adv) * u
+        frames[f, 0] = np.stack([xa + shift, x0[:, 1], x0[:, 2]], -1)
+    mag = np.zeros((len(t), 1, 4, 3))
+    mag[:, 0, 2, 2] = 0.003 * np.sin(np.pi * t) ** 2
+    ang = np.zeros((len(t), 1, 2))
+    ang[:, 0, 0] = -1.0 + 0.3 * np.sin(np.pi * t)
+    ang[:, 0, 1] = 1.0
+    m = gait_metrics(pat, np.array([crease.MOUNTAIN, crease.VALLEY]),
+                     {"positions": frames, "magnet_pos": mag, "crease_angle": ang, "time": t}, 1.0)
+    assert m["tail_displacement_m"][0] == pytest.approx(0.020, abs=1e-9)
+    assert m["head_displacement_m"][0] == pytest.approx(0.020, abs=1e-9)
+    np.testing.assert_allclose(m["cycle_displacement_m"][0], [0.010, 0.010], atol=1e-9)
+    assert m["centre_ipm_max_lift_m"][0] == pytest.approx(0.003, abs=1e-9)
+    assert m["crease_angle_range_deg"][0] == pytest.approx(np.degrees(0.6), rel=1e-3)
+    assert m["max_fold_violation_deg"][0] == 0.0
+    # the extremes over time of the (separately tested) ratios: a uniform stretch by up to 10 mm / 80 mm
+    r = segment_ratios(pat, frames)[:, 0]
+    np.testing.assert_allclose(m["deformation_ratio_min"][0], r.min(0))
+    np.testing.assert_allclose(m["deformation_ratio_max"][0], 1.0 + 0.010 / xa.max(), rtol=1e-9)
+    # the contraction phase of each cycle (longest -> shortest): the head held (0) while the tail moved
+    np.testing.assert_allclose(m["end_hold_ratio"][0], [0.0, 0.0], atol=1e-9)
+    # nothing moves at the far points (s = 1, 2)
+    assert m["far_point_motion_m"][0] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_parse_grid_and_points():
+    g = parse_grid("w=0.01:0.03:3,a=0.04,0.05,h=0.01")
+    np.testing.assert_allclose(g["wavelength"], [0.01, 0.02, 0.03])
+    np.testing.assert_allclose(g["amplitude"], [0.04, 0.05])
+    pts = grid_points(g)
+    assert len(pts["wavelength"]) == 6 and set(pts["closest_approach"]) == {0.01}
+    for bad, msg in [("q=1", "unknown key 'q'"), ("w=1:2", "lo:hi:n"), ("0.1", "no key"), ("w=-1", ">= 0"),
+                     ("w=1,w=2", "twice")]:
+        with pytest.raises(ValueError, match=msg):
+            parse_grid(bad)

@@ -1,0 +1,131 @@
+"""What a gait did, measured from a trajectory: deformation, crawl versus slide, lift, fold violations.
+
+Host-side NumPy on stacked snapshots (``Simulator.snapshot`` keys) of W worlds over F frames; every function is
+vectorized over worlds and frames. The quantities follow the paper's §IV-E (Fig. 11): the four deformation ratios are
+the distances between adjacent segment centres (keypoints ``seg0..seg4``, tail → head) over their values at the first
+frame, so < 1 is a contraction of that part of the worm.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import crease
+
+IPM_CENTRE_SLOT = 2
+
+
+def segment_ratios(pattern: crease.CreasePattern, positions: np.ndarray) -> np.ndarray:
+    """Deformation ratios, shape (F, W, 4): adjacent segment-centre distances over their first-frame values.
+
+    Args:
+        pattern: the worm's crease pattern (keypoints ``seg0..seg4``).
+        positions: vertex positions [m], shape (F, W, V, 3).
+    """
+    kp = pattern.keypoints(np.asarray(positions, np.float64))
+    idx = [pattern.keypoint_names.index(f"seg{i}") for i in range(5)]
+    d = np.linalg.norm(np.diff(kp[..., idx, :], axis=-2), axis=-1)
+    return d / d[:1]
+
+
+def fold_violation(hinge_label: np.ndarray, crease_angle: np.ndarray) -> np.ndarray:
+    """How far each crease is outside its NoFoldThrough range [rad] (mountain [−π, 0], valley [0, π]; 0 inside),
+    same shape as ``crease_angle`` (..., H)."""
+    a = np.asarray(crease_angle, np.float64)
+    lab = np.asarray(hinge_label)
+    lo = np.where(lab == crease.VALLEY, 0.0, -np.pi)
+    hi = np.where(lab == crease.MOUNTAIN, 0.0, np.pi)
+    return np.maximum(lo - a, 0.0) + np.maximum(a - hi, 0.0)
+
+
+def end_positions(positions: np.ndarray, axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Tail and head coordinates along the worm axis [m], each (F, W): the mean of the end sections' corners
+    (vertices 0–2 and the last three) projected on ``axis`` (W, 3)."""
+    x = np.asarray(positions, np.float64)
+    tail = np.einsum("fwc,wc->fw", x[:, :, :3].mean(axis=2), axis)
+    head = np.einsum("fwc,wc->fw", x[:, :, -3:].mean(axis=2), axis)
+    return tail, head
+
+
+def gait_metrics(pattern, hinge_label, frames: dict, period, incline=0.0) -> dict:
+    """Per-world measures of one gait run.
+
+    Args:
+        pattern: the crease pattern.
+        hinge_label: crease labels (H,).
+        frames: stacked snapshots: ``positions (F, W, V, 3)`` [m], ``magnet_pos (F, W, 4, 3)`` [m],
+            ``crease_angle (F, W, H)`` [rad], ``time (F,)`` [s] from the start of the gait (t = 0 at the first
+            frame's EPM path origin), ``unstable (W,)`` optional.
+        period: EPM cycle period [s], scalar or (W,).
+        incline: floor slope about +y [rad], scalar or (W,) (the worm axis is (cos β, 0, sin β)).
+
+    Returns a dict of NumPy arrays (W = worlds, C = whole cycles in the run):
+        ``deformation_ratio_min``, ``deformation_ratio_max`` (W, 4); ``crease_angle_range_deg`` (W,) the largest
+        swing (max − min over time) of any crease; ``tail_displacement_m``, ``head_displacement_m`` (W,) along the
+        axis; ``centre_ipm_max_lift_m`` (W,) highest rise of the centre IPM above its first-frame height;
+        ``max_fold_violation_deg`` (W,); ``cycle_displacement_m`` (W, C) net motion of the vertex centroid per
+        cycle; ``cycle_ratio_min`` (W, C, 4) the smallest ratio of each segment pair in each cycle;
+        ``end_hold_ratio`` (W, C): in each cycle's contraction (from its longest head–tail length to the shortest
+        after it; from the cycle start when the shortest comes first), the motion of the end that moved less over that of the end that moved more (0: one end held,
+        1: both ends moved together, i.e. slid); ``far_point_motion_m`` (W,) the largest centroid motion in the
+        windows ±0.1 cycle around the EPM's far points (s = 0, 1, 2, …) after the first.
+    """
+    x = np.asarray(frames["positions"], np.float64)
+    F, W = x.shape[:2]
+    t = np.asarray(frames["time"], np.float64).reshape(F)
+    beta = np.broadcast_to(np.asarray(incline, np.float64), (W,))
+    axis = np.stack([np.cos(beta), np.zeros(W), np.sin(beta)], -1)
+    T = np.broadcast_to(np.asarray(period, np.float64), (W,))
+
+    ratios = segment_ratios(pattern, x)
+    ang = np.asarray(frames["crease_angle"], np.float64)
+    viol = fold_violation(hinge_label, ang)
+    tail, head = end_positions(x, axis)
+    centroid = np.einsum("fwc,wc->fw", x.mean(axis=2), axis)
+    lift = np.asarray(frames["magnet_pos"], np.float64)[:, :, IPM_CENTRE_SLOT, 2]
+
+    s = t[:, None] / T[None, :]  # (F, W) cycles since the gait started
+    C = int(np.floor(s[-1].min() + 1e-9))
+    cyc_disp = np.zeros((W, C))
+    cyc_rmin = np.ones((W, C, 4))
+    hold = np.full((W, C), np.nan)
+    length = head - tail
+    wi = np.arange(W)
+    for c in range(C):  # a few cycles: the loop is over cycles, every operation is over all worlds
+        inside = (s >= c - 1e-9) & (s <= c + 1 + 1e-9)  # (F, W)
+        first = np.argmax(inside, axis=0)
+        last = F - 1 - np.argmax(inside[::-1], axis=0)
+        cyc_disp[:, c] = centroid[last, wi] - centroid[first, wi]
+        cyc_rmin[:, c] = np.where(inside[..., None], ratios, np.inf).min(axis=0)
+        longest = np.argmax(np.where(inside, length, -np.inf), axis=0)
+        after = inside & (np.arange(F)[:, None] >= longest[None, :])
+        shortest = np.argmin(np.where(after, length, np.inf), axis=0)
+        start = np.where(shortest > longest, longest, first)
+        shortest = np.where(shortest > longest, shortest, np.argmin(np.where(inside, length, np.inf), axis=0))
+        dt_ = np.abs(tail[shortest, wi] - tail[start, wi])
+        dh = np.abs(head[shortest, wi] - head[start, wi])
+        big = np.maximum(dt_, dh)
+        hold[:, c] = np.where(big > 0, np.minimum(dt_, dh) / np.where(big > 0, big, 1.0), 0.0)
+
+    far = np.zeros(W)
+    for k in range(1, C + 1):
+        win = np.abs(s - k) <= 0.1
+        if not win.any():
+            continue
+        hi = np.where(win, centroid, -np.inf).max(axis=0)
+        lo = np.where(win, centroid, np.inf).min(axis=0)
+        far = np.maximum(far, np.where(np.isfinite(hi - lo), hi - lo, 0.0))
+
+    return {
+        "deformation_ratio_min": ratios.min(axis=0),
+        "deformation_ratio_max": ratios.max(axis=0),
+        "crease_angle_range_deg": np.degrees((ang.max(axis=0) - ang.min(axis=0)).max(axis=-1)),
+        "tail_displacement_m": tail[-1] - tail[0],
+        "head_displacement_m": head[-1] - head[0],
+        "centre_ipm_max_lift_m": (lift - lift[:1]).max(axis=0),
+        "max_fold_violation_deg": np.degrees(viol.max(axis=(0, 2))),
+        "cycle_displacement_m": cyc_disp,
+        "cycle_ratio_min": cyc_rmin,
+        "end_hold_ratio": hold,
+        "far_point_motion_m": far,
+    }
