@@ -34,7 +34,13 @@ def test_simulate_cli_json_and_files(tmp_path, capsys):
     assert rc == 0
     stdout = capsys.readouterr().out
     summary = json.loads(stdout)  # only JSON on stdout
-    assert list(summary) == ["gait", "worlds", "displacement_m", "unstable", "sim_time_s", "wall_time_s"]
+    assert list(summary)[:7] == ["gait", "worlds", "displacement_m", "unstable", "crumpled", "sim_time_s",
+                                 "wall_time_s"]
+    for key in ("deformation_ratio_min", "deformation_ratio_max"):
+        assert np.shape(summary[key]) == (2, 4)
+    for key in ("crease_angle_range_deg", "tail_displacement_m", "head_displacement_m", "centre_ipm_max_lift_m",
+                "max_fold_violation_deg"):
+        assert np.shape(summary[key]) == (2,)
     assert summary["gait"] == "omega" and summary["worlds"] == 2
     assert len(summary["displacement_m"]) == 2 and len(summary["unstable"]) == 2
     assert summary["sim_time_s"] == pytest.approx(1.0)
@@ -43,3 +49,4 @@ def test_simulate_cli_json_and_files(tmp_path, capsys):
     assert traj["positions"].shape[:2] == (F, 2) and traj["magnet_rot"].shape[-2:] == (3, 3)
     assert traj["crease_angle"].shape[:2] == (F, 2) and "triangles" in traj.files
     assert (out / "preview.mp4").stat().st_size > 0 and (out / "preview_strip.png").stat().st_size > 0
+    assert (out / "filmstrip.png").stat().st_size > 0

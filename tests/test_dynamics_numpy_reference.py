@@ -162,7 +162,8 @@ def test_implicit_fold_through_limit_matches_numpy_and_pushes_back():
         flip = np.flatnonzero(labels == crease.MOUNTAIN)[:3]
         labels[flip] = crease.VALLEY
         model.hinge_label.assign(labels)
-        sim = Simulator(model, dt=1e-3, substeps=1, solver="implicit")
+        # the relabelled creases start 67° outside their range: switch the crumple detection off for this test
+        sim = Simulator(model, dt=1e-3, substeps=1, solver="implicit", fold_tolerance=10.0)
         state = sim.initial_state()
         lifted = state.positions.numpy() + np.array([0.0, 0.0, 0.03], np.float32)  # no floor contact
         state.positions.assign(lifted)

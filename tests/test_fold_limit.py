@@ -15,12 +15,12 @@ from warpworm.simulator import Simulator
 quiet_warp()
 
 
-def squeeze_violation(hinge_stiffness, fold_limit, squeeze=0.035, duration=0.6):
-    """Tail section clamped, head section driven 35 mm (44 % of the worm) toward it and pressed 8 mm down into the
-    floor, one world per (k_α, k_lim); returns the largest fold violation [deg] over the run, (W,)."""
+def squeeze(hinge_stiffness, distance, duration=0.6):
+    """Tail section clamped, head section driven ``distance`` [m] toward it (over 2/3 of ``duration``, then held),
+    one world per k_α; returns (largest fold violation [deg] while not flagged, (W,); final ``unstable`` flags (W,);
+    final positions (W, V, 3))."""
     k = np.asarray(hinge_stiffness, np.float64)
-    p = WormParams(hinge_stiffness=k, fold_limit_stiffness=np.asarray(fold_limit, np.float64),
-                   ipm_moment=np.zeros(3), epm_moment=0.0, damping=20.0)
+    p = WormParams(hinge_stiffness=k, ipm_moment=np.zeros(3), epm_moment=0.0, damping=20.0)
     n = p.n_units
     tail, head = section_vertices(n, 0), section_vertices(n, 2 * n)
     model = Model.from_params(p, len(k), "cpu", anchors=np.concatenate([tail, head]), anchor_stiffness=50.0)
@@ -31,23 +31,27 @@ def squeeze_violation(hinge_stiffness, fold_limit, squeeze=0.035, duration=0.6):
     worst = np.zeros(len(k))
     label = model.pattern.hinge_label
     for i in range(1, steps + 1):
-        u = min(1.0, 1.5 * i / steps)
         t = x0.copy()
-        t[:, 3:, 0] -= squeeze * u
-        t[:, 3:, 2] -= 0.008 * u * (1 - u) * 4
+        t[:, 3:, 0] -= distance * min(1.0, 1.5 * i / steps)
         sim.set_anchor_targets(state, t)
         sim.step(state, 1)
-        if i % 5 == 0:
-            ang = state.crease_angle.numpy()
-            worst = np.maximum(worst, np.degrees(fold_violation(label, ang).max(axis=-1)))
-    assert not state.unstable.numpy().any()
-    return worst
+        flagged = state.unstable.numpy() != 0
+        viol = np.degrees(fold_violation(label, state.crease_angle.numpy()).max(axis=-1))
+        worst = np.where(flagged, worst, np.maximum(worst, viol))
+    return worst, state.unstable.numpy(), state.positions.numpy()
 
 
-def test_squeeze_respects_the_fold_range_at_any_crease_stiffness():
-    k = [0.0005, 0.005, 0.05]
-    worst = squeeze_violation(k + k, [2.0] * 3 + [0.0] * 3)
-    with_barrier, without = worst[:3], worst[3:]
-    assert np.all(with_barrier <= 5.0), with_barrier
-    # the squeeze is hard enough to matter: without the barrier the soft creases fold through
-    assert without[:2].max() > 10.0, without
+def test_moderate_squeeze_keeps_every_crease_in_range():
+    """8 mm (10 % of the worm): soft and stiff creases fold without leaving their range (measured 0.0°)."""
+    worst, flags, _ = squeeze([0.005, 0.05], 0.008)
+    assert np.all(flags == 0), flags
+    assert np.all(worst <= 5.0), worst
+
+
+def test_hard_squeeze_crumples_and_is_flagged_not_written():
+    """30 mm (37 %) is past what the bellows can fold (its waists close at about 17 % shortening, docs/crease.md):
+    the sheet crumples; every world is flagged crumpled (2) and frozen finite, so no data is made from it."""
+    worst, flags, x = squeeze([0.005, 0.05], 0.030)
+    assert np.all(flags == 2), flags
+    assert np.isfinite(x).all()
+    assert np.all(worst <= 5.0), worst  # nothing beyond the tolerance was ever reported as a live world
