@@ -246,7 +246,7 @@ def test_disk_full_gives_clear_error_and_keeps_completed_shards(tmp_path, monkey
     with pytest.raises(ds.DatasetWriteError, match="No space left"):
         run(tiny(), tmp_path / "d")
     names = sorted(p.name for p in (tmp_path / "d").iterdir())
-    assert names == ["manifest.json", "shard-00000.h5", "shard-00001.h5"]
+    assert names == [ds.LOCK_NAME, "manifest.json", "shard-00000.h5", "shard-00001.h5"]  # no temporary left
     m = json.loads((tmp_path / "d" / "manifest.json").read_text())
     assert not m["complete"] and [s["index"] for s in m["shards"]] == [0, 1]
     monkeypatch.setattr(ds.ShardWriter, "write", real_write)

@@ -21,7 +21,12 @@ sample; chunking them costs more than it saves). Rows are always written as cont
 from __future__ import annotations
 
 import builtins
+import errno as errno_mod
+import fcntl
 import glob
+import hashlib
+import socket
+import time
 import json
 import os
 import re
@@ -47,47 +52,192 @@ UNITS = {"length": "m", "depth": "m (camera z; 0 = background)", "angle": "rad",
          "mass": "kg", "moment": "A*m^2", "frames": "OpenCV camera (+z forward, +y down), x_cam = R x_world + t; "
          "poses are object -> world 4x4"}
 
-# name -> (dtype, unit, description). Shapes are per sample; the file's arrays have a leading N (samples in the shard).
-SCHEMA: dict[str, tuple[str, str, str]] = {
-    "rgb": ("uint8", "", "(H, W, 3) colour image, sRGB, after sensor effects"),
-    "depth": ("float32", "m", "(H, W) camera-frame z of the first surface; 0 = background"),
-    "segmentation": ("uint8", "", "(H, W) ids, see root attribute segmentation_ids"),
-    "camera/K": ("float64", "px", "(3, 3) intrinsics, row-major, fx, fy > 0"),
-    "camera/R": ("float64", "", "(3, 3) world -> camera rotation (x_cam = R x_world + t)"),
-    "camera/t": ("float64", "m", "(3,) world -> camera translation"),
-    "camera/position": ("float64", "m", "(3,) camera centre in world"),
-    "camera/in_frame": ("float32", "", "() fraction of the worm's vertices (every frame the camera shows) inside the "
-                        "image; below camera.min_in_frame only if no view in camera.max_tries draws reached it"),
-    "poses/body": ("float64", "m", "(4, 4) worm body frame -> world"),
-    "poses/ipm": ("float64", "m", "(3, 4, 4) IPM (tail, centre, head) -> world"),
-    "poses/epm": ("float64", "m", "(4, 4) EPM -> world"),
-    "poses/body_quat": ("float64", "", "(4,) body rotation as a quaternion (w, x, y, z)"),
-    "keypoints/world": ("float64", "m", "(P, 3) keypoints in world, names in root attribute keypoint_names"),
-    "keypoints/camera": ("float64", "m", "(P, 3) keypoints in the camera frame"),
-    "keypoints/pixel": ("float64", "px", "(P, 2) projection (u, v); pixel centres at integer (u, v) as in OpenCV"),
-    "keypoints/visibility": ("uint8", "", "(P,) COCO: 0 outside the image, 1 occluded, 2 visible"),
-    "creases/angle": ("float32", "rad", "(C,) signed dihedral of every crease, crease-pattern hinge order"),
-    "bars/strain": ("float32", "", "(E,) Cauchy strain dL/L0 of every bar, crease-pattern edge order"),
-    "worm/vertices": ("float32", "m", "(V, 3) worm mesh vertex positions in world"),
-    "labels/bbox_obj": ("float32", "px", "(4,) worm box (x, y, w, h) of the projected mesh, occlusion ignored"),
-    "labels/bbox_visib": ("float32", "px", "(4,) worm box (x, y, w, h) of its visible pixels; 0 if none"),
-    "labels/visib_fract": ("float32", "", "() visible worm pixels / pixels of the worm rendered alone (estimate)"),
-    "labels/worm_mask": ("uint8", "", "(H, W) 1 where the worm's sheet projects, occluders ignored (BOP 'mask')"),
-    "labels/deformation": ("float32", "", "(4,) distances between adjacent segment centres over their rest values"),
-    "time": ("float32", "s", "() simulated time of the frame after settling"),
-    "trajectory": ("int64", "", "() trajectory (simulated world) id; its frames are consecutive samples"),
-    "frame": ("int32", "", "() frame index within the trajectory (sim.frame_times)"),
-    "attempt": ("int32", "", "() replacement attempt that gave a stable world (0: first draw)"),
-    "sample_id": ("int64", "", "() global sample id, == row in the whole dataset"),
-    "seed": ("int64", "", "() per-sample 63-bit seed derived from (master seed, sample id) for pixel noise"),
+@dataclass(frozen=True)
+class Field:
+    """One dataset of every shard: its name, per-file shape (symbols N, H, W, P, C, E, V or integers), dtype, unit."""
+
+    name: str
+    shape: tuple
+    dtype: str
+    unit: str
+    description: str
+
+
+SHAPE_SYMBOLS = {
+    "N": "samples in the shard (attribute count)", "H": "render.height [px]", "W": "render.width [px]",
+    "P": "keypoints (root attribute keypoint_names)", "C": "creases (rows of root attribute crease_hinges)",
+    "E": "bars (rows of root attribute bar_edges)", "V": "sheet vertices (worm mesh)",
 }
-"""Datasets every shard holds (``params/<group>.<name>`` come in addition, one per randomized parameter)."""
+"""What each symbol of :attr:`Field.shape` stands for."""
+
+FIELDS: tuple[Field, ...] = (
+    Field("rgb", ("N", "H", "W", 3), "uint8", "", "colour image, sRGB, after sensor effects"),
+    Field("depth", ("N", "H", "W"), "float32", "m", "camera-frame z of the first surface; 0 = background"),
+    Field("segmentation", ("N", "H", "W"), "uint8", "",
+          "ids, see root attribute segmentation_ids: 0 background, 1 floor, 2..6 worm segments tail->head, "
+          "7/8/9 tail/centre/head IPM, 10 EPM"),
+    Field("camera/K", ("N", 3, 3), "float64", "px", "intrinsics, row-major, fx, fy > 0, pixel centres at integers"),
+    Field("camera/R", ("N", 3, 3), "float64", "", "world -> camera rotation (x_cam = R x_world + t)"),
+    Field("camera/t", ("N", 3), "float64", "m", "world -> camera translation"),
+    Field("camera/position", ("N", 3), "float64", "m", "camera centre in world (= -R^T t)"),
+    Field("camera/in_frame", ("N",), "float32", "",
+          "fraction of the worm's vertices (every frame the camera shows) inside the image; below "
+          "camera.min_in_frame only if no view in camera.max_tries draws reached it"),
+    Field("poses/body", ("N", 4, 4), "float64", "m",
+          "worm body frame -> world (origin: mean of the segment centres, x tail->head, z dorsal)"),
+    Field("poses/ipm", ("N", 3, 4, 4), "float64", "m", "IPM (tail, centre, head) -> world; disk axis = local z"),
+    Field("poses/epm", ("N", 4, 4), "float64", "m", "EPM -> world; moment along local z"),
+    Field("poses/body_quat", ("N", 4), "float64", "", "body rotation as a unit quaternion (w, x, y, z)"),
+    Field("keypoints/world", ("N", "P", 3), "float64", "m", "keypoints in world, names in root attribute keypoint_names"),
+    Field("keypoints/camera", ("N", "P", 3), "float64", "m", "keypoints in the camera frame (R x_world + t)"),
+    Field("keypoints/body", ("N", "P", 3), "float64", "m",
+          "keypoints in the worm body frame: poses/body^-1 applied to keypoints/world"),
+    Field("keypoints/pixel", ("N", "P", 2), "float64", "px",
+          "projection (u, v) of keypoints/world through K, R, t (cv2.projectPoints, no distortion)"),
+    Field("keypoints/visibility", ("N", "P"), "uint8", "",
+          "COCO: 0 outside the image (or behind the camera), 1 occluded, 2 visible (docs/render.md)"),
+    Field("creases/angle", ("N", "C"), "float32", "rad",
+          "signed dihedral of every crease (valley +, mountain -), order = root attribute crease_hinges"),
+    Field("bars/strain", ("N", "E"), "float32", "", "Cauchy strain dL/L0 of every bar, order = root attribute bar_edges"),
+    Field("worm/vertices", ("N", "V", 3), "float32", "m",
+          "deformed sheet vertices in world (triangles: root attribute mesh_triangles)"),
+    Field("labels/bbox_obj", ("N", 4), "float32", "px", "worm box (x, y, w, h) of the projected mesh, occlusion ignored"),
+    Field("labels/bbox_visib", ("N", 4), "float32", "px", "worm box (x, y, w, h) of its visible pixels; 0s if none"),
+    Field("labels/visib_fract", ("N",), "float32", "", "visible worm pixels / pixels of the worm rendered alone"),
+    Field("labels/worm_mask", ("N", "H", "W"), "uint8", "", "1 where the worm's sheet projects, occluders ignored"),
+    Field("labels/deformation", ("N", 4), "float32", "",
+          "distances between adjacent segment centres over their rest values"),
+    Field("time", ("N",), "float32", "s", "simulated time of the frame after settling"),
+    Field("trajectory", ("N",), "int64", "", "trajectory (simulated world) id; its frames are consecutive samples"),
+    Field("frame", ("N",), "int32", "", "frame index within the trajectory (sim.frame_times)"),
+    Field("attempt", ("N",), "int32", "", "replacement attempt that gave a stable world (0: first draw)"),
+    Field("sample_id", ("N",), "int64", "", "global sample id, == row in the whole dataset"),
+    Field("seed", ("N",), "int64", "", "per-sample 63-bit seed derived from (master seed, sample id) for pixel noise"),
+)
+"""Every dataset of every shard, in the order of the docs table (``params/<group>.<name>`` come in addition)."""
+
+PARAMS_FIELD = Field("params/<group>.<name>", ("N",), "float64 / bytes / bool", "(the parameter's)",
+                     "every randomized value, one dataset per name in root attribute params_names")
+
+SCHEMA: dict[str, tuple[str, str, str]] = {
+    f.name: (f.dtype, f.unit, f"({', '.join(str(d) for d in f.shape[1:])}{',' if len(f.shape) == 2 else ''}) "
+             f"{f.description}") for f in FIELDS}
+"""name -> (dtype, unit, description with the per-sample shape); the ``description`` attribute of each dataset."""
+
+SCHEMA_TABLE_BEGIN = "<!-- schema table: generated from warpworm.dataset.FIELDS by schema_markdown(); do not edit -->"
+SCHEMA_TABLE_END = "<!-- end of schema table -->"
+
+
+def schema_markdown() -> str:
+    """The docs' table of every HDF5 dataset (docs/dataset.md holds exactly this text; a test checks it)."""
+    def shape(f):
+        return "(" + ", ".join(str(d) for d in f.shape) + ("," if len(f.shape) == 1 else "") + ")"
+
+    rows = ["| dataset | shape | dtype | unit | meaning |", "|---|---|---|---|---|"]
+    for f in FIELDS + (PARAMS_FIELD,):
+        rows.append(f"| `{f.name}` | {shape(f)} | {f.dtype} | {f.unit or '—'} | {f.description} |")
+    syms = "; ".join(f"{k} = {v}" for k, v in SHAPE_SYMBOLS.items())
+    return "\n".join([SCHEMA_TABLE_BEGIN, *rows, "", f"Shape symbols: {syms}.", SCHEMA_TABLE_END])
+
+
+def resolve_shape(field: Field, dims: dict[str, int]) -> tuple[int, ...]:
+    """A field's shape with its symbols replaced by ``dims`` (e.g. {"N": 6, "H": 16, ...})."""
+    return tuple(dims[d] if isinstance(d, str) else d for d in field.shape)
+
 
 IMAGE_KEYS = ("rgb", "depth", "segmentation", "labels/worm_mask")
 
 
 class DatasetWriteError(OSError):
     """Writing a shard failed (disk full, read-only folder, ...). Completed shards are intact; rerun with --resume."""
+
+
+class DatasetError(ValueError):
+    """A dataset folder is damaged or not a dataset (missing / unreadable manifest, unreadable shard)."""
+
+
+def write_error(exc: OSError, path, doing: str) -> DatasetWriteError:
+    """One-line :class:`DatasetWriteError` naming the file, the cause and what to do."""
+    import errno as _e
+
+    code = exc.errno or 0
+    what = os.strerror(code) if code else str(exc)
+    if code in (_e.ENOSPC, _e.EDQUOT):
+        fix = "free space on that file system (or point --out elsewhere and start again)"
+    elif code in (_e.EACCES, _e.EPERM, _e.EROFS):
+        fix = "make the folder writable (permissions, a read-write mount)"
+    else:
+        fix = "fix the storage problem"
+    return DatasetWriteError(code, f"{doing} {path} failed: {what} [errno {code}]. Completed shards are intact and "
+                                   f"nothing half-written is left; {fix}, then rerun the same command with --resume")
+
+
+class _FailSafeFile:
+    """The shard's file as HDF5 sees it (h5py's ``fileobj`` driver): unbuffered writes to a real file; the first
+    OSError (ENOSPC, EIO, EROFS, ...) is recorded in :attr:`error` and every later write is dropped (reported as done).
+
+    Why: when the disk fills up mid-shard, HDF5 keeps retrying the failed writes while closing the file and at
+    interpreter exit (one traceback per cached metadata block, then a segfault, exit 139). Dropping the writes after
+    the first failure lets HDF5 close cleanly; the writer then deletes the temporary and raises one clear error.
+    """
+
+    def __init__(self, path: Path):
+        self.path = path
+        self.raw = builtins.open(path, "w+b", buffering=0)
+        self.error: OSError | None = None
+        self._pos = 0
+
+    def _raw_write(self, b) -> int:
+        return self.raw.write(b)
+
+    def write(self, b) -> int:
+        n = len(memoryview(b).cast("B"))
+        if self.error is None:
+            try:
+                mv = memoryview(b).cast("B")
+                done = 0
+                while done < n:
+                    w = self._raw_write(mv[done:])
+                    if not w:
+                        raise OSError(errno_mod.EIO, "short write")
+                    done += w
+            except OSError as exc:
+                self.error = exc
+        self._pos += n
+        if self.error is None:
+            return n
+        try:
+            self.raw.seek(self._pos)
+        except OSError:
+            pass
+        return n
+
+    def read(self, n=-1):
+        return self.raw.read(n)
+
+    def readinto(self, b):
+        return self.raw.readinto(b)
+
+    def seek(self, pos, whence=0):
+        self._pos = self.raw.seek(pos, whence)
+        return self._pos
+
+    def tell(self):
+        return self._pos
+
+    def truncate(self, size=None):
+        if self.error is None:
+            try:
+                return self.raw.truncate(size)
+            except OSError as exc:
+                self.error = exc
+        return size
+
+    def flush(self):
+        pass
+
+    def close(self):
+        self.raw.close()
 
 
 def _fsync_dir(path: Path) -> None:
@@ -120,7 +270,7 @@ def atomic_write_json(path: str | os.PathLike, obj: Any) -> None:
             tmp.unlink()
         except OSError:
             pass
-        raise DatasetWriteError(exc.errno, f"could not write {path}: {exc.strerror}") from exc
+        raise write_error(exc, path, "writing") from exc
 
 
 def _json_default(o):
@@ -167,8 +317,11 @@ class ShardWriter:
         self.rows_written = np.zeros(count, dtype=bool)
         self._datasets: dict = {}
         self._buffers: dict[str, np.ndarray] = {}
+        self._io = None
+        self.sha256 = ""
         try:
-            self.f = h5py.File(self.tmp, "w", libver="latest")
+            self._io = _FailSafeFile(self.tmp)
+            self.f = h5py.File(self._io, "w", libver="latest")
             for k, v in root_attrs.items():
                 self.f.attrs[k] = v
             self.f.attrs["shard_index"] = index
@@ -176,8 +329,17 @@ class ShardWriter:
             self.f.attrs["count"] = count
             self.f.attrs["complete"] = False
         except OSError as exc:
+            err = (self._io.error if self._io is not None else None) or exc
             self._cleanup()
-            raise DatasetWriteError(exc.errno or 0, f"cannot create shard {self.tmp}: {exc}") from exc
+            raise write_error(err, self.tmp, "creating shard") from exc
+        self._check_io("creating shard")
+
+    def _check_io(self, doing: str) -> None:
+        """Raise the first write error the file saw (the temporary is deleted first)."""
+        err = self._io.error if self._io is not None else None
+        if err is not None:
+            self.abort()
+            raise write_error(err, self.tmp, doing) from err
 
     def _create(self, name: str, arr: np.ndarray):
         shape = (self.count,) + arr.shape[1:]
@@ -222,9 +384,10 @@ class ShardWriter:
                         buf = self._buffers[name] = buf.astype(arr.dtype)
                     buf[sl] = arr
         except OSError as exc:
+            err = (self._io.error if self._io is not None else None) or exc
             self.abort()
-            raise DatasetWriteError(exc.errno or 0, f"write to {self.tmp} failed ({exc}); completed shards are "
-                                    "intact: free space / fix permissions and rerun with --resume") from exc
+            raise write_error(err, self.tmp, "writing shard") from exc
+        self._check_io("writing shard")
         if sl is not None:
             self.rows_written[sl] = True
 
@@ -241,17 +404,19 @@ class ShardWriter:
             self.f.flush()
             self.f.close()
             self.f = None
-            fd = os.open(self.tmp, os.O_RDONLY)
-            try:
-                os.fsync(fd)
-            finally:
-                os.close(fd)
+            self._check_io("finishing shard")
+            os.fsync(self._io.raw.fileno())
+            self._io.close()
+            self._io = None
+            self.sha256 = file_sha256(self.tmp)
             os.replace(self.tmp, self.final)
             _fsync_dir(self.dir)
         except OSError as exc:
+            if isinstance(exc, DatasetWriteError):
+                raise
+            err = (self._io.error if self._io is not None else None) or exc
             self.abort()
-            raise DatasetWriteError(exc.errno or 0, f"finishing shard {self.final} failed ({exc}); completed shards "
-                                    "are intact: rerun with --resume") from exc
+            raise write_error(err, self.tmp, "finishing shard") from exc
         return self.final
 
     def _cleanup(self):
@@ -261,6 +426,12 @@ class ShardWriter:
         except Exception:  # noqa: BLE001 - best effort on an already failing file
             pass
         self.f = None
+        try:
+            if getattr(self, "_io", None) is not None:
+                self._io.close()
+        except Exception:  # noqa: BLE001
+            pass
+        self._io = None
         try:
             self.tmp.unlink()
         except OSError:
@@ -285,17 +456,164 @@ def clean_temporaries(out_dir) -> list[str]:
 
 def shard_is_valid(path, expected_first: int, expected_count: int) -> bool:
     """A final-named shard that opens, is marked complete and holds the expected sample ids."""
+    return shard_problem(path, expected_first, expected_count) is None
+
+
+def shard_problem(path, expected_first: int, expected_count: int, sha256: str | None = None) -> str | None:
+    """Why shard ``path`` is not a complete shard of ids [first, first + count) (with the manifest's ``sha256``:
+    also byte-identical to what was written), or None."""
+    if sha256:
+        try:
+            got = file_sha256(path)
+        except OSError as exc:
+            return f"unreadable ({exc.strerror})"
+        if got != sha256:
+            return f"checksum mismatch (manifest sha256 {sha256[:12]}..., file {got[:12]}...): changed after it was written"
     try:
         with h5py.File(path, "r") as f:
             if not bool(f.attrs.get("complete", False)):
-                return False
+                return "not marked complete"
             if int(f.attrs["first_sample"]) != expected_first or int(f.attrs["count"]) != expected_count:
-                return False
+                return (f"holds samples [{int(f.attrs['first_sample'])}, +{int(f.attrs['count'])}); expected "
+                        f"[{expected_first}, +{expected_count})")
             ids = f["sample_id"][...]
-            return ids.shape == (expected_count,) and np.array_equal(
-                ids, np.arange(expected_first, expected_first + expected_count))
-    except (OSError, KeyError):
-        return False
+            if ids.shape != (expected_count,) or not np.array_equal(
+                    ids, np.arange(expected_first, expected_first + expected_count)):
+                return "sample_id is not the expected range"
+    except (OSError, KeyError, ValueError) as exc:
+        return f"unreadable as HDF5 (truncated or damaged: {type(exc).__name__}: {str(exc)[:120]})"
+    return None
+
+
+def file_sha256(path, block: int = 1 << 20) -> str:
+    """SHA-256 of a file's bytes (hex), as stored per shard in the manifest."""
+    h = hashlib.sha256()
+    with builtins.open(path, "rb") as f:
+        while True:
+            b = f.read(block)
+            if not b:
+                return h.hexdigest()
+            h.update(b)
+
+
+def read_manifest(root) -> dict:
+    """The manifest of dataset folder ``root``; :class:`DatasetError` naming the file and the fix if it is missing
+    or damaged."""
+    mpath = Path(root) / MANIFEST
+    if not mpath.is_file():
+        raise DatasetError(f"{mpath}: missing, so {root} is not a (finished) warpworm dataset folder; if a job wrote "
+                           "shards there, rerun it with --resume to rebuild the manifest from the shards")
+    try:
+        m = json.loads(mpath.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise DatasetError(f"{mpath}: unreadable ({type(exc).__name__}: {exc}); rerun the job that wrote it with "
+                           "--resume to rebuild it from the shards") from exc
+    if not isinstance(m, dict) or m.get("format") != "warpworm-dataset" or not isinstance(m.get("shards"), list):
+        raise DatasetError(f"{mpath}: not a warpworm manifest (expected a JSON object with format "
+                           "'warpworm-dataset' and a shards list); rerun the job with --resume to rebuild it")
+    return m
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# Advisory lock on a dataset folder
+LOCK_NAME = ".warpworm.lock"
+
+
+class DatasetLockedError(RuntimeError):
+    """Another running job holds the folder's lock."""
+
+
+class FolderLock:
+    """An exclusive advisory lock (``flock``) on ``DIR/.warpworm.lock`` held for a whole job.
+
+    The file names the holder (JSON: pid, host, start time, command). The kernel releases the lock when the holder
+    dies, however it dies, so a lock file with a holder in it that can be locked again is *stale* (a killed job):
+    :attr:`stale` then holds the dead job's record. A clean exit empties the file. ``flock`` is per host on most
+    network file systems: two hosts writing one NFS folder are not stopped by it (use one folder per job there).
+    """
+
+    def __init__(self, root):
+        self.path = Path(root) / LOCK_NAME
+        self.fd = None
+        self.stale: dict | None = None
+
+    @staticmethod
+    def describe(info: dict) -> str:
+        return (f"pid {info.get('pid')} on host {info.get('host')} started {info.get('started')}"
+                + (f" ({info.get('command')})" if info.get("command") else ""))
+
+    def acquire(self, command: str = "") -> "FolderLock":
+        import sys
+
+        try:
+            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError as exc:
+            raise write_error(exc, self.path, "creating the lock file") from exc
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            info = _read_lock(fd)
+            os.close(fd)
+            raise DatasetLockedError(f"{self.path.parent} is in use by another job: {self.describe(info)}; wait for "
+                                     "it to finish or stop it (kill -TERM <pid>), then rerun with --resume") from None
+        old = _read_lock(fd)
+        if old:
+            self.stale = old
+        info = {"pid": os.getpid(), "host": socket.gethostname(),
+                "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "command": command or " ".join(sys.argv)}
+        try:
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, json.dumps(info).encode(), 0)
+        except OSError as exc:
+            os.close(fd)
+            raise write_error(exc, self.path, "writing the lock file") from exc
+        self.fd = fd
+        return self
+
+    def release(self) -> None:
+        if self.fd is None:
+            return
+        try:
+            os.ftruncate(self.fd, 0)  # empty = released cleanly (not stale)
+        except OSError:
+            pass
+        try:
+            fcntl.flock(self.fd, fcntl.LOCK_UN)
+        finally:
+            os.close(self.fd)
+            self.fd = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.release()
+
+
+def _read_lock(fd) -> dict:
+    try:
+        raw = os.pread(fd, 4096, 0)
+        return json.loads(raw) if raw.strip() else {}
+    except (OSError, ValueError):
+        return {"pid": "?", "host": "?", "started": "?"}
+
+
+def lock_holder(root) -> dict | None:
+    """The record of the job holding ``root``'s lock now, or None (no lock file, or a stale one)."""
+    path = Path(root) / LOCK_NAME
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:
+        return None
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except BlockingIOError:
+            return _read_lock(fd)
+        fcntl.flock(fd, fcntl.LOCK_UN)
+        return None
+    finally:
+        os.close(fd)
 
 
 # ---------------------------------------------------------------------------------------------------------------------
@@ -312,10 +630,7 @@ class DatasetReader:
 
     def __init__(self, root):
         self.root = Path(root)
-        mpath = self.root / MANIFEST
-        if not mpath.is_file():
-            raise FileNotFoundError(f"{self.root} has no {MANIFEST}: not a warpworm dataset folder")
-        self.manifest = json.loads(mpath.read_text())
+        self.manifest = read_manifest(self.root)
         shards = []
         for name in sorted(os.listdir(self.root)):
             m = SHARD_RE.match(name)
@@ -324,8 +639,13 @@ class DatasetReader:
         self.shard_paths = [p for _, p in shards]
         counts = []
         for p in self.shard_paths:
-            with h5py.File(p, "r") as f:
-                counts.append(int(f.attrs["count"]))
+            try:
+                with h5py.File(p, "r") as f:
+                    counts.append(int(f.attrs["count"]))
+            except (OSError, KeyError) as exc:
+                raise DatasetError(f"{p}: unreadable shard ({type(exc).__name__}: {str(exc)[:160]}); run "
+                                   f"`warpworm verify {self.root}`, then the job's command with --resume to redo "
+                                   "it") from exc
         self.counts = np.asarray(counts, dtype=np.int64)
         self.offsets = np.concatenate([[0], np.cumsum(self.counts)])
         self._files: dict[int, h5py.File] = {}

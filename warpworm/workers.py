@@ -23,11 +23,25 @@ from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from typing import Callable
 
 _progress_queue = None
+_in_shard = False
+
+
+def _worker_signal(signum, frame):
+    """SIGTERM / SIGINT in a worker: discard the shard in flight (run_shard deletes its temporary), then exit."""
+    if _in_shard:
+        from .pipeline import Interrupted
+
+        raise Interrupted(signum)
+    os._exit(128 + signum)
 
 
 def _init_worker(q, parent_pid: int, stages=None, ready=None):
     global _progress_queue
+    import signal
+
     _progress_queue = q
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, _worker_signal)
 
     def watchdog():
         while True:
@@ -54,9 +68,16 @@ def _report(n: int):
 
 
 def _run_shard_task(cfg, out, k, stages):
-    from .pipeline import run_shard
+    global _in_shard
+    from .pipeline import Interrupted, run_shard
 
-    return run_shard(cfg, out, k, stages, progress=_report)
+    _in_shard = True
+    try:
+        return run_shard(cfg, out, k, stages, progress=_report)
+    except Interrupted as exc:  # the temporary is gone (run_shard aborted the writer): stop this process now
+        os._exit(128 + exc.signum)
+    finally:
+        _in_shard = False
 
 
 def _warm(cfg, stages) -> None:
@@ -138,13 +159,40 @@ def _run_local_pool(cfg, out, todo, stages, workers, on_progress, on_shard):
                 except Exception as exc:  # noqa: BLE001 - re-raised with the recovery advice
                     for f in pending:
                         f.cancel()
+                    from .dataset import DatasetWriteError
+
+                    if isinstance(exc, DatasetWriteError):  # disk full in a worker: its own one-line message
+                        _stop_workers(pool)
+                        raise exc from None
                     raise WorkerError(f"shard {k} failed in a worker: {type(exc).__name__}: {exc}. Completed shards "
                                       "are intact; rerun the same command with --resume to finish the job") from exc
                 on_shard(st)
+    except BaseException:
+        _stop_workers(pool)  # SIGTERM / SIGINT in the parent, or a failure: no worker keeps writing
+        raise
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
         stop.set()
         t.join(timeout=2)
+
+
+def _stop_workers(pool, timeout: float = 10.0) -> None:
+    """SIGTERM every live worker (each discards its shard in flight and exits), SIGKILL any left after ``timeout``."""
+    import signal
+
+    procs = list(getattr(pool, "_processes", {}).values())
+    for p in procs:
+        if p.is_alive():
+            try:
+                os.kill(p.pid, signal.SIGTERM)
+            except (ProcessLookupError, TypeError):
+                pass
+    t_end = time.monotonic() + timeout
+    for p in procs:
+        p.join(max(0.0, t_end - time.monotonic()))
+        if p.is_alive():
+            p.kill()
+            p.join(1.0)
 
 
 def _run_ray(cfg, out, todo, stages, address, on_progress, on_shard):

@@ -7,6 +7,14 @@ import sys
 
 HELP = "Generate a labeled synthetic dataset (sharded HDF5) from a YAML config (path or packaged name, e.g. 'default')."
 
+# Exit codes (docs/dataset.md, "Faults and exit codes")
+EXIT_OK = 0
+EXIT_FAILED = 1  # a worker died, or a stage failed (e.g. worlds unstable in every attempt): --resume continues
+EXIT_CONFIG = 2  # bad config / arguments / output folder: refused before any work, nothing written
+EXIT_WRITE = 3  # disk full, read-only or unwritable folder mid-job: completed shards intact, --resume continues
+EXIT_LOCKED = 4  # another running job holds the output folder's lock (named in the message)
+# 128 + signal (130 SIGINT, 143 SIGTERM): stopped cleanly on a signal, --resume continues
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("config", help="YAML config: a file path or a packaged name (default, production, ...)")
@@ -45,12 +53,13 @@ def allow_intermixed(parser: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     from ..config import ConfigError, check_output_dir, load_config
+    from ..dataset import DatasetError, DatasetLockedError, DatasetWriteError, FolderLock, lock_holder
 
     try:
         cfg = load_config(args.config, args.overrides, num_samples=args.num, seed=args.seed)
         if args.print_config:
             print(cfg.to_yaml(), end="")
-            return 0
+            return EXIT_OK
         if args.workers < 1:
             raise ConfigError([f"--workers: got {args.workers}; expected >= 1"])
         if args.engine == "ray":
@@ -59,24 +68,40 @@ def main(args: argparse.Namespace) -> int:
             if importlib.util.find_spec("ray") is None:  # before anything is written to --out
                 raise ConfigError(["--engine: got 'ray'; expected Ray to be installed "
                                    "(pip install 'warpworm[ray]') or --engine local"])
+        holder = lock_holder(args.out)
+        if holder is not None:
+            raise DatasetLockedError(f"{args.out} is in use by another job: {FolderLock.describe(holder)}; wait for it "
+                                     "to finish or stop it (kill -TERM <pid>), then rerun with --resume")
         check_output_dir(args.out, args.resume)
     except ConfigError as exc:
         print(f"error: {exc}", file=sys.stderr)
-        return 2
+        return EXIT_CONFIG
+    except DatasetLockedError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_LOCKED
 
-    from ..dataset import DatasetWriteError
-    from ..pipeline import DEFAULT_STAGES, generate
+    from ..pipeline import DEFAULT_STAGES, Interrupted, generate
     from ..workers import WorkerError
 
     try:
         summary = generate(cfg, args.out, workers=args.workers, resume=args.resume,
                            stages=args.stages or DEFAULT_STAGES, engine=args.engine, address=args.address,
                            progress=not args.no_progress, preview=False if args.no_preview else None)
-    except ConfigError as exc:
+    except (ConfigError, DatasetError) as exc:
         print(f"error: {exc}", file=sys.stderr)
-        return 2
-    except (DatasetWriteError, WorkerError, RuntimeError) as exc:
+        return EXIT_CONFIG
+    except DatasetLockedError as exc:
         print(f"error: {exc}", file=sys.stderr)
-        return 1
+        return EXIT_LOCKED
+    except DatasetWriteError as exc:
+        print(f"error: {exc.strerror if exc.strerror else exc}", file=sys.stderr)
+        return EXIT_WRITE
+    except Interrupted as exc:
+        print(f"stopped: {exc}; completed shards are committed and listed in {args.out}/manifest.json, the shard in "
+              "flight was discarded; rerun the same command with --resume to continue", file=sys.stderr)
+        return 128 + exc.signum
+    except (WorkerError, RuntimeError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_FAILED
     print(summary.text())
-    return 0
+    return EXIT_OK
