@@ -102,7 +102,17 @@ class FakeStages:
         kc = np.einsum("bij,bpj->bpi", cameras.R, kw) + cameras.t[:, None]
         kuv = np.einsum("bij,bpj->bpi", cameras.K, kc)
         kpix = kuv[..., :2] / kuv[..., 2:3]
-        inside = (kpix[..., 0] >= 0) & (kpix[..., 0] < W) & (kpix[..., 1] >= 0) & (kpix[..., 1] < H) & (kc[..., 2] > 0)
+        # COCO visibility by the renderer's rule (docs/render.md) against this fake's own depth map: 0 behind the
+        # camera or the rounded pixel outside, 2 where nothing lies more than 0.5 mm in front (or a worm pixel within
+        # 1 cm: the keypoint's own surface), else 1
+        px, py = np.rint(kpix[..., 0]), np.rint(kpix[..., 1])
+        inside = (px >= 0) & (px < W) & (py >= 0) & (py < H) & (kc[..., 2] > 0)
+        pxi, pyi = np.where(inside, px, 0).astype(int), np.where(inside, py, 0).astype(int)
+        D = depth[np.arange(B)[:, None], pyi, pxi].astype(np.float64)
+        L = seg[np.arange(B)[:, None], pyi, pxi]
+        gap = kc[..., 2] - D
+        visible = (D == 0) | (gap <= 5e-4) | ((gap <= 0.01) & (L >= 2) & (L <= 6))
+        vis = np.where(inside, np.where(visible, 2, 1), 0).astype(np.uint8)
         body = tf.pose_matrix(np.broadcast_to(np.eye(3), (B, 3, 3)), pos.mean(1))
         mags = tf.pose_matrix(frame["magnet_rot"], frame["magnet_pos"])
         ys, xs = np.nonzero(mask.any(2)), None
@@ -121,7 +131,7 @@ class FakeStages:
             "poses/body": body, "poses/ipm": mags[:, 1:4], "poses/epm": mags[:, 0],
             "poses/body_quat": tf.matrix_to_quat_wxyz(body[:, :3, :3]),
             "keypoints/world": kw, "keypoints/camera": kc, "keypoints/pixel": kpix,
-            "keypoints/visibility": np.where(inside, 2, 0).astype(np.uint8),
+            "keypoints/visibility": vis,
             "creases/angle": frame["crease_angle"].astype(np.float32),
             "bars/strain": frame["bar_strain"].astype(np.float32),
             "worm/vertices": pos.astype(np.float32),

@@ -23,6 +23,8 @@ COMMANDS = {
     "generate": "generate",
     "export-bop": "export_bop",
     "export-usd": "export_usd",
+    "export-coco": "export_coco",
+    "verify": "verify",
 }
 
 

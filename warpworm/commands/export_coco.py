@@ -1,0 +1,134 @@
+"""``warpworm export-coco DIR OUT``: images and a COCO keypoint annotation file (https://cocodataset.org/#format-data).
+
+Written::
+
+    OUT/images/{sample_id:06d}.png        # the dataset's rgb, losslessly
+    OUT/annotations/keypoints.json        # COCO: info, images, annotations, categories
+
+One category, ``worm`` (id 1), with the dataset's ``keypoint_names`` and a ``skeleton`` (1-based pairs: the body axis
+tail - seg0 ... seg4 - head, each IPM centre to its segment, the end-section corners to their end). One annotation per
+image: ``keypoints`` = [u, v, v_flag] * P with the dataset's visibility (0 outside the image, 1 occluded, 2 visible;
+u = v = 0 where the flag is 0, as COCO requires), ``num_keypoints`` = keypoints with a flag > 0, ``bbox`` = the visible
+worm box (x, y, w, h) [px] (``labels/bbox_visib``; the projected box ``labels/bbox_obj`` clipped to the image where
+no worm pixel is visible), ``area`` = visible worm pixels (segmentation ids 2..6), ``segmentation`` = that mask as an
+uncompressed RLE (column-major, as pycocotools' ``frPyObjects``), ``iscrowd`` 0. Keypoint pixel centres are at integer
+coordinates (the dataset's OpenCV convention, which is also COCO's keypoint convention).
+
+For ``COCOeval(..., "keypoints")`` set ``params.kpt_oks_sigmas`` to P values (pycocotools' default has COCO's 17
+person keypoints); the file's ``info.kpt_oks_sigmas`` holds a uniform suggestion (0.025 per keypoint).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+
+HELP = "Export a dataset folder to COCO keypoints (images/*.png + annotations/keypoints.json)."
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("dir", help="dataset folder")
+    parser.add_argument("out", help="output folder (created; must be empty or new)")
+    parser.add_argument("--limit", type=int, default=None, help="export only the first N samples")
+
+
+def skeleton(names: list[str]) -> list[list[int]]:
+    """1-based keypoint pairs between the names that exist: body axis, IPMs to their segments, corners to their end."""
+    idx = {n: i + 1 for i, n in enumerate(names)}
+    chain = ["tail"] + [f"seg{i}" for i in range(5)] + ["head"]
+    pairs = list(zip(chain[:-1], chain[1:]))
+    pairs += [("ipm_tail", "seg0"), ("ipm_centre", "seg2"), ("ipm_head", "seg4")]
+    for end in ("tail", "head"):
+        pairs += [(f"{end}_{c}", end) for c in ("top", "left", "right")]
+    return [[idx[a], idx[b]] for a, b in pairs if a in idx and b in idx]
+
+
+def rle_uncompressed(mask: np.ndarray) -> dict:
+    """COCO uncompressed RLE of a (H, W) boolean mask: run lengths in column-major order, starting with zeros."""
+    flat = np.asarray(mask, bool).flatten(order="F")
+    change = np.flatnonzero(np.diff(flat.astype(np.int8))) + 1
+    bounds = np.concatenate([[0], change, [flat.size]])
+    counts = np.diff(bounds).tolist()
+    if flat.size and flat[0]:
+        counts = [0] + counts
+    return {"size": [int(mask.shape[0]), int(mask.shape[1])], "counts": [int(c) for c in counts]}
+
+
+def export_coco(src, out, limit: int | None = None) -> dict:
+    """Write ``out``; returns {"images": n, "annotations": n, "file": path}."""
+    import cv2
+
+    from .. import dataset as ds
+
+    reader = ds.open(src)
+    out = Path(out)
+    if out.exists() and any(out.iterdir()):
+        raise ValueError(f"OUT: got '{out}'; expected an empty or new folder")
+    (out / "images").mkdir(parents=True, exist_ok=True)
+    (out / "annotations").mkdir(parents=True, exist_ok=True)
+    names = json.loads(reader.attrs["keypoint_names"])
+    P = len(names)
+    n = len(reader) if limit is None else min(limit, len(reader))
+    images, anns = [], []
+    for i in range(n):
+        s = reader[i]
+        sid = int(s["sample_id"])
+        rgb = s["rgb"]
+        H, W = rgb.shape[:2]
+        fname = f"{sid:06d}.png"
+        if not cv2.imwrite(str(out / "images" / fname), np.ascontiguousarray(rgb[..., ::-1])):
+            raise OSError(f"could not write {out / 'images' / fname}")
+        images.append({"id": sid, "file_name": f"images/{fname}", "width": int(W), "height": int(H)})
+        vis = s["keypoints/visibility"].astype(np.int64)
+        uv = s["keypoints/pixel"]
+        kp = np.zeros((P, 3))
+        kp[:, :2] = np.where(vis[:, None] > 0, uv, 0.0)
+        kp[:, 2] = vis
+        seg = s["segmentation"]
+        worm = (seg >= 2) & (seg <= 6)
+        area = int(worm.sum())
+        bv = s["labels/bbox_visib"].astype(np.float64)
+        if bv[2] > 0 and bv[3] > 0:
+            bbox = bv
+        else:
+            b = s["labels/bbox_obj"].astype(np.float64)
+            x0, y0 = np.clip(b[0], 0, W), np.clip(b[1], 0, H)
+            x1, y1 = np.clip(b[0] + b[2], 0, W), np.clip(b[1] + b[3], 0, H)
+            bbox = np.array([x0, y0, x1 - x0, y1 - y0])
+        anns.append({"id": sid + 1, "image_id": sid, "category_id": 1, "iscrowd": 0,
+                     "keypoints": [float(x) if j % 3 < 2 else int(x) for j, x in enumerate(kp.reshape(-1))],
+                     "num_keypoints": int((vis > 0).sum()), "bbox": [float(x) for x in bbox], "area": float(area),
+                     "segmentation": rle_uncompressed(worm)})
+    coco = {
+        "info": {"description": f"warpworm dataset {Path(src).resolve().name} (COCO keypoints export)",
+                 "version": str(reader.attrs.get("warpworm_version", "")), "year": 2024,
+                 "kpt_oks_sigmas": [0.025] * P},
+        "licenses": [],
+        "images": images,
+        "annotations": anns,
+        "categories": [{"id": 1, "name": "worm", "supercategory": "robot", "keypoints": names,
+                        "skeleton": skeleton(names)}],
+    }
+    path = out / "annotations" / "keypoints.json"
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(coco))
+    os.replace(tmp, path)
+    reader.close()
+    return {"images": len(images), "annotations": len(anns), "file": str(path)}
+
+
+def main(args: argparse.Namespace) -> int:
+    from ..dataset import DatasetError
+
+    try:
+        r = export_coco(args.dir, args.out, args.limit)
+    except (DatasetError, ValueError, OSError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(f"wrote {r['images']} images and {r['annotations']} keypoint annotations: {r['file']}")
+    return 0
