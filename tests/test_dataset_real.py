@@ -34,6 +34,10 @@ def test_default_config_end_to_end_with_real_stages(tmp_path):
         rvec, _ = cv2.Rodrigues(d["camera/R"][i])
         uv, _ = cv2.projectPoints(d["keypoints/world"][i], rvec, d["camera/t"][i], d["camera/K"][i], None)
         assert np.abs(uv.reshape(-1, 2) - d["keypoints/pixel"][i]).max() < 1e-6
+    # every label invariant of `warpworm verify` holds on real physics and rendering (incl. visibility vs depth)
+    from warpworm.commands.verify import verify_dataset
+
+    assert verify_dataset(tmp_path / "d")[0] == []
     # frames of one trajectory differ in time but share the camera (camera_per_frame: false)
     assert np.array_equal(d["trajectory"], [0, 0, 1, 1, 2, 2, 3, 3]) and np.array_equal(d["frame"], [0, 1] * 4)
     assert np.allclose(d["camera/R"][0], d["camera/R"][1])
