@@ -137,14 +137,15 @@ def write_csv(path, result: dict) -> None:
     cols = list(pts) + ["per_cycle_m", "valid"]
     scal = [k for k, v in m.items() if np.asarray(v).ndim == 1]
     ratio = [f"ratio_min_{i}" for i in range(4)]
+    hold = np.nanmax(m["end_hold_ratio"], axis=1) if m["end_hold_ratio"].shape[1] else np.full(len(cols), np.nan)
     with open(path, "w", newline="") as f:
         w = csv.writer(f)
-        w.writerow(cols + scal + ratio)
+        w.writerow(cols + scal + ratio + ["end_hold_max"])
         for i in range(len(result["per_cycle_m"])):
             w.writerow([f"{pts[k][i]:.6g}" for k in pts] + [f"{result['per_cycle_m'][i]:.6g}",
                                                              int(result["valid"][i])]
                        + [f"{float(m[k][i]):.6g}" for k in scal]
-                       + [f"{r:.4f}" for r in m["deformation_ratio_min"][i]])
+                       + [f"{r:.4f}" for r in m["deformation_ratio_min"][i]] + [f"{hold[i]:.4f}"])
 
 
 def write_heatmap(path, result: dict, x_key: str = "wavelength", y_key: str = "closest_approach") -> None:

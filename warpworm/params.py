@@ -120,6 +120,11 @@ class WormParams:
     +π/2 north pole up; NaN takes the gait preset's value (warpworm.gaits.GAIT_ORIENTATION)."""
     cycle_period: float | np.ndarray = 1.0
     """Duration of one EPM cycle [s], shape () or (W,)."""
+    closest_approach_scale: float | np.ndarray = 1.0
+    """Factor on ``closest_approach`` [1], shape () or (W,): lets a dataset config randomize h *around* each
+    sample's gait preset (e.g. {uniform: [0.9, 1.2]}), whatever gait it draws. The gap used is h × this."""
+    wavelength_scale: float | np.ndarray = 1.0
+    """Factor on ``wavelength`` [1], shape () or (W,), as ``closest_approach_scale``."""
 
     def names(self) -> list[str]:
         return [f.name for f in fields(self)]
