@@ -1,17 +1,16 @@
-"""Dynamics benchmark: worm-substeps per second of the batched solvers on the CPU (and CUDA when present).
+"""Dynamics benchmark: worm-substeps per second of the batched implicit solver on the CPU (and CUDA when present).
 
-Rows (one per device, solver, magnet model and W), in the gait setting (``gaits.DEFAULT_DT``; the implicit solver
-at ``gaits.DEFAULT_SUBSTEPS`` = 1 ms substeps, the XPBD solvers at the 50 µs they need):
-- ``substep_rate``: worm-substeps/s of the substeps alone (implicit / Gauss–Seidel: the one per-step launch of
-  ``implicit_euler.implicit_step`` / ``xpbd_gs.gs_step``; Jacobi: the three substep kernels);
+Rows (one per device, magnet model and W), in the gait setting (``gaits.DEFAULT_DT`` at ``gaits.DEFAULT_SUBSTEPS``
+= 1 ms substeps):
+- ``substep_rate``: worm-substeps/s of the substeps alone (the one per-step launch of
+  ``implicit_euler.implicit_step``);
 - ``wrench_ms_per_world``: one magnetic-wrench evaluation (poses, ``launch_world_wrenches``, distribution) per world;
 - ``step_rate``: worm-substeps/s of whole steps (1 wrench + ``substeps`` substeps, the gait setting dt = 4 ms,
-  80 substeps), i.e. what a simulation actually gets;
+  4 substeps), i.e. what a simulation actually gets;
 - ``realtime_factor``: simulated seconds per wall second per world at that rate (>= 1: real time for W = 1);
 - ``sim_s_per_wall_s``: simulated seconds per wall second of the whole batch (W × realtime_factor);
 - ``numpy_substep_rate`` and ``speedup_vs_numpy``: the same substep in NumPy (``numpy_substep.py``, float64: the
-  implicit step with a dense batched ``np.linalg.solve`` (floor contact left out), a Gauss–Seidel sweep vectorized
-  over worlds looping over elements, the Jacobi pass vectorized over worlds and elements);
+  implicit step with a dense batched ``np.linalg.solve``, floor contact left out);
 - ``launches_per_substep``, ``bytes_per_world``;
 - ``paper_ratio``: substep_rate(W) / 400, the paper's ~400 Kangaroo iterations per second for one worm.
 
@@ -47,41 +46,25 @@ def _timeit(fn, min_time=0.5, max_reps=200):
             return el / reps
 
 
-def bench_one(W: int, magnet_model: str, device: str, with_numpy: bool, min_time: float,
-              solver: str = "implicit") -> dict:
-    from numpy_substep import NumpyGaussSeidel, NumpyImplicit, NumpySubstep
+def bench_one(W: int, magnet_model: str, device: str, with_numpy: bool, min_time: float) -> dict:
+    from numpy_substep import NumpyImplicit
 
     from warpworm import gaits
     from warpworm.model import Model
     from warpworm.simulator import Simulator
 
     DT = gaits.DEFAULT_DT
-    SUBSTEPS = gaits.DEFAULT_SUBSTEPS if solver == "implicit" else 80  # the XPBD solvers need 50 us substeps
+    SUBSTEPS = gaits.DEFAULT_SUBSTEPS
     model = Model.from_params(gaits.preset_params("peristaltic", magnet_model=magnet_model), W, device)
-    sim = Simulator(model, dt=DT, substeps=SUBSTEPS, solver=solver)
+    sim = Simulator(model, dt=DT, substeps=SUBSTEPS)
     state = sim.initial_state()
     sim.step(state, 1)
-    if solver in ("implicit", "gauss_seidel"):
-        cmd = sim._world_cmd(state, SUBSTEPS)
-
-        def substeps():
-            cmd.launch()
-
-        t_sub = _timeit(substeps, min_time) / SUBSTEPS
-    else:
-        cmds = sim._substep_cmds(state)
-
-        def substeps():
-            for _ in range(10):
-                for c in cmds:
-                    c.launch()
-
-        t_sub = _timeit(substeps, min_time) / 10
+    cmd = sim._world_cmd(state, SUBSTEPS)
+    t_sub = _timeit(cmd.launch, min_time) / SUBSTEPS
     t_wrench = _timeit(lambda: sim.update_magnets(state), min_time, max_reps=20)
     t_step = t_wrench + SUBSTEPS * t_sub  # one step = one wrench + SUBSTEPS substeps (measured apart: cheaper)
     row = {
         "device": device,
-        "solver": solver,
         "magnets": magnet_model,
         "W": W,
         "substep_us": 1e6 * sim.dt_sub,
@@ -95,12 +78,7 @@ def bench_one(W: int, magnet_model: str, device: str, with_numpy: bool, min_time
         "paper_ratio": (W / t_sub) / PAPER_ITERATIONS_PER_S,
     }
     if with_numpy:
-        if solver == "implicit":
-            ref = NumpyImplicit(model, sim.dt_sub, newton=sim.newton)
-        elif solver == "gauss_seidel":
-            ref = NumpyGaussSeidel(model, sim.dt_sub, iterations=sim.iterations)
-        else:
-            ref = NumpySubstep(model, sim.dt_sub, split_hinge=sim.split_hinge.numpy())
+        ref = NumpyImplicit(model, sim.dt_sub, newton=sim.newton)
         x, v, a = ref.init(state)
         f = state.external_force.numpy().astype(np.float64)
         t_np = _timeit(lambda: ref.substep(x, v, a, f), min_time, max_reps=50)
@@ -120,10 +98,6 @@ def run(quick: bool = False) -> list[dict]:
             for W in sizes:
                 with_numpy = W <= 4096
                 rows.append(bench_one(W, magnet_model, device, with_numpy, 0.2 if quick else 0.5))
-        # the XPBD solvers for comparison (analytic magnets; the substep does not depend on the magnet model)
-        for solver in ("gauss_seidel", "jacobi"):
-            for W in sizes[:3] if quick else [1, 256, 4096]:
-                rows.append(bench_one(W, "analytic", device, W <= 256, 0.2 if quick else 0.5, solver=solver))
     return rows
 
 

@@ -1,6 +1,6 @@
 """The default solver: implicit Euler with Newton steps on a banded direct solve, one thread per world.
 
-Kernels only; the host orchestration is :class:`warpworm.simulator.Simulator` (``solver="implicit"``).
+Kernels only; the host orchestration is :class:`warpworm.simulator.Simulator`.
 :func:`implicit_step` is launched 1-D over worlds (``world = wp.tid()``); each thread runs its world's substeps. A
 substep of length dt finds the positions x that minimise
 
@@ -32,7 +32,7 @@ sticks when the kinetic force reverses its motion or when it starts a substep sl
 vertices that reached the floor in the last step; then v = v' + (x − x̃) / dt.
 
 Why: the bars are near-rigid on 1e-5 kg vertices. An XPBD sweep per substep caps their stiffness near m/dt² (the
-Gauss–Seidel and Jacobi solvers of this package: "rigid" bars strain by percents), a Gauss–Seidel crease sweep
+Gauss–Seidel and Jacobi XPBD solvers of this package's first version: "rigid" bars strained by percents), a Gauss–Seidel crease sweep
 composed with a direct bar projection was linearly unstable, and explicit crease forces projected on rigid bars are
 only stable below ~100–200 µs and lose stability as the bellows approaches its snap-through (all measured:
 docs/dynamics.md). Implicit Euler with a direct solve is unconditionally stable, has the exact statics of E (no mass
@@ -44,7 +44,7 @@ from __future__ import annotations
 import warp as wp
 
 from .band_cholesky import band_add_block, band_cholesky_factor, band_cholesky_solve
-from .xpbd import dihedral_angle_and_gradient, fold_range, freeze_world, pw, wrap_angle
+from .common import dihedral_angle_and_gradient, fold_range, freeze_world, pw, wrap_angle
 
 wp.set_module_options({"enable_backward": False})
 

@@ -1,5 +1,5 @@
-"""The Warp substep against the independent NumPy implementation in benchmarks/numpy_substep.py (float64), and the
-kernel's dihedral angle and gradient against the crease module's NumPy versions and finite differences."""
+"""The implicit Warp substep against the independent NumPy implementation in benchmarks/numpy_substep.py (float64),
+and the kernel's dihedral angle and gradient against the crease module's NumPy versions and finite differences."""
 
 from __future__ import annotations
 
@@ -7,66 +7,16 @@ import sys
 from pathlib import Path
 
 import numpy as np
-import pytest
 import warp as wp
-from warpworm.kernels import xpbd
 
 from warpworm import crease, gaits, quiet_warp
+from warpworm.kernels import common
 from warpworm.model import Model
 from warpworm.simulator import Simulator
 
 quiet_warp()
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-from numpy_substep import NumpyGaussSeidel, NumpySubstep  # noqa: E402
-
-
-def test_warp_jacobi_substeps_match_numpy_reference():
-    p = gaits.preset_params("inchworm", hinge_damping=1e-4, floor_incline=0.05)
-    W = 3
-    p.closest_approach = np.array([0.06, 0.07, 0.08])
-    model = Model.from_params(p, W, "cpu")
-    sim = Simulator(model, dt=2e-3, substeps=40, solver="jacobi")
-    state = sim.initial_state()
-    sim.step(state, 5)  # get the worm moving: contact, friction, magnets all active
-    sim.update_magnets(state)
-    ref = NumpySubstep(model, sim.dt_sub, split_hinge=sim.split_hinge.numpy())
-    x, v, ang = ref.init(state)
-    f = state.external_force.numpy().astype(np.float64)
-    cmds = sim._substep_cmds(state)
-    for _ in range(10):
-        for c in cmds:
-            c.launch()
-        x, v, ang = ref.substep(x, v, ang, f)
-    xw = state.positions.numpy()
-    assert np.abs(xw - x).max() < 2e-7, np.abs(xw - x).max()  # float32 positions of ~0.1 m: ~1e-8 per op
-    # velocities of contact vertices carry one float32 position rounding per substep: ulp(0.1 m) / dt_sub
-    assert np.abs(state.velocities.numpy() - v).max() < 20 * np.spacing(np.float32(0.1)) / sim.dt_sub
-    assert np.abs(state.crease_angle.numpy() - ang).max() < 1e-4
-
-
-@pytest.mark.parametrize("iterations", [1, 2])
-def test_warp_gauss_seidel_substeps_match_numpy_reference(iterations):
-    """10 substeps of the per-world Gauss–Seidel kernel (one launch) against the NumPy sweep, with contact, friction,
-    magnets, crease damping and an anchor."""
-    p = gaits.preset_params("inchworm", hinge_damping=1e-4, floor_incline=0.05)
-    W = 3
-    p.closest_approach = np.array([0.05, 0.06, 0.07])
-    model = Model.from_params(p, W, "cpu", anchors=[4], anchor_stiffness=50.0)
-    sim = Simulator(model, dt=2e-3, substeps=40, iterations=iterations, solver="gauss_seidel")
-    state = sim.initial_state()
-    sim.step(state, 5)  # get the worm moving: contact, friction, magnets all active
-    sim.update_magnets(state)
-    ref = NumpyGaussSeidel(model, sim.dt_sub, iterations=iterations)
-    x, v, ang = ref.init(state)
-    f = state.external_force.numpy().astype(np.float64)
-    sim._world_cmd(state, 10).launch()
-    for _ in range(10):
-        x, v, ang = ref.substep(x, v, ang, f)
-    assert not state.unstable.numpy().any()
-    xw = state.positions.numpy()
-    assert np.abs(xw - x).max() < 2e-7, np.abs(xw - x).max()
-    assert np.abs(state.velocities.numpy() - v).max() < 20 * np.spacing(np.float32(0.1)) / sim.dt_sub
-    assert np.abs(state.crease_angle.numpy() - ang).max() < 1e-4
+from numpy_substep import NumpyImplicit  # noqa: E402
 
 
 @wp.kernel
@@ -74,7 +24,7 @@ def _dihedral_kernel(x: wp.array(dtype=wp.vec3), h: wp.array2d(dtype=wp.int32), 
                      grad: wp.array2d(dtype=wp.vec3)):
     i = wp.tid()
     a, b, c, d = x[h[i, 0]], x[h[i, 1]], x[h[i, 2]], x[h[i, 3]]
-    psi, g0, g1, g2, g3 = xpbd.dihedral_angle_and_gradient(a, b, c, d)
+    psi, g0, g1, g2, g3 = common.dihedral_angle_and_gradient(a, b, c, d)
     ang[i] = psi
     grad[i, 0] = g0
     grad[i, 1] = g1
@@ -115,13 +65,11 @@ def test_dihedral_angle_and_gradient_against_finite_differences():
 def test_warp_implicit_substeps_match_numpy_reference():
     """10 implicit substeps of the kernel (one launch) against the NumPy dense-solve reference for worms off the
     floor: falling, magnets, crease damping, an anchor, three worlds with different EPM heights."""
-    from numpy_substep import NumpyImplicit
-
     p = gaits.preset_params("inchworm", hinge_damping=1e-4)
     W = 3
     p.closest_approach = np.array([0.06, 0.07, 0.08])
     model = Model.from_params(p, W, "cpu", anchors=[4], anchor_stiffness=50.0)
-    sim = Simulator(model, dt=2e-3, substeps=4, solver="implicit")
+    sim = Simulator(model, dt=2e-3, substeps=4)
     state = sim.initial_state()
     lifted = state.positions.numpy() + np.array([0.0, 0.0, 0.03], np.float32)  # 3 cm up: no contact in the test
     state.positions.assign(lifted)
@@ -151,8 +99,6 @@ def test_implicit_fold_through_limit_matches_numpy_and_pushes_back():
     the kernel and the NumPy reference then agree over 10 substeps, and the limit turns those creases toward 0 while
     without it (k_lim = 0) they stay at rest. (k_lim 0.3 N/rad here: the default makes the relabelled creases snap,
     a violent motion where two float precisions part ways.)"""
-    from numpy_substep import NumpyImplicit
-
     turned = {}
     for ratio in (0.3, 0.0):
         p = gaits.preset_params("peristaltic", gravity=0.0, epm_moment=0.0, ipm_moment=np.zeros(3),
@@ -163,7 +109,7 @@ def test_implicit_fold_through_limit_matches_numpy_and_pushes_back():
         labels[flip] = crease.VALLEY
         model.hinge_label.assign(labels)
         # the relabelled creases start 67° outside their range: switch the crumple detection off for this test
-        sim = Simulator(model, dt=1e-3, substeps=1, solver="implicit", fold_tolerance=10.0)
+        sim = Simulator(model, dt=1e-3, substeps=1, fold_tolerance=10.0)
         state = sim.initial_state()
         lifted = state.positions.numpy() + np.array([0.0, 0.0, 0.03], np.float32)  # no floor contact
         state.positions.assign(lifted)

@@ -27,8 +27,7 @@ def test_force_distance_analytic_equals_table():
 
 
 def test_compression_matches_linear_quasi_static_and_scales_with_hinge_stiffness():
-    """Zero gravity (no friction) and soft bars (EA = 0.02 N, so every constraint is in XPBD's compliant regime where
-    the solver's force is the spring force): the measured force must follow the independent linear solve of the
+    """Zero gravity (no friction) and soft bars (EA = 0.02 N): the measured force must follow the independent linear solve of the
     bar-and-hinge stiffness, and so grow with k_α by the solve's ratio, not by k_α's own ratio (bars also resist)."""
     ks = (0.02, 0.08)
     r = ex.compression(ks, max_displacement=1.0e-3, increments=2, hold=0.15, settle=0.05, gravity=0.0,

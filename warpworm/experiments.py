@@ -403,7 +403,7 @@ def slope(offsets_deg=(-4.0, -2.0, -1.0, 1.0, 2.0, 4.0), duration: float = 0.5, 
     The centroid's motion down the slope is recorded from t = 0 (worm built unloaded at rest on the slope) for
     ``settle + duration`` [s]: ``slide (S, W)`` [m] down-slope, ``predicted (S, W)`` = ½ g (sin β − μk cos β) t² where
     β > atan(μs), else 0. A world "slides" when it moves more than ``slide_threshold`` [m] after ``settle`` (the
-    worm takes its weight first; the Jacobi contact transient may slip a few vertices by ~0.1 mm); the summary gives
+    worm takes its weight first; a contact transient may slip a few vertices by ~0.1 mm); the summary gives
     the transition angle bracket.
     """
     from .model import Model

@@ -56,8 +56,8 @@ class State:
     prev_positions: wp.array
     """Positions at the start of the current substep [m], shape (W, V), vec3 (solver scratch)."""
     delta: wp.array
-    """Summed constraint corrections of the current substep [m], shape (W, V), vec3 (solver scratch, zero between
-    substeps)."""
+    """x − x̃ of the current substep (position minus its prediction) [m], shape (W, V), vec3 (solver scratch, zero
+    between substeps)."""
     external_force: wp.array
     """External (magnetic) force on each vertex [N], shape (W, V), vec3; refreshed once per step."""
     magnet_pos: wp.array
@@ -81,9 +81,6 @@ class State:
     """Substeps taken by each world since t = 0, shape (W,), int32 (time = step_count · dt_sub, exact)."""
     anchor_target: wp.array
     """Anchor target points [m], shape (W, A), vec3 (A may be 0)."""
-    constraint_lambda: wp.array
-    """Accumulated XPBD multipliers of bars, hinges and anchors, shape (W, E + H + A), float (Gauss–Seidel scratch,
-    used with more than one iteration per substep)."""
     floor_force: wp.array
     """Force of the floor on each vertex in the last substep (normal + friction) [N], shape (W, V), vec3 (implicit
     solver; zero off the floor)."""
@@ -200,9 +197,6 @@ class Model:
         A_idx = np.zeros(0, np.int32) if anchors is None else np.asarray(anchors, np.int32).reshape(-1)
         A = len(A_idx)
         self.num_anchors = A
-        split = np.zeros(V)
-        np.add.at(split, pat.edges.reshape(-1), 1.0)
-        np.add.at(split, A_idx, 1.0)
         self.edges = wp.array(pat.edges, dtype=wp.int32, device=dev)
         """Bar vertex pairs, shape (E, 2), int32."""
         self.vertex_bandwidth = vertex_bandwidth(pat.edges, pat.hinges)
@@ -211,8 +205,6 @@ class Model:
         """Hinge stencils (i, j, k, l), shared edge j-k, shape (H, 4), int32."""
         self.hinge_label = wp.array(pat.hinge_label.astype(np.int32), dtype=wp.int32, device=dev)
         """Hinge labels (0 flat, 1 mountain, 2 valley), shape (H,), int32; sets the NoFoldThrough range."""
-        self.split = wp.array(np.maximum(split, 1.0), dtype=float, device=dev)
-        """Number of bars and anchors at each vertex, shape (V,), float (Jacobi mass splitting)."""
 
         self.mount_vertices = wp.array(mv, dtype=wp.int32, device=dev)
         """IPM mount vertices (tail, centre, head), shape (3, K), int32."""
@@ -367,31 +359,10 @@ class Model:
             unstable=z((W,), wp.int32),
             step_count=z((W,), wp.int32),
             anchor_target=wp.array(targets.reshape(W, A, 3), dtype=wp.vec3, device=dev),
-            constraint_lambda=z((W, E + H + A), float),
             floor_force=z((W, V), wp.vec3),
             newton_matrix=z((W, V, self.vertex_bandwidth + 1), wp.mat33),
             newton_rhs=z((W, V), wp.vec3),
         )
-
-    def hinge_split(self, dt_sub: float) -> np.ndarray:
-        """Jacobi mass-splitting factor of the hinge springs per vertex for substep ``dt_sub`` [s]: max(1, 2 G_v)
-        with G_v = sum over the hinges at v of (k_alpha dt² + c_alpha dt) L w_v |d psi / d x_v|² (rest geometry),
-        shape (R, V). Without it the summed Jacobi corrections of the up to 12 hinges at a vertex overshoot (stiff
-        creases at coarse substeps, or any crease damping)."""
-        pat = self.pattern
-        rows = max(self.inv_mass.shape[0], self.hinge_length.shape[0], self.hinge_stiffness.shape[0])
-        x = self.rest_positions_host[:rows]
-        grad = crease.dihedral_gradients(x, pat.hinges)  # (R, H, 4, 3)
-        w = np.broadcast_to(self.inv_mass.numpy(), (rows, self.num_vertices))
-        L = np.broadcast_to(self.hinge_length.numpy(), (rows, self.num_hinges))
-        k = np.broadcast_to(self.hinge_stiffness.numpy()[:, None], (rows, 1))
-        c = np.broadcast_to(self.hinge_damping.numpy()[:, None], (rows, 1))
-        # stiffness and damping both act like a spring of k dt² + c dt per substep
-        gain = ((k * dt_sub**2 + c * dt_sub) * L)[:, :, None] * np.sum(grad**2, axis=-1)  # (R, H, 4)
-        G = np.zeros((rows, self.num_vertices))
-        for c in range(4):
-            np.add.at(G, (slice(None), pat.hinges[:, c]), gain[:, :, c] * w[:, pat.hinges[:, c]])
-        return np.maximum(1.0, 2.0 * G)
 
     def bytes_per_world(self) -> int:
         """Device bytes of one world's state and per-world model arrays (shared topology excluded)."""

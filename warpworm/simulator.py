@@ -3,9 +3,9 @@
 One :meth:`Simulator.step` = one magnetic-wrench evaluation (EPM pose from its path, IPM poses from their mounts,
 net force and torque on every magnet from :func:`warpworm.magnets.launch_world_wrenches`, distributed onto the
 mount vertices) followed by ``substeps`` substeps: by default implicit Euler with Newton steps on a per-world
-banded direct solve, one launch for all substeps of all worlds (:mod:`warpworm.kernels.implicit_euler`); the first
-version's XPBD solvers are kept (Gauss–Seidel: one launch per step; Jacobi: three launches per substep). All worlds
-are in every launch; nothing loops over worlds on the host.
+banded direct solve, one launch for all substeps of all worlds (:mod:`warpworm.kernels.implicit_euler`; the magnet
+poses and the wrench distribution: :mod:`warpworm.kernels.magnet_pose`). All worlds are in every launch; nothing loops
+over worlds on the host.
 
 The wrench is held constant over a step's substeps: it varies on the time scale of the magnets' motion (ms), not
 of the substep, and it is the most expensive kernel (see ``docs/dynamics.md`` for the profile and the dt study).
@@ -28,8 +28,6 @@ import warp as wp
 
 from .model import Model, State
 from .transforms import quat_wxyz_to_matrix, quat_xyzw_to_wxyz
-
-SOLVERS = ("implicit", "gauss_seidel", "jacobi")
 
 
 def launch_world_wrenches(model: Model, state: State, moment: wp.array) -> None:
@@ -56,8 +54,7 @@ class Simulator:
     Args:
         model: the batch.
         dt: step [s]: the magnetic wrench and the EPM pose are refreshed once per step.
-        substeps: substeps per step; the substep is ``dt / substeps`` (implicit: 1 ms is accurate for the gaits and
-            friction; the XPBD solvers need ~50 µs).
+        substeps: substeps per step; the substep is ``dt / substeps`` (1 ms is accurate for the gaits and friction).
         magnet_every_substep: re-evaluate the magnetic wrench every substep (slower; for dt studies).
         strain_limit: a bar strained beyond this |ΔL/L0| flags its world unstable (the soft VALLEY waist bars, which
             stand for panel bending, at ``max(strain_limit, 0.9)``: only a waist that collapses or triples fails).
@@ -66,15 +63,9 @@ class Simulator:
             [0, π]) means the sheet crumpled: the world is frozen and flagged (``State.unstable`` = 2; 1 is an
             explosion). Default 5°.
         use_graph: capture a step as a CUDA graph (default: on CUDA devices); ignored on CPU.
-        solver: "implicit" (default: implicit Euler, Newton on a per-world block-banded Cholesky, one thread per
-            world; :mod:`warpworm.kernels.implicit_euler`, docs/dynamics.md), "gauss_seidel" (XPBD: one thread per
-            world runs all substeps of a step, constraints projected
-            sequentially in place; :mod:`warpworm.kernels.xpbd_gs`) or "jacobi" (every element of every world a
-            thread, atomics and mass splitting, three launches per substep; :mod:`warpworm.kernels.xpbd`).
-        iterations: Gauss–Seidel constraint passes per substep (multipliers accumulated); Jacobi: 1.
-        newton: implicit solver: Newton steps per substep (at least 2; contacts and friction are updated from the
-            floor's force before every step after the first).
-        slip_speed: implicit solver: regularisation speed ε of static friction [m/s]: below it friction is a stiff
+        newton: Newton steps per substep (at least 2; contacts and friction are updated from the floor's force
+            before every step after the first).
+        slip_speed: regularisation speed ε of static friction [m/s]: below it friction is a stiff
             viscous force reaching mu_s F_n at ε, so a worm held by friction creeps at most ~ε (1e-5 m/s: < 0.02 mm
             in 2 s).
     """
@@ -90,25 +81,13 @@ class Simulator:
         fold_tolerance: float = np.radians(5.0),
         speed_limit: float = 20.0,
         use_graph: bool | None = None,
-        solver: str = "implicit",
-        iterations: int = 1,
         newton: int = 3,
         slip_speed: float = 1.0e-5,
     ):
-        from .kernels import implicit_euler, xpbd, xpbd_gs
+        from .kernels import implicit_euler, magnet_pose
 
-        if solver not in SOLVERS:
-            raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
-        self._k = xpbd
-        self._kgs = xpbd_gs
+        self._kpose = magnet_pose
         self._ki = implicit_euler
-        self.solver = solver
-        self.iterations = int(iterations)
-        if self.iterations < 1:
-            raise ValueError("iterations must be >= 1")
-        if solver != "gauss_seidel" and self.iterations != 1:
-            raise ValueError(f"iterations={iterations} is a Gauss–Seidel setting; the {solver} solver does not take it "
-                             "(implicit: set newton; Jacobi: use more substeps)")
         self.newton = int(newton)
         if self.newton < 2:
             raise ValueError(f"newton must be >= 2 (the contacts are updated between Newton steps), got {newton}")
@@ -131,9 +110,6 @@ class Simulator:
                                          .astype(np.float32), dtype=float, device=model.device)
         """Strain beyond which a bar flags its world unstable, shape (E,), float."""
         self.speed_limit = float(speed_limit)
-        self.split_hinge = wp.array(model.hinge_split(self.dt_sub).astype(np.float32), dtype=float,
-                                    device=model.device)
-        """Hinge mass-splitting factor per vertex for this substep, shape (R, V) (see Model.hinge_split)."""
         self.use_graph = model.device.is_cuda if use_graph is None else bool(use_graph and model.device.is_cuda)
         self._cmds = {}
         self._graphs = {}
@@ -148,17 +124,15 @@ class Simulator:
     @property
     def launches_per_substep(self) -> float:
         """Kernel launches per substep: per step 5 for the magnets (EPM pose, IPM poses, wrench, zero f_ext,
-        distribution), plus 3 per substep (Jacobi) or 1 per step (implicit, Gauss–Seidel)."""
+        distribution), plus 1 per step for the substeps."""
         per_step = 5  # epm pose, ipm poses, wrench, zero f_ext, distribute
-        if self.solver == "jacobi":
-            return 3.0 + (per_step if self.magnet_every_substep else per_step / self.substeps)
         if self.magnet_every_substep:
             return 1.0 + per_step
         return (1.0 + per_step) / self.substeps
 
     # ------------------------------------------------------------------------------------------------------------
     def _magnet_poses(self, state: State) -> None:
-        m, k = self.model, self._k
+        m, k = self.model, self._kpose
         W = m.num_worlds
         if m.path.kind == "sine":
             wp.launch(k.epm_sine_pose, dim=W, inputs=[*m.path_arrays, self.dt_sub, state.step_count],
@@ -181,96 +155,44 @@ class Simulator:
         self._magnet_poses(state)
         launch_world_wrenches(m, state, moment)
         state.external_force.zero_()
-        wp.launch(self._k.distribute_wrench, dim=(m.num_worlds, 3),
+        wp.launch(self._kpose.distribute_wrench, dim=(m.num_worlds, 3),
                   inputs=[m.mount_vertices, state.positions, state.magnet_pos, state.magnet_force,
                           state.magnet_torque],
                   outputs=[state.external_force], device=m.device)
 
-    def _substep_cmds(self, state: State):
-        """The three substep launches, recorded once per state (a recorded launch costs ~3 µs instead of ~16 µs)."""
-        key = id(state)
-        cmds = self._cmds.get(key)
-        if cmds is not None and cmds[0] is state:
-            return cmds[1]
-        m, k, dt = self.model, self._k, self.dt_sub
-        W, V = m.num_worlds, m.num_vertices
-        n_elem = m.num_edges + m.num_hinges + m.num_anchors
-        c1 = wp.launch(k.integrate_vertices, dim=(W, V),
-                       inputs=[m.inv_mass, m.gravity, m.damping, dt, state.external_force, state.unstable],
-                       outputs=[state.positions, state.velocities, state.prev_positions],
-                       device=m.device, record_cmd=True)
-        c2 = wp.launch(k.solve_constraints, dim=(W, n_elem),
-                       inputs=[m.inv_mass, m.split, self.split_hinge, m.edges, m.rest_length, m.bar_stiffness, m.hinges,
-                               m.hinge_rest_angle, m.hinge_length, m.hinge_label, m.hinge_stiffness,
-                               m.hinge_damping, m.anchor_vertex, m.anchor_stiffness, dt, self.strain_limit,
-                               state.positions, state.prev_positions, state.anchor_target],
-                       outputs=[state.delta, state.bar_strain, state.crease_angle, state.unstable],
-                       device=m.device, record_cmd=True)
-        c3 = wp.launch(k.apply_corrections, dim=(W, V),
-                       inputs=[m.floor_incline, m.mu_static, m.mu_kinetic, dt, self.speed_limit,
-                               state.prev_positions],
-                       outputs=[state.delta, state.positions, state.velocities, state.contact, state.unstable,
-                                state.step_count],
-                       device=m.device, record_cmd=True)
-        cmds = (c1, c2, c3)
-        self._cmds[key] = (state, cmds)
-        return cmds
-
     def _world_cmd(self, state: State, num_substeps: int):
-        """The per-world launch (implicit or Gauss–Seidel solver) of ``num_substeps`` substeps over all worlds, recorded
-        once per state."""
-        key = (self.solver, id(state), num_substeps)
+        """The per-world launch of ``num_substeps`` implicit substeps over all worlds, recorded once per state."""
+        key = (id(state), num_substeps)
         cmd = self._cmds.get(key)
         if cmd is not None and cmd[0] is state:
             return cmd[1]
         m = self.model
-        if self.solver == "implicit":
-            c = wp.launch(self._ki.implicit_step, dim=m.num_worlds,
-                          inputs=[m.inv_mass, m.gravity, m.damping, m.edges, m.rest_length, m.bar_stiffness,
-                                  m.bar_stop_strain, m.bar_stop_stiffness,
-                                  m.hinges, m.hinge_rest_angle, m.hinge_length, m.hinge_label, m.hinge_stiffness,
-                                  m.hinge_damping, m.fold_limit_stiffness, m.anchor_vertex, m.anchor_stiffness,
-                                  m.floor_incline, m.mu_static, m.mu_kinetic, self.dt_sub, int(num_substeps),
-                                  self.newton,
-                                  self.slip_speed, self.bar_strain_limit, self.speed_limit, self.fold_tolerance,
-                                  state.external_force,
-                                  state.anchor_target],
-                          outputs=[state.positions, state.velocities, state.prev_positions, state.delta,
-                                   state.floor_force, state.newton_matrix, state.newton_rhs, state.bar_strain,
-                                   state.crease_angle, state.contact, state.unstable, state.step_count],
-                          device=m.device, record_cmd=True)
-            self._cmds[key] = (state, c)
-            return c
-        c = wp.launch(self._kgs.gs_step, dim=m.num_worlds,
-                      inputs=[m.inv_mass, m.gravity, m.damping, m.edges, m.rest_length, m.bar_stiffness, m.hinges,
-                              m.hinge_rest_angle, m.hinge_length, m.hinge_label, m.hinge_stiffness, m.hinge_damping,
-                              m.anchor_vertex, m.anchor_stiffness, m.floor_incline, m.mu_static, m.mu_kinetic,
-                              self.dt_sub, int(num_substeps), self.iterations, self.strain_limit, self.speed_limit,
-                              state.external_force, state.anchor_target],
+        c = wp.launch(self._ki.implicit_step, dim=m.num_worlds,
+                      inputs=[m.inv_mass, m.gravity, m.damping, m.edges, m.rest_length, m.bar_stiffness,
+                              m.bar_stop_strain, m.bar_stop_stiffness,
+                              m.hinges, m.hinge_rest_angle, m.hinge_length, m.hinge_label, m.hinge_stiffness,
+                              m.hinge_damping, m.fold_limit_stiffness, m.anchor_vertex, m.anchor_stiffness,
+                              m.floor_incline, m.mu_static, m.mu_kinetic, self.dt_sub, int(num_substeps),
+                              self.newton,
+                              self.slip_speed, self.bar_strain_limit, self.speed_limit, self.fold_tolerance,
+                              state.external_force,
+                              state.anchor_target],
                       outputs=[state.positions, state.velocities, state.prev_positions, state.delta,
-                               state.constraint_lambda, state.bar_strain, state.crease_angle, state.contact,
-                               state.unstable, state.step_count],
+                               state.floor_force, state.newton_matrix, state.newton_rhs, state.bar_strain,
+                               state.crease_angle, state.contact, state.unstable, state.step_count],
                       device=m.device, record_cmd=True)
         self._cmds[key] = (state, c)
         return c
 
     def _one_step(self, state: State, moment: wp.array) -> None:
-        if self.solver in ("implicit", "gauss_seidel"):
-            if self.magnet_every_substep:
-                cmd = self._world_cmd(state, 1)
-                for _ in range(self.substeps):
-                    self._wrench(state, moment)
-                    cmd.launch()
-            else:
+        if self.magnet_every_substep:
+            cmd = self._world_cmd(state, 1)
+            for _ in range(self.substeps):
                 self._wrench(state, moment)
-                self._world_cmd(state, self.substeps).launch()
-            return
-        cmds = self._substep_cmds(state)
-        for s in range(self.substeps):
-            if s == 0 or self.magnet_every_substep:
-                self._wrench(state, moment)
-            for c in cmds:
-                c.launch()
+                cmd.launch()
+        else:
+            self._wrench(state, moment)
+            self._world_cmd(state, self.substeps).launch()
 
     # ------------------------------------------------------------------------------------------------------------
     def step(self, state: State, num_steps: int = 1, *, epm: bool = True) -> State:
@@ -283,10 +205,7 @@ class Simulator:
             key = (id(state), epm)
             g = self._graphs.get(key)
             if g is None or g[0] is not state:
-                if self.solver == "jacobi":
-                    self._substep_cmds(state)
-                else:
-                    self._world_cmd(state, 1 if self.magnet_every_substep else self.substeps)
+                self._world_cmd(state, 1 if self.magnet_every_substep else self.substeps)
                 with wp.ScopedCapture(device=self.model.device) as capture:
                     self._one_step(state, moment)
                 g = (state, capture.graph)
@@ -332,13 +251,6 @@ class Simulator:
             av = m.anchor_vertex.numpy()
             ak = np.broadcast_to(m.anchor_stiffness.numpy(), (m.num_worlds, A))
             anchor_force = ak[..., None] * (x[:, av] - state.anchor_target.numpy())
-            if self.solver == "jacobi":
-                # Jacobi's mass splitting applies the spring force divided by 1 + split·w·k·dt² (equal in the
-                # compliant limit, up to ~10x smaller for light vertices and stiff anchors); Gauss–Seidel applies
-                # exactly k·C after its projection, the spring force above.
-                w = np.broadcast_to(m.inv_mass.numpy()[:, av], (m.num_worlds, A))
-                applied = 1.0 + m.split.numpy()[av] * w * ak * self.dt_sub**2
-                anchor_force = anchor_force / applied[..., None]
         else:
             anchor_force = np.zeros((m.num_worlds, 0, 3), np.float32)
         return {

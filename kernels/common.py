@@ -1,0 +1,83 @@
+"""Shared ``@wp.func`` helpers and constants of the dynamics kernels (:mod:`warpworm.kernels.implicit_euler`,
+:mod:`warpworm.kernels.magnet_pose`): per-world parameters, angle wrapping, crease fold ranges, freezing a diverging
+world, and the dihedral angle of a hinge with its gradient.
+
+Per-world parameters are read as ``p[world % p.shape[0]]`` so that an array of one value (shared) or one value per
+world both work. float32, SI units.
+"""
+
+from __future__ import annotations
+
+import warp as wp
+
+LABEL_FLAT = wp.constant(0)
+LABEL_MOUNTAIN = wp.constant(1)
+LABEL_VALLEY = wp.constant(2)
+
+PI = wp.constant(3.14159265358979)
+TWO_PI = wp.constant(6.28318530717959)
+
+
+@wp.func
+def pw(p: wp.array(dtype=float), world: int) -> float:
+    """Per-world scalar: one shared value or one per world."""
+    return p[world % p.shape[0]]
+
+
+@wp.func
+def wrap_angle(a: float) -> float:
+    """Wrap an angle difference into (-pi, pi]."""
+    return a - TWO_PI * wp.floor((a + PI) / TWO_PI)
+
+
+@wp.func
+def fold_range(label: int):
+    """NoFoldThrough range (lo, hi) [rad] of a crease's signed angle: mountain [−π, 0], valley [0, π], flat [−π, π]."""
+    lo = -PI
+    hi = PI
+    if label == LABEL_MOUNTAIN:
+        hi = 0.0
+    if label == LABEL_VALLEY:
+        lo = 0.0
+    return lo, hi
+
+
+@wp.func
+def freeze_world(world: int, num_vertices: int, x: wp.array2d(dtype=wp.vec3), v: wp.array2d(dtype=wp.vec3),
+                 x_prev: wp.array2d(dtype=wp.vec3), delta: wp.array2d(dtype=wp.vec3),
+                 unstable: wp.array(dtype=wp.int32)):
+    """Flag ``world`` unstable and put it back, finite, to the start of the substep at rest (per-world solvers)."""
+    unstable[world] = 1
+    for i in range(num_vertices):
+        x[world, i] = x_prev[world, i]
+        v[world, i] = wp.vec3(0.0)
+        delta[world, i] = wp.vec3(0.0)
+    return 0
+
+
+@wp.func
+def dihedral_angle_and_gradient(xi: wp.vec3, xj: wp.vec3, xk: wp.vec3, xl: wp.vec3):
+    """Signed fold angle psi [rad] of the hinge stencil (i, j, k, l) (shared edge j-k; 0 flat, > 0 valley) and its
+    exact gradient w.r.t. (x_i, x_j, x_k, x_l) [rad/m], sharing their cross products.
+
+    The convention of :func:`warpworm.crease.dihedral_angles`: psi = atan2((n1 x n2) . e, n1 . n2) with the outward
+    wing normals n1 = (x_j - x_i) x (x_k - x_i), n2 = (x_k - x_l) x (x_j - x_l) and e = (x_j - x_k) / |x_j - x_k|.
+    Gradient (Liu & Paulino 2017, MERLIN, with psi = pi - theta_MERLIN): d psi/d x_i = L n1/|n1|²,
+    d psi/d x_l = L n2/|n2|², x_j and x_k by the wings' projections on the hinge axis (free of translation and
+    rotation). Returns (psi, g_i, g_j, g_k, g_l).
+    """
+    n1 = wp.cross(xj - xi, xk - xi)
+    n2 = wp.cross(xk - xl, xj - xl)
+    r_kj = xk - xj
+    len2 = wp.dot(r_kj, r_kj)
+    length = wp.sqrt(len2)
+    # (n1 x n2) . e with e = (x_j - x_k) / |x_j - x_k| = -r_kj / length
+    psi = wp.atan2(-wp.dot(wp.cross(n1, n2), r_kj) / length, wp.dot(n1, n2))
+    # guard degenerate wings (zero area): no gradient rather than inf
+    gi = n1 * (length / wp.max(wp.dot(n1, n1), 1.0e-30))
+    gl = n2 * (length / wp.max(wp.dot(n2, n2), 1.0e-30))
+    pi_ = wp.dot(xi - xj, r_kj) / len2
+    pl_ = wp.dot(xk - xl, r_kj) / len2
+    gj = gi * (pi_ - 1.0) - gl * pl_
+    gk = gl * (pl_ - 1.0) - gi * pi_
+    return psi, gi, gj, gk, gl

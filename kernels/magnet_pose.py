@@ -1,0 +1,165 @@
+"""Per-step kernels of the magnets' poses and of the magnetic wrench on the mesh: the kinematic EPM on its path
+(sine or keyframes), the IPMs carried by their mounts, and the distribution of each IPM's wrench onto its mount
+vertices. Launched by :class:`warpworm.simulator.Simulator` once per step, over all worlds.
+"""
+
+from __future__ import annotations
+
+import warp as wp
+
+from .common import PI, TWO_PI, pw
+
+
+@wp.func
+def mount_frame(
+    x: wp.array2d(dtype=wp.vec3), world: int, mount_vertices: wp.array2d(dtype=wp.int32), m: int
+):
+    """Body frame of mount ``m``'s vertex ring, as :func:`warpworm.crease.frame_from_vertices`: origin = centroid,
+    x = ring normal by Newell's rule, y = centroid -> first vertex made orthogonal to x, z = x cross y.
+
+    Returns (origin, R) with R's columns the frame axes in world coordinates (frame -> world).
+    """
+    nk = mount_vertices.shape[1]
+    o = wp.vec3(0.0)
+    for k in range(nk):
+        o += x[world, mount_vertices[m, k]]
+    o = o / float(nk)
+    nrm = wp.vec3(0.0)
+    for k in range(nk):
+        q0 = x[world, mount_vertices[m, k]] - o
+        q1 = x[world, mount_vertices[m, (k + 1) % nk]] - o
+        nrm += wp.cross(q0, q1)
+    ex = wp.normalize(nrm)
+    y = x[world, mount_vertices[m, 0]] - o
+    ey = wp.normalize(y - ex * wp.dot(y, ex))
+    ez = wp.cross(ex, ey)
+    return o, wp.matrix_from_cols(ex, ey, ez)
+
+
+
+@wp.kernel
+def epm_sine_pose(
+    # Model:
+    start_x: wp.array(dtype=float),
+    start_y: wp.array(dtype=float),
+    wavelength: wp.array(dtype=float),
+    amplitude: wp.array(dtype=float),
+    depth: wp.array(dtype=float),
+    theta: wp.array(dtype=float),
+    period: wp.array(dtype=float),
+    direction: wp.array(dtype=float),
+    phase: wp.array(dtype=float),
+    dt_sub: float,
+    # Data in:
+    step_count: wp.array(dtype=wp.int32),
+    # Data out:
+    magnet_pos: wp.array2d(dtype=wp.vec3),
+    magnet_rot: wp.array2d(dtype=wp.quat),
+):
+    """Kinematic EPM on the paper's sinusoidal path (§IV-C). Launch dim (W,).
+
+    s = t / period + phase (cycles); x = x0 + direction * w * s; z = -(depth + a (1 + cos 2 pi s) / 2): the EPM
+    moves beneath the floor, starts far (a below its closest approach), comes closest (its centre ``depth`` below
+    z = 0, i.e. its top face h below the origami base) at half a cycle, and advances w per cycle.
+    Orientation: the EPM's own +z (its magnetization) at angle theta from +x toward +z in the x-z plane.
+    """
+    world = wp.tid()
+    t = float(step_count[world]) * dt_sub
+    s = t / pw(period, world) + pw(phase, world)
+    px = pw(start_x, world) + pw(direction, world) * pw(wavelength, world) * s
+    pz = -(pw(depth, world) + pw(amplitude, world) * 0.5 * (1.0 + wp.cos(TWO_PI * s)))
+    magnet_pos[world, 0] = wp.vec3(px, pw(start_y, world), pz)
+    # rotation about +y by (pi/2 - theta) takes +z to (cos theta, 0, sin theta)
+    magnet_rot[world, 0] = wp.quat_from_axis_angle(wp.vec3(0.0, 1.0, 0.0), 0.5 * PI - pw(theta, world))
+
+
+@wp.kernel
+def epm_keyframe_pose(
+    # Model:
+    key_time: wp.array(dtype=float),
+    key_pos: wp.array2d(dtype=wp.vec3),
+    key_rot: wp.array2d(dtype=wp.quat),
+    dt_sub: float,
+    # Data in:
+    step_count: wp.array(dtype=wp.int32),
+    # Data out:
+    magnet_pos: wp.array2d(dtype=wp.vec3),
+    magnet_rot: wp.array2d(dtype=wp.quat),
+):
+    """Kinematic EPM on a keyframed path: linear position, slerped rotation, held before the first / after the last
+    key. ``key_time (K,)`` ascending [s]; ``key_pos``/``key_rot`` (1 or W, K). Launch dim (W,)."""
+    world = wp.tid()
+    t = float(step_count[world]) * dt_sub
+    row = world % key_pos.shape[0]
+    nk = key_time.shape[0]
+    k = int(0)
+    while k < nk - 2 and t >= key_time[k + 1]:
+        k += 1
+    t0 = key_time[k]
+    t1 = key_time[wp.min(k + 1, nk - 1)]
+    u = float(0.0)
+    if t1 > t0:
+        u = wp.clamp((t - t0) / (t1 - t0), 0.0, 1.0)
+    k1 = wp.min(k + 1, nk - 1)
+    magnet_pos[world, 0] = key_pos[row, k] * (1.0 - u) + key_pos[row, k1] * u
+    magnet_rot[world, 0] = wp.quat_slerp(key_rot[row, k], key_rot[row, k1], u)
+
+
+@wp.kernel
+def ipm_poses(
+    # Model:
+    mount_vertices: wp.array2d(dtype=wp.int32),
+    mount_local_pos: wp.array2d(dtype=wp.vec3),
+    mount_local_rot: wp.array2d(dtype=wp.mat33),
+    # Data in:
+    x: wp.array2d(dtype=wp.vec3),
+    # Data out:
+    magnet_pos: wp.array2d(dtype=wp.vec3),
+    magnet_rot: wp.array2d(dtype=wp.quat),
+):
+    """Pose of IPM ``m`` (slot m + 1) from its mount: the mount ring's frame composed with the mount's local pose.
+    Launch dim (W, 3)."""
+    world, m = wp.tid()
+    o, R = mount_frame(x, world, mount_vertices, m)
+    row = world % mount_local_pos.shape[0]
+    magnet_pos[world, m + 1] = o + R * mount_local_pos[row, m]
+    magnet_rot[world, m + 1] = wp.quat_from_matrix(R * mount_local_rot[row, m])
+
+
+@wp.kernel
+def distribute_wrench(
+    # Model:
+    mount_vertices: wp.array2d(dtype=wp.int32),
+    # Data in:
+    x: wp.array2d(dtype=wp.vec3),
+    magnet_pos: wp.array2d(dtype=wp.vec3),
+    force: wp.array2d(dtype=wp.vec3),
+    torque: wp.array2d(dtype=wp.vec3),
+    # Data out:
+    f_ext: wp.array2d(dtype=wp.vec3),
+):
+    """Least-norm vertex forces carrying the wrench of IPM ``m`` onto its K mount vertices. Launch dim (W, 3).
+
+    With r_k = x_k - c (c the vertices' centroid), f_k = F / K + w x r_k with J w = T_c, J = sum(|r|^2 I - r r^T),
+    T_c = T + (p - c) x F the torque about c (T is about the magnet centre p). Then sum f_k = F and
+    sum (x_k - p) x f_k = T exactly, with the smallest sum |f_k|^2. ``f_ext`` must be zeroed before.
+    """
+    world, m = wp.tid()
+    nk = mount_vertices.shape[1]
+    c = wp.vec3(0.0)
+    for k in range(nk):
+        c += x[world, mount_vertices[m, k]]
+    c = c / float(nk)
+    J = wp.mat33(0.0)
+    for k in range(nk):
+        r = x[world, mount_vertices[m, k]] - c
+        J += wp.diag(wp.vec3(wp.dot(r, r))) - wp.outer(r, r)
+    f = force[world, m + 1]
+    tc = torque[world, m + 1] + wp.cross(magnet_pos[world, m + 1] - c, f)
+    # J is SPD for non-collinear mount vertices; the tiny ridge keeps a collinear mount finite (no twist about it)
+    tr = J[0, 0] + J[1, 1] + J[2, 2]
+    omega = wp.inverse(J + wp.diag(wp.vec3(1.0e-9 * tr))) * tc
+    for k in range(nk):
+        vk = mount_vertices[m, k]
+        r = x[world, vk] - c
+        wp.atomic_add(f_ext, world, vk, f / float(nk) + wp.cross(omega, r))
