@@ -10,9 +10,11 @@ from __future__ import annotations
 
 import warp as wp
 
-LABEL_FLAT = wp.constant(0)
-LABEL_MOUNTAIN = wp.constant(1)
-LABEL_VALLEY = wp.constant(2)
+from warpworm import ids
+
+LABEL_FLAT = wp.constant(ids.FLAT)
+LABEL_MOUNTAIN = wp.constant(ids.MOUNTAIN)
+LABEL_VALLEY = wp.constant(ids.VALLEY)
 
 PI = wp.constant(3.14159265358979)
 TWO_PI = wp.constant(6.28318530717959)

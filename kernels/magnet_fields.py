@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import warp as wp
 
+from warpworm import ids
+
 MU0_OVER_4PI = wp.constant(1.0e-7)
 """mu0 / (4 pi) [T·m/A] (float32)."""
 
@@ -31,8 +33,8 @@ F64_4 = wp.constant(wp.float64(4.0))
 F64_PI = wp.constant(wp.float64(3.141592653589793))
 F64_INV_4PI = wp.constant(wp.float64(0.07957747154594767))
 
-SHAPE_CUBOID = wp.constant(0)
-SHAPE_CYLINDER = wp.constant(1)
+SHAPE_CUBOID = wp.constant(ids.SHAPE_CUBOID)
+SHAPE_CYLINDER = wp.constant(ids.SHAPE_CYLINDER)
 
 
 # ----------------------------------------------------------------------------------------------------------------------

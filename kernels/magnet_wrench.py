@@ -5,12 +5,14 @@ The pair physics lives in :mod:`warpworm.kernels.magnet_fields`; this module onl
 
 Conventions: float32 arrays, SI units; sizes are cuboid extents (x, y, z) or (d, d, h) for a cylinder (axis +z of
 the magnet); moments [A·m²] are given in the magnet's own frame; rotations are ``wp.quat`` (x, y, z, w) mapping the
-magnet frame to the world. Model ids: 0 = 'dipoles', 1 = 'analytic' (order of ``warpworm.params.MAGNET_MODELS``).
+magnet frame to the world. Model ids: the index of the model's name in ``warpworm.ids.MAGNET_MODELS``.
 """
 
 from __future__ import annotations
 
 import warp as wp
+
+from warpworm import ids
 
 from .magnet_fields import (
     F64_0,
@@ -21,8 +23,8 @@ from .magnet_fields import (
     magnet_field_local,
 )
 
-MODEL_DIPOLES = wp.constant(0)
-MODEL_ANALYTIC = wp.constant(1)
+MODEL_DIPOLES = wp.constant(ids.MODEL_DIPOLES)
+MODEL_ANALYTIC = wp.constant(ids.MODEL_ANALYTIC)
 
 MU0 = wp.constant(wp.float64(1.25663706212e-6))
 

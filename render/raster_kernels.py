@@ -31,18 +31,20 @@ from __future__ import annotations
 
 import warp as wp
 
+from warpworm import ids
+
 # forward only: nothing differentiates through rendering, and skipping adjoints halves the compile time
 wp.set_module_options({"enable_backward": False})
 
-NUM_LABELS = 11
-"""Segmentation ids 0..10 (docs/architecture.md): 0 background, 1 floor, 2..6 worm segments, 7..9 IPMs, 10 EPM."""
+NUM_LABELS = ids.NUM_SEGMENTATION_IDS
+"""Segmentation ids 0..10 (:mod:`warpworm.ids`): 0 background, 1 floor, 2..6 worm segments, 7..9 IPMs, 10 EPM."""
 
-LABEL_BACKGROUND = 0
-LABEL_FLOOR = 1
-LABEL_WORM_FIRST = 2
-LABEL_WORM_LAST = 6
-LABEL_IPM_FIRST = 7
-LABEL_EPM = 10
+LABEL_BACKGROUND = ids.SEG_BACKGROUND
+LABEL_FLOOR = ids.SEG_FLOOR
+LABEL_WORM_FIRST = ids.SEG_WORM_FIRST
+LABEL_WORM_LAST = ids.SEG_WORM_LAST
+LABEL_IPM_FIRST = ids.SEG_IPM_FIRST
+LABEL_EPM = ids.SEG_EPM
 
 TRI_BITS = 24
 """Low bits of the packed key that hold the triangle index."""

@@ -31,11 +31,11 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from warpworm import ids
 from warpworm.render.raster_kernels import LABEL_EPM, LABEL_FLOOR, LABEL_IPM_FIRST, LABEL_WORM_FIRST, NUM_LABELS
 from warpworm.render.seeding import uniforms
 
-LABEL_NAMES = ("background", "floor", "worm_seg0", "worm_seg1", "worm_seg2", "worm_seg3", "worm_seg4",
-               "ipm_tail", "ipm_centre", "ipm_head", "epm")
+LABEL_NAMES = ids.SEGMENTATION_NAMES
 """Name of every segmentation id, indexed by id."""
 
 

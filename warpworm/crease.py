@@ -53,9 +53,10 @@ from pathlib import Path
 
 import numpy as np
 
-FLAT, MOUNTAIN, VALLEY, BOUNDARY = 0, 1, 2, 3
-"""Edge / hinge labels (int8)."""
-LABEL_NAMES = ("flat", "mountain", "valley", "boundary")
+from .ids import BOUNDARY, CREASE_LABEL_NAMES, FLAT, MOUNTAIN, VALLEY
+
+# FLAT, MOUNTAIN, VALLEY, BOUNDARY (from warpworm.ids): the edge / hinge labels (int8)
+LABEL_NAMES = CREASE_LABEL_NAMES
 NUM_SEGMENTS = 5
 """The paper's five equal segments along the worm (tail -> head)."""
 MOUNT_NAMES = ("tail", "centre", "head")

@@ -28,16 +28,14 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from warpworm.ids import MAGNET_MODELS, SHAPE_CUBOID, SHAPE_CYLINDER
 from warpworm.transforms import matrix_to_quat_wxyz, quat_wxyz_to_xyzw
 
 MU0 = 1.25663706212e-6
 """Vacuum permeability [T·m/A]."""
 
-MODELS = {"dipoles": 0, "analytic": 1}
-"""Model name -> id used in the kernels (order of ``warpworm.params.MAGNET_MODELS``)."""
-
-SHAPE_CUBOID = 0
-SHAPE_CYLINDER = 1
+MODELS = {name: i for i, name in enumerate(MAGNET_MODELS)}
+"""Model name -> id used in the kernels (order of ``warpworm.ids.MAGNET_MODELS``)."""
 
 DEFAULT_DENSITY = 64e6
 """Default dipole density of the 'dipoles' model: 64 per cm³ [1/m³]."""

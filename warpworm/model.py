@@ -18,10 +18,8 @@ import warp as wp
 
 from . import crease, gaits
 from .params import MAGNET_MODELS, WormParams, per_world
+from .ids import SHAPE_CUBOID, SHAPE_CYLINDER
 from .transforms import axis_angle_to_matrix, matrix_to_quat_wxyz, quat_wxyz_to_xyzw
-
-SHAPE_CUBOID = 0
-SHAPE_CYLINDER = 1
 
 
 def _scalar_param(value, num_worlds: int, name: str) -> np.ndarray:

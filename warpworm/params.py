@@ -14,6 +14,8 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
+from .ids import MAGNET_MODELS
+
 N52_MOMENT_PER_VOLUME = 0.9e6
 """Fitted magnetization of the paper's N52 magnets: 0.9 A·m² per cm³ = 0.9e6 A/m (DESIGN-NOTES)."""
 
@@ -21,7 +23,6 @@ MAGNET_SLOTS = ("epm", "ipm_tail", "ipm_centre", "ipm_head")
 EPM, IPM_TAIL, IPM_CENTRE, IPM_HEAD = range(4)
 
 GAITS = ("peristaltic", "omega", "inchworm")
-MAGNET_MODELS = ("dipoles", "analytic")
 
 
 @dataclass
