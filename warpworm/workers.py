@@ -11,6 +11,10 @@ does its heavy imports (``preload``) and then waits for the parent, so no two pr
 A worker that dies (SIGKILL, out of memory) breaks the local pool: the job stops with a clear error, finished shards stay
 committed, the half-written shard is a temporary file, and ``--resume`` redoes exactly the missing shards. A worker whose
 parent dies exits by itself (a watchdog thread), so a killed job leaves no orphan writing files.
+
+On Ray, a shard task whose worker or node dies is re-run by Ray (``RAY_MAX_RETRIES``) and the job goes on; the
+temporaries such attempts left are deleted when every shard is committed (tested: tests/test_dataset_ray.py kills a
+node of a two-node cluster mid-shard).
 """
 
 from __future__ import annotations
@@ -195,6 +199,12 @@ def _stop_workers(pool, timeout: float = 10.0) -> None:
             p.join(1.0)
 
 
+RAY_MAX_RETRIES = 3
+"""Ray re-runs a shard task up to this many times when its worker or node dies (system failures only; an exception in
+the task, e.g. disk full, is not retried). A re-run is safe: shard k's content depends only on (config, k), and the
+shard is written under a temporary name and renamed when complete."""
+
+
 def _run_ray(cfg, out, todo, stages, address, on_progress, on_shard):
     try:
         import ray
@@ -202,7 +212,7 @@ def _run_ray(cfg, out, todo, stages, address, on_progress, on_shard):
         raise WorkerError("--engine ray needs Ray: pip install 'warpworm[ray]'") from None
     ray.init(address=address, ignore_reinit_error=True, log_to_driver=False,
              runtime_env={"env_vars": {"OMP_NUM_THREADS": "1"}})
-    task = ray.remote(num_cpus=1, max_retries=2)(_ray_shard)
+    task = ray.remote(num_cpus=1, max_retries=RAY_MAX_RETRIES, retry_exceptions=False)(_ray_shard)
     refs = {task.remote(cfg, str(out), k, stages): k for k in todo}
     while refs:
         ready, _ = ray.wait(list(refs), num_returns=1)
@@ -216,6 +226,27 @@ def _run_ray(cfg, out, todo, stages, address, on_progress, on_shard):
                               "--resume") from exc
         on_progress(st.count)
         on_shard(st)
+    _remove_dead_attempts(out, todo)
+
+
+def _remove_dead_attempts(out, shards) -> list[str]:
+    """Delete the temporaries (``.shard-k.h5.tmp-<pid>``) that attempts killed with their node left behind, once every
+    shard in ``shards`` is committed: Ray re-ran those attempts elsewhere, and a task whose node died is gone (its
+    worker exits when its raylet does), so nothing is still writing them. (The pid in a name is another host's, so it
+    cannot tell here whether its writer lives.)"""
+    import glob
+
+    from .dataset import shard_name
+
+    removed = []
+    for k in shards:
+        for p in glob.glob(os.path.join(str(out), f".{shard_name(k)}.tmp-*")):
+            try:
+                os.unlink(p)
+                removed.append(os.path.basename(p))
+            except OSError:
+                pass
+    return removed
 
 
 def _ray_shard(cfg, out, k, stages):
