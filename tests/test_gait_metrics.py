@@ -68,6 +68,8 @@ def test_inchworm_like_trajectory_measures():
     np.testing.assert_allclose(m["end_hold_ratio"][0], [0.0, 0.0], atol=1e-9)
     # nothing moves at the far points (s = 1, 2)
     assert m["far_point_motion_m"][0] == pytest.approx(0.0, abs=1e-12)
+    assert m["far_point_ratio_deviation"][0] == pytest.approx(0.0, abs=1e-12)  # relaxed at the far points
+    assert m["length_ratio_min"][0] == pytest.approx(1.0, abs=1e-12)  # it never got shorter than at rest
 
 
 def test_parse_grid_and_points():

@@ -68,7 +68,9 @@ def gait_metrics(pattern, hinge_label, frames: dict, period, incline=0.0) -> dic
         ``end_hold_ratio`` (W, C): in each cycle's contraction (from its longest head–tail length to the shortest
         after it; from the cycle start when the shortest comes first), the motion of the end that moved less over that of the end that moved more (0: one end held,
         1: both ends moved together, i.e. slid); ``far_point_motion_m`` (W,) the largest centroid motion in the
-        windows ±0.1 cycle around the EPM's far points (s = 0, 1, 2, …) after the first.
+        windows ±0.1 cycle around the EPM's far points (s = 0, 1, 2, …) after the first;
+        ``far_point_ratio_deviation`` (W,) the largest |ratio − 1| in those windows (has the worm relaxed?);
+        ``length_ratio_min`` (W,) the smallest head–tail distance over its first value.
     """
     x = np.asarray(frames["positions"], np.float64)
     F, W = x.shape[:2]
@@ -89,7 +91,8 @@ def gait_metrics(pattern, hinge_label, frames: dict, period, incline=0.0) -> dic
     cyc_disp = np.zeros((W, C))
     cyc_rmin = np.ones((W, C, 4))
     hold = np.full((W, C), np.nan)
-    length = head - tail
+    ends = x[:, :, -3:].mean(axis=2) - x[:, :, :3].mean(axis=2)
+    length = np.linalg.norm(ends, axis=-1)  # head–tail distance (a worm that turns on the floor is not shorter)
     wi = np.arange(W)
     for c in range(C):  # a few cycles: the loop is over cycles, every operation is over all worlds
         inside = (s >= c - 1e-9) & (s <= c + 1 + 1e-9)  # (F, W)
@@ -108,6 +111,7 @@ def gait_metrics(pattern, hinge_label, frames: dict, period, incline=0.0) -> dic
         hold[:, c] = np.where(big > 0, np.minimum(dt_, dh) / np.where(big > 0, big, 1.0), 0.0)
 
     far = np.zeros(W)
+    far_dev = np.zeros(W)
     for k in range(1, C + 1):
         win = np.abs(s - k) <= 0.1
         if not win.any():
@@ -115,6 +119,8 @@ def gait_metrics(pattern, hinge_label, frames: dict, period, incline=0.0) -> dic
         hi = np.where(win, centroid, -np.inf).max(axis=0)
         lo = np.where(win, centroid, np.inf).min(axis=0)
         far = np.maximum(far, np.where(np.isfinite(hi - lo), hi - lo, 0.0))
+        dev = np.where(win[..., None], np.abs(ratios - 1.0), 0.0).max(axis=(0, 2))
+        far_dev = np.maximum(far_dev, dev)
 
     return {
         "deformation_ratio_min": ratios.min(axis=0),
@@ -128,4 +134,6 @@ def gait_metrics(pattern, hinge_label, frames: dict, period, incline=0.0) -> dic
         "cycle_ratio_min": cyc_rmin,
         "end_hold_ratio": hold,
         "far_point_motion_m": far,
+        "far_point_ratio_deviation": far_dev,
+        "length_ratio_min": (length / length[:1]).min(axis=0),
     }

@@ -3,7 +3,7 @@
 The worm walks on the top face of a support plate (the floor, z = 0, ``WormParams.support_thickness`` thick); the EPM
 moves **beneath** it (§III-B: the EPM's repulsion "pushes the middle of the origami upward"; §IV-C: h is the "closest
 approach from the origami base"). The EPM is kinematic: its pose is a function of time evaluated on the device each
-step (:func:`warpworm.kernels.xpbd.epm_sine_pose` / ``epm_keyframe_pose``).
+step (:func:`warpworm.kernels.magnet_pose.epm_sine_pose` / ``epm_keyframe_pose``).
 
 Sinusoidal path (per world; s = t / period + phase, in cycles)::
 
@@ -68,14 +68,14 @@ GAIT_ORIENTATION = {
 }
 GAIT_PLACEMENT = {"peristaltic": 0.4, "omega": 0.0, "inchworm": 0.2}
 
-# Tuned paths per gait (docs/dynamics.md, "Tuning"): the best distance per cycle of a 1,036-point batched grid search
-# (warpworm search-gait, 2 cycles, the default mineral-paper worm) among the stable, unfolded worlds that deform
-# (some segment ratio <= 0.9; peristaltic <= 0.95, none reached 0.9) and whose closest approach gives the wrench signs
-# of §III (omega: ends drawn inward only from h ~ 17 mm).
+# Tuned paths per gait (docs/dynamics.md, "Gaits"): batched grid searches (warpworm search-gait, 4 cycles, the
+# default mineral-paper worm), the best distance per cycle among the worlds that stay stable and unfolded, keep up
+# with the EPM (<= 1.05 w per cycle) and deform (some segment ratio <= 0.9; peristaltic <= 0.97, the most any of its
+# stable worlds reached), with the wrench signs of §III at the closest approach (omega: h >= 17 mm).
 GAIT_PRESETS = {
-    "peristaltic": dict(wavelength=0.012, amplitude=0.06, closest_approach=0.012, cycle_period=1.0),
-    "omega": dict(wavelength=0.016, amplitude=0.03, closest_approach=0.026, cycle_period=1.0),
-    "inchworm": dict(wavelength=0.032, amplitude=0.05, closest_approach=0.009, cycle_period=1.0),
+    "peristaltic": dict(wavelength=0.020, amplitude=0.05, closest_approach=0.018, cycle_period=1.0),
+    "omega": dict(wavelength=0.032, amplitude=0.04, closest_approach=0.025, cycle_period=1.0),
+    "inchworm": dict(wavelength=0.028, amplitude=0.06, closest_approach=0.014, cycle_period=1.0),
 }
 
 
