@@ -13,14 +13,30 @@ quiet_warp()
 
 @pytest.mark.parametrize("backward", [False, True], ids=["forward", "backward"])
 @pytest.mark.parametrize("gait", ["peristaltic", "omega", "inchworm"])
-def test_gait_preset_moves_the_worm_its_way(gait, backward):
+def test_gait_preset_deforms_and_moves_the_worm_its_way(gait, backward):
+    """5 cycles of each preset on the default (mineral-paper) worm: stable and unfolded; it moves the commanded way
+    by more than 1 mm but never outruns the EPM (at most 1.05 w per cycle overall); its creases swing by 15° or more
+    (the paper's deformation, not a rigid slide); and it rests when the EPM is far (segment ratios within 2 % of 1
+    around the far points)."""
     params = gaits.preset_params(gait, backward)
-    result = run_gait(params, 1, 5, fps=None)
+    result = run_gait(params, 1, 5, fps=25.0, save_worlds=0)
+    m = result["metrics"]
     d = float(result["displacement_m"][0])
-    assert not result["unstable"][0]
+    assert not result["unstable"][0] and not result["crumpled"][0]
     sign = -1.0 if backward else 1.0
-    # at least 1 mm in the commanded direction over 5 cycles (the worm is 80 mm long)
-    assert sign * d > 1e-3, f"{gait} {'backward' if backward else 'forward'}: net displacement {d * 1e3:+.2f} mm"
+    w = gaits.GAIT_PRESETS[gait]["wavelength"]
+    assert 1e-3 < sign * d <= 1.05 * 5 * w, f"{gait}: net displacement {d * 1e3:+.2f} mm (w = {w * 1e3:.0f} mm)"
+    assert m["crease_angle_range_deg"][0] >= 15.0, m["crease_angle_range_deg"]
+    assert m["max_fold_violation_deg"][0] <= 5.0
+    assert m["far_point_ratio_deviation"][0] <= 0.02, m["far_point_ratio_deviation"]
+
+
+def test_omega_preset_lifts_the_middle_and_shortens_the_worm():
+    """§III-B: the middle of the worm is pushed up (centre IPM >= 3 mm) while its ends come closer (>= 10 %)."""
+    result = run_gait(gaits.preset_params("omega"), 1, 2, fps=25.0, save_worlds=0)
+    m = result["metrics"]
+    assert m["centre_ipm_max_lift_m"][0] >= 3e-3, m["centre_ipm_max_lift_m"]
+    assert m["length_ratio_min"][0] <= 0.9, m["length_ratio_min"]
 
 
 def test_simulate_cli_json_and_files(tmp_path, capsys):
