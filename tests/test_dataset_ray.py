@@ -1,8 +1,8 @@
 """``generate --engine ray`` on a real two-node Ray cluster on this machine, with the second node killed mid-job.
 
-Two ``ray start`` nodes (1 CPU each, both on 127.0.0.1 and listening on loopback only, temp dirs under
-tmp_path, no dashboard, no usage stats, no auth token written to ~/.ray) run a small job of the deterministic fake stages
-(tests/test_dataset_fakes.py, slowed down so a shard is in flight for seconds). As soon as a shard task on the second
+Two ``ray start`` nodes (1 CPU each, both on 127.0.0.1 and listening on loopback only, temp dirs under pytest's
+base temp, no dashboard, no usage stats, no auth token written to ~/.ray) run a small job of the deterministic fake
+stages (tests/test_dataset_fakes.py, slowed down so a shard is in flight for seconds). As soon as a shard task on the second
 node has opened its temporary, that node's raylet is SIGKILLed. Ray re-runs the lost task on the head node
 (``warpworm.workers.RAY_MAX_RETRIES``); the job must exit 0 with a complete dataset whose every dataset equals a local
 run's, sample for sample, and no temporary left. Every wait is bounded; the nodes are stopped by their process ids
@@ -24,7 +24,7 @@ import pytest
 
 pytest.importorskip("ray", reason="Ray not installed (test extra: pip install -e '.[test]')")
 
-from test_dataset_pipeline import FAKE, TESTS, _cli, _reference, assert_same, everything  # noqa: E402
+from test_dataset_pipeline import TESTS, _cli, _reference, assert_same, everything  # noqa: E402
 
 RAY = [sys.executable, "-m", "ray.scripts.scripts"]
 # `ray start` for the second node, on 127.0.0.1 too. Ray binds its gRPC servers to loopback only when the node's IP is

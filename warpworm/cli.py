@@ -25,6 +25,7 @@ COMMANDS = {
     "export-usd": "export_usd",
     "export-coco": "export_coco",
     "verify": "verify",
+    "report": "report",
 }
 
 
