@@ -51,7 +51,7 @@ class NumpyImplicit:
         self.lo, self.hi = lo, hi
         self.newton = int(newton)
         E = model.num_edges
-        self.stop_strain = np.broadcast_to(model.bar_stop_strain.numpy().astype(np.float64), (self.W, E))
+        self.stop_strain = np.broadcast_to(model.bar_stop_strain.numpy().astype(np.float64), (self.W, E, 2))
         self.stop_k = np.broadcast_to(model.bar_stop_stiffness.numpy().astype(np.float64), (self.W, E))
         self.k_limit = np.broadcast_to(model.fold_limit_stiffness.numpy().astype(np.float64), (self.W,))
         self.anchor_vertex = model.anchor_vertex.numpy().astype(np.int64)
@@ -103,8 +103,9 @@ class NumpyImplicit:
             ka = self.EA / self.L0
             f = n * (ka * (L - self.L0))[..., None]
             strain = (L - self.L0) / self.L0
-            l_stop = self.L0 * (1.0 + np.where(strain < 0, -self.stop_strain, self.stop_strain))
-            ks = np.where(np.abs(strain) > self.stop_strain, self.stop_k / self.L0, 0.0)
+            stop = np.where(strain < 0, -self.stop_strain[..., 0], self.stop_strain[..., 1])
+            l_stop = self.L0 * (1.0 + stop)
+            ks = np.where(np.where(strain < 0, strain < stop, strain > stop), self.stop_k / self.L0, 0.0)
             f = f + n * (ks * (L - l_stop))[..., None]
             np.add.at(g, (slice(None), e[:, 0]), f)
             np.add.at(g, (slice(None), e[:, 1]), -f)

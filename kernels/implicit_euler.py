@@ -137,7 +137,7 @@ def assemble(
     edges: wp.array2d(dtype=wp.int32),
     rest_length: wp.array2d(dtype=float),
     bar_stiffness: wp.array2d(dtype=float),
-    bar_stop_strain: wp.array2d(dtype=float),
+    bar_stop_strain: wp.array2d(dtype=wp.vec2),
     bar_stop_stiffness: wp.array2d(dtype=float),
     hinges: wp.array2d(dtype=wp.int32),
     hinge_rest: wp.array2d(dtype=float),
@@ -207,12 +207,13 @@ def assemble(
         ka = bar_stiffness[ea_row, e] / l0
         f = n * (ka * (length - l0))
         k_axial = ka
-        # a soft waist bar strained past its stop |ε| = ε_s turns rigid: the sheet's panels, which the soft bar
-        # stands for, bend only so far before they stretch (without it a hard squeeze flattens the waist triangles
+        # a soft waist bar strained past its stops (−ε_c shortened, +ε_t stretched) turns rigid: the sheet's panels,
+        # which the soft bar stands for, bend only so far (without them a hard squeeze flattens the waist triangles
         # into slivers, whose crease gradients blow up, or pinches the waist through the axis)
-        stop = bar_stop_strain[world % bar_stop_strain.shape[0], e]
-        l_stop = l0 * (1.0 + wp.where(strain < 0.0, -stop, stop))
-        if wp.abs(strain) > stop:
+        stops = bar_stop_strain[world % bar_stop_strain.shape[0], e]
+        stop = wp.where(strain < 0.0, -stops[0], stops[1])
+        l_stop = l0 * (1.0 + stop)
+        if wp.where(strain < 0.0, strain < stop, strain > stop):
             ks = bar_stop_stiffness[ea_row % bar_stop_stiffness.shape[0], e] / l0
             f = f + n * (ks * (length - l_stop))
             k_axial = k_axial + ks
@@ -290,7 +291,7 @@ def implicit_step(
     edges: wp.array2d(dtype=wp.int32),
     rest_length: wp.array2d(dtype=float),
     bar_stiffness: wp.array2d(dtype=float),
-    bar_stop_strain: wp.array2d(dtype=float),
+    bar_stop_strain: wp.array2d(dtype=wp.vec2),
     bar_stop_stiffness: wp.array2d(dtype=float),
     hinges: wp.array2d(dtype=wp.int32),
     hinge_rest: wp.array2d(dtype=float),

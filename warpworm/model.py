@@ -242,11 +242,15 @@ class Model:
         ea = np.where(is_valley[None, :], ea_valley[:, None], ea_rigid[:, None])
         self.bar_stiffness = wp.array(ea.astype(np.float32), dtype=float, device=dev)
         """Axial rigidity EA of each bar [N], shape (R, E), float (valley-ring bars: ``valley_bar_stiffness``)."""
-        stop_w = _scalar_param(p.waist_stop_strain, W, "waist_stop_strain")
-        stop = np.where(is_valley[None, :], stop_w[:, None], 1e3)
-        self.bar_stop_strain = wp.array(stop.astype(np.float32), dtype=float, device=dev)
-        """|strain| beyond which a bar meets its stop, shape (R, E), float: ``waist_stop_strain`` for the waist
-        (VALLEY) bars, none (1e3) for the others."""
+        stop_c = _scalar_param(p.waist_close_strain, W, "waist_close_strain")
+        stop_t = _scalar_param(p.waist_stop_strain, W, "waist_stop_strain")
+        rows_s = max(len(stop_c), len(stop_t))
+        stop = np.full((rows_s, len(is_valley), 2), 1e3)
+        stop[:, is_valley, 0] = np.broadcast_to(stop_c, (rows_s,))[:, None]
+        stop[:, is_valley, 1] = np.broadcast_to(stop_t, (rows_s,))[:, None]
+        self.bar_stop_strain = wp.array(stop.astype(np.float32), dtype=wp.vec2, device=dev)
+        """Strain magnitudes (shortened, stretched) beyond which a bar meets its stops, shape (R, E), vec2:
+        (``waist_close_strain``, ``waist_stop_strain``) for the waist (VALLEY) bars, none (1e3) for the others."""
         self.bar_stop_stiffness = wp.array(np.where(is_valley[None, :], ea_rigid[:, None], 0.0).astype(np.float32),
                                            dtype=float, device=dev)
         """Axial rigidity of the stop [N], shape (R, E), float: the rigid bars' EA on the waist bars, 0 elsewhere."""

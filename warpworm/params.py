@@ -56,8 +56,12 @@ class WormParams:
     in-plane compliance. The tube is isostatic (docs/crease.md): these bars stand for the panel bending near the
     waists that lets the paper bellows fold, so they must be far softer than ``bar_stiffness`` for the worm to
     shorten under the magnets (default: mineral paper, warpworm.materials)."""
+    waist_close_strain: float | np.ndarray = 0.3
+    """How far a waist (VALLEY) bar may shorten, as a strain magnitude ε_c [1], before it turns as stiff as the rigid
+    bars, shape () or (W,). The bellows' folding mode shrinks its waists (they close completely at about 17 %
+    shortening, docs/crease.md), so this caps how far each unit can contract."""
     waist_stop_strain: float | np.ndarray = 0.3
-    """Strain |ε_s| [1] beyond which a waist (VALLEY) bar turns as stiff as the rigid ones (``bar_stiffness``), shared
+    """Stretch ε_t [1] beyond which a waist (VALLEY) bar turns as stiff as the rigid ones (``bar_stiffness``), shared
     shape () or (W,): the panels it stands for bend only so far. Without the stop a hard squeeze flattens the waist
     triangles into slivers (their crease gradients blow up) or pinches the waist through the axis (docs/crease.md:
     the waist closes at α = 92.4°)."""
