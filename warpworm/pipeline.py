@@ -981,6 +981,14 @@ def _generate_locked(cfg, out, t0, guard, log, *, workers, resume, stages, engin
     try:
         wk.run_shards(cfg, out, todo, stages, workers=workers, engine=engine, address=address,
                       on_progress=bar.update, on_shard=on_shard)
+    except Interrupted:
+        # a shard committed to disk between its rename and the manifest update is complete but unrecorded: discard
+        # it like the shard in flight (--resume writes the same bytes again), so the manifest lists exactly the
+        # shards on disk
+        for k in todo:
+            if k not in done:
+                (out / ds.shard_name(k)).unlink(missing_ok=True)
+        raise
     finally:
         bar.close()
     wall = time.perf_counter() - t0
