@@ -276,52 +276,73 @@ def _wait_started(out, proc, old, timeout=60):
     raise AssertionError("the job never started a shard")
 
 
-def test_killed_at_random_moments_then_resumed_equals_uninterrupted(tmp_path, ref):
-    """Four interruptions of one job at random moments (seeded), each followed by --resume: SIGTERM and SIGINT must
-    stop cleanly (exit 128 + signal, no temporary, workers gone, manifest listing exactly the shards on disk);
-    SIGKILL leaves at most temporaries and a stale lock. The final dataset equals the uninterrupted one."""
-    rng = np.random.default_rng(20240611)
-    out = tmp_path / "job"
-    plan = [(signal.SIGTERM, "1"), (signal.SIGKILL, "1"), (signal.SIGTERM, "2"), (signal.SIGINT, "2")]
-    interrupted = 0
-    for i, (sig, workers) in enumerate(plan):
-        extra = ["--workers", workers] + (["--resume"] if i else [])
-        args, env = _cli(out, *extra, env_extra={"WARPWORM_FAKE_SLEEP": "0.08"})
-        old = set(out.glob(".shard-*.tmp-*")) if out.exists() else set()  # a SIGKILLed run's leftovers
-        proc = subprocess.Popen(args, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                                start_new_session=True)
-        _wait_started(out, proc, old)
-        time.sleep(float(rng.uniform(0.0, 0.5)))
-        if proc.poll() is None:
-            os.kill(proc.pid, sig)
-            interrupted += 1
-        _, err = proc.communicate(timeout=60)
-        if proc.returncode == 0:
-            break  # finished before the signal
-        if sig == signal.SIGKILL:
-            assert proc.returncode == -signal.SIGKILL
-            time.sleep(1.0)  # orphaned workers' watchdog (0.5 s)
-        else:
-            assert proc.returncode == 128 + sig, (sig, proc.returncode, err)
-            assert "stopped: interrupted by" in err and "--resume" in err, err
-            assert not list(out.glob(".*.tmp-*")), list(out.iterdir())
-            m = json.loads((out / "manifest.json").read_text())
-            assert sorted(s["file"] for s in m["shards"]) == sorted(p.name for p in out.glob("shard-*.h5"))
-        for _ in range(20):  # no live process of the job is left in its session (exited ones may be zombies
-            ps = subprocess.run(["ps", "-o", "stat=,pid=,args=", "-s", str(proc.pid)], capture_output=True, text=True)
-            live = [ln for ln in ps.stdout.splitlines() if ln.strip() and not ln.strip().startswith("Z")]
-            if not live:  # (un-reaped where pid 1 does not reap orphans, as in this container)
-                break
-            time.sleep(0.1)
-        else:
-            raise AssertionError(f"interrupted job {i} ({sig.name}) left live processes: {live}")
-    assert interrupted >= 2
+def _interrupt_once(out, sig, workers, resume, rng):
+    """Start the job (resuming if asked), send ``sig`` at a random moment once it writes a shard, and check the stop.
+    Returns True if the signal was delivered, False if the job finished first."""
+    extra = ["--workers", workers] + (["--resume"] if resume else [])
+    args, env = _cli(out, *extra, env_extra={"WARPWORM_FAKE_SLEEP": "0.08"})
+    old = set(out.glob(".shard-*.tmp-*")) if out.exists() else set()  # a SIGKILLed run's leftovers
+    proc = subprocess.Popen(args, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    _wait_started(out, proc, old)
+    time.sleep(float(rng.uniform(0.0, 0.5)))
+    delivered = proc.poll() is None
+    if delivered:
+        os.kill(proc.pid, sig)
+    _, err = proc.communicate(timeout=60)
+    if proc.returncode == 0:
+        return False  # finished before the signal
+    if sig == signal.SIGKILL:
+        assert proc.returncode == -signal.SIGKILL
+        time.sleep(1.0)  # orphaned workers' watchdog (0.5 s)
+    else:
+        assert proc.returncode == 128 + sig, (sig, proc.returncode, err)
+        assert "stopped: interrupted by" in err and "--resume" in err, err
+        assert not list(out.glob(".*.tmp-*")), list(out.iterdir())
+        m = json.loads((out / "manifest.json").read_text())
+        assert sorted(s["file"] for s in m["shards"]) == sorted(p.name for p in out.glob("shard-*.h5"))
+    for _ in range(20):  # no live process of the job is left in its session (exited ones may be zombies
+        ps = subprocess.run(["ps", "-o", "stat=,pid=,args=", "-s", str(proc.pid)], capture_output=True, text=True)
+        live = [ln for ln in ps.stdout.splitlines() if ln.strip() and not ln.strip().startswith("Z")]
+        if not live:  # (un-reaped where pid 1 does not reap orphans, as in this container)
+            break
+        time.sleep(0.1)
+    else:
+        raise AssertionError(f"interrupted job ({sig.name}) left live processes: {live}")
+    return delivered
+
+
+def _finish_and_check(out, ref):
     args, env = _cli(out, "--resume")
     r = subprocess.run(args, env=env, capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
     assert not list(out.glob(".*.tmp-*"))
     assert _verify(out) == (0, [])
     assert_same(everything(out)[0], ref)
+
+
+def test_killed_at_random_moments_then_resumed_equals_uninterrupted(tmp_path, ref):
+    """20 interruptions at random moments (seeded), cycling SIGTERM, SIGKILL, SIGTERM and SIGINT over 1 and 2 workers,
+    each followed by --resume; a job that completes is checked and a new one started. SIGTERM and SIGINT must stop
+    cleanly (exit 128 + signal, no temporary, workers gone, manifest listing exactly the shards on disk); SIGKILL
+    leaves at most temporaries and a stale lock. Every finished dataset equals the uninterrupted one byte for byte."""
+    rng = np.random.default_rng(20240611)
+    plan = [(signal.SIGTERM, "1"), (signal.SIGKILL, "1"), (signal.SIGTERM, "2"), (signal.SIGINT, "2")]
+    interrupted, jobs, step, resume = 0, 0, 0, False
+    out = tmp_path / f"job{jobs}"
+    while interrupted < 20:
+        sig, workers = plan[step % len(plan)]
+        step += 1
+        if _interrupt_once(out, sig, workers, resume, rng):
+            interrupted += 1
+            resume = True
+        else:  # the job finished: check it and start the next one
+            _finish_and_check(out, ref)
+            jobs += 1
+            out, resume = tmp_path / f"job{jobs}", False
+        assert step < 80, "the jobs keep finishing before the signal"
+    if out.exists():
+        _finish_and_check(out, ref)
 
 
 # --- 6. COCO keypoints -----------------------------------------------------------------------------------------------
