@@ -25,6 +25,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--workers", type=int, default=None, help="processes (default: every core)")
     parser.add_argument("--out", default="search_out", help="output folder for the CSV and the heat map")
     parser.add_argument("--top", type=int, default=10, help="rows of the ranking to print")
+    parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
+                        help="override a WormParams field for every world, e.g. --set hinge_damping=1e-4")
     parser.add_argument("--max-ratio", type=float, default=None,
                         help="rank only worlds that deform: some segment ratio <= this (e.g. 0.9)")
 
@@ -44,7 +46,20 @@ def main(args) -> int:
     if args.cycles < 1:
         print(f"warpworm search-gait: --cycles {args.cycles}: expected >= 1", file=sys.stderr)
         return 2
-    params = gaits.preset_params(args.gait, args.backward, base=base, magnet_model=args.magnet_model)
+    from warpworm.params import WormParams
+
+    fields = set(WormParams().names())
+    overrides = {}
+    for item in args.set:
+        key, _, value = item.partition("=")
+        try:
+            if key not in fields:
+                raise ValueError(f"unknown field {key!r}; expected one of WormParams' fields")
+            overrides[key] = float(value)
+        except ValueError as e:
+            print(f"warpworm search-gait: --set {item!r}: {e}", file=sys.stderr)
+            return 2
+    params = gaits.preset_params(args.gait, args.backward, base=base, magnet_model=args.magnet_model, **overrides)
     n = int(np.prod([len(v) for v in grid.values()]))
     workers = args.workers or os.cpu_count() or 1
     print(f"search-gait {args.gait}{' backward' if args.backward else ''}: {n} grid points x {args.cycles} cycles "
