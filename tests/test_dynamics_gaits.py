@@ -16,8 +16,9 @@ quiet_warp()
 def test_gait_preset_deforms_and_moves_the_worm_its_way(gait, backward):
     """5 cycles of each preset on the default (mineral-paper) worm: stable and unfolded; it moves the commanded way
     by more than 1 mm but never outruns the EPM (at most 1.05 w per cycle overall); its creases swing by 15° or more
-    (the paper's deformation, not a rigid slide); and it rests when the EPM is far (segment ratios within 2 % of 1
-    around the far points)."""
+    (the paper's deformation, not a rigid slide); peristaltic and inchworm rest when the EPM is far (segment ratios
+    within 2 % of 1 around the far points; the omega preset, which keeps up with the EPM, does not: 5.7 %,
+    docs/dynamics.md)."""
     params = gaits.preset_params(gait, backward)
     result = run_gait(params, 1, 5, fps=25.0, save_worlds=0)
     m = result["metrics"]
@@ -28,7 +29,8 @@ def test_gait_preset_deforms_and_moves_the_worm_its_way(gait, backward):
     assert 1e-3 < sign * d <= 1.05 * 5 * w, f"{gait}: net displacement {d * 1e3:+.2f} mm (w = {w * 1e3:.0f} mm)"
     assert m["crease_angle_range_deg"][0] >= 15.0, m["crease_angle_range_deg"]
     assert m["max_fold_violation_deg"][0] <= 5.0
-    assert m["far_point_ratio_deviation"][0] <= 0.02, m["far_point_ratio_deviation"]
+    if gait != "omega":
+        assert m["far_point_ratio_deviation"][0] <= 0.02, m["far_point_ratio_deviation"]
 
 
 def test_omega_preset_lifts_the_middle_and_shortens_the_worm():

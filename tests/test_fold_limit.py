@@ -50,8 +50,9 @@ def test_moderate_squeeze_keeps_every_crease_in_range():
 
 def test_hard_squeeze_crumples_and_is_flagged_not_written():
     """30 mm (37 %) is past what the bellows can fold (its waists close at about 17 % shortening, docs/crease.md):
-    the sheet crumples; every world is flagged crumpled (2) and frozen finite, so no data is made from it."""
+    the sheet crumples; every world is flagged (the soft one crumpled, 2; the stiffer one may first exceed a strain
+    or speed limit, 1) and frozen finite, so no data is made from it."""
     worst, flags, x = squeeze([0.005, 0.05], 0.030)
-    assert np.all(flags == 2), flags
+    assert np.all(flags != 0) and flags[0] == 2, flags
     assert np.isfinite(x).all()
     assert np.all(worst <= 5.0), worst  # nothing beyond the tolerance was ever reported as a live world

@@ -8,6 +8,9 @@ The worm is a bar-and-hinge model (docs/crease.md). Its stiffness has three part
   bar framework (rank 3V − 6): it can only shorten if some bars give, and the waist bars stand for the panel
   bending near the waists that lets a real paper bellows fold. This is the in-plane compliance of the sheet.
 - ``bar_stiffness`` EA [N]: every other bar, near-rigid (panels do not stretch).
+- ``hinge_damping`` c_α [N·m·s/rad per metre of crease]: the crease's viscous resistance to folding speed (paper
+  creases are viscoelastic). Without it a soft worm near the EPM snaps dynamically and crumples; 20 ms relaxation
+  (c_α = 1e-4 for mineral paper) keeps the force-plate runs and closer approaches stable (docs/dynamics.md).
 
 The fold-through barrier (``fold_limit_stiffness``) is independent of all three.
 
@@ -31,11 +34,12 @@ from dataclasses import replace
 from .params import WormParams
 
 MATERIALS: dict[str, dict[str, float]] = {
-    "mineral_paper": dict(hinge_stiffness=0.005, valley_bar_stiffness=0.3, sheet_density=0.15),
-    "tracing_paper": dict(hinge_stiffness=0.010, valley_bar_stiffness=0.6, sheet_density=0.09),
-    "bopet": dict(hinge_stiffness=0.025, valley_bar_stiffness=1.5, sheet_density=0.17),
+    "mineral_paper": dict(hinge_stiffness=0.005, valley_bar_stiffness=0.3, sheet_density=0.15, hinge_damping=1.0e-4),
+    "tracing_paper": dict(hinge_stiffness=0.010, valley_bar_stiffness=0.6, sheet_density=0.09, hinge_damping=2.0e-4),
+    "bopet": dict(hinge_stiffness=0.025, valley_bar_stiffness=1.5, sheet_density=0.17, hinge_damping=5.0e-4),
 }
-"""Named sheet materials: k_α [N/rad], EA_w [N], areal density [kg/m²]."""
+"""Named sheet materials: k_α [N/rad], EA_w [N], areal density [kg/m²], crease damping c_α [N·m·s/rad/m] (a crease
+relaxation time c_α / k_α of 20 ms for all three)."""
 
 DEFAULT_MATERIAL = "mineral_paper"
 

@@ -71,9 +71,10 @@ class WormParams:
     k_α, so softening the crease does not soften the barrier (MERLIN stiffens the hinge outside its range likewise)."""
     damping: float | np.ndarray = 2.0
     """Linear velocity damping rate [1/s], shape () or (W,)."""
-    hinge_damping: float | np.ndarray = 0.0
+    hinge_damping: float | np.ndarray = 1.0e-4
     """Crease damping c_α per metre of crease [N·m·s/rad/m]: a hinge resists folding speed with c_α L dψ/dt,
-    shape () or (W,)."""
+    shape () or (W,). Default: mineral paper's (warpworm.materials), a crease relaxation time c_α / k_α = 20 ms.
+    Without it a soft worm close to the EPM snaps and crumples (docs/dynamics.md)."""
 
     # --- floor ---
     mu_static: float | np.ndarray = 0.268
