@@ -110,7 +110,8 @@ class NumpyImplicit:
             np.add.at(g, (slice(None), e[:, 0]), f)
             np.add.at(g, (slice(None), e[:, 1]), -f)
             nn = n[..., :, None] * n[..., None, :]
-            kb = (ka + ks)[..., None, None] * nn + (ka * np.maximum(0.0, 1.0 - self.L0 / L))[..., None, None] * (eye - nn)
+            k_trans = ka * np.maximum(0.0, 1.0 - self.L0 / L) + ks * np.maximum(0.0, 1.0 - l_stop / L)
+            kb = (ka + ks)[..., None, None] * nn + k_trans[..., None, None] * (eye - nn)
             self._add_blocks(H, e[:, 0], e[:, 0], kb)
             self._add_blocks(H, e[:, 1], e[:, 1], kb)
             self._add_blocks(H, e[:, 0], e[:, 1], -kb)

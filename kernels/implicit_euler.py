@@ -213,16 +213,18 @@ def assemble(
         stops = bar_stop_strain[world % bar_stop_strain.shape[0], e]
         stop = wp.where(strain < 0.0, -stops[0], stops[1])
         l_stop = l0 * (1.0 + stop)
+        k_trans = ka * wp.max(0.0, 1.0 - l0 / length)
         if wp.where(strain < 0.0, strain < stop, strain > stop):
             ks = bar_stop_stiffness[ea_row % bar_stop_stiffness.shape[0], e] / l0
             f = f + n * (ks * (length - l_stop))
             k_axial = k_axial + ks
+            k_trans = k_trans + ks * wp.max(0.0, 1.0 - l_stop / length)  # the stop's tension, as the bar's
         grad[world, a] = grad[world, a] + f
         grad[world, b] = grad[world, b] - f
         if with_hessian:
             nn = wp.outer(n, n)
             # the compressive geometric stiffness is dropped (keeps the matrix positive definite)
-            kb = k_axial * nn + (ka * wp.max(0.0, 1.0 - l0 / length)) * (eye - nn)
+            kb = k_axial * nn + k_trans * (eye - nn)
             band_add_block(world, hess, a, a, kb)
             band_add_block(world, hess, b, b, kb)
             band_add_block(world, hess, a, b, -kb)

@@ -12,7 +12,7 @@ import numpy as np
 
 from . import crease
 
-IPM_CENTRE_SLOT = 2
+from .params import IPM_CENTRE as IPM_CENTRE_SLOT
 
 
 def segment_ratios(pattern: crease.CreasePattern, positions: np.ndarray) -> np.ndarray:
@@ -84,7 +84,8 @@ def gait_metrics(pattern, hinge_label, frames: dict, period, incline=0.0) -> dic
     viol = fold_violation(hinge_label, ang)
     tail, head = end_positions(x, axis)
     centroid = np.einsum("fwc,wc->fw", x.mean(axis=2), axis)
-    lift = np.asarray(frames["magnet_pos"], np.float64)[:, :, IPM_CENTRE_SLOT, 2]
+    normal = np.stack([-np.sin(beta), np.zeros(W), np.cos(beta)], -1)  # the floor's normal: lift is height above it
+    lift = np.einsum("fwc,wc->fw", np.asarray(frames["magnet_pos"], np.float64)[:, :, IPM_CENTRE_SLOT], normal)
 
     s = t[:, None] / T[None, :]  # (F, W) cycles since the gait started
     C = int(np.floor(s[-1].min() + 1e-9))
@@ -108,7 +109,8 @@ def gait_metrics(pattern, hinge_label, frames: dict, period, incline=0.0) -> dic
         dt_ = np.abs(tail[shortest, wi] - tail[start, wi])
         dh = np.abs(head[shortest, wi] - head[start, wi])
         big = np.maximum(dt_, dh)
-        hold[:, c] = np.where(big > 0, np.minimum(dt_, dh) / np.where(big > 0, big, 1.0), 0.0)
+        contracted = (shortest != start) & (big > 0)  # a cycle in which the worm never got shorter has no value
+        hold[:, c] = np.where(contracted, np.minimum(dt_, dh) / np.where(big > 0, big, 1.0), np.nan)
 
     far = np.zeros(W)
     far_dev = np.zeros(W)

@@ -15,18 +15,17 @@ from dataclasses import replace
 
 import numpy as np
 
-GRID_KEYS = {"w": "wavelength", "a": "amplitude", "h": "closest_approach", "T": "cycle_period"}
+GRID_KEYS = {"w": "wavelength", "a": "amplitude", "h": "closest_approach"}
 """Short names of the searchable path parameters -> WormParams fields."""
 
-FOLD_TOLERANCE_DEG = 5.0
-"""A world whose creases left their NoFoldThrough range by more than this is crumpled: excluded from the ranking."""
 
 
 def parse_grid(spec: str) -> dict[str, np.ndarray]:
     """``"w=0.008:0.024:5,a=0.03,0.05,h=0.01:0.03:5"`` -> {"wavelength": array, ...} [m, s].
 
-    Each key takes ``lo:hi:n`` (n values, linear, ends included) or a comma-separated list of values. Keys: w, a, h,
-    T (period). Raises ValueError naming the item and what was expected."""
+    Each key takes ``lo:hi:n`` (n values, linear, ends included) or a comma-separated list of values. Keys: w, a, h
+    (the period is one for the whole batch: a worker runs its worlds for cycles × the longest period of its share).
+    Raises ValueError naming the item and what was expected."""
     out: dict[str, list[float]] = {}
     key = None
     for item in [s.strip() for s in spec.split(",") if s.strip()]:
@@ -65,7 +64,7 @@ def grid_points(grid: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
 
 
 def _run_chunk(args):
-    """One worker's share: (params, cycles, dt, substeps, fps, settle) -> metrics dict and unstable flags."""
+    """One worker's share: (params, worlds, cycles, dt, substeps, fps, settle) -> metrics dict and unstable flags."""
     params, n, cycles, dt, substeps, fps, settle = args
     from . import quiet_warp
     from .commands.simulate import run_gait
@@ -93,11 +92,13 @@ def search_gait(params, grid: dict[str, np.ndarray], cycles: int = 3, *, workers
 
     Returns a dict: ``points`` (field -> (N,)), ``metrics`` (per-world arrays, as gait_metrics, plus ``unstable``,
     ``displacement_m``), ``per_cycle_m`` (N,) mean distance per cycle in the commanded direction (cycles after the
-    first when there are several: the first starts from rest), ``valid`` (N,) stable and not crumpled, ``order``
+    first when there are several: the first starts from rest), ``valid`` (N,) (below), ``order``
     indices of the valid worlds best first, ``best`` the best point's fields (None if no world is valid). Valid:
     stable, no crease more than 5° out of its range, and at most 1.05 w per cycle (a worm dragged along faster than
     the EPM advances slides, it does not crawl).
     """
+    if int(cycles) < 1:
+        raise ValueError(f"cycles: {cycles}; expected at least 1 whole EPM cycle")
     pts = grid_points(grid)
     N = len(next(iter(pts.values())))
     workers = max(1, min(int(workers or os.cpu_count() or 1), N))
@@ -118,9 +119,10 @@ def search_gait(params, grid: dict[str, np.ndarray], cycles: int = 3, *, workers
     cyc = metrics["cycle_displacement_m"] * sign
     per_cycle = cyc[:, 1:].mean(axis=1) if cyc.shape[1] > 1 else cyc[:, 0]
     w = pts.get("wavelength", np.broadcast_to(np.asarray(params.wavelength, np.float64), (N,)))
-    # stable, unfolded, and not dragged further than the EPM advances (a crawl makes at most w per cycle)
-    valid = (~metrics["unstable"].astype(bool) & (metrics["max_fold_violation_deg"] <= FOLD_TOLERANCE_DEG)
-             & (per_cycle <= 1.05 * w))
+    w = w * np.broadcast_to(np.asarray(params.wavelength_scale, np.float64), (N,))
+    # stable (the simulator flags a world whose creases fold through its range by more than its fold tolerance), and
+    # not dragged further than the EPM advances (a crawl makes at most w per cycle)
+    valid = ~metrics["unstable"].astype(bool) & (per_cycle <= 1.05 * w)
     if max_ratio is not None:
         valid &= metrics["deformation_ratio_min"].min(axis=1) <= max_ratio
     order = np.flatnonzero(valid)[np.argsort(-per_cycle[valid], kind="stable")]
@@ -137,7 +139,12 @@ def write_csv(path, result: dict) -> None:
     cols = list(pts) + ["per_cycle_m", "valid"]
     scal = [k for k, v in m.items() if np.asarray(v).ndim == 1]
     ratio = [f"ratio_min_{i}" for i in range(4)]
-    hold = np.nanmax(m["end_hold_ratio"], axis=1) if m["end_hold_ratio"].shape[1] else np.full(len(cols), np.nan)
+    with np.errstate(all="ignore"):
+        import warnings
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN rows: no contraction in any cycle
+            hold = np.nanmax(m["end_hold_ratio"], axis=1)
     with open(path, "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(cols + scal + ratio + ["end_hold_max"])

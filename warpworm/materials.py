@@ -1,6 +1,6 @@
 """Sheet materials: one physical parameterization of the origami's stiffness, and three named presets.
 
-The worm is a bar-and-hinge model (docs/crease.md). Its stiffness has three parts, each a material constant:
+The worm is a bar-and-hinge model (docs/crease.md). Its stiffness and damping are material constants:
 
 - ``hinge_stiffness`` k_α [N·m/rad per metre of crease = N/rad]: the crease's rotational spring. A crease of length
   L resists a fold-angle change Δφ with the moment k_α L Δφ.

@@ -265,7 +265,7 @@ class Simulator:
             "anchor_force": anchor_force.astype(np.float32),
             "contact": state.contact.numpy().astype(bool),
             "unstable": state.unstable.numpy().astype(bool),
-            "crumpled": state.unstable.numpy() == 2,
+            "crumpled": state.unstable.numpy() == int(self._ki.WORLD_CRUMPLED),
             "time": (state.step_count.numpy().astype(np.float64) * self.dt_sub),
         }
 

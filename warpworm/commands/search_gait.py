@@ -80,7 +80,7 @@ def main(args) -> int:
         print(f"  {r + 1:4d}  {1e3 * pts.get('wavelength', [np.nan] * n)[i]:8.1f} "
               f"{1e3 * pts.get('amplitude', [np.nan] * n)[i]:8.1f} {1e3 * pts.get('closest_approach', [np.nan] * n)[i]:8.1f}"
               f"  {1e3 * res['per_cycle_m'][i]:9.2f}  {np.round(m['deformation_ratio_min'][i], 2).tolist()}"
-              f"  {m['crease_angle_range_deg'][i]:9.1f}  {np.nanmax(m['end_hold_ratio'][i]):8.2f}")
+              f"  {m['crease_angle_range_deg'][i]:9.1f}  {np.nanmax(np.append(m['end_hold_ratio'][i], -1.0)):8.2f}")
     summary = {"gait": args.gait, "backward": bool(args.backward), "grid": args.grid, "cycles": args.cycles,
                "max_ratio": args.max_ratio, "points": n, "crumpled": int(m["crumpled"].sum()),
                "unstable": int(m["unstable"].sum()), "valid": int(res["valid"].sum()), "wall_time_s": wall, "best": res["best"],

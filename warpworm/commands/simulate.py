@@ -272,7 +272,8 @@ def main(args) -> int:
     device = "cuda:0" if args.device == "cuda" else args.device
     want_files = not args.no_output
     result = run_gait(params, args.worlds, args.cycles, device=device, dt=args.dt, substeps=args.substeps,
-                      settle=args.settle, fps=args.fps, save_worlds=args.save_worlds)
+                      settle=args.settle, fps=args.fps if (want_files or args.json) else None,
+                      save_worlds=args.save_worlds)
     disp = result["displacement_m"]
     unstable = result["unstable"]
     paths = write_outputs(Path(args.out), result, params, args.worlds) if want_files else []
