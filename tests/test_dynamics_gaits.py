@@ -68,3 +68,19 @@ def test_simulate_cli_json_and_files(tmp_path, capsys):
     assert traj["crease_angle"].shape[:2] == (F, 2) and "triangles" in traj.files
     assert (out / "preview.mp4").stat().st_size > 0 and (out / "preview_strip.png").stat().st_size > 0
     assert (out / "filmstrip.png").stat().st_size > 0
+
+
+def test_simulate_workers_split_equals_one_process(capsys):
+    """Three randomized worlds on one and on two processes: every per-world number is identical."""
+    import json
+
+    from warpworm.cli import main
+
+    outs = []
+    for workers in ("1", "2"):
+        assert main(["simulate", "--gait", "inchworm", "--cycles", "1", "--worlds", "3", "--randomize", "--seed", "4",
+                     "--json", "--no-output", "--fps", "10", "--workers", workers]) == 0
+        outs.append(json.loads(capsys.readouterr().out))
+    for key, value in outs[0].items():
+        if key != "wall_time_s":
+            assert outs[1][key] == value, key

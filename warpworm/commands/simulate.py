@@ -45,6 +45,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--save-worlds", type=int, default=4, help="worlds stored in the trajectory (default 4)")
     parser.add_argument("--fps", type=float, default=30.0, help="trajectory / preview frame rate [1/s]")
     parser.add_argument("--seed", type=int, default=0, help="seed of --randomize")
+    parser.add_argument("--workers", type=int, default=None,
+                        help="processes to split the worlds over (default: every core; results equal one process's)")
     parser.add_argument("--randomize", action="store_true",
                         help="draw per-world parameters uniformly around the preset (" + ", ".join(
                             f"{k} ±{int(100 * v)}%%" for k, v in RANDOMIZED.items()) + ")")
@@ -131,6 +133,70 @@ def run_gait(params, num_worlds: int, cycles: float, *, device="cpu", dt=None, s
         "model": model,
         "sim": sim,
     }
+
+
+VECTOR_FIELDS = ("epm_size", "ipm_moment")
+"""WormParams fields whose per-world form is (W, 3) (shared: (3,))."""
+
+
+def slice_worlds(params, num_worlds: int, lo: int, hi: int):
+    """``params`` for worlds [lo, hi): every per-world array field sliced, shared values kept."""
+    from dataclasses import fields
+
+    changes = {}
+    for f in fields(params):
+        v = getattr(params, f.name)
+        if isinstance(v, (str, bool)) or v is None:
+            continue
+        a = np.asarray(v)
+        per_world = a.ndim == 2 if f.name in VECTOR_FIELDS else a.ndim == 1
+        if per_world and a.shape[0] == num_worlds:
+            changes[f.name] = a[lo:hi].copy()
+    return replace(params, **changes)
+
+
+def _run_share(job):
+    """A worker's share of :func:`run_gait_split`: the picklable part of run_gait's result."""
+    params, n, cycles, kw = job
+    from warpworm import quiet_warp
+
+    quiet_warp()
+    r = run_gait(params, n, cycles, **kw)
+    return {k: r[k] for k in ("displacement_m", "unstable", "crumpled", "sim_time_s", "metrics", "frames")}
+
+
+def run_gait_split(params, num_worlds: int, cycles: float, *, workers: int | None = None, **kw):
+    """:func:`run_gait` with the worlds split over ``workers`` processes (default: every core), each a batch of a
+    contiguous share; worlds never interact, so every per-world result equals one process's. The trajectory frames
+    are those of the first ``save_worlds`` worlds, gathered from the shares that hold them."""
+    import os
+
+    workers = max(1, min(int(workers or os.cpu_count() or 1), num_worlds))
+    if workers == 1:
+        return run_gait(params, num_worlds, cycles, **kw)
+    import multiprocessing as mp
+
+    from warpworm.model import Model
+
+    t0 = time.perf_counter()
+    bounds = np.linspace(0, num_worlds, workers + 1).astype(int)
+    save = kw.pop("save_worlds", 4)
+    jobs = [(slice_worlds(params, num_worlds, lo, hi), int(hi - lo), cycles,
+             dict(kw, save_worlds=int(max(0, min(save - lo, hi - lo)))))
+            for lo, hi in zip(bounds[:-1], bounds[1:])]
+    with mp.get_context("spawn").Pool(workers) as pool:
+        parts = pool.map(_run_share, jobs)
+    out = {k: np.concatenate([p[k] for p in parts]) for k in ("displacement_m", "unstable", "crumpled")}
+    out["metrics"] = (None if parts[0]["metrics"] is None else
+                      {k: np.concatenate([p["metrics"][k] for p in parts]) for k in parts[0]["metrics"]})
+    fr = [p["frames"] for p in parts if p["frames"] is not None]
+    out["frames"] = None if not fr else {
+        k: (fr[0][k] if fr[0][k].ndim == 1 else np.concatenate([f[k] for f in fr], axis=1)) for k in fr[0]}
+    out["sim_time_s"] = parts[0]["sim_time_s"]
+    out["wall_time_s"] = time.perf_counter() - t0
+    out["model"] = Model.from_params(jobs[0][0], jobs[0][1], "cpu")  # topology and sizes for the pictures
+    out["sim"] = None
+    return out
 
 
 def _draw_frame(x, tri, mpos, mrot, msize, width=640, height=360, xlim=(-0.03, 0.14), zlim=(-0.01, 0.10), *,
@@ -271,9 +337,14 @@ def main(args) -> int:
         params = randomized_params(params, args.worlds, args.seed)
     device = "cuda:0" if args.device == "cuda" else args.device
     want_files = not args.no_output
-    result = run_gait(params, args.worlds, args.cycles, device=device, dt=args.dt, substeps=args.substeps,
-                      settle=args.settle, fps=args.fps if (want_files or args.json) else None,
-                      save_worlds=args.save_worlds)
+    if args.workers is not None and args.workers < 1:
+        print(f"warpworm simulate: --workers {args.workers}: expected >= 1", file=sys.stderr)
+        return 2
+    # one process per core on the CPU; a GPU runs every world in one batch
+    workers = args.workers if device == "cpu" else 1
+    result = run_gait_split(params, args.worlds, args.cycles, workers=workers, device=device, dt=args.dt,
+                            substeps=args.substeps, settle=args.settle,
+                            fps=args.fps if (want_files or args.json) else None, save_worlds=args.save_worlds)
     disp = result["displacement_m"]
     unstable = result["unstable"]
     paths = write_outputs(Path(args.out), result, params, args.worlds) if want_files else []
