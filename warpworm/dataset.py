@@ -442,10 +442,11 @@ class ShardWriter:
         self._cleanup()
 
 
-def clean_temporaries(out_dir) -> list[str]:
-    """Delete temporary files a killed job left (``.shard-*.tmp-*``, ``.manifest.json.tmp-*``); returns their names."""
+def clean_temporaries(out_dir, pattern: str = ".*.tmp-*") -> list[str]:
+    """Delete temporary files a killed job left (default every ``.shard-*.tmp-*`` and ``.manifest.json.tmp-*``; or
+    those matching ``pattern``, a glob in ``out_dir``); returns their names."""
     removed = []
-    for p in glob.glob(os.path.join(out_dir, ".*.tmp-*")):
+    for p in glob.glob(os.path.join(str(out_dir), pattern)):
         try:
             os.unlink(p)
             removed.append(os.path.basename(p))

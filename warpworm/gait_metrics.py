@@ -23,7 +23,7 @@ def segment_ratios(pattern: crease.CreasePattern, positions: np.ndarray) -> np.n
         positions: vertex positions [m], shape (F, W, V, 3).
     """
     kp = pattern.keypoints(np.asarray(positions, np.float64))
-    idx = [pattern.keypoint_names.index(f"seg{i}") for i in range(5)]
+    idx = [pattern.keypoint_names.index(f"seg{i}") for i in range(crease.NUM_SEGMENTS)]
     d = np.linalg.norm(np.diff(kp[..., idx, :], axis=-2), axis=-1)
     return d / d[:1]
 
@@ -38,13 +38,12 @@ def fold_violation(hinge_label: np.ndarray, crease_angle: np.ndarray) -> np.ndar
     return np.maximum(lo - a, 0.0) + np.maximum(a - hi, 0.0)
 
 
-def end_positions(positions: np.ndarray, axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Tail and head coordinates along the worm axis [m], each (F, W): the mean of the end sections' corners
-    (vertices 0–2 and the last three) projected on ``axis`` (W, 3)."""
+def end_centres(pattern: crease.CreasePattern, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Centres of the tail and head mount rings [m] (the end sections the tail and head IPMs ride on:
+    ``pattern.mount_vertices`` rows 0 and 2), each shape ``positions.shape[:-2] + (3,)``."""
     x = np.asarray(positions, np.float64)
-    tail = np.einsum("fwc,wc->fw", x[:, :, :3].mean(axis=2), axis)
-    head = np.einsum("fwc,wc->fw", x[:, :, -3:].mean(axis=2), axis)
-    return tail, head
+    mv = pattern.mount_vertices
+    return x[..., mv[0], :].mean(axis=-2), x[..., mv[-1], :].mean(axis=-2)
 
 
 def gait_metrics(pattern, hinge_label, frames: dict, period, incline=0.0) -> dict:
@@ -82,7 +81,9 @@ def gait_metrics(pattern, hinge_label, frames: dict, period, incline=0.0) -> dic
     ratios = segment_ratios(pattern, x)
     ang = np.asarray(frames["crease_angle"], np.float64)
     viol = fold_violation(hinge_label, ang)
-    tail, head = end_positions(x, axis)
+    tail_c, head_c = end_centres(pattern, x)  # (F, W, 3)
+    tail = np.einsum("fwc,wc->fw", tail_c, axis)
+    head = np.einsum("fwc,wc->fw", head_c, axis)
     centroid = np.einsum("fwc,wc->fw", x.mean(axis=2), axis)
     normal = np.stack([-np.sin(beta), np.zeros(W), np.cos(beta)], -1)  # the floor's normal: lift is height above it
     lift = np.einsum("fwc,wc->fw", np.asarray(frames["magnet_pos"], np.float64)[:, :, IPM_CENTRE_SLOT], normal)
@@ -92,8 +93,7 @@ def gait_metrics(pattern, hinge_label, frames: dict, period, incline=0.0) -> dic
     cyc_disp = np.zeros((W, C))
     cyc_rmin = np.ones((W, C, 4))
     hold = np.full((W, C), np.nan)
-    ends = x[:, :, -3:].mean(axis=2) - x[:, :, :3].mean(axis=2)
-    length = np.linalg.norm(ends, axis=-1)  # head–tail distance (a worm that turns on the floor is not shorter)
+    length = np.linalg.norm(head_c - tail_c, axis=-1)  # head–tail distance (a worm that turns is not shorter)
     wi = np.arange(W)
     for c in range(C):  # a few cycles: the loop is over cycles, every operation is over all worlds
         inside = (s >= c - 1e-9) & (s <= c + 1 + 1e-9)  # (F, W)

@@ -10,7 +10,6 @@ commanded direction.
 from __future__ import annotations
 
 import itertools
-import os
 from dataclasses import replace
 
 import numpy as np
@@ -63,21 +62,6 @@ def grid_points(grid: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     return {k: pts[:, i] for i, k in enumerate(keys)}
 
 
-def _run_chunk(args):
-    """One worker's share: (params, worlds, cycles, dt, substeps, fps, settle) -> metrics dict and unstable flags."""
-    params, n, cycles, dt, substeps, fps, settle = args
-    from . import quiet_warp
-    from .commands.simulate import run_gait
-
-    quiet_warp()
-    r = run_gait(params, n, cycles, dt=dt, substeps=substeps, settle=settle, fps=fps, save_worlds=0)
-    out = dict(r["metrics"])
-    out["unstable"] = r["unstable"]
-    out["crumpled"] = r["crumpled"]
-    out["displacement_m"] = r["displacement_m"]
-    return out
-
-
 def search_gait(params, grid: dict[str, np.ndarray], cycles: int = 3, *, workers: int | None = None,
                 dt: float | None = None, substeps: int | None = None, fps: float = 25.0, settle: float = 0.2,
                 max_ratio: float | None = None) -> dict:
@@ -94,27 +78,18 @@ def search_gait(params, grid: dict[str, np.ndarray], cycles: int = 3, *, workers
     ``displacement_m``), ``per_cycle_m`` (N,) mean distance per cycle in the commanded direction (cycles after the
     first when there are several: the first starts from rest), ``valid`` (N,) (below), ``order``
     indices of the valid worlds best first, ``best`` the best point's fields (None if no world is valid). Valid:
-    stable, no crease more than 5° out of its range, and at most 1.05 w per cycle (a worm dragged along faster than
-    the EPM advances slides, it does not crawl).
+    stable (never flagged exploded or crumpled, :class:`~warpworm.simulator.Simulator`), at most 1.05 w per cycle (a
+    worm dragged along faster than the EPM advances slides, it does not crawl), and with ``max_ratio`` deforming.
     """
     if int(cycles) < 1:
         raise ValueError(f"cycles: {cycles}; expected at least 1 whole EPM cycle")
     pts = grid_points(grid)
     N = len(next(iter(pts.values())))
-    workers = max(1, min(int(workers or os.cpu_count() or 1), N))
-    bounds = np.linspace(0, N, workers + 1).astype(int)
-    jobs = []
-    for lo, hi in zip(bounds[:-1], bounds[1:]):
-        p = replace(params, **{k: v[lo:hi].copy() for k, v in pts.items()})
-        jobs.append((p, int(hi - lo), cycles, dt, substeps, fps, settle))
-    if workers == 1:
-        parts = [_run_chunk(jobs[0])]
-    else:
-        import multiprocessing as mp
+    from .commands.simulate import run_gait_split
 
-        with mp.get_context("spawn").Pool(workers) as pool:
-            parts = pool.map(_run_chunk, jobs)
-    metrics = {k: np.concatenate([part[k] for part in parts]) for k in parts[0]}
+    r = run_gait_split(replace(params, **pts), N, cycles, workers=workers, dt=dt, substeps=substeps, settle=settle,
+                       fps=fps, save_worlds=0)
+    metrics = dict(r["metrics"], unstable=r["unstable"], crumpled=r["crumpled"], displacement_m=r["displacement_m"])
     sign = -1.0 if params.backward else 1.0
     cyc = metrics["cycle_displacement_m"] * sign
     per_cycle = cyc[:, 1:].mean(axis=1) if cyc.shape[1] > 1 else cyc[:, 0]

@@ -990,8 +990,7 @@ def _generate_locked(cfg, out, t0, guard, log, *, workers, resume, stages, engin
                 (out / ds.shard_name(k)).unlink(missing_ok=True)
         # and no temporary stays visible: the workers are stopped and the folder lock is ours, so any left (the shard
         # in flight of a worker stopped mid-write, or a SIGKILLed run's that the signal beat the clean-up to) is dead
-        for tmp in out.glob(".shard-*.tmp-*"):
-            tmp.unlink(missing_ok=True)
+        ds.clean_temporaries(out, ".shard-*.tmp-*")
         raise
     finally:
         bar.close()

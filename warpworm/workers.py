@@ -234,19 +234,9 @@ def _remove_dead_attempts(out, shards) -> list[str]:
     shard in ``shards`` is committed: Ray re-ran those attempts elsewhere, and a task whose node died is gone (its
     worker exits when its raylet does), so nothing is still writing them. (The pid in a name is another host's, so it
     cannot tell here whether its writer lives.)"""
-    import glob
+    from .dataset import clean_temporaries, shard_name
 
-    from .dataset import shard_name
-
-    removed = []
-    for k in shards:
-        for p in glob.glob(os.path.join(str(out), f".{shard_name(k)}.tmp-*")):
-            try:
-                os.unlink(p)
-                removed.append(os.path.basename(p))
-            except OSError:
-                pass
-    return removed
+    return [name for k in shards for name in clean_temporaries(out, f".{shard_name(k)}.tmp-*")]
 
 
 def _ray_shard(cfg, out, k, stages):

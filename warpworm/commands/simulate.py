@@ -247,7 +247,7 @@ def write_filmstrip(path: Path, frames: dict, model, params, world: int = 0, cou
     z = 0; time, the four deformation ratios and the head–tail length under each frame."""
     import cv2
 
-    from warpworm.gait_metrics import segment_ratios
+    from warpworm.gait_metrics import end_centres, segment_ratios
 
     pat = model.pattern
     t = frames["time"]
@@ -268,7 +268,8 @@ def write_filmstrip(path: Path, frames: dict, model, params, world: int = 0, cou
     for f in pick:
         img = _draw_frame(x[f], pat.triangles, mpos[f], frames["magnet_rot"][f, world], size, width=420, height=300,
                           xlim=(lo, hi), zlim=(zlo, ztop), edges=pat.edges, edge_colour=strain_colour(strain[f], scale))
-        length = np.linalg.norm(x[f, -3:].mean(0) - x[f, :3].mean(0))
+        tail_c, head_c = end_centres(pat, x[f])
+        length = np.linalg.norm(head_c - tail_c)
         cv2.putText(img, f"t = {t[f]:.2f} s   L = {1e3 * length:.1f} mm", (8, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.45,
                     (0, 0, 0), 1, cv2.LINE_AA)
         cv2.putText(img, "ratios " + " ".join(f"{r:.2f}" for r in ratios[f]), (8, 36), cv2.FONT_HERSHEY_SIMPLEX,
