@@ -230,6 +230,38 @@ class Simulator:
         self._magnet_poses(state)
         return state
 
+    def run(self, state: State, frame_times, *, epm: bool = True, keys=None, stack: bool = False):
+        """The run loop: step from the current time to each of ``frame_times`` and take a :meth:`snapshot` there.
+
+        Args:
+            state: advanced in place.
+            frame_times: times [s] measured from the current time (after :meth:`settle`, the gait clock), non-
+                decreasing and >= 0; each is rounded to a whole number of steps of ``dt``. A time of 0 snapshots the
+                current state.
+            epm: the EPM present (False: parked, as while settling).
+            keys: snapshot keys to keep (default: all; fewer saves host memory on long recordings).
+            stack: return one dict of arrays stacked over frames, shape (S, ...), instead of a list of S dicts.
+
+        Every frame also carries ``clock`` [s]: the host's time of the frame (an unstable world's own ``time``
+        stops when it freezes; the clock does not).
+        """
+        steps = np.rint(np.asarray(frame_times, np.float64).reshape(-1) / self.dt).astype(np.int64)
+        if steps.size and (steps[0] < 0 or np.any(np.diff(steps) < 0)):
+            raise ValueError(f"frame_times must be non-decreasing and >= 0 [s], got {list(frame_times)}")
+        frames, done = [], 0
+        for n in steps:
+            if n > done:
+                self.step(state, int(n - done), epm=epm)
+                done = int(n)
+            snap = self.snapshot(state)
+            if keys is not None:
+                snap = {k: snap[k] for k in keys}
+            snap["clock"] = done * self.dt
+            frames.append(snap)
+        if stack:
+            return {k: np.stack([f[k] for f in frames]) for k in frames[0]} if frames else {}
+        return frames
+
     # ------------------------------------------------------------------------------------------------------------
     def snapshot(self, state: State) -> dict:
         """Host copies (NumPy) of the state, keyed as in docs/architecture.md.

@@ -58,8 +58,7 @@ def simulate_states(num_worlds: int, seed: int, gait: str, sim_time: float, devi
     sim = Simulator(model, dt=gaits.DEFAULT_DT, substeps=gaits.DEFAULT_SUBSTEPS)
     state = sim.initial_state()
     sim.settle(state, 0.1)
-    sim.step(state, max(0, int(round(sim_time / sim.dt))))
-    return sim.snapshot(state), model
+    return sim.run(state, [max(0.0, sim_time)])[0], model
 
 
 def main(args) -> int:
