@@ -21,6 +21,7 @@ COMMANDS = {
     "experiment": "experiment",
     "render": "render",
     "generate": "generate",
+    "config-schema": "config_schema",
     "export-bop": "export_bop",
     "export-usd": "export_usd",
     "export-coco": "export_coco",

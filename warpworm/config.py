@@ -1,40 +1,13 @@
-"""Dataset job configuration: YAML -> typed, validated dataclasses, with dotted command-line overrides.
+"""Dataset job configuration: YAML -> validated dataclasses (a pydantic v2 schema), with dotted command-line overrides.
+
+The schema is the dataclasses below (their field docstrings are the documentation) and :data:`PARAM_SPECS` (every
+randomizable parameter); :func:`json_schema` exports it for editors (``warpworm config-schema``, docs/config.md).
+All SI: m, s, rad, kg.
 
 Every mistake (unknown key, wrong type, negative size, low > high, unknown gait, unwritable output folder) raises
 :class:`ConfigError` *before any work*, with one line per problem naming the key path, the value given and what was
-expected. Nothing is written by loading or validating a config.
-
-Schema (all SI: m, s, rad, kg; see ``docs/dataset.md`` and the packaged ``dataset_configs/default.yaml``)::
-
-    name: str                       # free text, stored in the files
-    seed: int >= 0                  # master seed; sample i's values depend only on (seed, i)
-    num_samples: int >= 1           # N images (samples) in the dataset
-    shard_size: int >= 1            # samples per HDF5 shard; a multiple of len(sim.frame_times)
-    sim:
-      worlds: int >= 1              # W worlds simulated at once (batch size)
-      dt: float > 0                 # time step [s]
-      substeps: int >= 1            # solver substeps per step
-      settle_time: float >= 0       # EPM parked, worm settles under gravity [s]
-      frame_times: [float >= 0]     # times after settling at which frames are taken [s], strictly increasing
-      n_units: int >= 1             # prism units (fixes array shapes: creases, vertices) — shared by the dataset
-      max_attempts: int >= 1        # an unstable world is redrawn (attempt + 1) at most this many times in all
-      device: str                   # Warp device: "cpu", "cuda:0" or "auto"
-    render:
-      width, height: int >= 8       # image size [px]
-      batch: int >= 1               # images per render call (memory bound)
-      camera_per_frame: bool        # false: one camera per trajectory (a video); true: a new camera per frame
-    output:
-      compression: lzf | gzip | none
-      compression_level: 0..9       # gzip only
-      preview: bool                 # contact sheet PNG + MP4 of one world at the end
-    randomize:                      # group -> parameter -> distribution (see warpworm.randomize)
-      worm:    {<WormParams field or component>: dist}
-      camera:  {distance, elevation, azimuth, roll, fov_y (constant or uniform), lookat_jitter,
-                min_in_frame, max_tries (constants)}
-      light:   {elevation, azimuth, intensity, ambient}
-      color:   {worm_hue, worm_saturation, worm_value, floor_hue, floor_saturation, floor_value, background_value}
-      texture: {floor, floor_scale, worm}
-      sensor:  {noise_std, blur_sigma, jpeg_quality, brightness, contrast}
+expected. Nothing is written by loading or validating a config. Building the dataclasses in code (e.g.
+``dataclasses.replace``) does not validate: only YAML / mappings from outside go through :func:`config_from_dict`.
 """
 
 from __future__ import annotations
@@ -47,9 +20,13 @@ import tempfile
 from dataclasses import dataclass, field, fields
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Literal
 
 import yaml
+from pydantic import AfterValidator, BeforeValidator, ConfigDict, Field, PlainValidator, TypeAdapter, \
+    ValidationError, ValidationInfo, WithJsonSchema
+from pydantic_core import PydanticCustomError
+from typing_extensions import TypedDict
 
 from . import randomize as rnd
 from .params import GAITS, MAGNET_MODELS, WormParams
@@ -130,8 +107,7 @@ def _worm_specs() -> dict[str, ParamSpec]:
         if key in s:
             s[key] = dataclasses.replace(s[key], default=float("nan"), preset=True,
                                          doc=s[key].doc + " (default NaN: the gait preset's value)")
-    if hasattr(_WP, "hinge_damping"):
-        s["hinge_damping"] = ParamSpec(_WP.hinge_damping, "N*m*s/rad/m", low=0.0, doc="crease damping c_alpha")
+    s["hinge_damping"] = ParamSpec(_WP.hinge_damping, "N*m*s/rad/m", low=0.0, doc="crease damping c_alpha")
     # Any other scalar WormParams field is randomizable too (constant at its default unless configured), so a field
     # added to the parameter contract is never silently unreachable from configs.
     for f in fields(WormParams):
@@ -202,60 +178,264 @@ BATCH_SHARED = ("worm.gait", "worm.backward", "worm.magnet_model")
 
 
 # ---------------------------------------------------------------------------------------------------------------------
+def _fmt(v) -> str:
+    return repr(v) if not isinstance(v, str) else f"'{v}'"
+
+
+def _problem(detail: str, path: str | None = None) -> PydanticCustomError:
+    """A check of ours failing: ``detail`` is "got X; expected Y"; ``path`` names the key when it is not the one
+    being validated (a check relating two keys)."""
+    return PydanticCustomError("config", "{detail}", {"detail": detail, "path": path})
+
+
+# Strict scalars: YAML 'yes', "0.1" or 1.5 for an integer are mistakes, not values to convert; an integer is a number.
+Int = Annotated[int, Field(strict=True)]
+Num = Annotated[float, Field(strict=True)]
+Bool = Annotated[bool, Field(strict=True)]
+Str = Annotated[str, Field(strict=True)]
+_SECTION = ConfigDict(extra="forbid", allow_inf_nan=False, use_attribute_docstrings=True, validate_default=True)
+
+
+def _none_is_empty(v):
+    return {} if v is None else v  # "sim:" with nothing under it = all defaults
+
+
+def _check_frame_times(ft: list[float], info: ValidationInfo) -> list[float]:
+    if any(t < 0 for t in ft) or any(b <= a for a, b in zip(ft, ft[1:])):
+        raise _problem(f"got {ft}; expected strictly increasing times >= 0 [s]")
+    dt = info.data.get("dt")
+    # frames are taken after whole steps: a time between steps would be rounded silently, and two frames within one
+    # step would store the same snapshot under two times
+    if dt is not None and any(abs(t / dt - round(t / dt)) > 1e-6 * max(1.0, t / dt) for t in ft):
+        raise _problem(f"got {ft}; expected multiples of sim.dt = {dt} [s]")
+    return ft
+
+
+def _check_device(ident: str) -> str:
+    """"auto" -> the first GPU if there is one, else the CPU (stored so in the config); refused unless Warp can run on
+    it here (so a CUDA config fails before any work on a machine without a GPU, not in a worker's traceback)."""
+    import warp as wp
+
+    from . import quiet_warp
+
+    quiet_warp()
+    if ident == "auto":
+        ident = "cuda:0" if wp.get_cuda_device_count() > 0 else "cpu"
+    try:
+        wp.get_device(ident)
+    except (ValueError, RuntimeError):
+        raise _problem(f"got {_fmt(ident)}; expected 'auto' or a Warp device available here: one of "
+                       f"{[str(d) for d in wp.get_devices()]} (override with sim.device=cpu)") from None
+    return ident
+
+
 @dataclass
 class SimConfig:
-    worlds: int = 64
+    """The batched simulation (SI units)."""
+
+    __pydantic_config__ = _SECTION
+    worlds: Annotated[Int, Field(ge=1)] = 64
     """W: worlds simulated at once in one solver batch."""
-    dt: float = 0.004
+    dt: Annotated[Num, Field(gt=0)] = 0.004
     """Solver time step [s] (the gait runs' warpworm.gaits.DEFAULT_DT)."""
-    substeps: int = 4
+    substeps: Annotated[Int, Field(ge=1)] = 4
     """Solver substeps per time step."""
-    settle_time: float = 0.3
+    settle_time: Annotated[Num, Field(ge=0)] = 0.3
     """Time [s] the worm settles under gravity with the EPM parked at the path start."""
-    frame_times: list = field(default_factory=lambda: [0.2, 0.5, 0.8, 1.0])
-    """Times [s] after settling at which frames are taken; each trajectory gives len(frame_times) samples; multiples of ``dt``."""
-    n_units: int = 6
+    frame_times: Annotated[list[Num], Field(strict=True, min_length=1), AfterValidator(_check_frame_times)] = \
+        field(default_factory=lambda: [0.2, 0.5, 0.8, 1.0])
+    """Times [s] after settling at which frames are taken, strictly increasing, multiples of ``dt``; each trajectory
+    gives len(frame_times) samples."""
+    n_units: Annotated[Int, Field(ge=1)] = 6
     """Prism units of the worm; fixes the number of creases and vertices, so one value per dataset."""
-    max_attempts: int = 4
+    max_attempts: Annotated[Int, Field(ge=1)] = 4
     """Unstable worlds are redrawn with attempt + 1, at most this many attempts in all; then the job fails."""
-    device: str = "cpu"
+    device: Annotated[Str, AfterValidator(_check_device)] = "cpu"
     """Warp device for simulation and rendering: "cpu", "cuda:N", or "auto" (the first GPU if any, else the CPU)."""
 
 
 @dataclass
 class RenderConfig:
-    width: int = 128
+    """The images."""
+
+    __pydantic_config__ = _SECTION
+    width: Annotated[Int, Field(ge=8)] = 128
     """Image width [px]."""
-    height: int = 96
+    height: Annotated[Int, Field(ge=8)] = 96
     """Image height [px]."""
-    camera_per_frame: bool = False
+    camera_per_frame: Bool = False
     """False: one camera per trajectory (frames of a world form a video); True: a new camera for every frame."""
-    batch: int = 1024
+    batch: Annotated[Int, Field(ge=1)] = 1024
     """Images per render call (whole trajectories); bounds the memory of images held before writing."""
 
 
 @dataclass
 class OutputConfig:
-    compression: str = "gzip"
+    """The HDF5 files and the previews."""
+
+    __pydantic_config__ = _SECTION
+    compression: Literal["lzf", "gzip", "none"] = "gzip"
     """HDF5 filter for images: 'gzip' (level 1 measured smaller *and* faster to write and read than 'lzf' on rendered
     images; benchmarks/bench_dataset.py), 'lzf' or 'none'."""
-    compression_level: int = 1
+    compression_level: Annotated[Int, Field(ge=0, le=9)] = 1
     """gzip level 0..9 (ignored for lzf/none)."""
-    preview: bool = True
+    preview: Bool = True
     """Write ``preview.png`` (contact sheet) and ``preview.mp4`` (one world) at the end."""
 
 
+# ---------------------------------------------------------------------------------------------------------------------
+# randomize: group -> parameter -> distribution, one TypedDict per group generated from PARAM_SPECS. A parameter is
+# parsed by warpworm.randomize.parse_distribution, then checked against its ParamSpec (_check_spec); the JSON Schema
+# of each parameter lists the YAML forms its spec allows (_dist_schema).
+def _check_spec(dist: rnd.Distribution, spec: ParamSpec) -> list[str]:
+    """What is wrong with ``dist`` for a parameter of ``spec`` ("got X; expected Y" each); [] if nothing."""
+    got = f"got {_fmt(dist.to_yaml())}"
+    if spec.values is not None and not (spec.low is not None and dist.is_numeric):
+        vals = rnd.distribution_values(dist)
+        if not vals:
+            return [f"{got}; expected a constant or choice/grid of {list(spec.values)}"]
+        bad = [v for v in vals if v not in spec.values or type(v) is not type(spec.values[0])]
+        return [f"got {_fmt(bad[0])}; expected one of {list(spec.values)}"] if bad else []
+    if spec.constant_only and not isinstance(dist, rnd.Constant):
+        return [f"{got}; expected a constant [{spec.unit}] ({spec.doc})"]
+    if spec.ranges_only and not isinstance(dist, (rnd.Constant, rnd.Uniform)):
+        return [f"{got}; expected a constant or {{uniform: [lo, hi]}} [{spec.unit}] (the camera sampler draws "
+                "uniformly in the range, per attempt)"]
+    b = rnd.distribution_bounds(dist)
+    if b is None:
+        return [f"{got}; expected numeric values [{spec.unit}]"]
+    lo, hi = b
+    if math.isnan(lo) or math.isnan(hi):  # NaN = "the gait preset's value", only where a preset gives one
+        return [] if spec.preset and isinstance(dist, rnd.Constant) else [f"{got}; expected a number [{spec.unit}]"]
+    problems = []
+    if spec.integer and not (float(lo).is_integer() and float(hi).is_integer()):
+        problems.append(f"{got}; expected a whole number")
+    if spec.positive and lo <= 0:
+        problems.append(f"{got}; expected values > 0 [{spec.unit}]")
+    if spec.low is not None and lo < spec.low:
+        problems.append(f"{got}; expected values >= {spec.low} [{spec.unit}]")
+    if spec.high is not None and hi > spec.high:
+        problems.append(f"{got}; expected values <= {spec.high} [{spec.unit}]")
+    return problems
+
+
+def _dist_validator(spec: ParamSpec):
+    def parse(raw) -> rnd.Distribution:
+        try:
+            dist = rnd.parse_distribution(raw)
+        except rnd.DistributionError as exc:
+            raise _problem(str(exc)) from None
+        problems = _check_spec(dist, spec)
+        if problems:
+            raise _problem("; ".join(problems))
+        return dist
+    return parse
+
+
+_FORMS: dict[str, dict] = {}
+"""Schema name -> JSON Schema of the YAML forms a kind of parameter may take; many parameters share one."""
+
+
+def _forms(spec: ParamSpec) -> str:
+    """Register the forms a parameter of ``spec`` may take (warpworm.randomize's module docstring); their name."""
+    def obj(**props):
+        return {"type": "object", "properties": props, "required": list(props)[:1], "additionalProperties": False}
+
+    def listof(item, n=None):
+        return {"type": "array", "items": item, "minItems": n or 1, **({"maxItems": n} if n else {})}
+
+    if spec.values is not None:
+        value = {"enum": list(spec.values)}
+        name = "one_of_" + "_".join(str(v).lower() for v in spec.values)
+    else:
+        value = {"type": "integer" if spec.integer else "number"}
+        name = value["type"]
+        if spec.positive:
+            value["exclusiveMinimum"], name = 0, name + "_gt_0"
+        if spec.low is not None:
+            value["minimum"], name = spec.low, name + f"_ge_{spec.low:.4g}"
+        if spec.high is not None:
+            value["maximum"], name = spec.high, name + f"_le_{spec.high:.4g}"
+        name += "_constant" if spec.constant_only else "_range" if spec.ranges_only else "_distribution"
+    forms = [value, obj(constant=value)]
+    if spec.values is None and not spec.constant_only:
+        forms.append(obj(uniform=listof(value, 2)))
+        if not spec.ranges_only:
+            positive = {**value, "exclusiveMinimum": max(0, value.get("exclusiveMinimum", 0))}
+            normal = obj(mean={"type": "number"}, std={"type": "number", "minimum": 0}, low=value, high=value)
+            # a normal is truncated to [low, high]; a bounded parameter needs the bound (an open side reaches it)
+            normal["required"] = ["mean", "std"] + (["low"] if "minimum" in value or spec.positive else []) + \
+                (["high"] if "maximum" in value else [])
+            forms += [obj(loguniform=listof(positive, 2)), obj(normal=normal)]
+    if not spec.constant_only and not spec.ranges_only:
+        forms += [obj(choice=listof(value), weights=listof({"type": "number", "minimum": 0})), obj(grid=listof(value))]
+    assert _FORMS.setdefault(name, {"anyOf": forms}) == {"anyOf": forms}, name  # one name, one set of forms
+    return name
+
+
+def _dist_schema(spec: ParamSpec) -> dict:
+    """A parameter's JSON Schema: its forms (by reference), what it is and its default."""
+    out = {"forms": _forms(spec),  # -> {"allOf": [{"$ref": "#/$defs/<forms>"}]} in json_schema (pydantic checks refs)
+           "description": f"{spec.doc} [{spec.unit}]" if spec.unit else spec.doc}
+    default = rnd.parse_distribution(spec.default).to_yaml()
+    if not (isinstance(default, float) and math.isnan(default)):  # NaN (the gait preset's value) has no JSON spelling
+        out["default"] = default
+    return out
+
+
+def _group(name: str, specs: dict[str, ParamSpec]):
+    params = {n: Annotated[Any, PlainValidator(_dist_validator(s)), WithJsonSchema(_dist_schema(s))]
+              for n, s in specs.items()}
+    td = TypedDict(f"Randomize{name.capitalize()}", params, total=False)
+    td.__doc__ = f"randomize.{name}: parameter -> distribution; parameters not named keep their defaults."
+    td.__pydantic_config__ = ConfigDict(extra="forbid")
+    return Annotated[td, BeforeValidator(_none_is_empty)]
+
+
+_DEFAULTS = {g: {n: rnd.parse_distribution(s.default) for n, s in specs.items()} for g, specs in PARAM_SPECS.items()}
+_Randomize = TypedDict("Randomize", {g: _group(g, specs) for g, specs in PARAM_SPECS.items()}, total=False)
+_Randomize.__pydantic_config__ = ConfigDict(extra="forbid")
+_Randomize.__doc__ = "group -> parameter -> distribution (warpworm.randomize; docs/dataset.md)."
+
+
+def _with_defaults(given: dict) -> dict:
+    """Every parameter of PARAM_SPECS, in its order: the given distribution, else the default."""
+    return {g: {n: given.get(g, {}).get(n, d) for n, d in dists.items()} for g, dists in _DEFAULTS.items()}
+
+
+def _whole_trajectories(sim: SimConfig, info: ValidationInfo) -> SimConfig:
+    shard_size, n = info.data.get("shard_size"), len(sim.frame_times)
+    if shard_size is not None and shard_size % n:
+        raise _problem(f"got {shard_size}; expected a multiple of len(sim.frame_times) = {n} (a shard holds whole "
+                       "trajectories)", path="shard_size")
+    return sim
+
+
+# ---------------------------------------------------------------------------------------------------------------------
 @dataclass
 class DatasetConfig:
-    name: str = "dataset"
-    seed: int = 0
-    num_samples: int = 64
-    shard_size: int = 32
-    sim: SimConfig = field(default_factory=SimConfig)
-    render: RenderConfig = field(default_factory=RenderConfig)
-    output: OutputConfig = field(default_factory=OutputConfig)
-    randomize: dict = field(default_factory=dict)
-    """group -> name -> :class:`warpworm.randomize.Distribution`, every parameter of PARAM_SPECS resolved."""
+    """A dataset job: what to simulate and render, how much, and how it is stored (SI units; docs/dataset.md)."""
+
+    __pydantic_config__ = _SECTION
+    name: Str = "dataset"
+    """Free text, stored in the files."""
+    seed: Annotated[Int, Field(ge=0)] = 0
+    """Master seed: sample i's values depend only on (seed, i)."""
+    num_samples: Annotated[Int, Field(ge=1)] = 64
+    """N: images (samples) in the dataset."""
+    shard_size: Annotated[Int, Field(ge=1)] = 32
+    """Samples per HDF5 shard; a multiple of len(sim.frame_times) (a shard holds whole trajectories)."""
+    sim: Annotated[SimConfig, BeforeValidator(_none_is_empty), AfterValidator(_whole_trajectories)] = \
+        field(default_factory=SimConfig)
+    """The batched simulation."""
+    render: Annotated[RenderConfig, BeforeValidator(_none_is_empty)] = field(default_factory=RenderConfig)
+    """Images."""
+    output: Annotated[OutputConfig, BeforeValidator(_none_is_empty)] = field(default_factory=OutputConfig)
+    """The HDF5 files and previews."""
+    randomize: Annotated[_Randomize, BeforeValidator(_none_is_empty), AfterValidator(_with_defaults)] = \
+        field(default_factory=dict)
+    """group -> parameter -> distribution (a number is a constant; the forms: warpworm.randomize); parameters not
+    named keep their defaults. Loaded, it holds every parameter of PARAM_SPECS as a warpworm.randomize.Distribution."""
 
     # ---- derived -------------------------------------------------------------------------------------------------
     @property
@@ -275,233 +455,71 @@ class DatasetConfig:
         return {f"{g}.{n}": d for g, params in self.randomize.items() for n, d in params.items()}
 
     def to_dict(self) -> dict:
-        d = {
+        return {
             "name": self.name, "seed": self.seed, "num_samples": self.num_samples, "shard_size": self.shard_size,
             "sim": dataclasses.asdict(self.sim), "render": dataclasses.asdict(self.render),
             "output": dataclasses.asdict(self.output),
             "randomize": {g: {n: dist.to_yaml() for n, dist in p.items()} for g, p in self.randomize.items()},
         }
-        return d
 
     def to_yaml(self) -> str:
         return yaml.safe_dump(self.to_dict(), sort_keys=False)
 
 
+_ADAPTER = TypeAdapter(DatasetConfig)
+
+
+def json_schema() -> dict:
+    """The config's JSON Schema, for editors and validators (docs/config.md). Draft 7 is what yaml-language-server
+    (VS Code's YAML support) implements; the schema uses nothing later (``$defs`` is only where references point)."""
+    schema = _ADAPTER.json_schema()
+    for group in PARAM_SPECS:
+        for param in schema["$defs"][f"Randomize{group.capitalize()}"]["properties"].values():
+            param["allOf"] = [{"$ref": f"#/$defs/{param.pop('forms')}"}]
+    schema["$defs"].update(_FORMS)
+    return {"$schema": "http://json-schema.org/draft-07/schema#", **schema, "title": "warpworm dataset config"}
+
+
 # ---------------------------------------------------------------------------------------------------------------------
-_TYPE_NAMES = {int: "an integer", float: "a number", bool: "true/false", str: "a string", list: "a list of numbers"}
-
-# path -> (min, strict) for numeric checks beyond the type
-_CONSTRAINTS = {
-    "seed": (0, False), "num_samples": (1, False), "shard_size": (1, False),
-    "sim.worlds": (1, False), "sim.dt": (0, True), "sim.substeps": (1, False), "sim.settle_time": (0, False),
-    "sim.n_units": (1, False), "sim.max_attempts": (1, False),
-    "render.width": (8, False), "render.height": (8, False), "render.batch": (1, False), "output.compression_level": (0, False),
-}
-
-
-def _fmt(v) -> str:
-    return repr(v) if not isinstance(v, str) else f"'{v}'"
+# pydantic's errors -> "path: got X; expected Y"
+_KEYS = {"": [f.name for f in fields(DatasetConfig)], "sim": [f.name for f in fields(SimConfig)],
+         "render": [f.name for f in fields(RenderConfig)], "output": [f.name for f in fields(OutputConfig)],
+         "randomize": list(PARAM_SPECS), **{f"randomize.{g}": list(s) for g, s in PARAM_SPECS.items()}}
+_EXPECTED = {"int_type": "an integer", "float_type": "a number", "finite_number": "a finite number",
+             "bool_type": "true or false", "string_type": "a string", "list_type": "a list of numbers",
+             "too_short": "a non-empty list", "greater_than_equal": ">= {ge}", "greater_than": "> {gt}",
+             "less_than_equal": "<= {le}", "literal_error": "{expected}"}
+_MAPPING = ("dataclass_type", "dataclass_exact_type", "dict_type", "model_type")
 
 
-def _coerce(value, typ, path, errors):
-    """Check a YAML scalar against a field type; ints are accepted for floats (never bools for numbers)."""
-    if typ is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            errors.append(f"{path}: got {_fmt(value)}; expected {_TYPE_NAMES[float]}")
-            return None
-        return float(value)
-    if typ is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            errors.append(f"{path}: got {_fmt(value)}; expected {_TYPE_NAMES[int]}")
-            return None
-        return value
-    if typ is bool:
-        if not isinstance(value, bool):
-            errors.append(f"{path}: got {_fmt(value)}; expected true or false")
-            return None
-        return value
-    if typ is str:
-        if not isinstance(value, str):
-            errors.append(f"{path}: got {_fmt(value)}; expected a string")
-            return None
-        return value
-    if typ is list:
-        if not isinstance(value, list) or not value or any(
-                isinstance(x, bool) or not isinstance(x, (int, float)) for x in value):
-            errors.append(f"{path}: got {_fmt(value)}; expected a non-empty list of numbers")
-            return None
-        return [float(x) for x in value]
-    raise TypeError(typ)
+def _path(loc) -> str:
+    return "".join(f"[{k}]" if isinstance(k, int) else f".{k}" for k in loc).lstrip(".")
 
 
-_FIELD_TYPES = {"int": int, "float": float, "bool": bool, "str": str, "list": list}
-
-
-def _build_section(cls, raw, path, errors):
-    obj = cls()
-    if raw is None:
-        return obj
-    if not isinstance(raw, dict):
-        errors.append(f"{path}: got {_fmt(raw)}; expected a mapping with keys {[f.name for f in fields(cls)]}")
-        return obj
-    names = {f.name: f for f in fields(cls)}
-    for key, value in raw.items():
-        p = f"{path}.{key}" if path else str(key)
-        if key not in names:
-            errors.append(f"{p}: unknown key; expected one of {sorted(names)}")
-            continue
-        typ = _FIELD_TYPES[names[key].type] if isinstance(names[key].type, str) else names[key].type
-        v = _coerce(value, typ, p, errors)
-        if v is None:
-            continue
-        lim = _CONSTRAINTS.get(p)
-        if lim is not None:
-            lo, strict = lim
-            if (v <= lo) if strict else (v < lo):
-                errors.append(f"{p}: got {_fmt(value)}; expected {'>' if strict else '>='} {lo}")
-                continue
-        setattr(obj, key, v)
-    return obj
-
-
-def _check_spec(path: str, dist: rnd.Distribution, spec: ParamSpec, errors: list[str]):
-    if spec.values is not None and not (spec.low is not None and dist.is_numeric):
-        vals = rnd.distribution_values(dist)
-        if not vals:
-            errors.append(f"{path}: got {_fmt(dist.to_yaml())}; expected a constant or choice/grid of {list(spec.values)}")
-            return
-        bad = [v for v in vals if v not in spec.values or type(v) is not type(spec.values[0])]
-        if bad:
-            errors.append(f"{path}: got {_fmt(bad[0])}; expected one of {list(spec.values)}")
-        return
-    if spec.constant_only and not isinstance(dist, rnd.Constant):
-        errors.append(f"{path}: got {_fmt(dist.to_yaml())}; expected a constant [{spec.unit}] ({spec.doc})")
-        return
-    if spec.ranges_only and not isinstance(dist, (rnd.Constant, rnd.Uniform)):
-        errors.append(f"{path}: got {_fmt(dist.to_yaml())}; expected a constant or {{uniform: [lo, hi]}} "
-                      f"[{spec.unit}] (the camera sampler draws uniformly in the range, per attempt)")
-        return
-    b = rnd.distribution_bounds(dist)
-    if b is None:
-        errors.append(f"{path}: got {_fmt(dist.to_yaml())}; expected numeric values [{spec.unit}]")
-        return
-    lo, hi = b
-    if spec.integer and not (float(lo).is_integer() and float(hi).is_integer()):
-        errors.append(f"{path}: got {_fmt(dist.to_yaml())}; expected a whole number")
-    if spec.preset and isinstance(dist, rnd.Constant) and math.isnan(lo):
-        return
-    if spec.positive and lo <= 0:
-        errors.append(f"{path}: got {_fmt(dist.to_yaml())}; expected values > 0 [{spec.unit}]")
-    if spec.low is not None and lo < spec.low:
-        errors.append(f"{path}: got {_fmt(dist.to_yaml())}; expected values >= {spec.low} [{spec.unit}]")
-    if spec.high is not None and hi > spec.high:
-        errors.append(f"{path}: got {_fmt(dist.to_yaml())}; expected values <= {spec.high} [{spec.unit}]")
-
-
-def _build_randomize(raw, errors) -> dict:
-    out: dict[str, dict[str, rnd.Distribution]] = {}
-    if raw is not None and not isinstance(raw, dict):
-        errors.append(f"randomize: got {_fmt(raw)}; expected a mapping of groups {sorted(PARAM_SPECS)}")
-        raw = None
-    raw = raw or {}
-    for group in raw:
-        if group not in PARAM_SPECS:
-            errors.append(f"randomize.{group}: unknown group; expected one of {sorted(PARAM_SPECS)}")
-    for group, specs in PARAM_SPECS.items():
-        given = raw.get(group) or {}
-        if not isinstance(given, dict):
-            errors.append(f"randomize.{group}: got {_fmt(given)}; expected a mapping of parameters")
-            given = {}
-        for name in given:
-            if name not in specs:
-                errors.append(f"randomize.{group}.{name}: unknown parameter; expected one of {sorted(specs)}")
-        out[group] = {}
-        for name, spec in specs.items():
-            path = f"randomize.{group}.{name}"
-            src = given[name] if name in given else spec.default
-            try:
-                dist = rnd.parse_distribution(src)
-            except rnd.DistributionError as exc:
-                errors.append(f"{path}: {exc}")
-                continue
-            _check_spec(path, dist, spec, errors)
-            out[group][name] = dist
-    return out
+def _message(e: dict) -> str:
+    loc, kind, ctx = e["loc"], e["type"], e.get("ctx") or {}
+    path = _path(loc)
+    if kind == "config":
+        return f"{ctx['path'] or path}: {ctx['detail']}"
+    if kind in ("extra_forbidden", "unexpected_keyword_argument"):
+        what = {2: "group", 3: "parameter"}.get(len(loc), "key") if loc[0] == "randomize" else "key"
+        return f"{path}: unknown {what}; expected one of {sorted(_KEYS.get(_path(loc[:-1]), []))}"
+    if kind in _MAPPING:
+        expected = "a mapping of parameters" if path.startswith("randomize.") else f"a mapping with keys {_KEYS[path]}"
+    else:  # bounds of float fields come as floats: say 0, not 0.0
+        ctx = {k: int(v) if isinstance(v, float) and v.is_integer() else v for k, v in ctx.items()}
+        expected = _EXPECTED[kind].format(**ctx) if kind in _EXPECTED else e["msg"]
+    return f"{path}: got {_fmt(e['input'])}; expected {expected}"
 
 
 def config_from_dict(raw: dict) -> DatasetConfig:
     """Validate a raw mapping (as loaded from YAML) into a :class:`DatasetConfig`; raises :class:`ConfigError`."""
-    errors: list[str] = []
     if not isinstance(raw, dict):
         raise ConfigError([f"<root>: got {_fmt(raw)}; expected a mapping"])
-    top = {"name": str, "seed": int, "num_samples": int, "shard_size": int}
-    sections = {"sim": SimConfig, "render": RenderConfig, "output": OutputConfig}
-    cfg = DatasetConfig()
-    for key, value in raw.items():
-        if key in top:
-            v = _coerce(value, top[key], key, errors)
-            if v is None:
-                continue
-            lim = _CONSTRAINTS.get(key)
-            if lim is not None and v < lim[0]:
-                errors.append(f"{key}: got {_fmt(value)}; expected >= {lim[0]}")
-                continue
-            setattr(cfg, key, v)
-        elif key in sections:
-            setattr(cfg, key, _build_section(sections[key], value, key, errors))
-        elif key != "randomize":
-            errors.append(f"{key}: unknown key; expected one of {sorted([*top, *sections, 'randomize'])}")
-    cfg.randomize = _build_randomize(raw.get("randomize"), errors)
-
-    ft = cfg.sim.frame_times
-    if any(t < 0 for t in ft) or any(b <= a for a, b in zip(ft, ft[1:])):
-        errors.append(f"sim.frame_times: got {ft}; expected strictly increasing times >= 0 [s]")
-    elif cfg.sim.dt > 0:
-        # frames are taken after whole steps: a time between steps would be rounded silently, and two frames within
-        # one step would store the same snapshot under two times
-        steps = [t / cfg.sim.dt for t in ft]
-        if any(abs(k - round(k)) > 1e-6 * max(1.0, k) for k in steps):
-            errors.append(f"sim.frame_times: got {ft}; expected multiples of sim.dt = {cfg.sim.dt} [s]")
-    if cfg.output.compression not in ("lzf", "gzip", "none"):
-        errors.append(f"output.compression: got {_fmt(cfg.output.compression)}; expected one of ['lzf', 'gzip', 'none']")
-    if cfg.output.compression_level > 9:
-        errors.append(f"output.compression_level: got {cfg.output.compression_level}; expected 0..9")
-    if cfg.shard_size % len(ft) != 0:
-        errors.append(f"shard_size: got {cfg.shard_size}; expected a multiple of len(sim.frame_times) = {len(ft)} "
-                      "(a shard holds whole trajectories)")
-    if cfg.sim.device == "auto":  # the first GPU if there is one, else the CPU (resolved and stored in the config)
-        cfg.sim.device = _auto_device()
-    device_error = _check_device(cfg.sim.device)
-    if device_error:
-        errors.append(f"sim.device: got {_fmt(cfg.sim.device)}; expected {device_error}")
-    if errors:
-        raise ConfigError(errors)
-    return cfg
-
-
-def _auto_device() -> str:
-    import warp as wp
-
-    from . import quiet_warp
-
-    quiet_warp()
-    return "cuda:0" if wp.get_cuda_device_count() > 0 else "cpu"
-
-
-def _check_device(ident: str) -> str | None:
-    """None if Warp can run on ``ident`` here, else what would be accepted (so a CUDA config fails before any work
-    on a machine without a GPU, not in a worker's traceback)."""
-    import warp as wp
-
-    from . import quiet_warp
-
-    quiet_warp()
     try:
-        wp.get_device(ident)
-    except (ValueError, RuntimeError):
-        names = [str(d) for d in wp.get_devices()]
-        return f"'auto' or a Warp device available here: one of {names} (override with sim.device=cpu)"
-    return None
+        return _ADAPTER.validate_python(raw)
+    except ValidationError as exc:
+        raise ConfigError([_message(e) for e in exc.errors(include_url=False)]) from None
 
 
 # ---------------------------------------------------------------------------------------------------------------------
