@@ -1,0 +1,248 @@
+#!/usr/bin/env python
+"""Profile of a gait run's dynamics: time per kernel launch of :meth:`warpworm.simulator.Simulator.step`.
+
+The run is what ``warpworm simulate --magnet-model analytic`` does (peristaltic preset, ``gaits.DEFAULT_DT`` with
+``gaits.DEFAULT_SUBSTEPS``: 4 ms steps of four 1 ms substeps): build, settle (EPM parked), then the gait, without
+frame snapshots. Every ``wp.launch`` and every recorded-command launch (the substeps' one ``implicit_step``) is
+timed by the wall clock around it with a device synchronize after it (a CPU launch runs synchronously anyway), keyed
+by kernel name; whatever the step spends outside the launches (array zeroing, Python) is the ``host`` row. The
+timers wrap the launch functions, not the simulator, so the profile follows whatever the simulator launches.
+
+Two extra measurements give the candidate levers a size:
+- ``newton``: the implicit substep alone at 2, 3 and 4 Newton steps (the cost of one Newton step);
+- ``launch_floor``: a trivial one-thread kernel, the fixed cost of a CPU launch (what graph capture or fused
+  launches could save per launch).
+
+Usage::
+
+    python benchmarks/profile_step.py [--worlds 1 64] [--duration 1.0] [--out benchmarks/results/profile_step.json]
+
+Prints one table per world count and writes the JSON (rows + metadata).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import sys
+import time
+from collections import defaultdict
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+
+STAGES = {
+    "epm_sine_pose": "EPM pose",
+    "epm_keyframe_pose": "EPM pose",
+    "ipm_poses": "IPM poses",
+    "world_wrench_kernel": "wrench (magnets)",
+    "distribute_wrench": "distribute wrench",
+    "implicit_step": "implicit substeps",
+}
+"""Kernel name -> the stage it is reported as (a kernel not listed is reported under its own name)."""
+
+
+@contextmanager
+def launch_timers():
+    """Time every ``wp.launch`` and ``wp.Launch.launch`` inside the block.
+
+    Yields ``{kernel key: [wall seconds, CPU seconds of this thread, launches]}``. On the CPU the thread's CPU time is
+    the figure to read: a CPU kernel runs on the launching thread, and on a shared machine the wall time also counts
+    the time other processes held the core (seen here: wall up to 3x the CPU time under a load of 3.7 on 2 cores).
+    """
+    import warp as wp
+
+    acc: dict = defaultdict(lambda: [0.0, 0.0, 0])
+    orig_launch, orig_cmd = wp.launch, wp.Launch.launch
+
+    def _timed(key, device, fn):
+        t0, c0 = time.perf_counter(), time.thread_time()
+        out = fn()
+        wp.synchronize_device(device)
+        a = acc[key]
+        a[0] += time.perf_counter() - t0
+        a[1] += time.thread_time() - c0
+        a[2] += 1
+        return out
+
+    def launch(kernel, *args, **kw):
+        if kw.get("record_cmd"):  # recording only: timed when the command is launched
+            return orig_launch(kernel, *args, **kw)
+        return _timed(kernel.key, kw.get("device"), lambda: orig_launch(kernel, *args, **kw))
+
+    def cmd_launch(self, *args, **kw):
+        return _timed(self.kernel.key, self.device, lambda: orig_cmd(self, *args, **kw))
+
+    wp.launch, wp.Launch.launch = launch, cmd_launch
+    try:
+        yield acc
+    finally:
+        wp.launch, wp.Launch.launch = orig_launch, orig_cmd
+
+
+def _build(W: int, magnet_model: str, device: str, newton: int | None = None):
+    from warpworm import gaits
+    from warpworm.model import Model
+    from warpworm.simulator import Simulator
+
+    model = Model.from_params(gaits.preset_params("peristaltic", magnet_model=magnet_model), W, device)
+    kw = {} if newton is None else {"newton": newton}
+    sim = Simulator(model, dt=gaits.DEFAULT_DT, substeps=gaits.DEFAULT_SUBSTEPS, **kw)
+    return model, sim
+
+
+def profile_run(W: int, *, duration: float, settle: float, magnet_model: str = "analytic",
+                device: str = "cpu") -> dict:
+    """Settle + ``duration`` [s] of the peristaltic gait on ``W`` worlds, every launch timed.
+
+    Returns ``{"W", "steps", "wall_s", "cpu_s", "us_per_world_step", "worm_substeps_per_s", "sim_s_per_wall_s",
+    "stages": [{stage, kernel, calls_per_step, us_per_step, us_per_world_step, share, wall_us_per_step}], ...}``.
+    Per-step figures cover the gait steps only (the settle runs first, untimed, so compilation and the settling
+    transient stay out); ``us_*`` and ``share`` are CPU time of the launching thread on the CPU (what one dedicated
+    core delivers), wall time on CUDA; the rates are per that time (``*_wall`` beside them: per wall second).
+    """
+    import warp as wp
+
+    model, sim = _build(W, magnet_model, device)
+    state = sim.initial_state()
+    sim.step(state, 1, epm=False)  # compile every kernel before anything is timed
+    sim.settle(state, settle)
+    n_steps = max(1, int(round(duration / sim.dt)))
+    use_cpu = not model.device.is_cuda
+    with launch_timers() as acc:
+        wp.synchronize_device(model.device)
+        t0, c0 = time.perf_counter(), time.thread_time()
+        sim.step(state, n_steps)
+        wp.synchronize_device(model.device)
+        wall, cpu = time.perf_counter() - t0, time.thread_time() - c0
+    total = cpu if use_cpu else wall
+    unstable = int(state.unstable.numpy().astype(bool).sum())
+    stages, timed, timed_wall = [], 0.0, 0.0
+    for key, (w_s, c_s, n) in sorted(acc.items(), key=lambda kv: -kv[1][1 if use_cpu else 0]):
+        sec = c_s if use_cpu else w_s
+        timed, timed_wall = timed + sec, timed_wall + w_s
+        stages.append({"stage": STAGES.get(key, key), "kernel": key, "calls_per_step": n / n_steps,
+                       "us_per_step": 1e6 * sec / n_steps, "us_per_world_step": 1e6 * sec / n_steps / W,
+                       "share": sec / total, "wall_us_per_step": 1e6 * w_s / n_steps})
+    host = max(0.0, total - timed)
+    stages.append({"stage": "host (zeroing, Python)", "kernel": "-", "calls_per_step": "-",
+                   "us_per_step": 1e6 * host / n_steps, "us_per_world_step": 1e6 * host / n_steps / W,
+                   "share": host / total, "wall_us_per_step": 1e6 * max(0.0, wall - timed_wall) / n_steps})
+    return {"W": W, "magnets": magnet_model, "device": str(model.device), "steps": n_steps, "dt_s": sim.dt,
+            "substeps": sim.substeps, "newton": sim.newton, "wall_s": wall, "cpu_s": cpu,
+            "time_base": "thread CPU time" if use_cpu else "wall",
+            "us_per_world_step": 1e6 * total / n_steps / W,
+            "worm_substeps_per_s": W * n_steps * sim.substeps / total,
+            "sim_s_per_wall_s": W * n_steps * sim.dt / total,
+            "worm_substeps_per_s_wall": W * n_steps * sim.substeps / wall,
+            "sim_s_per_wall_s_wall": W * n_steps * sim.dt / wall,
+            "unstable_worlds": unstable, "stages": stages}
+
+
+def newton_cost(W: int, newtons=(2, 3, 4), device: str = "cpu", steps: int = 15) -> list[dict]:
+    """The implicit substeps alone (their launch's time inside a gait step; thread CPU time on the CPU) at each
+    Newton count, after a short settle: the median over ``steps`` steps, the counts interleaved step by step so that
+    other work on a shared machine falls on all of them alike."""
+    sims = []
+    for k in newtons:
+        model, sim = _build(W, "analytic", device, newton=k)
+        state = sim.initial_state()
+        sim.settle(state, 0.05)
+        sims.append((sim, state, []))
+    for _ in range(steps):
+        for sim, state, times in sims:
+            with launch_timers() as acc:
+                sim.step(state, 1)
+            times.append(acc["implicit_step"][0 if sim.model.device.is_cuda else 1])
+    rows = [{"W": W, "newton": k, "us_per_world_substep": 1e6 * float(np.median(t)) / (sim.substeps * W)}
+            for k, (sim, _, t) in zip(newtons, sims)]
+    for a, b in zip(rows, rows[1:]):
+        b["us_per_extra_newton"] = b["us_per_world_substep"] - a["us_per_world_substep"]
+    return rows
+
+
+def launch_floor(device: str = "cpu", reps: int = 200) -> float:
+    """Median wall time [µs] of launching a one-thread kernel that writes one float: the fixed cost of a launch."""
+    import warp as wp
+
+    @wp.kernel
+    def _noop(a: wp.array(dtype=float)):
+        a[wp.tid()] = 1.0
+
+    a = wp.zeros(1, dtype=float, device=device)
+    wp.launch(_noop, dim=1, inputs=[a], device=device)
+    wp.synchronize_device(device)
+    clock = time.perf_counter if wp.get_device(device).is_cuda else time.thread_time
+    times = []
+    for _ in range(reps):
+        t0 = clock()
+        wp.launch(_noop, dim=1, inputs=[a], device=device)
+        wp.synchronize_device(device)
+        times.append(clock() - t0)
+    return 1e6 * float(np.median(times))
+
+
+def _table(rows: list[dict], cols: list[str]) -> str:
+    sys.path.insert(0, str(HERE))
+    from run import table
+
+    return table([{c: r.get(c, "") for c in cols} for r in rows])
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--worlds", type=int, nargs="+", default=[1, 64], help="world counts (default 1 64)")
+    ap.add_argument("--duration", type=float, default=1.0, help="gait time profiled [s] (default 1.0: one cycle)")
+    ap.add_argument("--settle", type=float, default=0.2, help="settling before the gait [s] (default 0.2)")
+    ap.add_argument("--magnet-model", choices=["analytic", "dipoles"], default="analytic")
+    ap.add_argument("--device", default="cpu")
+    ap.add_argument("--no-levers", action="store_true", help="skip the Newton-count and launch-floor measurements")
+    ap.add_argument("--out", default=str(HERE / "results" / "profile_step.json"), help="JSON path")
+    args = ap.parse_args(argv)
+    for w in args.worlds:
+        if w < 1:
+            ap.error(f"--worlds: expected counts >= 1, got {w}")
+    if not args.duration > 0:
+        ap.error(f"--duration: expected > 0 [s], got {args.duration}")
+    from warpworm import quiet_warp
+
+    quiet_warp()
+    import warp as wp
+
+    wp.init()
+    device = "cuda:0" if args.device == "cuda" else args.device
+    runs = []
+    for W in args.worlds:
+        r = profile_run(W, duration=args.duration, settle=args.settle, magnet_model=args.magnet_model, device=device)
+        runs.append(r)
+        print(f"\n== {args.magnet_model} magnets, peristaltic, W = {W}, {r['steps']} steps of {1e3 * r['dt_s']:g} ms "
+              f"({r['substeps']} substeps, {r['newton']} Newton) on {device}: {r['wall_s']:.2f} s wall, "
+              f"{r['cpu_s']:.2f} s CPU; per {r['time_base']}: {r['us_per_world_step']:.0f} µs per world-step, "
+              f"{r['worm_substeps_per_s']:.3g} worm-substeps/s, {r['sim_s_per_wall_s']:.3g} worm-s per s; "
+              f"{r['unstable_worlds']} unstable ==")
+        print(_table(r["stages"], ["stage", "kernel", "calls_per_step", "us_per_step", "us_per_world_step", "share",
+                                   "wall_us_per_step"]))
+    levers = {}
+    if not args.no_levers:
+        levers["newton"] = [row for W in args.worlds for row in newton_cost(W, device=device)]
+        levers["launch_floor_us"] = launch_floor(device)
+        print("\n== levers: implicit substep alone vs Newton steps; fixed cost of one launch ==")
+        print(_table(levers["newton"], ["W", "newton", "us_per_world_substep", "us_per_extra_newton"]))
+        print(f"launch floor: {levers['launch_floor_us']:.1f} µs per launch on {device}")
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    meta = {"command": "python benchmarks/profile_step.py " + " ".join(argv if argv is not None else sys.argv[1:]),
+            "python": sys.version.split()[0], "warp": wp.config.version, "machine": platform.machine(),
+            "date": time.strftime("%Y-%m-%dT%H:%M:%S")}
+    out.write_text(json.dumps({"meta": meta, "runs": runs, "levers": levers}, indent=1,
+                              default=lambda o: None if isinstance(o, float) and not np.isfinite(o) else float(o)))
+    print(f"wrote {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
