@@ -1,0 +1,633 @@
+"""The implicit-Euler substep with one block of threads per world: the GPU path designed for occupancy.
+
+Same physics, same algorithm and, element by element, the same arithmetic as
+:func:`warpworm.kernels.implicit_euler.implicit_step` (predictor, floor contacts, friction, fold limits, strain and
+speed checks, crumple flag; read that module's docstring), but laid out for a GPU: the kernel is launched with
+``wp.launch_tiled(kernel, dim=W, block_dim=T)`` and the T threads of a block share one world.
+
+- Per-vertex phases (prediction, the contact update between Newton steps, the velocity update) and the crease
+  angles: thread ``lane`` takes vertices (hinges) ``lane, lane + T, ...``.
+- Assembly by rows, without atomics: thread ``lane`` owns the 3×3 block row of its vertex u in the block band
+  ``hess[world, u, 0..B]`` (the band path's layout and scratch, ``State.newton_matrix``) and ``grad[world, u]``, and
+  gathers the bars and creases incident on u (host-built incidence lists, ascending element index). Each block
+  receives the same contributions in the same order as :func:`~warpworm.kernels.implicit_euler.assemble` gives it,
+  so the assembled system is bit for bit the band path's; only the factorisation differs.
+- Solve: the band is scattered (``wp.tile_scatter_masked``, one entry per thread per call) into a dense 3V × 3V
+  float32 tile in shared memory, factored by ``wp.tile_cholesky_inplace`` and solved by
+  ``wp.tile_cholesky_solve_inplace`` (cuSolverDx on a GPU when Warp has libmathdx, a cooperative scalar
+  factorisation otherwise and on the CPU). The tile is zeroed once per launch: an in-place Cholesky of a matrix
+  keeps each row's envelope (its first non-zero to the diagonal), which for this block band lies inside the band,
+  so the entries outside it stay exact zeros and every later Newton step need only rewrite the band.
+- Block barriers: Warp has no bare ``__syncthreads``; :func:`block_max` (a tile reduction) is one, and also makes a
+  flag (a bad strain, a crumpled crease) the whole block's, so every thread takes the same branches and calls the
+  same cooperative tile operations (a barrier inside divergent code hangs a GPU block).
+
+Every tile operation must be called by every thread of the block the same number of times: loops around them run
+the same count on every thread (e.g. the scatter rounds), never ``range(lane, n, T)``.
+
+The tile's side N = 3V is a compile-time constant, so the kernel is built per vertex count by
+:func:`make_tile_substep_kernel` (one cached module each). float32, SI units.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import warp as wp
+
+from .band_cholesky import band_add_block
+from .common import dihedral_angle_and_gradient, fold_range, freeze_world, pw, wrap_angle
+from .implicit_euler import (
+    CONTACT_FIXED,
+    CONTACT_FREE,
+    CONTACT_SLIDING,
+    CONTACT_STUCK,
+    WORLD_CRUMPLED,
+    dof_projector,
+    floor_landing,
+    friction_force,
+    mass_over_dt2,
+)
+
+wp.set_module_options({"enable_backward": False})
+
+FLAG_CRUMPLED = wp.constant(1)  # block flag codes, ordered so the block maximum is the worst
+FLAG_EXPLODED = wp.constant(2)
+
+
+@wp.func
+def block_max(flag: int) -> int:
+    """The largest ``flag`` of the block's threads, returned to every thread. A cooperative tile reduction, so also a
+    block barrier: every thread's writes before it (global memory included) are seen by every thread after it.
+    Every thread of the block must call it."""
+    t = wp.tile(flag)
+    m = wp.tile_max(t)
+    return m[0]
+
+
+@wp.func
+def bar_terms(
+    d: wp.vec3,
+    l0: float,
+    ea: float,
+    stops: wp.vec2,
+    bar_stop_stiffness: wp.array2d(dtype=float),
+    ks_row: int,
+    e: int,
+):
+    """One bar's strain, force on its first vertex (the second gets −f), unit direction and axial / transverse
+    stiffness [N/m] for the bar vector ``d`` = x_a − x_b [m], rest length ``l0`` [m], rigidity ``ea`` [N] and stops
+    (shortened, stretched) strain magnitudes. The arithmetic of :func:`implicit_euler.assemble`'s bar loop, as its
+    own function (copied: that loop is inline there). Returns (strain, f, n, k_axial, k_trans)."""
+    length = wp.length(d)
+    strain = (length - l0) / l0
+    n = d / length
+    ka = ea / l0
+    f = n * (ka * (length - l0))
+    k_axial = ka
+    # a soft waist bar strained past its stops turns rigid (implicit_euler.assemble says why)
+    stop = wp.where(strain < 0.0, -stops[0], stops[1])
+    l_stop = l0 * (1.0 + stop)
+    k_trans = ka * wp.max(0.0, 1.0 - l0 / length)
+    if wp.where(strain < 0.0, strain < stop, strain > stop):
+        ks = bar_stop_stiffness[ks_row, e] / l0
+        f = f + n * (ks * (length - l_stop))
+        k_axial = k_axial + ks
+        k_trans = k_trans + ks * wp.max(0.0, 1.0 - l_stop / length)
+    return strain, f, n, k_axial, k_trans
+
+
+@wp.func
+def hinge_terms(phi: float, prev: float, rest: float, lh: float, label: int, k_hinge: float, c_hinge: float,
+                k_limit: float, inv_dt: float):
+    """A crease's torque ∂E/∂φ [N·m] and Gauss–Newton stiffness [N·m/rad] at unwrapped angle ``phi`` [rad] (``prev``
+    its angle at the start of the substep, ``lh`` its length [m]): spring, implicit damping and the NoFoldThrough
+    barrier. The arithmetic of :func:`implicit_euler.assemble`'s crease loop (copied: inline there)."""
+    torque = lh * (k_hinge * (phi - rest) + c_hinge * inv_dt * (phi - prev))
+    stiff = lh * (k_hinge + c_hinge * inv_dt)
+    lo, hi = fold_range(label)
+    if phi < lo or phi > hi:
+        torque += k_limit * lh * (phi - wp.where(phi < lo, lo, hi))
+        stiff += k_limit * lh
+    return torque, stiff
+
+
+@wp.func
+def assemble_row(
+    world: int,
+    u: int,
+    im_row: int,
+    rl_row: int,
+    ea_row: int,
+    hr_row: int,
+    hl_row: int,
+    ak_row: int,
+    inv_mass: wp.array2d(dtype=float),
+    edges: wp.array2d(dtype=wp.int32),
+    rest_length: wp.array2d(dtype=float),
+    bar_stiffness: wp.array2d(dtype=float),
+    bar_stop_strain: wp.array2d(dtype=wp.vec2),
+    bar_stop_stiffness: wp.array2d(dtype=float),
+    hinges: wp.array2d(dtype=wp.int32),
+    hinge_rest: wp.array2d(dtype=float),
+    hinge_length: wp.array2d(dtype=float),
+    hinge_label: wp.array(dtype=wp.int32),
+    vert_bar_start: wp.array(dtype=wp.int32),
+    vert_bar: wp.array(dtype=wp.int32),
+    vert_hinge_start: wp.array(dtype=wp.int32),
+    vert_hinge: wp.array(dtype=wp.int32),
+    k_hinge: float,
+    c_hinge: float,
+    anchor_vertex: wp.array(dtype=wp.int32),
+    anchor_stiffness: wp.array2d(dtype=float),
+    anchor_target: wp.array2d(dtype=wp.vec3),
+    k_limit: float,
+    strain_limit: wp.array(dtype=float),
+    inv_dt: float,
+    floor_n: wp.vec3,
+    mu_s: float,
+    mu_k: float,
+    slip_speed: float,
+    with_hessian: bool,
+    x: wp.array2d(dtype=wp.vec3),
+    v: wp.array2d(dtype=wp.vec3),
+    delta: wp.array2d(dtype=wp.vec3),
+    crease_angle: wp.array2d(dtype=float),
+    contact: wp.array2d(dtype=wp.int32),
+    floor_force: wp.array2d(dtype=wp.vec3),
+    bar_strain: wp.array2d(dtype=float),
+    hess: wp.array3d(dtype=wp.mat33),
+    grad: wp.array2d(dtype=wp.vec3),
+):
+    """Vertex ``u``'s row of :func:`implicit_euler.assemble`: ``grad[world, u]`` and, ``with_hessian``, the block row
+    ``hess[world, u, 0..B]`` (blocks (u, u − d)) projected on the allowed directions, and then the projected
+    gradient P_u ∂Φ/∂x_u (the right-hand side of the step). Only this row is written, so threads with different rows
+    need no atomics; ``bar_strain`` of a bar is written by its first vertex's thread. Reads every vertex's x and
+    contact: call it after a barrier. Returns 1 if a bar of the row is strained beyond its limit (or non-finite)."""
+    bw = hess.shape[2] - 1
+    eye = wp.identity(n=3, dtype=float)
+    inv_dt2 = inv_dt * inv_dt
+    m_dt2 = mass_over_dt2(inv_mass[im_row, u], inv_dt2)
+    g = delta[world, u] * m_dt2
+    if with_hessian:
+        diag = eye * m_dt2
+        st = contact[world, u]
+        if st == CONTACT_SLIDING or st == CONTACT_STUCK:
+            vel = v[world, u] + delta[world, u] * inv_dt
+            vt = vel - floor_n * wp.dot(vel, floor_n)
+            f, c, t = friction_force(st, vt, wp.dot(floor_force[world, u], floor_n), mu_s, mu_k, slip_speed)
+            g = g - f
+            diag = diag + (eye - wp.outer(floor_n, floor_n) - wp.outer(t, t)) * (c * inv_dt)
+        hess[world, u, 0] = diag
+        for k in range(1, bw + 1):
+            hess[world, u, k] = wp.mat33(0.0)
+    for q in range(vert_bar_start[u], vert_bar_start[u + 1]):
+        e = vert_bar[q]
+        a = edges[e, 0]
+        b = edges[e, 1]
+        l0 = rest_length[rl_row, e]
+        stops = bar_stop_strain[world % bar_stop_strain.shape[0], e]
+        strain, f, n, k_axial, k_trans = bar_terms(x[world, a] - x[world, b], l0, bar_stiffness[ea_row, e], stops,
+                                                   bar_stop_stiffness, ea_row % bar_stop_stiffness.shape[0], e)
+        if a == u:
+            bar_strain[world, e] = strain
+            if not (wp.abs(strain) < strain_limit[e]):  # also catches NaN
+                return 1
+            g = g + f
+        else:
+            g = g - f
+        if with_hessian:
+            nn = wp.outer(n, n)
+            # the compressive geometric stiffness is dropped (keeps the matrix positive definite)
+            kb = k_axial * nn + k_trans * (eye - nn)
+            band_add_block(world, hess, u, u, kb)
+            if wp.max(a, b) == u:
+                band_add_block(world, hess, a, b, -kb)
+    for q in range(vert_hinge_start[u], vert_hinge_start[u + 1]):
+        h = vert_hinge[q]
+        i0 = hinges[h, 0]
+        i1 = hinges[h, 1]
+        i2 = hinges[h, 2]
+        i3 = hinges[h, 3]
+        psi, g0, g1, g2, g3 = dihedral_angle_and_gradient(x[world, i0], x[world, i1], x[world, i2], x[world, i3])
+        prev = crease_angle[world, h]
+        phi = prev + wrap_angle(psi - prev)
+        torque, stiff = hinge_terms(phi, prev, hinge_rest[hr_row, h], hinge_length[hl_row, h], hinge_label[h],
+                                    k_hinge, c_hinge, k_limit, inv_dt)
+        if i0 == u:
+            g = g + g0 * torque
+        elif i1 == u:
+            g = g + g1 * torque
+        elif i2 == u:
+            g = g + g2 * torque
+        else:
+            g = g + g3 * torque
+        if with_hessian:
+            # Gauss–Newton (the angle's curvature term dropped); the blocks of implicit_euler.assemble, in its order,
+            # those that land in row u (a block (p, q) is stored in row max(p, q))
+            if i0 == u:
+                band_add_block(world, hess, i0, i0, stiff * wp.outer(g0, g0))
+            if i1 == u:
+                band_add_block(world, hess, i1, i1, stiff * wp.outer(g1, g1))
+            if i2 == u:
+                band_add_block(world, hess, i2, i2, stiff * wp.outer(g2, g2))
+            if i3 == u:
+                band_add_block(world, hess, i3, i3, stiff * wp.outer(g3, g3))
+            if wp.max(i1, i0) == u:
+                band_add_block(world, hess, i1, i0, stiff * wp.outer(g1, g0))
+            if wp.max(i2, i0) == u:
+                band_add_block(world, hess, i2, i0, stiff * wp.outer(g2, g0))
+            if wp.max(i3, i0) == u:
+                band_add_block(world, hess, i3, i0, stiff * wp.outer(g3, g0))
+            if wp.max(i2, i1) == u:
+                band_add_block(world, hess, i2, i1, stiff * wp.outer(g2, g1))
+            if wp.max(i3, i1) == u:
+                band_add_block(world, hess, i3, i1, stiff * wp.outer(g3, g1))
+            if wp.max(i3, i2) == u:
+                band_add_block(world, hess, i3, i2, stiff * wp.outer(g3, g2))
+    for an in range(anchor_vertex.shape[0]):
+        if anchor_vertex[an] == u:
+            ka = anchor_stiffness[ak_row, an]
+            if ka > 0.0:
+                g = g + (x[world, u] - anchor_target[world, an]) * ka
+                if with_hessian:
+                    band_add_block(world, hess, u, u, eye * ka)
+    if with_hessian:
+        # the row restricted to the allowed directions, as implicit_euler.assemble does it for every row
+        su = contact[world, u]
+        for band in range(bw + 1):
+            vv = u - band
+            if vv >= 0:
+                sv = contact[world, vv]
+                if su != CONTACT_FREE or sv != CONTACT_FREE:
+                    pu = dof_projector(su, floor_n)
+                    blk = pu * hess[world, u, band] * dof_projector(sv, floor_n)
+                    if band == 0:
+                        blk = blk + (eye - pu) * m_dt2
+                    hess[world, u, band] = blk
+        # the right-hand side of the restricted step (implicit_step does this after assemble)
+        if su != CONTACT_FREE:
+            g = dof_projector(su, floor_n) * g
+    grad[world, u] = g
+    return 0
+
+
+@wp.func
+def predict_vertex(
+    world: int,
+    i: int,
+    im_row: int,
+    inv_mass: wp.array2d(dtype=float),
+    gvec: wp.vec3,
+    damp: float,
+    dt: float,
+    inv_dt: float,
+    inv_dt2: float,
+    floor_n: wp.vec3,
+    slip_speed: float,
+    f_ext: wp.array2d(dtype=wp.vec3),
+    x: wp.array2d(dtype=wp.vec3),
+    v: wp.array2d(dtype=wp.vec3),
+    x_prev: wp.array2d(dtype=wp.vec3),
+    delta: wp.array2d(dtype=wp.vec3),
+    floor_force: wp.array2d(dtype=wp.vec3),
+    contact: wp.array2d(dtype=wp.int32),
+):
+    """Step 1 of implicit_step for vertex ``i`` (copied from its loop, which is inline there): the prediction x̃ and
+    the start of the Newton iteration, a vertex on the floor stuck or sliding on it. Touches only vertex i."""
+    w_inv = inv_mass[im_row, i]
+    vel = wp.vec3(0.0)
+    v_old = v[world, i]
+    if w_inv > 0.0:
+        vel = v_old * damp + dt * (gvec + f_ext[world, i] * w_inv)
+    p = x[world, i]
+    x_prev[world, i] = p
+    v[world, i] = vel
+    h0 = wp.dot(p, floor_n)
+    vn = wp.dot(vel, floor_n)
+    start = vel
+    st = CONTACT_FREE
+    if not (w_inv > 0.0):
+        st = CONTACT_FIXED
+    elif vn < 0.0 and (contact[world, i] != CONTACT_FREE or h0 + dt * vn < 0.0):
+        vt_old = v_old - floor_n * wp.dot(v_old, floor_n)
+        st = wp.where(wp.length(vt_old) > slip_speed, CONTACT_SLIDING, CONTACT_STUCK)
+        start = floor_n * wp.max(vn, -h0 * inv_dt)
+        if st == CONTACT_SLIDING:
+            start = start + (vel - floor_n * vn)
+        if contact[world, i] == CONTACT_FREE:
+            floor_force[world, i] = floor_n * (-(h0 + dt * vn) * mass_over_dt2(w_inv, inv_dt2))
+    contact[world, i] = st
+    x[world, i] = p + dt * start
+    delta[world, i] = (start - vel) * dt
+    return 0
+
+
+@wp.func
+def update_contact(
+    world: int,
+    i: int,
+    im_row: int,
+    inv_mass: wp.array2d(dtype=float),
+    dt: float,
+    inv_dt: float,
+    inv_dt2: float,
+    floor_n: wp.vec3,
+    mu_s: float,
+    mu_k: float,
+    slip_speed: float,
+    x: wp.array2d(dtype=wp.vec3),
+    v: wp.array2d(dtype=wp.vec3),
+    x_prev: wp.array2d(dtype=wp.vec3),
+    delta: wp.array2d(dtype=wp.vec3),
+    floor_force: wp.array2d(dtype=wp.vec3),
+    grad: wp.array2d(dtype=wp.vec3),
+    contact: wp.array2d(dtype=wp.int32),
+):
+    """implicit_step's contact update before a Newton step after the first, for vertex ``i`` (copied from its loop):
+    normal force from the gradient, let go / land / stick / slip. Touches only vertex i."""
+    st = contact[world, i]
+    if st == CONTACT_FIXED:
+        return 0
+    vel0 = v[world, i]
+    vel = vel0 + delta[world, i] * inv_dt
+    vn = wp.dot(vel, floor_n)
+    if st == CONTACT_FREE:
+        depth = -(wp.dot(x_prev[world, i], floor_n) + dt * vn)
+        if depth > 0.0:
+            vel = vel + floor_n * (depth * inv_dt)
+            x[world, i] = x_prev[world, i] + vel * dt
+            delta[world, i] = (vel - vel0) * dt
+            contact[world, i] = CONTACT_STUCK
+            floor_force[world, i] = floor_n * (depth * mass_over_dt2(inv_mass[im_row, i], inv_dt2))
+        return 0
+    fn = wp.dot(grad[world, i], floor_n)
+    if not (fn > 0.0):
+        contact[world, i] = CONTACT_FREE
+        floor_force[world, i] = wp.vec3(0.0)
+        return 0
+    vt = vel - floor_n * vn
+    vt_len = wp.length(vt)
+    ff = floor_force[world, i]
+    fn_old = wp.dot(ff, floor_n)
+    if st == CONTACT_STUCK and vt_len * fn_old > slip_speed * fn:
+        contact[world, i] = CONTACT_SLIDING
+    elif st == CONTACT_SLIDING and (wp.dot(vt, ff) > 0.0 or vt_len < 0.5 * slip_speed):
+        contact[world, i] = CONTACT_STUCK
+    f, c, t = friction_force(contact[world, i], vt, fn, mu_s, mu_k, slip_speed)
+    floor_force[world, i] = floor_n * fn + f
+    return 0
+
+
+@wp.func
+def finish_vertex(
+    world: int,
+    i: int,
+    im_row: int,
+    inv_mass: wp.array2d(dtype=float),
+    dt: float,
+    inv_dt: float,
+    inv_dt2: float,
+    floor_n: wp.vec3,
+    mu_s: float,
+    mu_k: float,
+    slip_speed: float,
+    speed_limit: float,
+    x: wp.array2d(dtype=wp.vec3),
+    v: wp.array2d(dtype=wp.vec3),
+    x_prev: wp.array2d(dtype=wp.vec3),
+    delta: wp.array2d(dtype=wp.vec3),
+    floor_force: wp.array2d(dtype=wp.vec3),
+    contact: wp.array2d(dtype=wp.int32),
+) -> int:
+    """Step 3 of implicit_step for vertex ``i`` (copied from its loop): the floor once more, the velocity, the
+    speed check. Touches only vertex i. Returns 1 if the vertex is too fast or non-finite."""
+    bad = int(0)
+    vel = v[world, i] + delta[world, i] * inv_dt
+    delta[world, i] = wp.vec3(0.0)
+    p0 = x_prev[world, i]
+    st = contact[world, i]
+    if st == CONTACT_FREE:
+        p, vel2, st2, depth = floor_landing(p0, vel, floor_n, mu_s, mu_k, dt)
+        vel = vel2
+        st = st2
+        floor_force[world, i] = floor_n * (depth * mass_over_dt2(inv_mass[im_row, i], inv_dt2))
+    elif st == CONTACT_STUCK or st == CONTACT_SLIDING:
+        vn = wp.dot(vel, floor_n)
+        vel = vel + floor_n * (wp.max(vn, -wp.dot(p0, floor_n) * inv_dt) - vn)
+        vt = vel - floor_n * wp.dot(vel, floor_n)
+        fn = wp.dot(floor_force[world, i], floor_n)
+        f, c, t = friction_force(st, vt, fn, mu_s, mu_k, slip_speed)
+        floor_force[world, i] = floor_n * fn + f
+    else:
+        vel = wp.vec3(0.0)  # infinite mass
+        st = CONTACT_FREE
+    if not (wp.length(vel) < speed_limit):  # NaN fails every comparison
+        bad = 1
+    x[world, i] = p0 + vel * dt
+    v[world, i] = vel
+    contact[world, i] = st
+    return bad
+
+
+@functools.cache
+def make_tile_substep_kernel(num_vertices: int, bandwidth: int):
+    """The block-per-world substep kernel for worms of ``num_vertices`` vertices and Newton-matrix half-bandwidth
+    ``bandwidth`` (vertex blocks): the dense tile's side 3V is a compile-time constant. One module per shape."""
+    if num_vertices < 1 or bandwidth < 0:
+        raise ValueError(f"num_vertices must be >= 1 and bandwidth >= 0, got {num_vertices}, {bandwidth}")
+    N = 3 * num_vertices
+    SLOTS = num_vertices * (bandwidth + 1) * 9  # 3x3 entries of the lower block band, with the out-of-range ones
+
+    @wp.kernel(enable_backward=False, module="unique")
+    def implicit_step_tile(
+        # Model:
+        inv_mass: wp.array2d(dtype=float),
+        gravity: wp.array(dtype=float),
+        damping: wp.array(dtype=float),
+        edges: wp.array2d(dtype=wp.int32),
+        rest_length: wp.array2d(dtype=float),
+        bar_stiffness: wp.array2d(dtype=float),
+        bar_stop_strain: wp.array2d(dtype=wp.vec2),
+        bar_stop_stiffness: wp.array2d(dtype=float),
+        hinges: wp.array2d(dtype=wp.int32),
+        hinge_rest: wp.array2d(dtype=float),
+        hinge_length: wp.array2d(dtype=float),
+        hinge_label: wp.array(dtype=wp.int32),
+        hinge_stiffness: wp.array(dtype=float),
+        hinge_damping: wp.array(dtype=float),
+        fold_limit_stiffness: wp.array(dtype=float),
+        anchor_vertex: wp.array(dtype=wp.int32),
+        anchor_stiffness: wp.array2d(dtype=float),
+        floor_incline: wp.array(dtype=float),
+        mu_static: wp.array(dtype=float),
+        mu_kinetic: wp.array(dtype=float),
+        vert_bar_start: wp.array(dtype=wp.int32),
+        vert_bar: wp.array(dtype=wp.int32),
+        vert_hinge_start: wp.array(dtype=wp.int32),
+        vert_hinge: wp.array(dtype=wp.int32),
+        dt: float,
+        num_substeps: int,
+        newton: int,
+        slip_speed: float,
+        strain_limit: wp.array(dtype=float),
+        speed_limit: float,
+        fold_tolerance: float,
+        # Data in:
+        f_ext: wp.array2d(dtype=wp.vec3),
+        anchor_target: wp.array2d(dtype=wp.vec3),
+        # Data out:
+        x: wp.array2d(dtype=wp.vec3),
+        v: wp.array2d(dtype=wp.vec3),
+        x_prev: wp.array2d(dtype=wp.vec3),
+        delta: wp.array2d(dtype=wp.vec3),
+        floor_force: wp.array2d(dtype=wp.vec3),
+        hess: wp.array3d(dtype=wp.mat33),
+        grad: wp.array2d(dtype=wp.vec3),
+        bar_strain: wp.array2d(dtype=float),
+        crease_angle: wp.array2d(dtype=float),
+        contact: wp.array2d(dtype=wp.int32),
+        unstable: wp.array(dtype=wp.int32),
+        step_count: wp.array(dtype=wp.int32),
+    ):
+        """``num_substeps`` implicit substeps of one world per block: launch_tiled dim (W,), any block_dim. The
+        arguments of implicit_euler.implicit_step (same shapes and units) plus the vertex -> incident bar / hinge
+        lists (CSR, ascending element index: ``vert_bar[vert_bar_start[u]:vert_bar_start[u + 1]]``). ``hess`` must
+        have ``bandwidth + 1`` blocks per row."""
+        world, lane = wp.tid()
+        bd = wp.block_dim()
+        if unstable[world] != 0:  # the same for every thread of the block: the whole block leaves
+            return
+        nv = x.shape[1]
+        nh = hinges.shape[0]
+        im_row = world % inv_mass.shape[0]
+        rl_row = world % rest_length.shape[0]
+        ea_row = world % bar_stiffness.shape[0]
+        hr_row = world % hinge_rest.shape[0]
+        hl_row = world % hinge_length.shape[0]
+        ak_row = world % anchor_stiffness.shape[0]
+        gvec = wp.vec3(0.0, 0.0, -pw(gravity, world))
+        damp = 1.0 / (1.0 + pw(damping, world) * dt)
+        k_hinge = pw(hinge_stiffness, world)
+        c_hinge = pw(hinge_damping, world)
+        k_limit = pw(fold_limit_stiffness, world)
+        beta = pw(floor_incline, world)
+        floor_n = wp.vec3(-wp.sin(beta), 0.0, wp.cos(beta))
+        mu_s = pw(mu_static, world)
+        mu_k = pw(mu_kinetic, world)
+        inv_dt = 1.0 / dt
+        inv_dt2 = inv_dt * inv_dt
+        slot_rounds = (SLOTS + bd - 1) // bd
+        rhs_rounds = (N + bd - 1) // bd
+
+        # the world's Newton matrix (lower triangle; factored in place) and right-hand side, in shared memory
+        mat = wp.tile_zeros(shape=(N, N), dtype=float, storage="shared")
+        rhs = wp.tile_zeros(shape=(N,), dtype=float, storage="shared")
+
+        for s in range(num_substeps):
+            # 1. prediction (implicit_step's step 1)
+            for i in range(lane, nv, bd):
+                predict_vertex(world, i, im_row, inv_mass, gvec, damp, dt, inv_dt, inv_dt2, floor_n, slip_speed,
+                               f_ext, x, v, x_prev, delta, floor_force, contact)
+            bad = block_max(0)  # barrier: every x predicted before any row reads it
+
+            # 2. Newton steps, the contacts updated before each after the first
+            for it in range(newton):
+                if it >= 1:
+                    flag = int(0)
+                    for u in range(lane, nv, bd):
+                        if assemble_row(world, u, im_row, rl_row, ea_row, hr_row, hl_row, ak_row, inv_mass, edges,
+                                        rest_length, bar_stiffness, bar_stop_strain, bar_stop_stiffness, hinges,
+                                        hinge_rest, hinge_length, hinge_label, vert_bar_start, vert_bar,
+                                        vert_hinge_start, vert_hinge, k_hinge, c_hinge, anchor_vertex,
+                                        anchor_stiffness, anchor_target, k_limit, strain_limit, inv_dt, floor_n,
+                                        mu_s, mu_k, slip_speed, False, x, v, delta, crease_angle, contact,
+                                        floor_force, bar_strain, hess, grad) != 0:
+                            flag = 1
+                    bad = block_max(flag)
+                    if bad != 0:
+                        break
+                    for i in range(lane, nv, bd):
+                        update_contact(world, i, im_row, inv_mass, dt, inv_dt, inv_dt2, floor_n, mu_s, mu_k,
+                                       slip_speed, x, v, x_prev, delta, floor_force, grad, contact)
+                    bad = block_max(0)  # barrier: contacts and landed positions before the rows read them
+                flag = int(0)
+                for u in range(lane, nv, bd):
+                    if assemble_row(world, u, im_row, rl_row, ea_row, hr_row, hl_row, ak_row, inv_mass, edges,
+                                    rest_length, bar_stiffness, bar_stop_strain, bar_stop_stiffness, hinges,
+                                    hinge_rest, hinge_length, hinge_label, vert_bar_start, vert_bar,
+                                    vert_hinge_start, vert_hinge, k_hinge, c_hinge, anchor_vertex, anchor_stiffness,
+                                    anchor_target, k_limit, strain_limit, inv_dt, floor_n, mu_s, mu_k, slip_speed,
+                                    True, x, v, delta, crease_angle, contact, floor_force, bar_strain, hess,
+                                    grad) != 0:
+                        flag = 1
+                bad = block_max(flag)  # also the barrier: every row assembled before the scatter reads it
+                if bad != 0:
+                    break
+                # the band into the tile: one entry per thread per round, block (u, u - d) entry (a, b); the
+                # diagonal blocks' upper entries are skipped (the factorisation reads the lower triangle only)
+                for r in range(slot_rounds):
+                    q = r * bd + lane
+                    u = q // (9 * (bandwidth + 1))
+                    rem = q - u * 9 * (bandwidth + 1)
+                    d = rem // 9
+                    a = (rem - d * 9) // 3
+                    b = rem - d * 9 - a * 3
+                    vv = u - d
+                    ok = q < SLOTS and vv >= 0 and (d > 0 or b <= a)
+                    row = int(0)
+                    col = int(0)
+                    val = float(0.0)
+                    if ok:
+                        row = 3 * u + a
+                        col = 3 * vv + b
+                        val = hess[world, u, d][a, b]
+                    wp.tile_scatter_masked(mat, row, col, val, ok)
+                for r in range(rhs_rounds):
+                    q = r * bd + lane
+                    ok = q < N
+                    val = float(0.0)
+                    idx = int(0)
+                    if ok:
+                        idx = q
+                        val = grad[world, q // 3][q - (q // 3) * 3]
+                    wp.tile_scatter_masked(rhs, idx, val, ok)
+                wp.tile_cholesky_inplace(mat)
+                wp.tile_cholesky_solve_inplace(mat, rhs)
+                for i in range(lane, nv, bd):
+                    dx = -wp.vec3(rhs[3 * i], rhs[3 * i + 1], rhs[3 * i + 2])
+                    x[world, i] = x[world, i] + dx
+                    delta[world, i] = delta[world, i] + dx
+                bad = block_max(0)  # barrier: the step taken before the next rows read x
+            if bad != 0:
+                if lane == 0:
+                    freeze_world(world, nv, x, v, x_prev, delta, unstable)
+                return
+
+            # 3. floor once more, velocities, crease angles, stability
+            flag = int(0)
+            for i in range(lane, nv, bd):
+                if finish_vertex(world, i, im_row, inv_mass, dt, inv_dt, inv_dt2, floor_n, mu_s, mu_k, slip_speed,
+                                 speed_limit, x, v, x_prev, delta, floor_force, contact) != 0:
+                    flag = FLAG_EXPLODED
+            bad = block_max(flag)  # barrier: every final x before the crease angles read them
+            for h in range(lane, nh, bd):
+                psi, g0, g1, g2, g3 = dihedral_angle_and_gradient(x[world, hinges[h, 0]], x[world, hinges[h, 1]],
+                                                                  x[world, hinges[h, 2]], x[world, hinges[h, 3]])
+                prev = crease_angle[world, h]
+                phi = prev + wrap_angle(psi - prev)
+                crease_angle[world, h] = phi
+                lo, hi = fold_range(hinge_label[h])
+                if phi < lo - fold_tolerance or phi > hi + fold_tolerance:
+                    flag = wp.max(flag, FLAG_CRUMPLED)
+            worst = block_max(flag)  # barrier: angles and flags before the next substep moves any vertex
+            if worst != 0:
+                if lane == 0:
+                    freeze_world(world, nv, x, v, x_prev, delta, unstable)
+                    if worst == FLAG_CRUMPLED:
+                        unstable[world] = WORLD_CRUMPLED
+                return
+            if lane == 0:
+                step_count[world] = step_count[world] + 1
+
+    return implicit_step_tile

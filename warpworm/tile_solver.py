@@ -1,0 +1,126 @@
+"""Host launcher of the block-per-world implicit substeps (:mod:`warpworm.kernels.implicit_tile`), the GPU path.
+
+:class:`TileSubsteps` does what ``Simulator._world_cmd(state, n).launch()`` does (``n`` implicit substeps of every
+world, in place on the :class:`~warpworm.model.State`), with one block of ``block_dim`` threads per world instead of
+one thread, and the same results to float rounding (the systems it solves are the band path's bit for bit; its
+dense tile Cholesky rounds differently from the block-band one). Typical use, in place of ``_world_cmd``::
+
+    tiles = TileSubsteps(sim.model, sim)             # block_dim: 128 on CUDA, 1 on the CPU
+    tiles.launch(state, sim.substeps, control)       # = sim._world_cmd(state, control, sim.substeps).launch()
+
+Everything the kernel reads from the Model, the Simulator, the State and the Control goes through
+:func:`kernel_arguments`, the one place to re-wire when those classes change. The solver's scratch (x at the start of
+the substep, x − x̃, the Newton band and right-hand side) is its own. Nothing loops over worlds on the host.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+DEFAULT_CUDA_BLOCK_DIM = 128
+"""Threads per world on a GPU: 4 warps, so the shared-memory-bound 4 worlds per SM still give 16 warps to hide
+latency; the Cholesky's row updates and the band scatter split over them (see the report / docs)."""
+
+
+def vertex_incidence(pairs_or_stencils: np.ndarray, num_vertices: int) -> tuple[np.ndarray, np.ndarray]:
+    """CSR lists of the elements (rows of ``pairs_or_stencils``, shape (n, k) vertex indices) incident on each
+    vertex, element indices ascending: ``index[start[u]:start[u + 1]]``. Returns (start (V + 1,), index), int32."""
+    el = np.asarray(pairs_or_stencils, dtype=np.int64)
+    if el.ndim != 2:
+        raise ValueError(f"elements: expected shape (n, k) of vertex indices, got {el.shape}")
+    if el.size and (el.min() < 0 or el.max() >= num_vertices):
+        raise ValueError(f"elements: vertex indices must be in [0, {num_vertices}), got [{el.min()}, {el.max()}]")
+    vert = el.reshape(-1)
+    elem = np.repeat(np.arange(len(el)), el.shape[1])
+    order = np.lexsort((elem, vert))  # by vertex, then element ascending
+    start = np.zeros(num_vertices + 1, np.int64)
+    np.add.at(start, vert + 1, 1)
+    return np.cumsum(start).astype(np.int32), elem[order].astype(np.int32)
+
+
+def kernel_arguments(model, simulator, state, control, scratch, incidence, num_substeps: int) -> tuple[list, list]:
+    """(inputs, outputs) of :func:`~warpworm.kernels.implicit_tile.make_tile_substep_kernel`'s kernel from the
+    Model, the Simulator (substep settings), the State, the Control (anchor targets) and this solver's scratch
+    (x_prev, delta, hess, grad). The only place that knows those classes' field names."""
+    m, sim = model, simulator
+    inputs = [m.inv_mass, m.gravity, m.damping, m.edges, m.rest_length, m.bar_stiffness, m.bar_stop_strain,
+              m.bar_stop_stiffness, m.hinges, m.hinge_rest_angle, m.hinge_length, m.hinge_label, m.hinge_stiffness,
+              m.hinge_damping, m.fold_limit_stiffness, m.anchor_vertex, m.anchor_stiffness, m.floor_incline,
+              m.mu_static, m.mu_kinetic, *incidence, sim.dt_sub, int(num_substeps), sim.newton, sim.slip_speed,
+              sim.bar_strain_limit, sim.speed_limit, sim.fold_tolerance, state.external_force, control.anchor_target]
+    outputs = [state.positions, state.velocities, scratch["x_prev"], scratch["delta"], state.floor_force,
+               scratch["hess"], scratch["grad"], state.bar_strain, state.crease_angle, state.contact, state.unstable,
+               state.step_count]
+    return inputs, outputs
+
+
+class TileSubsteps:
+    """The implicit substeps of every world of ``model``, one block of threads per world.
+
+    Args:
+        model: the batch (:class:`~warpworm.model.Model`); its topology sets the kernel's tile size (3V).
+        simulator: the :class:`~warpworm.simulator.Simulator` whose substep length, Newton count, friction and
+            stability settings are used (read at each new recording, as ``_world_cmd`` does).
+        block_dim: threads per world; default 128 on CUDA, 1 on the CPU. On the CPU values above 1 run as
+            cooperative fibers only with ``wp.config.enable_cpu_blocks`` set (slower; for testing the block logic),
+            else Warp runs 1.
+    """
+
+    def __init__(self, model, simulator, block_dim: int | None = None):
+        from .kernels.implicit_tile import make_tile_substep_kernel
+
+        self.model = model
+        self.simulator = simulator
+        if block_dim is None:
+            block_dim = DEFAULT_CUDA_BLOCK_DIM if model.device.is_cuda else 1
+        if not 1 <= int(block_dim) <= 1024:
+            raise ValueError(f"block_dim: expected 1..1024 threads per world, got {block_dim}")
+        self.block_dim = int(block_dim)
+        V = model.num_vertices
+        edges = model.edges.numpy()
+        hinges = model.hinges.numpy()
+        self.bandwidth = int(model.vertex_bandwidth)
+        bs, bi = vertex_incidence(edges, V)
+        hs, hi = vertex_incidence(hinges, V)
+        dev = model.device
+        self.incidence = [wp.array(a, dtype=wp.int32, device=dev) for a in (bs, bi, hs, hi)]
+        """Vertex -> bars and vertex -> hinges, CSR: [bar start (V + 1,), bars, hinge start (V + 1,), hinges]."""
+        self.kernel = make_tile_substep_kernel(V, self.bandwidth)
+        W = model.num_worlds
+        self.scratch = {
+            "x_prev": wp.zeros((W, V), dtype=wp.vec3, device=dev),
+            "delta": wp.zeros((W, V), dtype=wp.vec3, device=dev),
+            "hess": wp.zeros((W, V, self.bandwidth + 1), dtype=wp.mat33, device=dev),
+            "grad": wp.zeros((W, V), dtype=wp.vec3, device=dev),
+        }
+        """The solver's scratch, shared by every state it steps (nothing in it outlives a launch; delta is zero
+        between launches): x_prev, delta (W, V) vec3 [m], hess (W, V, B + 1) mat33, grad (W, V) vec3."""
+        self._cmds = {}
+
+    @property
+    def shared_bytes_per_world(self) -> int:
+        """Shared memory one block (world) needs [bytes]: the 3V × 3V float32 tile, the right-hand side and the
+        reductions' scratch, as Warp computes it (needs the module built for this device)."""
+        self.kernel.module.load(self.model.device, self.block_dim)
+        return int(self.kernel.adj.get_total_required_shared())
+
+    def _cmd(self, state, control, num_substeps: int):
+        key = (id(state), id(control), int(num_substeps))
+        cmd = self._cmds.get(key)
+        if cmd is not None and cmd[0] is state and cmd[1] is control:
+            return cmd[2]
+        inputs, outputs = kernel_arguments(self.model, self.simulator, state, control, self.scratch, self.incidence,
+                                           num_substeps)
+        c = wp.launch_tiled(self.kernel, dim=self.model.num_worlds, inputs=inputs, outputs=outputs,
+                            block_dim=self.block_dim, device=self.model.device, record_cmd=True)
+        self._cmds[key] = (state, control, c)
+        return c
+
+    def launch(self, state, num_substeps: int, control=None) -> None:
+        """Advance every world of ``state`` by ``num_substeps`` implicit substeps (in place) under ``control``
+        (default the simulator's), as ``Simulator._world_cmd(state, control, num_substeps).launch()`` does.
+        Recorded once per (state, control, count)."""
+        if int(num_substeps) < 1:
+            raise ValueError(f"num_substeps: expected >= 1, got {num_substeps}")
+        self._cmd(state, control if control is not None else self.simulator.control, num_substeps).launch()
