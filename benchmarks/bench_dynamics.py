@@ -59,7 +59,7 @@ def bench_one(W: int, magnet_model: str, device: str, with_numpy: bool, min_time
     sim = Simulator(model, dt=DT, substeps=SUBSTEPS)
     state = sim.initial_state()
     sim.step(state, 1)
-    cmd = sim._world_cmd(state, SUBSTEPS)
+    cmd = sim._world_cmd(state, sim.control, SUBSTEPS)
     t_sub = _timeit(cmd.launch, min_time) / SUBSTEPS
     t_wrench = _timeit(lambda: sim.update_magnets(state), min_time, max_reps=20)
     t_step = t_wrench + SUBSTEPS * t_sub  # one step = one wrench + SUBSTEPS substeps (measured apart: cheaper)

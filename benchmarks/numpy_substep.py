@@ -59,8 +59,9 @@ class NumpyImplicit:
         self.anchor_k = np.broadcast_to(model.anchor_stiffness.numpy().astype(np.float64), (self.W, A))
         self.anchor_target = None
 
-    def init(self, state):
-        self.anchor_target = state.anchor_target.numpy().astype(np.float64)
+    def init(self, state, control=None):
+        """The reference's start from a Warp ``state`` (and the anchor targets of ``control``, if any)."""
+        self.anchor_target = None if control is None else control.anchor_target.numpy().astype(np.float64)
         return (state.positions.numpy().astype(np.float64).copy(), state.velocities.numpy().astype(np.float64).copy(),
                 state.crease_angle.numpy().astype(np.float64).copy())
 

@@ -124,397 +124,476 @@ def dof_projector(status: int, n: wp.vec3) -> wp.mat33:
     return wp.identity(n=3, dtype=float)
 
 
+@wp.struct
+class BarHingeModel:
+    """The model arrays the substep reads (shapes as :class:`warpworm.model.Model`; "(R, ...)": R = 1 shared or W
+    rows, read at row ``world % R``)."""
+
+    inv_mass: wp.array2d(dtype=float)  # (R, V) [1/kg]
+    gravity: wp.array(dtype=float)  # (R,) [m/s²] along −z
+    damping: wp.array(dtype=float)  # (R,) linear velocity damping [1/s]
+    edges: wp.array2d(dtype=wp.int32)  # (E, 2)
+    rest_length: wp.array2d(dtype=float)  # (R, E) [m]
+    bar_stiffness: wp.array2d(dtype=float)  # (R, E) EA [N]
+    bar_stop_strain: wp.array2d(dtype=wp.vec2)  # (R, E) (shortened, stretched) stop strains
+    bar_stop_stiffness: wp.array2d(dtype=float)  # (R, E) EA of the stop [N]
+    hinges: wp.array2d(dtype=wp.int32)  # (H, 4)
+    hinge_rest: wp.array2d(dtype=float)  # (R, H) [rad]
+    hinge_length: wp.array2d(dtype=float)  # (R, H) [m]
+    hinge_label: wp.array(dtype=wp.int32)  # (H,)
+    hinge_stiffness: wp.array(dtype=float)  # (R,) k_α per metre of crease [N·m/rad/m]
+    hinge_damping: wp.array(dtype=float)  # (R,) c_α per metre of crease [N·m·s/rad/m]
+    fold_limit_stiffness: wp.array(dtype=float)  # (R,) NoFoldThrough barrier per metre [N·m/rad/m]
+    anchor_vertex: wp.array(dtype=wp.int32)  # (A,)
+    anchor_stiffness: wp.array2d(dtype=float)  # (R, A) [N/m]
+    floor_incline: wp.array(dtype=float)  # (R,) [rad] about +y
+    mu_static: wp.array(dtype=float)  # (R,)
+    mu_kinetic: wp.array(dtype=float)  # (R,)
+
+
+@wp.struct
+class SubstepOptions:
+    """The solver's settings (:class:`warpworm.simulator.Simulator`)."""
+
+    dt: float  # substep [s]
+    num_substeps: int  # substeps per launch
+    newton: int  # Newton steps per substep (>= 2)
+    slip_speed: float  # static-friction regularisation ε [m/s]
+    strain_limit: wp.array(dtype=float)  # (E,) |strain| beyond which a world explodes
+    speed_limit: float  # [m/s] beyond which (or non-finite) a world explodes
+    fold_tolerance: float  # [rad] beyond a crease's range: the world crumpled
+
+
+@wp.struct
+class BarHingeState:
+    """The physical state the substep advances (shapes as :class:`warpworm.model.State`)."""
+
+    x: wp.array2d(dtype=wp.vec3)  # (W, V) [m]
+    v: wp.array2d(dtype=wp.vec3)  # (W, V) [m/s]
+    floor_force: wp.array2d(dtype=wp.vec3)  # (W, V) [N] the floor's force in the last substep
+    bar_strain: wp.array2d(dtype=float)  # (W, E)
+    crease_angle: wp.array2d(dtype=float)  # (W, H) [rad] unwrapped
+    contact: wp.array2d(dtype=wp.int32)  # (W, V) CONTACT_*
+    unstable: wp.array(dtype=wp.int32)  # (W,) 0, 1 exploded, 2 crumpled
+    step_count: wp.array(dtype=wp.int32)  # (W,) substeps since t = 0
+
+
+@wp.struct
+class NewtonScratch:
+    """The solver's own scratch (:class:`warpworm.simulator.Simulator` owns it; its values mean nothing between
+    launches, except ``delta`` which is zero there)."""
+
+    x_prev: wp.array2d(dtype=wp.vec3)  # (W, V) positions at the start of the substep [m]
+    delta: wp.array2d(dtype=wp.vec3)  # (W, V) x − x̃ [m]
+    hess: wp.array3d(dtype=wp.mat33)  # (W, V, B + 1) lower block band of the Newton matrix
+    grad: wp.array2d(dtype=wp.vec3)  # (W, V) right-hand side, then the Newton step
+
+
+@wp.struct
+class WorldCoefficients:
+    """One world's parameter rows and scalars, read once per launch."""
+
+    im_row: int
+    rl_row: int
+    ea_row: int
+    hr_row: int
+    hl_row: int
+    ak_row: int
+    gravity: wp.vec3  # [m/s²]
+    damp: float  # 1 / (1 + c dt)
+    k_hinge: float
+    c_hinge: float
+    k_limit: float
+    floor_n: wp.vec3  # the floor's unit normal
+    mu_s: float
+    mu_k: float
+    dt: float
+    inv_dt: float
+    inv_dt2: float
+
+
 @wp.func
-def assemble(
-    world: int,
-    im_row: int,
-    rl_row: int,
-    ea_row: int,
-    hr_row: int,
-    hl_row: int,
-    ak_row: int,
-    inv_mass: wp.array2d(dtype=float),
-    edges: wp.array2d(dtype=wp.int32),
-    rest_length: wp.array2d(dtype=float),
-    bar_stiffness: wp.array2d(dtype=float),
-    bar_stop_strain: wp.array2d(dtype=wp.vec2),
-    bar_stop_stiffness: wp.array2d(dtype=float),
-    hinges: wp.array2d(dtype=wp.int32),
-    hinge_rest: wp.array2d(dtype=float),
-    hinge_length: wp.array2d(dtype=float),
-    hinge_label: wp.array(dtype=wp.int32),
-    k_hinge: float,
-    c_hinge: float,
-    anchor_vertex: wp.array(dtype=wp.int32),
-    anchor_stiffness: wp.array2d(dtype=float),
-    anchor_target: wp.array2d(dtype=wp.vec3),
-    k_limit: float,
-    strain_limit: wp.array(dtype=float),
-    inv_dt: float,
-    floor_n: wp.vec3,
-    mu_s: float,
-    mu_k: float,
-    slip_speed: float,
-    with_hessian: bool,
-    x: wp.array2d(dtype=wp.vec3),
-    v: wp.array2d(dtype=wp.vec3),
-    delta: wp.array2d(dtype=wp.vec3),
-    crease_angle: wp.array2d(dtype=float),
-    contact: wp.array2d(dtype=wp.int32),
-    floor_force: wp.array2d(dtype=wp.vec3),
-    bar_strain: wp.array2d(dtype=float),
-    hess: wp.array3d(dtype=wp.mat33),
-    grad: wp.array2d(dtype=wp.vec3),
-):
-    """Gradient ∂Φ/∂x of the substep's objective (inertia, bars, creases, anchors; with the Hessian also the floor
-    friction, :func:`friction_force`) into ``grad[world]`` and, ``with_hessian``, its Gauss–Newton Hessian projected
-    on each vertex's allowed directions into ``hess[world]``. ``crease_angle`` holds the angles at the start of the
-    substep (damping, unwrapping).
-    Returns 1 if a bar is strained beyond its ``strain_limit`` (per bar; or non-finite), else 0."""
-    nv = x.shape[1]
-    bw = hess.shape[2] - 1
+def world_coefficients(m: BarHingeModel, world: int, dt: float) -> WorldCoefficients:
+    c = WorldCoefficients()
+    c.im_row = world % m.inv_mass.shape[0]
+    c.rl_row = world % m.rest_length.shape[0]
+    c.ea_row = world % m.bar_stiffness.shape[0]
+    c.hr_row = world % m.hinge_rest.shape[0]
+    c.hl_row = world % m.hinge_length.shape[0]
+    c.ak_row = world % m.anchor_stiffness.shape[0]
+    c.gravity = wp.vec3(0.0, 0.0, -pw(m.gravity, world))
+    c.damp = 1.0 / (1.0 + pw(m.damping, world) * dt)
+    c.k_hinge = pw(m.hinge_stiffness, world)
+    c.c_hinge = pw(m.hinge_damping, world)
+    c.k_limit = pw(m.fold_limit_stiffness, world)
+    beta = pw(m.floor_incline, world)
+    c.floor_n = wp.vec3(-wp.sin(beta), 0.0, wp.cos(beta))
+    c.mu_s = pw(m.mu_static, world)
+    c.mu_k = pw(m.mu_kinetic, world)
+    c.dt = dt
+    c.inv_dt = 1.0 / dt
+    c.inv_dt2 = c.inv_dt * c.inv_dt
+    return c
+
+
+@wp.func
+def inertia_and_friction(world: int, c: WorldCoefficients, m: BarHingeModel, slip_speed: float, with_hessian: bool,
+                         s: BarHingeState, w: NewtonScratch):
+    """Start ``grad`` (and the Hessian's band) with the inertia term M (x − x̃) / dt² and the floor friction."""
+    nv = s.x.shape[1]
+    bw = w.hess.shape[2] - 1
     eye = wp.identity(n=3, dtype=float)
-    inv_dt2 = inv_dt * inv_dt
     for i in range(nv):
-        m_dt2 = mass_over_dt2(inv_mass[im_row, i], inv_dt2)
-        g = delta[world, i] * m_dt2  # delta is 0 for a vertex of infinite mass
+        m_dt2 = mass_over_dt2(m.inv_mass[c.im_row, i], c.inv_dt2)
+        g = w.delta[world, i] * m_dt2  # delta is 0 for a vertex of infinite mass
         if with_hessian:
             # m/dt² on the diagonal in every direction, also the fixed ones (keeps the matrix definite; their rows
             # are decoupled by the projection and their update is zero)
             diag = eye * m_dt2
-            st = contact[world, i]
+            st = s.contact[world, i]
             if st == CONTACT_SLIDING or st == CONTACT_STUCK:
-                vel = v[world, i] + delta[world, i] * inv_dt
-                vt = vel - floor_n * wp.dot(vel, floor_n)
-                f, c, t = friction_force(st, vt, wp.dot(floor_force[world, i], floor_n), mu_s, mu_k, slip_speed)
+                vel = s.v[world, i] + w.delta[world, i] * c.inv_dt
+                vt = vel - c.floor_n * wp.dot(vel, c.floor_n)
+                f, kf, t = friction_force(st, vt, wp.dot(s.floor_force[world, i], c.floor_n), c.mu_s, c.mu_k,
+                                          slip_speed)
                 g = g - f
-                diag = diag + (eye - wp.outer(floor_n, floor_n) - wp.outer(t, t)) * (c * inv_dt)
-            hess[world, i, 0] = diag
+                diag = diag + (eye - wp.outer(c.floor_n, c.floor_n) - wp.outer(t, t)) * (kf * c.inv_dt)
+            w.hess[world, i, 0] = diag
             for k in range(1, bw + 1):
-                hess[world, i, k] = wp.mat33(0.0)
-        grad[world, i] = g
-    for e in range(edges.shape[0]):
-        a = edges[e, 0]
-        b = edges[e, 1]
-        d = x[world, a] - x[world, b]
+                w.hess[world, i, k] = wp.mat33(0.0)
+        w.grad[world, i] = g
+
+
+@wp.func
+def bar_terms(world: int, c: WorldCoefficients, m: BarHingeModel, strain_limit: wp.array(dtype=float),
+              with_hessian: bool, s: BarHingeState, w: NewtonScratch) -> int:
+    """Add every bar's spring (and a waist bar's stop) to ``grad`` / the Hessian; record its strain.
+    Returns 1 if a bar is strained beyond its ``strain_limit`` (or non-finite), else 0."""
+    eye = wp.identity(n=3, dtype=float)
+    for e in range(m.edges.shape[0]):
+        a = m.edges[e, 0]
+        b = m.edges[e, 1]
+        d = s.x[world, a] - s.x[world, b]
         length = wp.length(d)
-        l0 = rest_length[rl_row, e]
+        l0 = m.rest_length[c.rl_row, e]
         strain = (length - l0) / l0
-        bar_strain[world, e] = strain
+        s.bar_strain[world, e] = strain
         if not (wp.abs(strain) < strain_limit[e]):  # also catches NaN
             return 1
         n = d / length
-        ka = bar_stiffness[ea_row, e] / l0
+        ka = m.bar_stiffness[c.ea_row, e] / l0
         f = n * (ka * (length - l0))
         k_axial = ka
         # a soft waist bar strained past its stops (−ε_c shortened, +ε_t stretched) turns rigid: the sheet's panels,
         # which the soft bar stands for, bend only so far (without them a hard squeeze flattens the waist triangles
         # into slivers, whose crease gradients blow up, or pinches the waist through the axis)
-        stops = bar_stop_strain[world % bar_stop_strain.shape[0], e]
+        stops = m.bar_stop_strain[world % m.bar_stop_strain.shape[0], e]
         stop = wp.where(strain < 0.0, -stops[0], stops[1])
         l_stop = l0 * (1.0 + stop)
         k_trans = ka * wp.max(0.0, 1.0 - l0 / length)
         if wp.where(strain < 0.0, strain < stop, strain > stop):
-            ks = bar_stop_stiffness[ea_row % bar_stop_stiffness.shape[0], e] / l0
+            ks = m.bar_stop_stiffness[c.ea_row % m.bar_stop_stiffness.shape[0], e] / l0
             f = f + n * (ks * (length - l_stop))
             k_axial = k_axial + ks
             k_trans = k_trans + ks * wp.max(0.0, 1.0 - l_stop / length)  # the stop's tension, as the bar's
-        grad[world, a] = grad[world, a] + f
-        grad[world, b] = grad[world, b] - f
+        w.grad[world, a] = w.grad[world, a] + f
+        w.grad[world, b] = w.grad[world, b] - f
         if with_hessian:
             nn = wp.outer(n, n)
             # the compressive geometric stiffness is dropped (keeps the matrix positive definite)
             kb = k_axial * nn + k_trans * (eye - nn)
-            band_add_block(world, hess, a, a, kb)
-            band_add_block(world, hess, b, b, kb)
-            band_add_block(world, hess, a, b, -kb)
-    for h in range(hinges.shape[0]):
-        i0 = hinges[h, 0]
-        i1 = hinges[h, 1]
-        i2 = hinges[h, 2]
-        i3 = hinges[h, 3]
-        psi, g0, g1, g2, g3 = dihedral_angle_and_gradient(x[world, i0], x[world, i1], x[world, i2], x[world, i3])
-        prev = crease_angle[world, h]
+            band_add_block(world, w.hess, a, a, kb)
+            band_add_block(world, w.hess, b, b, kb)
+            band_add_block(world, w.hess, a, b, -kb)
+    return 0
+
+
+@wp.func
+def crease_terms(world: int, c: WorldCoefficients, m: BarHingeModel, with_hessian: bool, s: BarHingeState,
+                 w: NewtonScratch):
+    """Add every crease's spring, its damping and its NoFoldThrough barrier to ``grad`` / the Hessian
+    (``crease_angle`` holds the angles at the start of the substep: damping, unwrapping)."""
+    for h in range(m.hinges.shape[0]):
+        i0 = m.hinges[h, 0]
+        i1 = m.hinges[h, 1]
+        i2 = m.hinges[h, 2]
+        i3 = m.hinges[h, 3]
+        psi, g0, g1, g2, g3 = dihedral_angle_and_gradient(s.x[world, i0], s.x[world, i1], s.x[world, i2],
+                                                          s.x[world, i3])
+        prev = s.crease_angle[world, h]
         phi = prev + wrap_angle(psi - prev)
-        lh = hinge_length[hl_row, h]
-        torque = lh * (k_hinge * (phi - hinge_rest[hr_row, h]) + c_hinge * inv_dt * (phi - prev))
-        stiff = lh * (k_hinge + c_hinge * inv_dt)
-        lo, hi = fold_range(hinge_label[h])
+        lh = m.hinge_length[c.hl_row, h]
+        torque = lh * (c.k_hinge * (phi - m.hinge_rest[c.hr_row, h]) + c.c_hinge * c.inv_dt * (phi - prev))
+        stiff = lh * (c.k_hinge + c.c_hinge * c.inv_dt)
+        lo, hi = fold_range(m.hinge_label[h])
         if phi < lo or phi > hi:
-            torque += k_limit * lh * (phi - wp.where(phi < lo, lo, hi))
-            stiff += k_limit * lh
-        grad[world, i0] = grad[world, i0] + g0 * torque
-        grad[world, i1] = grad[world, i1] + g1 * torque
-        grad[world, i2] = grad[world, i2] + g2 * torque
-        grad[world, i3] = grad[world, i3] + g3 * torque
+            torque += c.k_limit * lh * (phi - wp.where(phi < lo, lo, hi))
+            stiff += c.k_limit * lh
+        w.grad[world, i0] = w.grad[world, i0] + g0 * torque
+        w.grad[world, i1] = w.grad[world, i1] + g1 * torque
+        w.grad[world, i2] = w.grad[world, i2] + g2 * torque
+        w.grad[world, i3] = w.grad[world, i3] + g3 * torque
         if with_hessian:
             # Gauss–Newton: the angle's curvature term (torque ∇²φ) is dropped
-            band_add_block(world, hess, i0, i0, stiff * wp.outer(g0, g0))
-            band_add_block(world, hess, i1, i1, stiff * wp.outer(g1, g1))
-            band_add_block(world, hess, i2, i2, stiff * wp.outer(g2, g2))
-            band_add_block(world, hess, i3, i3, stiff * wp.outer(g3, g3))
-            band_add_block(world, hess, i1, i0, stiff * wp.outer(g1, g0))
-            band_add_block(world, hess, i2, i0, stiff * wp.outer(g2, g0))
-            band_add_block(world, hess, i3, i0, stiff * wp.outer(g3, g0))
-            band_add_block(world, hess, i2, i1, stiff * wp.outer(g2, g1))
-            band_add_block(world, hess, i3, i1, stiff * wp.outer(g3, g1))
-            band_add_block(world, hess, i3, i2, stiff * wp.outer(g3, g2))
-    for an in range(anchor_vertex.shape[0]):
-        pv = anchor_vertex[an]
-        ka = anchor_stiffness[ak_row, an]
+            band_add_block(world, w.hess, i0, i0, stiff * wp.outer(g0, g0))
+            band_add_block(world, w.hess, i1, i1, stiff * wp.outer(g1, g1))
+            band_add_block(world, w.hess, i2, i2, stiff * wp.outer(g2, g2))
+            band_add_block(world, w.hess, i3, i3, stiff * wp.outer(g3, g3))
+            band_add_block(world, w.hess, i1, i0, stiff * wp.outer(g1, g0))
+            band_add_block(world, w.hess, i2, i0, stiff * wp.outer(g2, g0))
+            band_add_block(world, w.hess, i3, i0, stiff * wp.outer(g3, g0))
+            band_add_block(world, w.hess, i2, i1, stiff * wp.outer(g2, g1))
+            band_add_block(world, w.hess, i3, i1, stiff * wp.outer(g3, g1))
+            band_add_block(world, w.hess, i3, i2, stiff * wp.outer(g3, g2))
+
+
+@wp.func
+def anchor_terms(world: int, c: WorldCoefficients, m: BarHingeModel, anchor_target: wp.array2d(dtype=wp.vec3),
+                 with_hessian: bool, s: BarHingeState, w: NewtonScratch):
+    """Add every anchor's spring ½ k |x − target|² to ``grad`` / the Hessian."""
+    eye = wp.identity(n=3, dtype=float)
+    for an in range(m.anchor_vertex.shape[0]):
+        pv = m.anchor_vertex[an]
+        ka = m.anchor_stiffness[c.ak_row, an]
         if ka > 0.0:
-            grad[world, pv] = grad[world, pv] + (x[world, pv] - anchor_target[world, an]) * ka
+            w.grad[world, pv] = w.grad[world, pv] + (s.x[world, pv] - anchor_target[world, an]) * ka
             if with_hessian:
-                band_add_block(world, hess, pv, pv, eye * ka)
+                band_add_block(world, w.hess, pv, pv, eye * ka)
+
+
+@wp.func
+def project_on_contacts(world: int, c: WorldCoefficients, m: BarHingeModel, s: BarHingeState, w: NewtonScratch):
+    """The Newton step restricted to each vertex's allowed directions: block (u, v) -> P_u B P_v; the removed
+    directions of a diagonal block get m/dt² back (keeps the matrix definite; their update is zero)."""
+    nv = s.x.shape[1]
+    bw = w.hess.shape[2] - 1
+    eye = wp.identity(n=3, dtype=float)
+    for u in range(nv):
+        su = s.contact[world, u]
+        for band in range(bw + 1):
+            vv = u - band
+            if vv >= 0:
+                sv = s.contact[world, vv]
+                if su != CONTACT_FREE or sv != CONTACT_FREE:
+                    pu = dof_projector(su, c.floor_n)
+                    blk = pu * w.hess[world, u, band] * dof_projector(sv, c.floor_n)
+                    if band == 0:
+                        blk = blk + (eye - pu) * mass_over_dt2(m.inv_mass[c.im_row, u], c.inv_dt2)
+                    w.hess[world, u, band] = blk
+
+
+@wp.func
+def assemble(world: int, c: WorldCoefficients, m: BarHingeModel, opt: SubstepOptions,
+             anchor_target: wp.array2d(dtype=wp.vec3), with_hessian: bool, s: BarHingeState,
+             w: NewtonScratch) -> int:
+    """Gradient ∂Φ/∂x of the substep's objective (inertia, bars, creases, anchors; with the Hessian also the floor
+    friction, :func:`friction_force`) into ``w.grad[world]`` and, ``with_hessian``, its Gauss–Newton Hessian
+    projected on each vertex's allowed directions into ``w.hess[world]``.
+    Returns 1 if a bar is strained beyond its ``strain_limit`` (per bar; or non-finite), else 0."""
+    inertia_and_friction(world, c, m, opt.slip_speed, with_hessian, s, w)
+    if bar_terms(world, c, m, opt.strain_limit, with_hessian, s, w) != 0:
+        return 1
+    crease_terms(world, c, m, with_hessian, s, w)
+    anchor_terms(world, c, m, anchor_target, with_hessian, s, w)
     if with_hessian:
-        # the Newton step restricted to each vertex's allowed directions: block (u, v) -> P_u B P_v; the removed
-        # directions of a diagonal block get m/dt² back (keeps the matrix definite; their update is zero)
-        for u in range(nv):
-            su = contact[world, u]
-            for band in range(bw + 1):
-                vv = u - band
-                if vv >= 0:
-                    sv = contact[world, vv]
-                    if su != CONTACT_FREE or sv != CONTACT_FREE:
-                        pu = dof_projector(su, floor_n)
-                        blk = pu * hess[world, u, band] * dof_projector(sv, floor_n)
-                        if band == 0:
-                            blk = blk + (eye - pu) * mass_over_dt2(inv_mass[im_row, u], inv_dt2)
-                        hess[world, u, band] = blk
+        project_on_contacts(world, c, m, s, w)
     return 0
+
+
+@wp.func
+def predict(world: int, c: WorldCoefficients, m: BarHingeModel, slip_speed: float,
+            f_ext: wp.array2d(dtype=wp.vec3), s: BarHingeState, w: NewtonScratch):
+    """Predict x̃; x starts there, except that a vertex on the floor (touching at the end of the last substep, or
+    predicted below it) starts stuck on it, unless it is moving off it: every substep first tries static friction,
+    the Coulomb test of :func:`update_contacts` lets go where it cannot hold."""
+    dt = c.dt
+    for i in range(s.x.shape[1]):
+        w_inv = m.inv_mass[c.im_row, i]
+        vel = wp.vec3(0.0)
+        v_old = s.v[world, i]
+        if w_inv > 0.0:
+            # linear damping on the velocity carried over, not on this substep's forces (damping them too
+            # would lower a hanging worm's weight on its anchors by the factor 1 / (1 + c dt))
+            vel = v_old * c.damp + dt * (c.gravity + f_ext[world, i] * w_inv)
+        p = s.x[world, i]
+        w.x_prev[world, i] = p
+        s.v[world, i] = vel
+        h0 = wp.dot(p, c.floor_n)
+        vn = wp.dot(vel, c.floor_n)
+        start = vel
+        st = CONTACT_FREE
+        if not (w_inv > 0.0):
+            st = CONTACT_FIXED
+        elif vn < 0.0 and (s.contact[world, i] != CONTACT_FREE or h0 + dt * vn < 0.0):
+            # on the floor (still, or landing): stuck or sliding by the speed along the floor it has (a contact
+            # moving along the floor is sliding whatever it did in the last substep, e.g. a worm kicked at rest);
+            # a stuck vertex starts where it is tangentially, a sliding one moves on; neither goes below it
+            vt_old = v_old - c.floor_n * wp.dot(v_old, c.floor_n)
+            st = wp.where(wp.length(vt_old) > slip_speed, CONTACT_SLIDING, CONTACT_STUCK)
+            start = c.floor_n * wp.max(vn, -h0 * c.inv_dt)
+            if st == CONTACT_SLIDING:
+                start = start + (vel - c.floor_n * vn)
+            if s.contact[world, i] == CONTACT_FREE:
+                s.floor_force[world, i] = c.floor_n * (-(h0 + dt * vn) * mass_over_dt2(w_inv, c.inv_dt2))
+        s.contact[world, i] = st
+        s.x[world, i] = p + dt * start
+        w.delta[world, i] = (start - vel) * dt
+
+
+@wp.func
+def update_contacts(world: int, c: WorldCoefficients, m: BarHingeModel, slip_speed: float, s: BarHingeState,
+                    w: NewtonScratch):
+    """Between Newton steps (``w.grad`` holds ∂Φ/∂x at the current x): the floor's normal force at each contact is
+    n · ∂Φ/∂x there (what holds the vertex against the rest of the implicit step); a contact the floor would have to
+    pull lets go; a stuck vertex faster than the slip speed broke loose, a sliding one whose motion reversed (kinetic
+    friction stopped it) or fell below half the slip speed sticks; a free vertex the last step put below the floor
+    lands."""
+    dt = c.dt
+    for i in range(s.x.shape[1]):
+        st = s.contact[world, i]
+        if st == CONTACT_FIXED:
+            continue
+        vel0 = s.v[world, i]
+        vel = vel0 + w.delta[world, i] * c.inv_dt
+        vn = wp.dot(vel, c.floor_n)
+        if st == CONTACT_FREE:
+            depth = -(wp.dot(w.x_prev[world, i], c.floor_n) + dt * vn)
+            if depth > 0.0:
+                vel = vel + c.floor_n * (depth * c.inv_dt)
+                s.x[world, i] = w.x_prev[world, i] + vel * dt
+                w.delta[world, i] = (vel - vel0) * dt
+                # stuck: it lets go at the next update if static friction cannot hold it
+                s.contact[world, i] = CONTACT_STUCK
+                s.floor_force[world, i] = c.floor_n * (depth * mass_over_dt2(m.inv_mass[c.im_row, i], c.inv_dt2))
+            continue
+        fn = wp.dot(w.grad[world, i], c.floor_n)  # friction is tangential: not in the normal balance
+        if not (fn > 0.0):
+            s.contact[world, i] = CONTACT_FREE
+            s.floor_force[world, i] = wp.vec3(0.0)
+            continue
+        vt = vel - c.floor_n * vn
+        vt_len = wp.length(vt)
+        ff = s.floor_force[world, i]
+        fn_old = wp.dot(ff, c.floor_n)
+        # the viscous static friction supplied (mu_s F_n,old / ε)|v_t|: more than mu_s F_n (the normal force now
+        # known) means static friction cannot hold it
+        if st == CONTACT_STUCK and vt_len * fn_old > slip_speed * fn:
+            s.contact[world, i] = CONTACT_SLIDING
+        elif st == CONTACT_SLIDING and (wp.dot(vt, ff) > 0.0 or vt_len < 0.5 * slip_speed):
+            s.contact[world, i] = CONTACT_STUCK
+        f, kf, t = friction_force(s.contact[world, i], vt, fn, c.mu_s, c.mu_k, slip_speed)
+        s.floor_force[world, i] = c.floor_n * fn + f
+
+
+@wp.func
+def newton_update(world: int, c: WorldCoefficients, s: BarHingeState, w: NewtonScratch):
+    """Solve H dx = −grad restricted to the allowed directions and apply dx to x and to x − x̃."""
+    nv = s.x.shape[1]
+    bw = w.hess.shape[2] - 1
+    for i in range(nv):
+        g = w.grad[world, i]
+        st = s.contact[world, i]
+        if st != CONTACT_FREE:
+            g = dof_projector(st, c.floor_n) * g
+        w.grad[world, i] = g
+    band_cholesky_factor(world, nv, bw, w.hess)
+    band_cholesky_solve(world, nv, bw, w.hess, w.grad)
+    for i in range(nv):
+        dx = -w.grad[world, i]
+        s.x[world, i] = s.x[world, i] + dx
+        w.delta[world, i] = w.delta[world, i] + dx
+
+
+@wp.func
+def finish_substep(world: int, c: WorldCoefficients, m: BarHingeModel, opt: SubstepOptions, s: BarHingeState,
+                   w: NewtonScratch) -> int:
+    """The floor once more (vertices that reached it in the last step) and v = v' + (x − x̃) / dt.
+    Returns 1 if a vertex is faster than ``speed_limit`` (or non-finite), else 0."""
+    dt = c.dt
+    bad = int(0)
+    for i in range(s.x.shape[1]):
+        # v = v' + (x − x̃) / dt with x − x̃ summed at its own precision (see floor_landing)
+        vel = s.v[world, i] + w.delta[world, i] * c.inv_dt
+        w.delta[world, i] = wp.vec3(0.0)
+        p0 = w.x_prev[world, i]
+        st = s.contact[world, i]
+        if st == CONTACT_FREE:
+            # a vertex that reaches the floor only in the last step: position-level contact and friction
+            p, vel, st, depth = floor_landing(p0, vel, c.floor_n, c.mu_s, c.mu_k, dt)
+            s.floor_force[world, i] = c.floor_n * (depth * mass_over_dt2(m.inv_mass[c.im_row, i], c.inv_dt2))
+        elif st == CONTACT_STUCK or st == CONTACT_SLIDING:
+            vn = wp.dot(vel, c.floor_n)
+            vel = vel + c.floor_n * (wp.max(vn, -wp.dot(p0, c.floor_n) * c.inv_dt) - vn)
+            vt = vel - c.floor_n * wp.dot(vel, c.floor_n)
+            fn = wp.dot(s.floor_force[world, i], c.floor_n)
+            f, kf, t = friction_force(st, vt, fn, c.mu_s, c.mu_k, opt.slip_speed)
+            s.floor_force[world, i] = c.floor_n * fn + f
+        else:
+            vel = wp.vec3(0.0)  # infinite mass
+            st = CONTACT_FREE
+        if not (wp.length(vel) < opt.speed_limit):  # NaN fails every comparison
+            bad = 1
+        s.x[world, i] = p0 + vel * dt
+        s.v[world, i] = vel
+        s.contact[world, i] = st
+    return bad
+
+
+@wp.func
+def update_crease_angles(world: int, m: BarHingeModel, fold_tolerance: float, s: BarHingeState) -> int:
+    """Unwrap every crease's angle to the end of the substep. Returns 1 if one left its NoFoldThrough range by more
+    than ``fold_tolerance`` (the sheet crumpled), else 0."""
+    crumpled = int(0)
+    for h in range(m.hinges.shape[0]):
+        psi, g0, g1, g2, g3 = dihedral_angle_and_gradient(s.x[world, m.hinges[h, 0]], s.x[world, m.hinges[h, 1]],
+                                                          s.x[world, m.hinges[h, 2]], s.x[world, m.hinges[h, 3]])
+        prev = s.crease_angle[world, h]
+        phi = prev + wrap_angle(psi - prev)
+        s.crease_angle[world, h] = phi
+        lo, hi = fold_range(m.hinge_label[h])
+        if phi < lo - fold_tolerance or phi > hi + fold_tolerance:
+            crumpled = 1
+    return crumpled
 
 
 @wp.kernel
 def implicit_step(
-    # Model:
-    inv_mass: wp.array2d(dtype=float),
-    gravity: wp.array(dtype=float),
-    damping: wp.array(dtype=float),
-    edges: wp.array2d(dtype=wp.int32),
-    rest_length: wp.array2d(dtype=float),
-    bar_stiffness: wp.array2d(dtype=float),
-    bar_stop_strain: wp.array2d(dtype=wp.vec2),
-    bar_stop_stiffness: wp.array2d(dtype=float),
-    hinges: wp.array2d(dtype=wp.int32),
-    hinge_rest: wp.array2d(dtype=float),
-    hinge_length: wp.array2d(dtype=float),
-    hinge_label: wp.array(dtype=wp.int32),
-    hinge_stiffness: wp.array(dtype=float),
-    hinge_damping: wp.array(dtype=float),
-    fold_limit_stiffness: wp.array(dtype=float),
-    anchor_vertex: wp.array(dtype=wp.int32),
-    anchor_stiffness: wp.array2d(dtype=float),
-    floor_incline: wp.array(dtype=float),
-    mu_static: wp.array(dtype=float),
-    mu_kinetic: wp.array(dtype=float),
-    dt: float,
-    num_substeps: int,
-    newton: int,
-    slip_speed: float,
-    strain_limit: wp.array(dtype=float),
-    speed_limit: float,
-    fold_tolerance: float,
-    # Data in:
+    m: BarHingeModel,
+    opt: SubstepOptions,
     f_ext: wp.array2d(dtype=wp.vec3),
     anchor_target: wp.array2d(dtype=wp.vec3),
-    # Data out:
-    x: wp.array2d(dtype=wp.vec3),
-    v: wp.array2d(dtype=wp.vec3),
-    x_prev: wp.array2d(dtype=wp.vec3),
-    delta: wp.array2d(dtype=wp.vec3),
-    floor_force: wp.array2d(dtype=wp.vec3),
-    hess: wp.array3d(dtype=wp.mat33),
-    grad: wp.array2d(dtype=wp.vec3),
-    bar_strain: wp.array2d(dtype=float),
-    crease_angle: wp.array2d(dtype=float),
-    contact: wp.array2d(dtype=wp.int32),
-    unstable: wp.array(dtype=wp.int32),
-    step_count: wp.array(dtype=wp.int32),
+    s: BarHingeState,
+    w: NewtonScratch,
 ):
-    """``num_substeps`` implicit-Euler substeps of length ``dt`` [s] of one world (module docstring). Launch dim (W,).
-
-    Shapes as :class:`warpworm.model.Model` / :class:`warpworm.model.State`: ``x``, ``v`` (W, V) [m, m/s];
-    ``delta (W, V)`` x − x̃ of the current substep [m] (zero between substeps); ``floor_force (W, V)`` the floor's
-    force on each vertex in the last substep (normal + friction) [N], also the next substep's first normal-force
-    estimate; ``hess (W, V, B + 1)`` (mat33) and
-    ``grad (W, V)`` (vec3) the Newton system's scratch; ``crease_angle (W, H)`` [rad] unwrapped, at the end of the step;
-    ``contact (W, V)`` 0 free, 1 sliding, 2 stuck (last substep).
-    """
+    """``opt.num_substeps`` implicit-Euler substeps of length ``opt.dt`` [s] of one world (module docstring).
+    Launch dim (W,). ``f_ext (W, V)`` the step's magnetic force on each vertex [N]; ``anchor_target (W, A)`` [m].
+    A world flagged unstable is frozen (skipped) from then on."""
     world = wp.tid()
-    if unstable[world] != 0:
+    if s.unstable[world] != 0:
         return
-    nv = x.shape[1]
-    nh = hinges.shape[0]
-    bw = hess.shape[2] - 1
-    im_row = world % inv_mass.shape[0]
-    rl_row = world % rest_length.shape[0]
-    ea_row = world % bar_stiffness.shape[0]
-    hr_row = world % hinge_rest.shape[0]
-    hl_row = world % hinge_length.shape[0]
-    ak_row = world % anchor_stiffness.shape[0]
-    gvec = wp.vec3(0.0, 0.0, -pw(gravity, world))
-    damp = 1.0 / (1.0 + pw(damping, world) * dt)
-    k_hinge = pw(hinge_stiffness, world)
-    c_hinge = pw(hinge_damping, world)
-    k_limit = pw(fold_limit_stiffness, world)
-    beta = pw(floor_incline, world)
-    floor_n = wp.vec3(-wp.sin(beta), 0.0, wp.cos(beta))
-    mu_s = pw(mu_static, world)
-    mu_k = pw(mu_kinetic, world)
-    inv_dt = 1.0 / dt
-    inv_dt2 = inv_dt * inv_dt
-
-    for s in range(num_substeps):
-        # 1. predict x̃; x starts there, except that a vertex on the floor (touching at the end of the last
-        #    substep, or predicted below it) starts stuck on it, unless it is moving off it: every substep first
-        #    tries static friction, the Coulomb test below lets go where it cannot hold
-        for i in range(nv):
-            w_inv = inv_mass[im_row, i]
-            vel = wp.vec3(0.0)
-            v_old = v[world, i]
-            if w_inv > 0.0:
-                # linear damping on the velocity carried over, not on this substep's forces (damping them too
-                # would lower a hanging worm's weight on its anchors by the factor 1 / (1 + c dt))
-                vel = v_old * damp + dt * (gvec + f_ext[world, i] * w_inv)
-            p = x[world, i]
-            x_prev[world, i] = p
-            v[world, i] = vel
-            h0 = wp.dot(p, floor_n)
-            vn = wp.dot(vel, floor_n)
-            start = vel
-            st = CONTACT_FREE
-            if not (w_inv > 0.0):
-                st = CONTACT_FIXED
-            elif vn < 0.0 and (contact[world, i] != CONTACT_FREE or h0 + dt * vn < 0.0):
-                # on the floor (still, or landing): stuck or sliding by the speed along the floor it has (a contact
-                # moving along the floor is sliding whatever it did in the last substep, e.g. a worm kicked at rest);
-                # a stuck vertex starts where it is tangentially, a sliding one moves on; neither goes below it
-                vt_old = v_old - floor_n * wp.dot(v_old, floor_n)
-                st = wp.where(wp.length(vt_old) > slip_speed, CONTACT_SLIDING, CONTACT_STUCK)
-                start = floor_n * wp.max(vn, -h0 * inv_dt)
-                if st == CONTACT_SLIDING:
-                    start = start + (vel - floor_n * vn)
-                if contact[world, i] == CONTACT_FREE:
-                    floor_force[world, i] = floor_n * (-(h0 + dt * vn) * mass_over_dt2(w_inv, inv_dt2))
-            contact[world, i] = st
-            x[world, i] = p + dt * start
-            delta[world, i] = (start - vel) * dt
-
-        # 2. Newton steps, the contacts updated before each after the first (module docstring)
+    c = world_coefficients(m, world, opt.dt)
+    for sub in range(opt.num_substeps):
+        predict(world, c, m, opt.slip_speed, f_ext, s, w)
         bad = int(0)
-        for it in range(newton):
+        for it in range(opt.newton):
             if it >= 1:
-                # the floor's normal force at each contact is n · ∂Φ/∂x there (what holds the vertex against the
-                # rest of the implicit step); a contact the floor would have to pull lets go; a stuck vertex faster
-                # than the slip speed broke loose, a sliding one whose motion reversed (kinetic friction stopped it)
-                # or fell below half the slip speed sticks; a free vertex the last step put below the floor lands
-                bad = assemble(world, im_row, rl_row, ea_row, hr_row, hl_row, ak_row, inv_mass, edges, rest_length,
-                               bar_stiffness, bar_stop_strain, bar_stop_stiffness, hinges, hinge_rest, hinge_length, hinge_label, k_hinge, c_hinge,
-                               anchor_vertex, anchor_stiffness, anchor_target, k_limit, strain_limit, inv_dt,
-                               floor_n, mu_s, mu_k, slip_speed, False, x, v, delta, crease_angle, contact,
-                               floor_force, bar_strain, hess, grad)
+                bad = assemble(world, c, m, opt, anchor_target, False, s, w)
                 if bad != 0:
                     break
-                for i in range(nv):
-                    st = contact[world, i]
-                    if st == CONTACT_FIXED:
-                        continue
-                    vel0 = v[world, i]
-                    vel = vel0 + delta[world, i] * inv_dt
-                    vn = wp.dot(vel, floor_n)
-                    if st == CONTACT_FREE:
-                        depth = -(wp.dot(x_prev[world, i], floor_n) + dt * vn)
-                        if depth > 0.0:
-                            vel = vel + floor_n * (depth * inv_dt)
-                            x[world, i] = x_prev[world, i] + vel * dt
-                            delta[world, i] = (vel - vel0) * dt
-                            # stuck: it lets go at the next update if static friction cannot hold it
-                            contact[world, i] = CONTACT_STUCK
-                            floor_force[world, i] = floor_n * (depth * mass_over_dt2(inv_mass[im_row, i], inv_dt2))
-                        continue
-                    fn = wp.dot(grad[world, i], floor_n)  # friction is tangential: not in the normal balance
-                    if not (fn > 0.0):
-                        contact[world, i] = CONTACT_FREE
-                        floor_force[world, i] = wp.vec3(0.0)
-                        continue
-                    vt = vel - floor_n * vn
-                    vt_len = wp.length(vt)
-                    ff = floor_force[world, i]
-                    fn_old = wp.dot(ff, floor_n)
-                    # the viscous static friction supplied (mu_s F_n,old / ε)|v_t|: more than mu_s F_n (the normal
-                    # force now known) means static friction cannot hold it
-                    if st == CONTACT_STUCK and vt_len * fn_old > slip_speed * fn:
-                        contact[world, i] = CONTACT_SLIDING
-                    elif st == CONTACT_SLIDING and (wp.dot(vt, ff) > 0.0 or vt_len < 0.5 * slip_speed):
-                        contact[world, i] = CONTACT_STUCK
-                    f, c, t = friction_force(contact[world, i], vt, fn, mu_s, mu_k, slip_speed)
-                    floor_force[world, i] = floor_n * fn + f
-            bad = assemble(world, im_row, rl_row, ea_row, hr_row, hl_row, ak_row, inv_mass, edges, rest_length,
-                           bar_stiffness, bar_stop_strain, bar_stop_stiffness, hinges, hinge_rest, hinge_length, hinge_label, k_hinge, c_hinge,
-                           anchor_vertex, anchor_stiffness, anchor_target, k_limit, strain_limit, inv_dt, floor_n,
-                           mu_s, mu_k, slip_speed, True, x, v, delta, crease_angle, contact, floor_force, bar_strain,
-                           hess, grad)
+                update_contacts(world, c, m, opt.slip_speed, s, w)
+            bad = assemble(world, c, m, opt, anchor_target, True, s, w)
             if bad != 0:
                 break
-            # the step restricted to the allowed directions: solve H dx = -grad
-            for i in range(nv):
-                g = grad[world, i]
-                st = contact[world, i]
-                if st != CONTACT_FREE:
-                    g = dof_projector(st, floor_n) * g
-                grad[world, i] = g
-            band_cholesky_factor(world, nv, bw, hess)
-            band_cholesky_solve(world, nv, bw, hess, grad)
-            for i in range(nv):
-                dx = -grad[world, i]
-                x[world, i] = x[world, i] + dx
-                delta[world, i] = delta[world, i] + dx
+            newton_update(world, c, s, w)
+        if bad == 0:
+            bad = finish_substep(world, c, m, opt, s, w)
+            crumpled = update_crease_angles(world, m, opt.fold_tolerance, s)
+            if bad == 0 and crumpled != 0:
+                # a crease folded through its range by more than the tolerance: the sheet crumpled (flag 2)
+                freeze_world(world, s.x.shape[1], s.x, s.v, w.x_prev, w.delta, s.unstable)
+                s.unstable[world] = WORLD_CRUMPLED
+                return
         if bad != 0:
-            freeze_world(world, nv, x, v, x_prev, delta, unstable)
+            freeze_world(world, s.x.shape[1], s.x, s.v, w.x_prev, w.delta, s.unstable)
             return
-
-        # 3. floor once more (vertices that reached it in the last step), velocities, crease angles, stability
-        for i in range(nv):
-            # v = v' + (x − x̃) / dt with x − x̃ summed at its own precision (see floor_landing)
-            vel = v[world, i] + delta[world, i] * inv_dt
-            delta[world, i] = wp.vec3(0.0)
-            p0 = x_prev[world, i]
-            st = contact[world, i]
-            if st == CONTACT_FREE:
-                # a vertex that reaches the floor only in the last step: position-level contact and friction
-                p, vel, st, depth = floor_landing(p0, vel, floor_n, mu_s, mu_k, dt)
-                floor_force[world, i] = floor_n * (depth * mass_over_dt2(inv_mass[im_row, i], inv_dt2))
-            elif st == CONTACT_STUCK or st == CONTACT_SLIDING:
-                vn = wp.dot(vel, floor_n)
-                vel = vel + floor_n * (wp.max(vn, -wp.dot(p0, floor_n) * inv_dt) - vn)
-                vt = vel - floor_n * wp.dot(vel, floor_n)
-                fn = wp.dot(floor_force[world, i], floor_n)
-                f, c, t = friction_force(st, vt, fn, mu_s, mu_k, slip_speed)
-                floor_force[world, i] = floor_n * fn + f
-            else:
-                vel = wp.vec3(0.0)  # infinite mass
-                st = CONTACT_FREE
-            if not (wp.length(vel) < speed_limit):  # NaN fails every comparison
-                bad = 1
-            x[world, i] = p0 + vel * dt
-            v[world, i] = vel
-            contact[world, i] = st
-        crumpled = int(0)
-        for h in range(nh):
-            psi, g0, g1, g2, g3 = dihedral_angle_and_gradient(x[world, hinges[h, 0]], x[world, hinges[h, 1]],
-                                                              x[world, hinges[h, 2]], x[world, hinges[h, 3]])
-            prev = crease_angle[world, h]
-            phi = prev + wrap_angle(psi - prev)
-            crease_angle[world, h] = phi
-            lo, hi = fold_range(hinge_label[h])
-            if phi < lo - fold_tolerance or phi > hi + fold_tolerance:
-                crumpled = 1
-        if bad != 0:
-            freeze_world(world, nv, x, v, x_prev, delta, unstable)
-            return
-        if crumpled != 0:
-            # a crease folded through its range by more than the tolerance: the sheet crumpled (flag 2)
-            freeze_world(world, nv, x, v, x_prev, delta, unstable)
-            unstable[world] = WORLD_CRUMPLED
-            return
-        step_count[world] = step_count[world] + 1
+        s.step_count[world] = s.step_count[world] + 1

@@ -37,18 +37,35 @@ def mount_frame(
 
 
 
+@wp.struct
+class SinePath:
+    """The paper's sinusoidal EPM path (§IV-C) of every world, fields as :data:`warpworm.gaits.SINE_FIELDS`, each
+    shape (1,) shared or (W,): start x, y [m], wavelength w [m], amplitude a [m], depth of the centre at closest
+    approach [m], theta [rad], period [s], direction ±1, phase [cycles]."""
+
+    start_x: wp.array(dtype=float)
+    start_y: wp.array(dtype=float)
+    wavelength: wp.array(dtype=float)
+    amplitude: wp.array(dtype=float)
+    depth: wp.array(dtype=float)
+    theta: wp.array(dtype=float)
+    period: wp.array(dtype=float)
+    direction: wp.array(dtype=float)
+    phase: wp.array(dtype=float)
+
+
+@wp.struct
+class KeyframePath:
+    """A keyframed EPM path: ``time (K,)`` ascending [s]; ``pos`` [m] / ``rot`` (x, y, z, w) shape (1 or W, K)."""
+
+    time: wp.array(dtype=float)
+    pos: wp.array2d(dtype=wp.vec3)
+    rot: wp.array2d(dtype=wp.quat)
+
+
 @wp.kernel
 def epm_sine_pose(
-    # Model:
-    start_x: wp.array(dtype=float),
-    start_y: wp.array(dtype=float),
-    wavelength: wp.array(dtype=float),
-    amplitude: wp.array(dtype=float),
-    depth: wp.array(dtype=float),
-    theta: wp.array(dtype=float),
-    period: wp.array(dtype=float),
-    direction: wp.array(dtype=float),
-    phase: wp.array(dtype=float),
+    path: SinePath,
     dt_sub: float,
     # Data in:
     step_count: wp.array(dtype=wp.int32),
@@ -65,20 +82,17 @@ def epm_sine_pose(
     """
     world = wp.tid()
     t = float(step_count[world]) * dt_sub
-    s = t / pw(period, world) + pw(phase, world)
-    px = pw(start_x, world) + pw(direction, world) * pw(wavelength, world) * s
-    pz = -(pw(depth, world) + pw(amplitude, world) * 0.5 * (1.0 + wp.cos(TWO_PI * s)))
-    magnet_pos[world, 0] = wp.vec3(px, pw(start_y, world), pz)
+    s = t / pw(path.period, world) + pw(path.phase, world)
+    px = pw(path.start_x, world) + pw(path.direction, world) * pw(path.wavelength, world) * s
+    pz = -(pw(path.depth, world) + pw(path.amplitude, world) * 0.5 * (1.0 + wp.cos(TWO_PI * s)))
+    magnet_pos[world, 0] = wp.vec3(px, pw(path.start_y, world), pz)
     # rotation about +y by (pi/2 - theta) takes +z to (cos theta, 0, sin theta)
-    magnet_rot[world, 0] = wp.quat_from_axis_angle(wp.vec3(0.0, 1.0, 0.0), 0.5 * PI - pw(theta, world))
+    magnet_rot[world, 0] = wp.quat_from_axis_angle(wp.vec3(0.0, 1.0, 0.0), 0.5 * PI - pw(path.theta, world))
 
 
 @wp.kernel
 def epm_keyframe_pose(
-    # Model:
-    key_time: wp.array(dtype=float),
-    key_pos: wp.array2d(dtype=wp.vec3),
-    key_rot: wp.array2d(dtype=wp.quat),
+    path: KeyframePath,
     dt_sub: float,
     # Data in:
     step_count: wp.array(dtype=wp.int32),
@@ -87,22 +101,22 @@ def epm_keyframe_pose(
     magnet_rot: wp.array2d(dtype=wp.quat),
 ):
     """Kinematic EPM on a keyframed path: linear position, slerped rotation, held before the first / after the last
-    key. ``key_time (K,)`` ascending [s]; ``key_pos``/``key_rot`` (1 or W, K). Launch dim (W,)."""
+    key. ``path`` as :class:`KeyframePath`. Launch dim (W,)."""
     world = wp.tid()
     t = float(step_count[world]) * dt_sub
-    row = world % key_pos.shape[0]
-    nk = key_time.shape[0]
+    row = world % path.pos.shape[0]
+    nk = path.time.shape[0]
     k = int(0)
-    while k < nk - 2 and t >= key_time[k + 1]:
+    while k < nk - 2 and t >= path.time[k + 1]:
         k += 1
-    t0 = key_time[k]
-    t1 = key_time[wp.min(k + 1, nk - 1)]
+    t0 = path.time[k]
+    t1 = path.time[wp.min(k + 1, nk - 1)]
     u = float(0.0)
     if t1 > t0:
         u = wp.clamp((t - t0) / (t1 - t0), 0.0, 1.0)
     k1 = wp.min(k + 1, nk - 1)
-    magnet_pos[world, 0] = key_pos[row, k] * (1.0 - u) + key_pos[row, k1] * u
-    magnet_rot[world, 0] = wp.quat_slerp(key_rot[row, k], key_rot[row, k1], u)
+    magnet_pos[world, 0] = path.pos[row, k] * (1.0 - u) + path.pos[row, k1] * u
+    magnet_rot[world, 0] = wp.quat_slerp(path.rot[row, k], path.rot[row, k1], u)
 
 
 @wp.kernel

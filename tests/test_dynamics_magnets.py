@@ -23,8 +23,8 @@ def test_wrench_on_mesh_equals_foundation_api(magnet_model):
     model = Model.from_params(p, 1, "cpu")
     ipm = model.ipm_rest_pos_host[0, :, 0]
     tilt = np.array([[0.8, 0.0, 0.6], [0.0, 1.0, 0.0], [-0.6, 0.0, 0.8]])  # EPM tilted: torques on all IPMs
-    model.set_path(gaits.keyframe_path([0.0], [[0.5 * (ipm[1] + ipm[2]), 0.004, 0.05]], [tilt]))
     sim = Simulator(model)
+    sim.set_path(gaits.keyframe_path([0.0], [[0.5 * (ipm[1] + ipm[2]), 0.004, 0.05]], [tilt]))
     state = sim.initial_state()
     # deform the worm a little so the IPM frames are not axis-aligned
     rng = np.random.default_rng(0)

@@ -26,7 +26,6 @@ def _com(x: np.ndarray) -> np.ndarray:
 def _lift(state, dz: float) -> None:
     x = state.positions.numpy() + np.array([0.0, 0.0, dz], np.float32)
     state.positions.assign(x)
-    state.prev_positions.assign(x)
 
 
 def test_rest_creases_hold_rest_angle_and_do_not_drift():
@@ -161,9 +160,9 @@ def _run_dt(dt_sub: float, t_end: float) -> np.ndarray:
     p = gaits.preset_params("peristaltic", gravity=0.0, damping=5.0, magnet_model="dipoles")
     model = Model.from_params(p, 1, "cpu", anchors=[0, 1, 2], anchor_stiffness=1e3)
     ipm = model.ipm_rest_pos_host[0, :, 0]
-    model.set_path(gaits.keyframe_path([0.0], [[ipm[1] + 0.4 * (ipm[2] - ipm[1]), 0.0, 0.09]], [np.eye(3)]))
     substeps = 4
     sim = Simulator(model, dt=dt_sub * substeps, substeps=substeps)
+    sim.set_path(gaits.keyframe_path([0.0], [[ipm[1] + 0.4 * (ipm[2] - ipm[1]), 0.0, 0.09]], [np.eye(3)]))
     state = sim.initial_state()
     sim.step(state, int(round(t_end / sim.dt)))
     snap = sim.snapshot(state)
@@ -201,7 +200,7 @@ def test_axial_squeeze_folds_the_creases(substeps):
     for r in np.linspace(0.0, 1.0, 31)[1:]:  # ramp the squeeze over 0.3 s, then hold 0.3 s
         t = targets.copy()
         t[3:, 0] -= r * squeeze
-        sim.set_anchor_targets(state, t)
+        sim.set_anchor_targets(t)
         sim.step(state, 3)
     sim.step(state, 75)
     snap = sim.snapshot(state)
@@ -232,7 +231,7 @@ def test_anchor_forces_carry_the_weight_of_a_hanging_worm():
     state = sim.initial_state()
     rest = state.positions.numpy()[0, ends].astype(np.float64)
     for lift in np.linspace(0.0, 0.06, 31)[1:]:  # raise the anchors over 0.24 s (a jump would tear the sheet)
-        sim.set_anchor_targets(state, rest + [0.0, 0.0, lift])
+        sim.set_anchor_targets(rest + [0.0, 0.0, lift])
         sim.step(state, 2)
     sim.step(state, 150)  # hold 0.6 s, well damped
     snap = sim.snapshot(state)

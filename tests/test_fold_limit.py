@@ -33,7 +33,7 @@ def squeeze(hinge_stiffness, distance, duration=0.6):
     for i in range(1, steps + 1):
         t = x0.copy()
         t[:, 3:, 0] -= distance * min(1.0, 1.5 * i / steps)
-        sim.set_anchor_targets(state, t)
+        sim.set_anchor_targets(t)
         sim.step(state, 1)
         flagged = state.unstable.numpy() != 0
         viol = np.degrees(fold_violation(label, state.crease_angle.numpy()).max(axis=-1))

@@ -73,7 +73,6 @@ def section_vertices(n_units: int, section: int, corners=(0, 1, 2)) -> np.ndarra
 def _lift(state, dz: float) -> None:
     x = state.positions.numpy() + np.array([0.0, 0.0, dz], np.float32)
     state.positions.assign(x)
-    state.prev_positions.assign(x)
 
 
 def linear_anchor_response(model, params: WormParams, target_offsets: np.ndarray, world: int = 0,
@@ -137,7 +136,7 @@ def linear_anchor_response(model, params: WormParams, target_offsets: np.ndarray
 
 def _batched_gait_params(gait_list, base: WormParams | None = None, **overrides) -> WormParams:
     """One WormParams for W = len(gait_list) worlds: every scalar field on which the gait presets differ becomes a
-    per-world array (the string fields ``gait`` / ``backward`` keep the first gait's; paths are set per world)."""
+    per-world array (``gait`` is set per world by the caller; ``backward`` is shared)."""
     presets = [gaits.preset_params(g, base=base, **overrides) for g in gait_list]
     merged = {}
     for f in fields(WormParams):
@@ -158,17 +157,8 @@ def _gait_model(gait_list, *, anchors=None, anchor_stiffness=1.0e4, base=None, d
     """A Model with one world per gait in ``gait_list``, each on its own gait's sinusoidal EPM path."""
     from .model import Model
 
-    p = _batched_gait_params(gait_list, base=base, **overrides)
-    W = len(gait_list)
-    model = Model.from_params(p, W, device, anchors=anchors, anchor_stiffness=anchor_stiffness)
-    ipm_x = model.ipm_rest_pos_host[:, :, 0]
-    paths = {g: gaits.sine_path(replace(p, gait=g), ipm_x, num_worlds=W) for g in set(gait_list)}
-    merged = {}
-    for name in gaits.SINE_FIELDS:
-        rows = [np.broadcast_to(np.asarray(getattr(paths[g], name), np.float64).reshape(-1), (W,))[w]
-                for w, g in enumerate(gait_list)]
-        merged[name] = np.array(rows)
-    model.set_path(gaits.EpmPath(kind="sine", **merged))
+    p = replace(_batched_gait_params(gait_list, base=base, **overrides), gait=np.array(gait_list, dtype=str))
+    model = Model.from_params(p, len(gait_list), device, anchors=anchors, anchor_stiffness=anchor_stiffness)
     return model, p
 
 
@@ -266,7 +256,7 @@ def _quasi_static(model, params, anchors_moving, direction, displacements, *, li
     if lift:
         _lift(state, lift)
     base_t = x0[:, av]  # (W, A, 3)
-    sim.set_anchor_targets(state, base_t)
+    sim.set_anchor_targets(base_t)
     n_settle, n_hold = int(round(settle / dt)), max(1, int(round(hold / dt)))
     sim.step(state, n_settle, epm=False)
     d = np.concatenate([[0.0], np.asarray(displacements, np.float64)])
@@ -275,7 +265,7 @@ def _quasi_static(model, params, anchors_moving, direction, displacements, *, li
     for dk in d:
         t = base_t.copy()
         t[:, moving] += dk * u
-        sim.set_anchor_targets(state, t)
+        sim.set_anchor_targets(t)
         sim.step(state, n_hold, epm=False)
         snaps = sim.snapshot(state)
         af = snaps["anchor_force"].astype(np.float64)  # (W, A, 3), as applied by the solver

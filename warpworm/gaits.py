@@ -142,19 +142,34 @@ def gait_theta(gait: str, backward: bool) -> float:
     return float(GAIT_ORIENTATION[gait][1 if backward else 0])
 
 
+def per_world_gait(params: WormParams, num_worlds: int) -> tuple[np.ndarray, np.ndarray]:
+    """``params.gait`` and ``params.backward`` per world: gait names (W,) str and directions (W,) bool (each field is
+    shared, a scalar, or per world, shape (W,))."""
+    W = num_worlds
+    gait = np.broadcast_to(np.asarray(params.gait, dtype=str), (W,))
+    back = np.broadcast_to(np.asarray(params.backward, dtype=bool), (W,))
+    bad = sorted(set(gait.tolist()) - set(GAITS))
+    if bad:
+        raise ValueError(f"worm.gait: got {bad[0]!r}; expected one of {GAITS}")
+    return gait, back
+
+
 def sine_path(params: WormParams, ipm_x: np.ndarray, num_worlds: int) -> EpmPath:
     """The sinusoidal EPM path of ``params`` (gait, backward, w, a, h, θ, period) placed on each world's worm.
 
     Args:
-        params: the batch parameters; ``orientation`` NaN takes the gait preset's θ; the gap is
-            ``closest_approach × closest_approach_scale`` and the wavelength ``wavelength × wavelength_scale``.
+        params: the batch parameters; ``gait`` and ``backward`` may differ per world (arrays (W,)); ``orientation``
+            NaN takes the gait preset's θ; the gap is ``closest_approach × closest_approach_scale`` and the
+            wavelength ``wavelength × wavelength_scale``.
         ipm_x: x of the (tail, centre, head) IPM centres at rest [m], shape (W, 3).
         num_worlds: W.
     """
     W = num_worlds
     ipm_x = np.broadcast_to(np.asarray(ipm_x, np.float64), (W, 3))
+    gait, back = per_world_gait(params, W)
+    preset_theta = np.array([GAIT_ORIENTATION[g][int(b)] for g, b in zip(gait, back)], np.float64)
     theta = per_world(params.orientation, W)
-    theta = np.where(np.isnan(theta), gait_theta(params.gait, params.backward), theta)
+    theta = np.where(np.isnan(theta), preset_theta, theta)
     h = per_world(params.closest_approach, W) * per_world(params.closest_approach_scale, W)
     plate = per_world(params.support_thickness, W)
     if np.any(~(h >= plate)):
@@ -162,10 +177,10 @@ def sine_path(params: WormParams, ipm_x: np.ndarray, num_worlds: int) -> EpmPath
         raise ValueError(f"worm.closest_approach: {bad} m puts the EPM inside the support plate; expected >= "
                          f"worm.support_thickness ({float(np.max(plate))} m): h is the gap from the origami base "
                          "(z = 0) to the EPM's top face, and the EPM moves beneath the plate")
-    frac = GAIT_PLACEMENT[params.gait]
-    end = ipm_x[:, 0] if params.backward else ipm_x[:, 2]
+    frac = np.array([GAIT_PLACEMENT[g] for g in gait], np.float64)
+    end = np.where(back, ipm_x[:, 0], ipm_x[:, 2])
     place = ipm_x[:, 1] + frac * (end - ipm_x[:, 1])
-    direction = -1.0 if params.backward else 1.0
+    direction = np.where(back, -1.0, 1.0)
     w = per_world(params.wavelength, W) * per_world(params.wavelength_scale, W)
     return EpmPath(
         kind="sine",
@@ -176,7 +191,7 @@ def sine_path(params: WormParams, ipm_x: np.ndarray, num_worlds: int) -> EpmPath
         depth=h + epm_half_height(per_world(params.epm_size, W, (3,)), theta),
         theta=theta,
         period=per_world(params.cycle_period, W),
-        direction=np.full(W, direction),
+        direction=direction,
         phase=np.zeros(W),
     )
 

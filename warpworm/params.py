@@ -110,10 +110,10 @@ class WormParams:
     """Moment magnitudes of the (tail, centre, head) IPMs [A·m²], axial, shape (3,) or (W, 3)."""
 
     # --- EPM path (paper §IV-C) ---
-    gait: str = "peristaltic"
-    """One of GAITS; fixes the EPM orientation and placement (shared by the batch)."""
-    backward: bool = False
-    """Drive the worm toward −x instead of +x (shared by the batch)."""
+    gait: str | np.ndarray = "peristaltic"
+    """One of GAITS; fixes the EPM orientation and placement; shape () or (W,) (str)."""
+    backward: bool | np.ndarray = False
+    """Drive the worm toward −x instead of +x; shape () or (W,) (bool)."""
     wavelength: float | np.ndarray = 0.02
     """EPM path wavelength w [m]: distance the EPM advances per cycle, shape () or (W,)."""
     amplitude: float | np.ndarray = 0.03

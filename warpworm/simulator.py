@@ -17,8 +17,10 @@ Typical use::
     sim = Simulator(model, dt=2e-3, substeps=40)
     state = sim.initial_state()
     sim.settle(state, 0.3)            # EPM absent, worm settles under gravity; resets t to 0
-    sim.step(state, 500)              # 1 s
-    out = sim.snapshot(state)         # dict of NumPy arrays
+    frames = sim.run(state, [0.5, 1.0])  # snapshots (dicts of NumPy arrays) at t = 0.5 s and 1 s
+
+The inputs of a run (the EPM path, the anchor targets) are a :class:`~warpworm.model.Control`: ``sim.control`` by
+default, or one passed to :meth:`step` / :meth:`run`. The solver's scratch belongs to the simulator.
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from .model import Model, State
+from .model import Control, Model, State
 from .transforms import quat_wxyz_to_matrix, quat_xyzw_to_wxyz
 
 
@@ -111,6 +113,24 @@ class Simulator:
         """Strain beyond which a bar flags its world unstable, shape (E,), float."""
         self.speed_limit = float(speed_limit)
         self.use_graph = model.device.is_cuda if use_graph is None else bool(use_graph and model.device.is_cuda)
+        self.control = model.control()
+        """The default inputs (the params' EPM path, anchors at rest): ``step`` uses it unless given another."""
+        ki = self._ki
+        self._model_arrays = ki.BarHingeModel()
+        for f in ("inv_mass", "gravity", "damping", "edges", "rest_length", "bar_stiffness", "bar_stop_strain",
+                  "bar_stop_stiffness", "hinges", "hinge_length", "hinge_label", "hinge_stiffness", "hinge_damping",
+                  "fold_limit_stiffness", "anchor_vertex", "anchor_stiffness", "floor_incline", "mu_static",
+                  "mu_kinetic"):
+            setattr(self._model_arrays, f, getattr(model, f))
+        self._model_arrays.hinge_rest = model.hinge_rest_angle
+        W, V, dev = model.num_worlds, model.num_vertices, model.device
+        self.scratch = ki.NewtonScratch()
+        """The solver's own scratch (:class:`warpworm.kernels.implicit_euler.NewtonScratch`), shared by every state
+        this simulator steps: nothing in it outlives a launch."""
+        self.scratch.x_prev = wp.zeros((W, V), dtype=wp.vec3, device=dev)
+        self.scratch.delta = wp.zeros((W, V), dtype=wp.vec3, device=dev)
+        self.scratch.hess = wp.zeros((W, V, model.vertex_bandwidth + 1), dtype=wp.mat33, device=dev)
+        self.scratch.grad = wp.zeros((W, V), dtype=wp.vec3, device=dev)
         self._cmds = {}
         self._graphs = {}
 
@@ -118,7 +138,7 @@ class Simulator:
     def initial_state(self) -> State:
         """Every world at its rest shape on its floor, at rest, t = 0, magnet poses evaluated."""
         state = self.model.state()
-        self._magnet_poses(state)
+        self._magnet_poses(state, self.control)
         return state
 
     @property
@@ -131,28 +151,29 @@ class Simulator:
         return (1.0 + per_step) / self.substeps
 
     # ------------------------------------------------------------------------------------------------------------
-    def _magnet_poses(self, state: State) -> None:
+    def _magnet_poses(self, state: State, control: Control) -> None:
         m, k = self.model, self._kpose
         W = m.num_worlds
-        if m.path.kind == "sine":
-            wp.launch(k.epm_sine_pose, dim=W, inputs=[*m.path_arrays, self.dt_sub, state.step_count],
+        if control.path.kind == "sine":
+            wp.launch(k.epm_sine_pose, dim=W, inputs=[control.sine, self.dt_sub, state.step_count],
                       outputs=[state.magnet_pos, state.magnet_rot], device=m.device)
         else:
-            wp.launch(k.epm_keyframe_pose, dim=W, inputs=[*m.path_arrays, self.dt_sub, state.step_count],
+            wp.launch(k.epm_keyframe_pose, dim=W, inputs=[control.keyframes, self.dt_sub, state.step_count],
                       outputs=[state.magnet_pos, state.magnet_rot], device=m.device)
         wp.launch(k.ipm_poses, dim=(W, 3), inputs=[m.mount_vertices, m.mount_local_pos, m.mount_local_rot,
                                                     state.positions],
                   outputs=[state.magnet_pos, state.magnet_rot], device=m.device)
 
-    def update_magnets(self, state: State, *, epm: bool = True) -> State:
+    def update_magnets(self, state: State, control: Control | None = None, *, epm: bool = True) -> State:
         """Evaluate the magnet poses at the current time and positions, the net magnetic wrench on every magnet and
         its distribution onto the mount vertices (``state.external_force``), as the first substep of a step does."""
-        self._wrench(state, self.model.magnet_moment if epm else self.model.magnet_moment_parked)
+        self._wrench(state, control or self.control, self.model.magnet_moment if epm else
+                     self.model.magnet_moment_parked)
         return state
 
-    def _wrench(self, state: State, moment: wp.array) -> None:
+    def _wrench(self, state: State, control: Control, moment: wp.array) -> None:
         m = self.model
-        self._magnet_poses(state)
+        self._magnet_poses(state, control)
         launch_world_wrenches(m, state, moment)
         state.external_force.zero_()
         wp.launch(self._kpose.distribute_wrench, dim=(m.num_worlds, 3),
@@ -160,61 +181,72 @@ class Simulator:
                           state.magnet_torque],
                   outputs=[state.external_force], device=m.device)
 
-    def _world_cmd(self, state: State, num_substeps: int):
-        """The per-world launch of ``num_substeps`` implicit substeps over all worlds, recorded once per state."""
-        key = (id(state), num_substeps)
+    def _substep_options(self, num_substeps: int):
+        o = self._ki.SubstepOptions()
+        o.dt, o.num_substeps, o.newton = self.dt_sub, int(num_substeps), self.newton
+        o.slip_speed, o.strain_limit = self.slip_speed, self.bar_strain_limit
+        o.speed_limit, o.fold_tolerance = self.speed_limit, self.fold_tolerance
+        return o
+
+    def _world_cmd(self, state: State, control: Control, num_substeps: int):
+        """The per-world launch of ``num_substeps`` implicit substeps over all worlds, recorded once per (state,
+        control)."""
+        key = (id(state), id(control), num_substeps)
         cmd = self._cmds.get(key)
-        if cmd is not None and cmd[0] is state:
-            return cmd[1]
+        if cmd is not None and cmd[0] is state and cmd[1] is control:
+            return cmd[2]
         m = self.model
+        s = self._ki.BarHingeState()
+        for f, name in (("x", "positions"), ("v", "velocities"), ("floor_force", "floor_force"),
+                        ("bar_strain", "bar_strain"), ("crease_angle", "crease_angle"), ("contact", "contact"),
+                        ("unstable", "unstable"), ("step_count", "step_count")):
+            setattr(s, f, getattr(state, name))
         c = wp.launch(self._ki.implicit_step, dim=m.num_worlds,
-                      inputs=[m.inv_mass, m.gravity, m.damping, m.edges, m.rest_length, m.bar_stiffness,
-                              m.bar_stop_strain, m.bar_stop_stiffness,
-                              m.hinges, m.hinge_rest_angle, m.hinge_length, m.hinge_label, m.hinge_stiffness,
-                              m.hinge_damping, m.fold_limit_stiffness, m.anchor_vertex, m.anchor_stiffness,
-                              m.floor_incline, m.mu_static, m.mu_kinetic, self.dt_sub, int(num_substeps),
-                              self.newton,
-                              self.slip_speed, self.bar_strain_limit, self.speed_limit, self.fold_tolerance,
-                              state.external_force,
-                              state.anchor_target],
-                      outputs=[state.positions, state.velocities, state.prev_positions, state.delta,
-                               state.floor_force, state.newton_matrix, state.newton_rhs, state.bar_strain,
-                               state.crease_angle, state.contact, state.unstable, state.step_count],
+                      inputs=[self._model_arrays, self._substep_options(num_substeps), state.external_force,
+                              control.anchor_target, s, self.scratch],
                       device=m.device, record_cmd=True)
-        self._cmds[key] = (state, c)
+        self._cmds[key] = (state, control, c)
         return c
 
-    def _one_step(self, state: State, moment: wp.array) -> None:
+    def run_substeps(self, state: State, num_substeps: int, control: Control | None = None) -> State:
+        """Advance every world by ``num_substeps`` solver substeps under the magnetic force already in
+        ``state.external_force`` (no wrench or pose update: for checks of the solver alone)."""
+        self._world_cmd(state, control or self.control, int(num_substeps)).launch()
+        return state
+
+    def _one_step(self, state: State, control: Control, moment: wp.array) -> None:
         if self.magnet_every_substep:
-            cmd = self._world_cmd(state, 1)
+            cmd = self._world_cmd(state, control, 1)
             for _ in range(self.substeps):
-                self._wrench(state, moment)
+                self._wrench(state, control, moment)
                 cmd.launch()
         else:
-            self._wrench(state, moment)
-            self._world_cmd(state, self.substeps).launch()
+            self._wrench(state, control, moment)
+            self._world_cmd(state, control, self.substeps).launch()
 
     # ------------------------------------------------------------------------------------------------------------
-    def step(self, state: State, num_steps: int = 1, *, epm: bool = True) -> State:
-        """Advance every world by ``num_steps`` steps of ``dt`` (in place; returns ``state``).
+    def step(self, state: State, num_steps: int = 1, control: Control | None = None, *, epm: bool = True) -> State:
+        """Advance every world by ``num_steps`` steps of ``dt`` (in place; returns ``state``) under ``control``
+        (default :attr:`control`).
 
         ``epm=False`` runs with the EPM absent (its moment zeroed), as :meth:`settle` does.
         """
+        control = control or self.control
         moment = self.model.magnet_moment if epm else self.model.magnet_moment_parked
         if self.use_graph:
-            key = (id(state), epm)
+            key = (id(state), id(control), epm)
             g = self._graphs.get(key)
-            if g is None or g[0] is not state:
-                self._world_cmd(state, 1 if self.magnet_every_substep else self.substeps)
+            if g is None or g[0] is not state or g[1] is not control:
+                self._world_cmd(state, control, 1 if self.magnet_every_substep else self.substeps)
                 with wp.ScopedCapture(device=self.model.device) as capture:
-                    self._one_step(state, moment)
-                g = (state, capture.graph)
+                    self._one_step(state, control, moment)
+                g = (state, control, capture.graph)
                 self._graphs[key] = g
             for _ in range(int(num_steps)):
-                wp.capture_launch(g[1])
+                wp.capture_launch(g[2])
             return state
         for _ in range(int(num_steps)):
-            self._one_step(state, moment)
+            self._one_step(state, control, moment)
         return state
 
     def settle(self, state: State, duration: float = 0.3, *, reset_time: bool = True) -> State:
@@ -227,10 +259,11 @@ class Simulator:
         if reset_time:
             state.step_count.zero_()
             state.velocities.zero_()
-        self._magnet_poses(state)
+        self._magnet_poses(state, self.control)
         return state
 
-    def run(self, state: State, frame_times, *, epm: bool = True, keys=None, stack: bool = False):
+    def run(self, state: State, frame_times, control: Control | None = None, *, epm: bool = True, keys=None,
+            stack: bool = False):
         """The run loop: step from the current time to each of ``frame_times`` and take a :meth:`snapshot` there.
 
         Args:
@@ -238,6 +271,7 @@ class Simulator:
             frame_times: times [s] measured from the current time (after :meth:`settle`, the gait clock), non-
                 decreasing and >= 0; each is rounded to a whole number of steps of ``dt``. A time of 0 snapshots the
                 current state.
+            control: the inputs (default :attr:`control`).
             epm: the EPM present (False: parked, as while settling).
             keys: snapshot keys to keep (default: all; fewer saves host memory on long recordings).
             stack: return one dict of arrays stacked over frames, shape (S, ...), instead of a list of S dicts.
@@ -251,9 +285,9 @@ class Simulator:
         frames, done = [], 0
         for n in steps:
             if n > done:
-                self.step(state, int(n - done), epm=epm)
+                self.step(state, int(n - done), control, epm=epm)
                 done = int(n)
-            snap = self.snapshot(state)
+            snap = self.snapshot(state, control)
             if keys is not None:
                 snap = {k: snap[k] for k in keys}
             snap["clock"] = done * self.dt
@@ -263,7 +297,7 @@ class Simulator:
         return frames
 
     # ------------------------------------------------------------------------------------------------------------
-    def snapshot(self, state: State) -> dict:
+    def snapshot(self, state: State, control: Control | None = None) -> dict:
         """Host copies (NumPy) of the state, keyed as in docs/architecture.md.
 
         Returns ``positions (W, V, 3)``, ``velocities (W, V, 3)`` [m, m/s]; ``magnet_pos (W, 4, 3)`` [m],
@@ -274,7 +308,8 @@ class Simulator:
         folded through its range by more than ``fold_tolerance``); ``time (W,)`` [s].
         """
         m = self.model
-        self._magnet_poses(state)  # poses at the current time (the wrench kept the step's starting ones)
+        control = control or self.control
+        self._magnet_poses(state, control)  # poses at the current time (the wrench kept the step's starting ones)
         # .numpy() aliases device memory on the CPU: copy, so a snapshot never changes after it is taken
         x = state.positions.numpy().copy()
         q = state.magnet_rot.numpy()
@@ -282,7 +317,7 @@ class Simulator:
         if A:
             av = m.anchor_vertex.numpy()
             ak = np.broadcast_to(m.anchor_stiffness.numpy(), (m.num_worlds, A))
-            anchor_force = ak[..., None] * (x[:, av] - state.anchor_target.numpy())
+            anchor_force = ak[..., None] * (x[:, av] - control.anchor_target.numpy())
         else:
             anchor_force = np.zeros((m.num_worlds, 0, 3), np.float32)
         return {
@@ -301,8 +336,10 @@ class Simulator:
             "time": (state.step_count.numpy().astype(np.float64) * self.dt_sub),
         }
 
-    def set_anchor_targets(self, state: State, targets) -> None:
-        """Set anchor targets [m], shape (A, 3) (all worlds) or (W, A, 3)."""
-        m = self.model
-        t = np.broadcast_to(np.asarray(targets, np.float32), (m.num_worlds, m.num_anchors, 3))
-        state.anchor_target.assign(wp.array(np.ascontiguousarray(t), dtype=wp.vec3, device=m.device))
+    def set_anchor_targets(self, targets) -> None:
+        """Set the default control's anchor targets [m], shape (A, 3) (all worlds) or (W, A, 3)."""
+        self.control.set_anchor_targets(targets)
+
+    def set_path(self, path) -> None:
+        """Set the default control's EPM path (:class:`warpworm.gaits.EpmPath`); takes effect at the next step."""
+        self.control.set_path(path)
