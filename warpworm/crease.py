@@ -161,14 +161,6 @@ class CreasePattern:
     def num_hinges(self) -> int:
         return len(self.hinges)
 
-    @property
-    def num_keypoints(self) -> int:
-        return len(self.keypoint_names)
-
-    @property
-    def num_mounts(self) -> int:
-        return len(self.mount_vertices)
-
     # --- evaluations on (batched) positions ---
     def keypoints(self, positions: np.ndarray | None = None) -> np.ndarray:
         """Keypoint positions [m], shape (..., P, 3), for vertex positions (..., V, 3) (default: rest)."""

@@ -103,20 +103,6 @@ class EpmPath:
     key_pos: np.ndarray | None = None
     key_rot: np.ndarray | None = None
 
-    def sine_pose(self, t) -> tuple[np.ndarray, np.ndarray]:
-        """Host evaluation of a sinusoidal path at times ``t`` (scalar or (W,)): pos (W, 3), rot (W, 3, 3)."""
-        f = {k: np.atleast_1d(np.asarray(getattr(self, k), np.float64)) for k in SINE_FIELDS}
-        s = np.asarray(t, np.float64) / f["period"] + f["phase"]
-        x = f["start_x"] + f["direction"] * f["wavelength"] * s
-        z = -(f["depth"] + f["amplitude"] * 0.5 * (1.0 + np.cos(2 * np.pi * s)))
-        x, y, z = np.broadcast_arrays(x, f["start_y"], z)
-        phi = 0.5 * np.pi - f["theta"]
-        c, sn = np.cos(phi), np.sin(phi)
-        R = np.zeros(np.shape(phi) + (3, 3))
-        R[..., 0, 0], R[..., 0, 2], R[..., 1, 1], R[..., 2, 0], R[..., 2, 2] = c, sn, 1.0, -sn, c
-        R = np.broadcast_to(R, x.shape + (3, 3))
-        return np.stack([x, y, z], -1), R
-
 
 def keyframe_path(times, positions, rotations) -> EpmPath:
     """A keyframed EPM path: times (K,) [s], positions (K, 3) or (W, K, 3) [m], rotations (K, 3, 3) or (W, K, 3, 3)."""
