@@ -1,14 +1,18 @@
 """Config loading: every mistake stops before any work with a message naming the key path, the value and what was
 expected; overrides; packaged configs."""
 
+import dataclasses
+import math
 import os
 import subprocess
 import sys
 
 import pytest
 
-from warpworm.config import ConfigError, check_output_dir, config_packaged_names, load_config
-from warpworm.randomize import Uniform
+from warpworm.config import (PARAM_SPECS, ConfigError, OutputConfig, RenderConfig, SimConfig, check_output_dir,
+                             config_packaged_names, load_config)
+from warpworm.params import WormParams
+from warpworm.randomize import Constant, Uniform
 
 GOOD = {"num_samples": 8, "shard_size": 4, "sim": {"frame_times": [0.1, 0.2]}}
 
@@ -59,6 +63,24 @@ def _err(raw, overrides=()):
     ({"sim": {"device": "cuda:99"}}, ["sim.device", "'cuda:99'", "Warp device available here"]),
     ({"sim": {"dt": 0.004, "frame_times": [0.25, 0.501]}}, ["sim.frame_times", "0.501", "multiples of sim.dt"]),
     ({"sim": [1, 2]}, ["sim", "mapping"]),
+    # each key alone, as pydantic reports it: the path (list items by index), the value, what was expected
+    ({"sim": {"frame_times": [0.1, "x"]}}, ["sim.frame_times[1]", "'x'", "a number"]),
+    ({"sim": {"frame_times": []}}, ["sim.frame_times", "[]", "non-empty list"]),
+    ({"sim": {"frame_times": 0.1}}, ["sim.frame_times", "0.1", "list of numbers"]),
+    ({"sim": {"dt": float("inf")}}, ["sim.dt", "inf", "finite number"]),
+    ({"sim": {"worlds": True}}, ["sim.worlds", "True", "integer"]),
+    ({"sim": {"worlds": 2.5}}, ["sim.worlds", "2.5", "integer"]),
+    ({"name": 3}, ["name", "3", "string"]),
+    ({"render": {"widht": 64}}, ["render.widht", "unknown key", "width"]),
+    ({"output": {"compression_level": 12}}, ["output.compression_level", "12", "<= 9"]),
+    ({"output": "gzip"}, ["output", "'gzip'", "mapping with keys", "compression"]),
+    ({"randomize": [1]}, ["randomize", "[1]", "mapping with keys", "worm"]),
+    ({"randomize": {"worm": [1]}}, ["randomize.worm", "[1]", "mapping of parameters"]),
+    ({"randomize": {"worm": {"backward": 1}}}, ["randomize.worm.backward", "1", "[False, True]"]),
+    ({"randomize": {"worm": {"a": float("nan")}}}, ["randomize.worm.a", "nan", "a number"]),  # NaN: presets only
+    ({"randomize": {"worm": {"gait": {"uniform": [0, 1]}}}}, ["randomize.worm.gait", "choice/grid"]),
+    ({"randomize": {"texture": {"floor": "wood"}}}, ["randomize.texture.floor", "'wood'", "checker"]),
+    ({"randomize": {"sensor": {"jpeg_quality": {"choice": [100, 0]}}}}, ["randomize.sensor.jpeg_quality", ">= 1"]),
 ])
 def test_bad_config_names_path_value_and_expectation(raw, must):
     msg = _err({**GOOD, **raw})
@@ -69,6 +91,47 @@ def test_bad_config_names_path_value_and_expectation(raw, must):
 def test_all_errors_reported_at_once():
     msg = _err({"bogus": 1, "sim": {"dt": -1}, "randomize": {"worm": {"gait": "crawl"}}})
     assert "bogus" in msg and "sim.dt" in msg and "randomize.worm.gait" in msg
+    # one message per problem, in every section
+    with pytest.raises(ConfigError) as e:
+        load_config({"seed": -1, "sim": {"worlds": 0, "device": 3}, "render": {"width": "wide"},
+                     "output": {"preview": "no"}, "randomize": {"light": {"ambient": 2}, "weather": {}}})
+    paths = sorted(m.split(":")[0] for m in e.value.errors)
+    assert paths == ["output.preview", "randomize.light.ambient", "randomize.weather", "render.width", "seed",
+                     "sim.device", "sim.worlds"], e.value.errors
+
+
+def test_a_check_relating_two_keys_names_the_key_to_change():
+    # shard_size is checked against sim.frame_times (its own key named, not sim's), frame times against sim.dt
+    with pytest.raises(ConfigError) as e:
+        load_config({"shard_size": 6, "sim": {"frame_times": [0.2, 0.4, 0.6, 0.8]}})
+    assert e.value.errors == ["shard_size: got 6; expected a multiple of len(sim.frame_times) = 4 (a shard holds "
+                              "whole trajectories)"]
+
+
+def test_defaults_and_coercions_match_the_documented_schema():
+    cfg = load_config({"sim": None, "render": None, "randomize": {"worm": None}})  # an empty section = defaults
+    assert cfg.sim == SimConfig() and cfg.render == RenderConfig() and cfg.output == OutputConfig()
+    assert cfg.randomize["worm"]["a"] == Constant(WormParams().a)
+    assert math.isnan(cfg.randomize["worm"]["orientation"].value)  # NaN: the gait preset's value
+    # integers are numbers, stored as floats, so the YAML (and the files' config_yaml) reads the same however written
+    cfg = load_config({"num_samples": 4, "shard_size": 2, "sim": {"dt": 1, "settle_time": 0, "frame_times": [1, 2]}})
+    assert type(cfg.sim.dt) is float and cfg.sim.frame_times == [1.0, 2.0]
+    assert all(type(t) is float for t in cfg.sim.frame_times) and "settle_time: 0.0" in cfg.to_yaml()
+    # every parameter is there, in PARAM_SPECS' order, named or not
+    assert {g: list(p) for g, p in cfg.randomize.items()} == {g: list(p) for g, p in PARAM_SPECS.items()}
+
+
+def test_every_param_spec_default_is_a_valid_value_of_its_spec():
+    for group, specs in PARAM_SPECS.items():
+        for name, spec in specs.items():
+            load_config({**GOOD, "randomize": {group: {name: spec.default}}})
+
+
+def test_code_built_configs_are_not_validated():
+    # the pipeline derives configs with dataclasses.replace (the preview's dense frame list is not on sim.dt's grid)
+    cfg = load_config("default")
+    dense = dataclasses.replace(cfg, sim=dataclasses.replace(cfg.sim, frame_times=[0.0, 0.05, 0.1]), shard_size=3)
+    assert dense.frames_per_trajectory == 3 and dense.num_shards == -(-cfg.num_samples // 3)
 
 
 def test_dotted_overrides_and_yaml_values():
