@@ -161,9 +161,103 @@ def _gf_matrix(T: np.ndarray):
     return Gf.Matrix4d(*np.asarray(T, np.float64).T.reshape(-1).tolist())
 
 
+def _define_floor(stage, incline: float, floor_half: float) -> None:
+    """A square in the inclined plane (normal (-sin i, 0, cos i)), as in the simulator and renderer."""
+    from pxr import Gf, UsdGeom, Vt
+
+    u = np.array([np.cos(incline), 0.0, np.sin(incline)])
+    v = np.array([0.0, 1.0, 0.0])
+    corners = np.array([floor_half * (su * u + sv * v) for su, sv in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
+    floor = UsdGeom.Mesh.Define(stage, "/World/Floor")
+    floor.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(corners.astype(np.float32)))
+    floor.CreateFaceVertexCountsAttr([4])
+    floor.CreateFaceVertexIndicesAttr([0, 1, 2, 3])
+    floor.CreateExtentAttr([Gf.Vec3f(*corners.min(0).tolist()), Gf.Vec3f(*corners.max(0).tolist())])
+    floor.CreateDisplayColorAttr([Gf.Vec3f(0.45, 0.42, 0.38)])
+
+
+def _define_worm(stage, root: str, tr: Track, codes) -> None:
+    """The worm's mesh, time-sampled points and extent, and per-vertex crease / strain primvars."""
+    from pxr import Gf, Sdf, UsdGeom, Vt
+
+    V = tr.points.shape[1]
+    mesh = UsdGeom.Mesh.Define(stage, f"{root}/Worm")
+    mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(tr.triangles), 3, np.int32)))
+    mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(np.asarray(tr.triangles, np.int32).reshape(-1)))
+    mesh.CreateDoubleSidedAttr(True)
+    mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    pts, ext = mesh.CreatePointsAttr(), mesh.CreateExtentAttr()
+    api = UsdGeom.PrimvarsAPI(mesh)
+    crease_v = (_vertex_mean(tr.crease_angle, tr.hinges[:, 1:3], V) if tr.hinges.size
+                else np.zeros((len(codes), V)))
+    strain_v = (_vertex_mean(np.abs(tr.bar_strain), tr.edges, V) if tr.edges.size
+                else np.zeros((len(codes), V)))
+    pv_disp = mesh.CreateDisplayColorPrimvar(UsdGeom.Tokens.vertex)
+    pv_crease = api.CreatePrimvar("creaseColor", Sdf.ValueTypeNames.Color3fArray, UsdGeom.Tokens.vertex)
+    pv_strain = api.CreatePrimvar("strainColor", Sdf.ValueTypeNames.Color3fArray, UsdGeom.Tokens.vertex)
+    pv_angle = api.CreatePrimvar("creaseAngle", Sdf.ValueTypeNames.FloatArray, UsdGeom.Tokens.vertex)
+    pv_bar = api.CreatePrimvar("barStrain", Sdf.ValueTypeNames.FloatArray, UsdGeom.Tokens.vertex)
+    cc = _crease_colour(crease_v).astype(np.float32)
+    sc = _strain_colour(strain_v).astype(np.float32)
+    for f, tc in enumerate(codes):
+        p = np.ascontiguousarray(tr.points[f], np.float32)
+        pts.Set(Vt.Vec3fArray.FromNumpy(p), tc)
+        ext.Set([Gf.Vec3f(*p.min(0).tolist()), Gf.Vec3f(*p.max(0).tolist())], tc)
+        col = Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(cc[f]))
+        pv_disp.Set(col, tc)
+        pv_crease.Set(col, tc)
+        pv_strain.Set(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(sc[f])), tc)
+        pv_angle.Set(Vt.FloatArray.FromNumpy(crease_v[f].astype(np.float32)), tc)
+        pv_bar.Set(Vt.FloatArray.FromNumpy(strain_v[f].astype(np.float32)), tc)
+
+
+def _define_magnets(stage, root: str, tr: Track, codes) -> None:
+    """The EPM (a cube scaled to its extents) and the IPMs (cylinders), each a time-sampled transform."""
+    from pxr import Gf, UsdGeom
+
+    for slot, name in enumerate(MAGNET_NAMES):
+        mx = UsdGeom.Xform.Define(stage, f"{root}/{name}")
+        op = mx.AddTransformOp()
+        for f, tc in enumerate(codes):
+            op.Set(_gf_matrix(tr.magnet_pose[f, slot]), tc)
+        if slot == 0:
+            cube = UsdGeom.Cube.Define(stage, f"{root}/{name}/Geom")
+            cube.CreateSizeAttr(1.0)
+            cube.AddScaleOp().Set(Gf.Vec3f(*np.asarray(tr.epm_size, float).tolist()))
+            cube.CreateDisplayColorAttr([Gf.Vec3f(0.6, 0.6, 0.62)])
+        else:
+            cyl = UsdGeom.Cylinder.Define(stage, f"{root}/{name}/Geom")
+            cyl.CreateAxisAttr(UsdGeom.Tokens.z)
+            cyl.CreateRadiusAttr(tr.ipm_diameter / 2)
+            cyl.CreateHeightAttr(tr.ipm_thickness)
+            r, h = tr.ipm_diameter / 2, tr.ipm_thickness / 2
+            cyl.CreateExtentAttr([Gf.Vec3f(-r, -r, -h), Gf.Vec3f(r, r, h)])
+            cyl.CreateDisplayColorAttr([Gf.Vec3f(0.55, 0.55, 0.58)])
+
+
+def _define_camera(stage, root: str, camera) -> None:
+    """The dataset's OpenCV pinhole camera (K, R, t, width, height) as a USD camera."""
+    from pxr import Gf, UsdGeom
+
+    K, R, t, w, h = camera
+    cam = UsdGeom.Camera.Define(stage, f"{root}/Camera")
+    # OpenCV camera (+z forward, +y down) -> USD camera (-z forward, +y up): flip the y and z axes
+    c2w = np.eye(4)
+    c2w[:3, :3] = R.T @ np.diag([1.0, -1.0, -1.0])
+    c2w[:3, 3] = -R.T @ t
+    cam.AddTransformOp().Set(_gf_matrix(c2w))
+    pitch = 36.0 / w  # aperture units per pixel (mm for a 36 mm-wide sensor); only ratios matter
+    cam.CreateHorizontalApertureAttr(float(w * pitch))
+    cam.CreateVerticalApertureAttr(float(h * pitch * K[0, 0] / K[1, 1]))
+    cam.CreateFocalLengthAttr(float(K[0, 0] * pitch))
+    cam.CreateHorizontalApertureOffsetAttr(float((K[0, 2] - (w - 1) / 2) * pitch))
+    cam.CreateVerticalApertureOffsetAttr(float(-(K[1, 2] - (h - 1) / 2) * pitch))
+    cam.CreateClippingRangeAttr(Gf.Vec2f(0.001, 100.0))
+
+
 def write_stage(tracks: list[Track], path, *, spacing: float = 0.0, floor_half: float = 0.3) -> Path:
     """Write a time-sampled USD stage (``.usda`` or ``.usdc``) of ``tracks``; returns the path."""
-    from pxr import Gf, Sdf, Usd, UsdGeom, Vt
+    from pxr import Gf, Usd, UsdGeom
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -177,87 +271,17 @@ def write_stage(tracks: list[Track], path, *, spacing: float = 0.0, floor_half: 
     stage.SetEndTimeCode(float(t_all.max() * TIME_CODES_PER_SECOND))
     world = UsdGeom.Xform.Define(stage, "/World")
     stage.SetDefaultPrim(world.GetPrim())
-
-    # floor: a square in the inclined plane (normal (-sin i, 0, cos i)), as in the simulator and renderer
-    inc = tracks[0].floor_incline
-    u = np.array([np.cos(inc), 0.0, np.sin(inc)])
-    v = np.array([0.0, 1.0, 0.0])
-    corners = np.array([floor_half * (su * u + sv * v) for su, sv in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
-    floor = UsdGeom.Mesh.Define(stage, "/World/Floor")
-    floor.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(corners.astype(np.float32)))
-    floor.CreateFaceVertexCountsAttr([4])
-    floor.CreateFaceVertexIndicesAttr([0, 1, 2, 3])
-    floor.CreateExtentAttr([Gf.Vec3f(*corners.min(0).tolist()), Gf.Vec3f(*corners.max(0).tolist())])
-    floor.CreateDisplayColorAttr([Gf.Vec3f(0.45, 0.42, 0.38)])
-
+    _define_floor(stage, tracks[0].floor_incline, floor_half)
     for k, tr in enumerate(tracks):
         root = f"/World/{tr.name}"
         xf = UsdGeom.Xform.Define(stage, root)
         if spacing:
             xf.AddTranslateOp().Set(Gf.Vec3d(0.0, k * spacing, 0.0))
         codes = [Usd.TimeCode(float(t * TIME_CODES_PER_SECOND)) for t in tr.time]
-        V = tr.points.shape[1]
-        mesh = UsdGeom.Mesh.Define(stage, f"{root}/Worm")
-        mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(tr.triangles), 3, np.int32)))
-        mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(np.asarray(tr.triangles, np.int32).reshape(-1)))
-        mesh.CreateDoubleSidedAttr(True)
-        mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
-        pts, ext = mesh.CreatePointsAttr(), mesh.CreateExtentAttr()
-        api = UsdGeom.PrimvarsAPI(mesh)
-        crease_v = (_vertex_mean(tr.crease_angle, tr.hinges[:, 1:3], V) if tr.hinges.size
-                    else np.zeros((len(codes), V)))
-        strain_v = (_vertex_mean(np.abs(tr.bar_strain), tr.edges, V) if tr.edges.size
-                    else np.zeros((len(codes), V)))
-        pv_disp = mesh.CreateDisplayColorPrimvar(UsdGeom.Tokens.vertex)
-        pv_crease = api.CreatePrimvar("creaseColor", Sdf.ValueTypeNames.Color3fArray, UsdGeom.Tokens.vertex)
-        pv_strain = api.CreatePrimvar("strainColor", Sdf.ValueTypeNames.Color3fArray, UsdGeom.Tokens.vertex)
-        pv_angle = api.CreatePrimvar("creaseAngle", Sdf.ValueTypeNames.FloatArray, UsdGeom.Tokens.vertex)
-        pv_bar = api.CreatePrimvar("barStrain", Sdf.ValueTypeNames.FloatArray, UsdGeom.Tokens.vertex)
-        cc = _crease_colour(crease_v).astype(np.float32)
-        sc = _strain_colour(strain_v).astype(np.float32)
-        for f, tc in enumerate(codes):
-            p = np.ascontiguousarray(tr.points[f], np.float32)
-            pts.Set(Vt.Vec3fArray.FromNumpy(p), tc)
-            ext.Set([Gf.Vec3f(*p.min(0).tolist()), Gf.Vec3f(*p.max(0).tolist())], tc)
-            col = Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(cc[f]))
-            pv_disp.Set(col, tc)
-            pv_crease.Set(col, tc)
-            pv_strain.Set(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(sc[f])), tc)
-            pv_angle.Set(Vt.FloatArray.FromNumpy(crease_v[f].astype(np.float32)), tc)
-            pv_bar.Set(Vt.FloatArray.FromNumpy(strain_v[f].astype(np.float32)), tc)
-        for slot, name in enumerate(MAGNET_NAMES):
-            mx = UsdGeom.Xform.Define(stage, f"{root}/{name}")
-            op = mx.AddTransformOp()
-            for f, tc in enumerate(codes):
-                op.Set(_gf_matrix(tr.magnet_pose[f, slot]), tc)
-            if slot == 0:
-                cube = UsdGeom.Cube.Define(stage, f"{root}/{name}/Geom")
-                cube.CreateSizeAttr(1.0)
-                cube.AddScaleOp().Set(Gf.Vec3f(*np.asarray(tr.epm_size, float).tolist()))
-                cube.CreateDisplayColorAttr([Gf.Vec3f(0.6, 0.6, 0.62)])
-            else:
-                cyl = UsdGeom.Cylinder.Define(stage, f"{root}/{name}/Geom")
-                cyl.CreateAxisAttr(UsdGeom.Tokens.z)
-                cyl.CreateRadiusAttr(tr.ipm_diameter / 2)
-                cyl.CreateHeightAttr(tr.ipm_thickness)
-                r, h = tr.ipm_diameter / 2, tr.ipm_thickness / 2
-                cyl.CreateExtentAttr([Gf.Vec3f(-r, -r, -h), Gf.Vec3f(r, r, h)])
-                cyl.CreateDisplayColorAttr([Gf.Vec3f(0.55, 0.55, 0.58)])
+        _define_worm(stage, root, tr, codes)
+        _define_magnets(stage, root, tr, codes)
         if tr.camera is not None:
-            K, R, t, w, h = tr.camera
-            cam = UsdGeom.Camera.Define(stage, f"{root}/Camera")
-            # OpenCV camera (+z forward, +y down) -> USD camera (-z forward, +y up): flip the y and z axes
-            c2w = np.eye(4)
-            c2w[:3, :3] = R.T @ np.diag([1.0, -1.0, -1.0])
-            c2w[:3, 3] = -R.T @ t
-            cam.AddTransformOp().Set(_gf_matrix(c2w))
-            pitch = 36.0 / w  # aperture units per pixel (mm for a 36 mm-wide sensor); only ratios matter
-            cam.CreateHorizontalApertureAttr(float(w * pitch))
-            cam.CreateVerticalApertureAttr(float(h * pitch * K[0, 0] / K[1, 1]))
-            cam.CreateFocalLengthAttr(float(K[0, 0] * pitch))
-            cam.CreateHorizontalApertureOffsetAttr(float((K[0, 2] - (w - 1) / 2) * pitch))
-            cam.CreateVerticalApertureOffsetAttr(float(-(K[1, 2] - (h - 1) / 2) * pitch))
-            cam.CreateClippingRangeAttr(Gf.Vec2f(0.001, 100.0))
+            _define_camera(stage, root, tr.camera)
     stage.GetRootLayer().customLayerData = {"warpworm": json.dumps({"source_tracks": [t.name for t in tracks]})}
     stage.GetRootLayer().Save()
     return path
