@@ -72,6 +72,7 @@ def _err(raw, overrides=()):
     ({"sim": {"worlds": 2.5}}, ["sim.worlds", "2.5", "integer"]),
     ({"name": 3}, ["name", "3", "string"]),
     ({"render": {"widht": 64}}, ["render.widht", "unknown key", "width"]),
+    ({"sim": {3: 1}}, ["sim.3: unknown key", "substeps"]),  # YAML '3: 1': a key that is not a string
     ({"output": {"compression_level": 12}}, ["output.compression_level", "12", "<= 9"]),
     ({"output": "gzip"}, ["output", "'gzip'", "mapping with keys", "compression"]),
     ({"randomize": [1]}, ["randomize", "[1]", "mapping with keys", "worm"]),

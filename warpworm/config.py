@@ -501,9 +501,11 @@ def _message(e: dict) -> str:
     path = _path(loc)
     if kind == "config":
         return f"{ctx['path'] or path}: {ctx['detail']}"
-    if kind in ("extra_forbidden", "unexpected_keyword_argument"):
+    if kind in ("extra_forbidden", "unexpected_keyword_argument", "invalid_key"):  # invalid: not a string (YAML 1:)
+        parent = _path(loc[:-1])
         what = {2: "group", 3: "parameter"}.get(len(loc), "key") if loc[0] == "randomize" else "key"
-        return f"{path}: unknown {what}; expected one of {sorted(_KEYS.get(_path(loc[:-1]), []))}"
+        key = f"{parent}.{loc[-1]}" if parent else str(loc[-1])
+        return f"{key}: unknown {what}; expected one of {sorted(_KEYS.get(parent, []))}"
     if kind in _MAPPING:
         expected = "a mapping of parameters" if path.startswith("randomize.") else f"a mapping with keys {_KEYS[path]}"
     else:  # bounds of float fields come as floats: say 0, not 0.0
