@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import functools
 import math
 import os
 import tempfile
@@ -466,13 +467,16 @@ class DatasetConfig:
         return yaml.safe_dump(self.to_dict(), sort_keys=False)
 
 
-_ADAPTER = TypeAdapter(DatasetConfig)
+@functools.cache
+def _adapter() -> TypeAdapter:
+    """pydantic's validator of DatasetConfig, built on first use (0.3 s: not paid by processes that only import)."""
+    return TypeAdapter(DatasetConfig)
 
 
 def json_schema() -> dict:
     """The config's JSON Schema, for editors and validators (docs/config.md). Draft 7 is what yaml-language-server
     (VS Code's YAML support) implements; the schema uses nothing later (``$defs`` is only where references point)."""
-    schema = _ADAPTER.json_schema()
+    schema = _adapter().json_schema()
     for group in PARAM_SPECS:
         for param in schema["$defs"][f"Randomize{group.capitalize()}"]["properties"].values():
             param["allOf"] = [{"$ref": f"#/$defs/{param.pop('forms')}"}]
@@ -519,7 +523,7 @@ def config_from_dict(raw: dict) -> DatasetConfig:
     if not isinstance(raw, dict):
         raise ConfigError([f"<root>: got {_fmt(raw)}; expected a mapping"])
     try:
-        return _ADAPTER.validate_python(raw)
+        return _adapter().validate_python(raw)
     except ValidationError as exc:
         raise ConfigError([_message(e) for e in exc.errors(include_url=False)]) from None
 
