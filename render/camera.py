@@ -12,7 +12,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from warpworm.render.seeding import uniform_range, uniforms
+from warpworm.randomize import seed_uniforms
 
 
 @dataclass
@@ -129,6 +129,12 @@ def make_cameras(K, R, t, world, width: int, height: int) -> Cameras:
     return Cameras(K=K, R=R.copy(), t=t.copy(), world=world, width=int(width), height=int(height))
 
 
+def _between(u: np.ndarray, lo_hi) -> np.ndarray:
+    """Uniforms in [0, 1) mapped to [lo, hi)."""
+    lo, hi = lo_hi
+    return lo + (hi - lo) * u
+
+
 def sample_cameras(
     seeds,
     worm_points,
@@ -153,8 +159,8 @@ def sample_cameras(
 ) -> Cameras:
     """Cameras on a shell around each world's worm, resampled until the worm is in frame.
 
-    Every image ``i`` draws from its own ``seeds[i]`` with a counter-based generator (:mod:`.seeding`), so its camera
-    does not depend on the batch it is drawn in. Attempts are vectorised over images; an image whose worm is less
+    Every image ``i`` draws from its own ``seeds[i]`` with the counter-based generator
+    (:func:`warpworm.randomize.seed_uniforms`), so its camera does not depend on the batch it is drawn in. Attempts are vectorised over images; an image whose worm is less
     than ``min_in_frame`` inside the image (fraction of ``worm_points`` projecting at least ``margin`` px inside,
     in front of the camera) draws again, up to ``max_tries``; then the best attempt is kept and ``accepted`` is False.
 
@@ -191,16 +197,16 @@ def sample_cameras(
     for attempt in range(max_tries):
         if pending.size == 0:
             break
-        u = uniforms(seeds[pending], 0xCA3E0 + attempt, 12)
-        dist = uniform_range(u[:, 0], distance)
-        el_deg = uniform_range(u[:, 1], elevation_deg)
-        az_deg = uniform_range(u[:, 2], azimuth_deg)
-        roll_d = uniform_range(u[:, 3], roll_deg)
+        u = seed_uniforms(seeds[pending], 0xCA3E0 + attempt, 12)
+        dist = _between(u[:, 0], distance)
+        el_deg = _between(u[:, 1], elevation_deg)
+        az_deg = _between(u[:, 2], azimuth_deg)
+        roll_d = _between(u[:, 3], roll_deg)
         el, az, roll = np.deg2rad(el_deg), np.deg2rad(az_deg), np.deg2rad(roll_d)
         look = tgt[wi[pending]] + lookat_jitter * (2 * u[:, 4:7] - 1)
         eye = look + dist[:, None] * np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], 1)
         Ri, ti = look_at(eye, look, up=up, roll=roll)
-        fov = uniform_range(u[:, 7], fov_deg)
+        fov = _between(u[:, 7], fov_deg)
         if fov_axis == "x":
             fx = focal_from_fov(np.deg2rad(fov), width)
             fy = fx * (1 + aspect_jitter * (2 * u[:, 8] - 1))

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from warpworm.render.seeding import uniforms
+from warpworm.randomize import seed_uniforms
 from warpworm.transforms import axis_angle_to_matrix
 
 
@@ -59,7 +59,7 @@ def posed_worm_states(seeds, pattern=None, *, bend: float = 8.0, spread: float =
     p = default_pattern() if pattern is None else pattern
     seeds = np.asarray(seeds).reshape(-1)
     W = seeds.shape[0]
-    u = uniforms(seeds, 0xD3E0, 12)
+    u = seed_uniforms(seeds, 0xD3E0, 12)
     x = _bend(p.vertices, bend * (2 * u[:, 0] - 1), bend * (2 * u[:, 1] - 1))
     x[..., 2] -= x[..., 2].min(axis=1, keepdims=True) - lift  # rest on the floor
     yaw = 2 * np.pi * u[:, 2]

@@ -33,7 +33,6 @@ import numpy as np
 
 from warpworm import ids
 from warpworm.render.raster_kernels import LABEL_EPM, LABEL_FLOOR, LABEL_IPM_FIRST, LABEL_WORM_FIRST, NUM_LABELS
-from warpworm.render.seeding import uniforms
 
 LABEL_NAMES = ids.SEGMENTATION_NAMES
 """Name of every segmentation id, indexed by id."""
@@ -133,49 +132,25 @@ def hsv_to_rgb(h, s, v):
 
 
 def sample_appearance(seeds) -> Appearance:
-    """Randomized look per world from one seed per world (independent of batching).
+    """Randomized look per world, one seed (any integer id) per world: the packaged ``default`` config's ``light /
+    color / texture`` distributions drawn with the counter-based generator (:func:`warpworm.sampling.sample_appearance`,
+    the one appearance randomizer). Kept for ``warpworm/commands/render.py`` and ``benchmarks/bench_render.py``; new
+    code calls :func:`warpworm.sampling.sample_appearance` with its own config."""
+    from warpworm.sampling import sample_appearance as from_config
 
-    Paper colour (mostly off-white, sometimes tinted), floor colours, checker tile/contrast and grain, magnet tint,
-    sun direction (20-80° elevation) and colour temperature, lamp position and power, ambient level, background.
-    """
-    seeds = np.asarray(seeds).reshape(-1)
-    W = seeds.shape[0]
-    u = uniforms(seeds, 0xA11CE, 40)
-    base = default_appearance(W)
-    albedo = base.albedo.copy()
-    # paper: off-white, 30 % of worlds a pale coloured sheet
-    tinted = u[:, 0] < 0.3
-    sat = np.where(tinted, 0.15 + 0.35 * u[:, 1], 0.03 * u[:, 1])
-    paper = hsv_to_rgb(u[:, 2], sat, 0.6 + 0.3 * u[:, 3])
-    albedo[:, LABEL_WORM_FIRST:LABEL_WORM_FIRST + 5] = paper[:, None]
-    floor = hsv_to_rgb(u[:, 4], 0.1 + 0.4 * u[:, 5], 0.2 + 0.5 * u[:, 6])
-    albedo[:, LABEL_FLOOR] = floor
-    floor2 = hsv_to_rgb(u[:, 7], 0.1 + 0.4 * u[:, 8], 0.1 + 0.5 * u[:, 9])
-    metal = 0.45 + 0.2 * u[:, 10]
-    albedo[:, LABEL_IPM_FIRST:LABEL_IPM_FIRST + 3] = metal[:, None, None] * np.array([1.0, 1.0, 1.04])
-    albedo[:, LABEL_EPM] = hsv_to_rgb(u[:, 11], 0.3 * u[:, 12], 0.4 + 0.3 * u[:, 13])
-    spec = base.specular.copy()
-    spec[:, LABEL_IPM_FIRST:, 0] = (0.4 + 0.6 * u[:, 14])[:, None]
-    floor_tex = np.stack([0.01 + 0.03 * u[:, 15], np.where(u[:, 16] < 0.25, 0.0, 0.2 + 0.7 * u[:, 17]),
-                          0.1 + 0.4 * u[:, 18], 100.0 + 500.0 * u[:, 19]], axis=1)
-    paper_tex = np.stack([0.1 + 0.3 * u[:, 20], 0.05 + 0.15 * u[:, 21]], axis=1)
-    el = np.deg2rad(20 + 60 * u[:, 22])
-    az = 2 * np.pi * u[:, 23]
-    sun_dir = np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], axis=1)
-    warmth = u[:, 24] - 0.5
-    sun_color = (0.5 + 0.5 * u[:, 25])[:, None] * np.stack([1 + 0.15 * warmth, np.ones(W), 1 - 0.15 * warmth], 1)
-    ambient = (0.1 + 0.25 * u[:, 26])[:, None] * np.array([1.0, 1.0, 1.05])
-    lel = np.deg2rad(30 + 50 * u[:, 27])
-    laz = 2 * np.pi * u[:, 28]
-    lr = 0.2 + 0.3 * u[:, 29]
-    lamp_pos = lr[:, None] * np.stack([np.cos(lel) * np.cos(laz), np.cos(lel) * np.sin(laz), np.sin(lel)], 1)
-    lamp_power = (0.2 + 0.5 * u[:, 30])[:, None] * lr[:, None] ** 2 * np.ones(3)
-    bg_top = hsv_to_rgb(u[:, 31], 0.3 * u[:, 32], 0.3 + 0.5 * u[:, 33])
-    bg_bottom = bg_top * (0.3 + 0.5 * u[:, 34])[:, None]
-    return Appearance(albedo=albedo, specular=spec, floor_tex=floor_tex, floor_color2=floor2, paper_tex=paper_tex,
-                      tex_seed=(u[:, 35] * 2**31).astype(np.int32), ambient=ambient, sun_dir=sun_dir,
-                      sun_color=sun_color, lamp_pos=lamp_pos, lamp_power=lamp_power, bg_top=bg_top,
-                      bg_bottom=bg_bottom)
+    return from_config(_default_config(), np.asarray(seeds).reshape(-1))
+
+
+def _default_config():
+    global _DEFAULT_CONFIG
+    if _DEFAULT_CONFIG is None:
+        from warpworm.config import load_config
+
+        _DEFAULT_CONFIG = load_config("default")
+    return _DEFAULT_CONFIG
+
+
+_DEFAULT_CONFIG = None
 
 
 # ---------------------------------------------------------------------------------------------------------------------

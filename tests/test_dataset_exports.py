@@ -10,7 +10,7 @@ import pytest
 
 from warpworm import dataset as ds
 from warpworm.config import load_config
-from warpworm.pipeline import generate
+from warpworm.job import generate
 
 
 @pytest.fixture(scope="module")

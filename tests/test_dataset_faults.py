@@ -19,7 +19,7 @@ import pytest
 
 from warpworm import dataset as ds
 from warpworm.commands import verify as vf
-from warpworm.pipeline import shard_plan
+from warpworm.job import shard_plan
 
 from test_dataset_pipeline import FAKE, _cli, _reference, assert_same, everything, run, tiny
 

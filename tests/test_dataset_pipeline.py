@@ -17,7 +17,7 @@ import yaml
 
 from warpworm import dataset as ds
 from warpworm.config import ConfigError, load_config
-from warpworm.pipeline import generate
+from warpworm.job import generate
 
 FAKE = "test_dataset_fakes:FakeStages"
 TESTS = Path(__file__).parent

@@ -7,7 +7,8 @@ import numpy as np
 
 from warpworm import dataset as ds
 from warpworm.config import load_config
-from warpworm.pipeline import generate
+from warpworm.job import generate
+from warpworm.previews import write_previews
 
 
 def test_default_config_end_to_end_with_real_stages(tmp_path):
@@ -16,6 +17,8 @@ def test_default_config_end_to_end_with_real_stages(tmp_path):
                       num_samples=8)
     s = generate(cfg, tmp_path / "d", progress=False)
     assert s.new_samples == 8
+    assert not (tmp_path / "d" / "preview.png").exists()  # previews are the generate command's, not the job's
+    write_previews(cfg, tmp_path / "d")
     r = ds.open(tmp_path / "d")
     assert len(r) == 8 and (tmp_path / "d" / "preview.png").is_file() and (tmp_path / "d" / "preview.mp4").is_file()
     names = json.loads(r.attrs["keypoint_names"])

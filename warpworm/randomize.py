@@ -75,6 +75,36 @@ def derived_seed(keys: np.ndarray, stream: str = "seed") -> np.ndarray:
     return (h >> np.uint64(1)).astype(np.int64)
 
 
+_STREAM = np.uint64(0xD1B54A32D192ED03)
+
+
+def seed_uniforms(seeds, stream: int, count: int) -> np.ndarray:
+    """Uniform [0, 1) float64, shape ``(len(seeds), count)``: ``count`` numbers per integer seed and numeric stream.
+
+    The same generator as :func:`uniform01` (this module's SplitMix64 finalizer), keyed the way the renderer's
+    consumers are (one integer seed per image, a numeric stream per use and rejection attempt: the cameras of
+    :func:`warpworm.render.sample_cameras`, :func:`warpworm.render.demo.posed_worm_states`): value ``j`` of seed ``s``
+    is ``mix(mix(s·φ + stream·c) ^ (j + 1)·φ)``, so image ``i`` gives the same numbers alone or in any batch.
+
+    Args:
+        seeds: one non-negative integer per sample, shape (N,) (e.g. :func:`derived_seed`).
+        stream: names an independent stream (e.g. one per use and per rejection attempt).
+        count: numbers per sample.
+    """
+    s = np.asarray(seeds).astype(np.uint64).reshape(-1, 1)
+    idx = np.arange(count, dtype=np.uint64).reshape(1, -1)
+    st = np.asarray([stream], dtype=np.uint64)
+    with np.errstate(over="ignore"):
+        x = _mix64(s * _GOLDEN + st * _STREAM)
+        x = _mix64(x ^ (idx + np.uint64(1)) * _GOLDEN)
+    return (x >> np.uint64(11)).astype(np.float64) * (1.0 / 9007199254740992.0)
+
+
+def derive_seeds(master_seed: int, count: int, stream: int = 0) -> np.ndarray:
+    """``count`` integer seeds (uint32 range, int64) from one master seed and a numeric stream (:func:`seed_uniforms`)."""
+    return (seed_uniforms([master_seed], stream, count)[0] * 2**32).astype(np.int64)
+
+
 # ---------------------------------------------------------------------------------------------------------------------
 # Inverse normal CDF (Acklam's rational approximation, relative error < 1.2e-9), vectorized; avoids a SciPy dependency.
 _A = (-3.969683028665376e01, 2.209460984245205e02, -2.759285104469687e02, 1.383577518672690e02,

@@ -26,6 +26,9 @@ import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from typing import Callable
 
+from .shard import Interrupted, run_shard
+from .stages import load_stages
+
 _progress_queue = None
 _in_shard = False
 
@@ -33,8 +36,6 @@ _in_shard = False
 def _worker_signal(signum, frame):
     """SIGTERM / SIGINT in a worker: discard the shard in flight (run_shard deletes its temporary), then exit."""
     if _in_shard:
-        from .pipeline import Interrupted
-
         raise Interrupted(signum)
     os._exit(128 + signum)
 
@@ -57,8 +58,6 @@ def _init_worker(q, parent_pid: int, stages=None, ready=None):
     if stages is not None:
         # heavy imports now, while the parent warms the kernel cache; then wait for it, so that no worker compiles
         # a kernel module the parent is compiling (each would compile its own copy: ~33 s of CPU per worker here)
-        from .pipeline import load_stages
-
         preload = getattr(load_stages(stages), "preload", None)
         if preload is not None:
             preload()
@@ -73,8 +72,6 @@ def _report(n: int):
 
 def _run_shard_task(cfg, out, k, stages):
     global _in_shard
-    from .pipeline import Interrupted, run_shard
-
     _in_shard = True
     try:
         return run_shard(cfg, out, k, stages, progress=_report)
@@ -86,8 +83,6 @@ def _run_shard_task(cfg, out, k, stages):
 
 def _warm(cfg, stages) -> None:
     """Load / compile the stages' kernels once in this process (``stages.warm(cfg)``, when the stages have it)."""
-    from .pipeline import load_stages
-
     warm = getattr(load_stages(stages), "warm", None)
     if warm is None:
         return
@@ -115,8 +110,6 @@ def run_shards(cfg, out, todo: list[int], stages, *, workers: int = 1, engine: s
     if engine != "local":
         raise ValueError(f"--engine: got {engine!r}; expected 'local' or 'ray'")
     if workers <= 1:
-        from .pipeline import run_shard
-
         _warm(cfg, stages)  # cold cache: the kernel modules compile in parallel threads
         for k in todo:
             on_shard(run_shard(cfg, out, k, stages, progress=on_progress))
@@ -240,8 +233,6 @@ def _remove_dead_attempts(out, shards) -> list[str]:
 
 
 def _ray_shard(cfg, out, k, stages):
-    from .pipeline import run_shard
-
     # Ray workers may not see the driver's sys.path (tests' fake stages): it travels with the task
     return run_shard(cfg, out, k, stages)
 

@@ -80,13 +80,14 @@ def main(args: argparse.Namespace) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_LOCKED
 
-    from ..pipeline import DEFAULT_STAGES, Interrupted, generate
+    from ..job import Interrupted, generate
+    from ..stages import DEFAULT_STAGES
     from ..workers import WorkerError
 
+    stages = args.stages or DEFAULT_STAGES
     try:
-        summary = generate(cfg, args.out, workers=args.workers, resume=args.resume,
-                           stages=args.stages or DEFAULT_STAGES, engine=args.engine, address=args.address,
-                           progress=not args.no_progress, preview=False if args.no_preview else None)
+        summary = generate(cfg, args.out, workers=args.workers, resume=args.resume, stages=stages,
+                           engine=args.engine, address=args.address, progress=not args.no_progress)
     except (ConfigError, DatasetError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_CONFIG
@@ -103,5 +104,18 @@ def main(args: argparse.Namespace) -> int:
     except (WorkerError, RuntimeError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_FAILED
+    if cfg.output.preview and not args.no_preview:
+        write_previews_or_warn(cfg, args.out, stages)
     print(summary.text())
     return EXIT_OK
+
+
+def write_previews_or_warn(cfg, out, stages) -> None:
+    """``preview.png`` / ``preview.mp4`` of the finished dataset; a failure is a warning (a preview must never fail a
+    finished dataset)."""
+    from ..previews import write_previews
+
+    try:
+        write_previews(cfg, out, stages)
+    except Exception as exc:  # noqa: BLE001
+        print(f"warning: preview not written: {exc}", file=sys.stderr)

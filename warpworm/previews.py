@@ -1,0 +1,80 @@
+"""Previews of a finished dataset: ``preview.png`` (a contact sheet of the first samples, read back from the shards)
+and ``preview.mp4`` (trajectory 0 resimulated densely with the same draws). Written by the ``generate`` command
+after the job (:func:`warpworm.job.generate` does not write them), never part of the data.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+
+from . import dataset as ds
+from .config import DatasetConfig
+from .sampling import appearance_draws, worm_params
+from .shard import ShardStats, simulate_with_replacement
+from .stages import DEFAULT_STAGES, load_stages
+
+
+def _sheet_inputs(samples: list[dict]) -> tuple[dict, dict]:
+    """Dataset samples -> the (images, labels) that :func:`warpworm.render.contact_sheet.contact_sheet` draws:
+    boxes back from (x, y, w, h) to corners, the body pose from ``poses/body``."""
+    def st(k):
+        return np.stack([s[k] for s in samples])
+
+    box, vb, body = st("labels/bbox_obj"), st("labels/bbox_visib"), st("poses/body")
+    visible = vb[:, 2] > 0
+    images = {"rgb": st("rgb"), "depth": st("depth"), "seg": st("segmentation")}
+    labels = {
+        "K": st("camera/K"), "R": st("camera/R"), "t": st("camera/t"),
+        "body_R_world": body[:, :3, :3], "body_t_world": body[:, :3, 3],
+        "keypoints_2d": st("keypoints/pixel"), "keypoint_visibility": st("keypoints/visibility"),
+        "worm_box": np.concatenate([box[:, :2], box[:, :2] + box[:, 2:]], axis=1),
+        "worm_box_visible": np.where(visible[:, None], np.concatenate([vb[:, :2], vb[:, :2] + vb[:, 2:] - 1], axis=1),
+                                     -1).astype(np.int64),
+        "visible_fraction": st("labels/visib_fract"),
+    }
+    return images, labels
+
+
+def write_previews(cfg: DatasetConfig, out, stages=DEFAULT_STAGES, max_rows: int = 8) -> list[Path]:
+    """``preview.png``: the renderer's contact sheet (:func:`warpworm.render.contact_sheet.contact_sheet`) of the
+    first samples; ``preview.mp4``: trajectory 0 resimulated at 20 fps over ``sim.frame_times`` with the same draws,
+    seen from sample 0's stored camera (one world, small)."""
+    import cv2
+
+    from .render import make_cameras
+    from .render.contact_sheet import contact_sheet, save_png
+
+    out = Path(out)
+    reader = ds.open(out)
+    try:
+        n = min(len(reader), max_rows)
+        paths = []
+        if n == 0:
+            return paths
+        images, labels = _sheet_inputs([reader[i] for i in range(n)])
+        save_png(out / "preview.png", contact_sheet(images, labels, max_rows=n, scale=2))
+        paths.append(out / "preview.png")
+        cam = {k: reader.read(f"camera/{k}", [0]) for k in ("K", "R", "t")}
+    finally:
+        reader.close()
+    # video: trajectory 0 with a dense frame list (same parameters and camera as in the dataset)
+    T = cfg.sim.frame_times[-1]
+    nf = max(2, int(T * 20) + 1)
+    dense = dataclasses.replace(cfg, sim=dataclasses.replace(cfg.sim, frame_times=list(np.linspace(0, T, nf)),
+                                                             worlds=1), shard_size=nf, num_samples=nf)
+    stg = load_stages(stages)
+    frames, wdraws, _ = simulate_with_replacement(stg, dense, np.array([0]), ShardStats(0, 0))
+    cams = make_cameras(cam["K"], cam["R"], cam["t"], 0, cfg.render.width, cfg.render.height)
+    traj = np.array([0])
+    app = appearance_draws(cfg, traj)
+    vw = cv2.VideoWriter(str(out / "preview.mp4"), cv2.VideoWriter_fourcc(*"mp4v"), 20,
+                         (cfg.render.width, cfg.render.height))
+    for f in frames:
+        img = stg.render_batch(f, worm_params(cfg, wdraws), cams, app, np.zeros(1, np.int64), cfg)["rgb"][0]
+        vw.write(np.ascontiguousarray(img[..., ::-1]))
+    vw.release()
+    paths.append(out / "preview.mp4")
+    return paths

@@ -1,0 +1,233 @@
+"""Every randomized value of a dataset sample, drawn from the config's distributions (``cfg.randomize``) with the one
+counter-based generator of :mod:`warpworm.randomize`, and turned into what the simulator and renderer take.
+
+What each draw is keyed by (so that any shard size, worker count, engine or device gives the same samples):
+
+* physics (``worm.*``): (seed, trajectory, attempt) -- :func:`draw_worm`, :func:`worm_params`;
+* appearance (``light.*``, ``color.*``, ``texture.*``) and sensor values (``sensor.*``): (seed, trajectory) --
+  :func:`appearance_draws`, turned into the renderer's inputs by :func:`appearance_from_draws` and
+  :func:`sensor_values`;
+* cameras (``camera.*``): (seed, trajectory) or (seed, sample) with ``render.camera_per_frame`` --
+  :func:`dataset_cameras`.
+
+:func:`randomized_params` draws ``WormParams`` for W worlds outside a dataset job (``warpworm simulate --randomize``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import randomize as rnd
+from .params import WormParams
+
+_WORM_VECTOR = {"epm_size": ("epm_size_x", "epm_size_y", "epm_size_z"),
+                "ipm_moment": ("ipm_moment_tail", "ipm_moment_centre", "ipm_moment_head")}
+_WORM_SHARED = {"gait", "backward", "magnet_model"}
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# Physics
+def draw_worm(cfg, traj: np.ndarray, attempt: np.ndarray) -> rnd.Draws:
+    """Draw the ``worm.*`` parameters of trajectories ``traj`` (n,) at ``attempt`` (n,)."""
+    dists = {f"worm.{k}": v for k, v in cfg.randomize["worm"].items()}
+    d = rnd.draw(dists, cfg.seed, traj, attempt)
+    _fill_gait_presets(d)
+    # kinetic friction can't exceed static: clip per sample (and record the clipped value).
+    d.values["worm.mu_kinetic"] = np.minimum(d["worm.mu_kinetic"], d["worm.mu_static"])
+    return d
+
+
+def _fill_gait_presets(d: rnd.Draws) -> None:
+    """NaN = "the gait preset's value" (:data:`warpworm.gaits.GAIT_PRESETS`), resolved in place per sample's gait;
+    a NaN orientation becomes the preset's EPM moment angle for the sample's gait and direction."""
+    from .gaits import GAIT_PRESETS, gait_theta
+
+    gait = np.asarray(d["worm.gait"]).astype(str)
+    for g, preset in GAIT_PRESETS.items():
+        sel = gait == g
+        if not sel.any():
+            continue
+        for key, value in preset.items():
+            arr = d.values.get(f"worm.{key}")
+            if arr is not None and arr.dtype.kind == "f":
+                arr[sel & np.isnan(arr)] = value
+    theta, back = d["worm.orientation"], np.asarray(d["worm.backward"]).astype(bool)
+    for g in np.unique(gait):
+        for bw in (False, True):
+            sel = (gait == g) & (back == bw) & np.isnan(theta)
+            theta[sel] = gait_theta(str(g), bw)
+
+
+def worm_params(cfg, draws: rnd.Draws, sel: np.ndarray | slice = slice(None)) -> WormParams:
+    """WormParams for the selected worlds of ``draws`` (the batch-shared fields must be equal over ``sel``)."""
+    p = WormParams(n_units=cfg.sim.n_units)
+    for name, arr in draws.values.items():
+        group, key = name.split(".", 1)
+        if group != "worm":
+            continue
+        a = arr[sel]
+        if key in _WORM_SHARED:
+            setattr(p, key, bool(a[0]) if key == "backward" else str(a[0]))
+        elif not any(key in comps for comps in _WORM_VECTOR.values()):
+            setattr(p, key, np.asarray(a, dtype=np.float64))
+    for vec, comps in _WORM_VECTOR.items():
+        setattr(p, vec, np.stack([np.asarray(draws[f"worm.{c}"][sel], dtype=np.float64) for c in comps], axis=1))
+    return p
+
+
+def randomized_params(cfg_name_or_cfg, num_worlds: int, seed: int) -> WormParams:
+    """``WormParams`` of ``num_worlds`` worlds drawn from a config's ``worm.*`` distributions (a
+    :class:`~warpworm.config.DatasetConfig`, or a config name / path for :func:`warpworm.config.load_config`) with the
+    counter-based generator: world ``w`` is trajectory ``w`` at attempt 0 of that config with master seed ``seed``
+    (the same values a dataset job with that seed draws for its trajectory ``w``).
+
+    The batch-shared fields (``gait``, ``backward``, ``magnet_model``) must come out equal for every world (they are
+    one value per solver batch); a config that randomizes them is refused, naming the field and the values drawn.
+    """
+    import dataclasses
+
+    from .config import BATCH_SHARED, ConfigError, load_config
+
+    cfg = load_config(cfg_name_or_cfg) if isinstance(cfg_name_or_cfg, str) else cfg_name_or_cfg
+    if int(num_worlds) < 1:
+        raise ConfigError([f"num_worlds: got {num_worlds}; expected >= 1"])
+    cfg = dataclasses.replace(cfg, seed=int(seed))
+    d = draw_worm(cfg, np.arange(int(num_worlds), dtype=np.int64), np.zeros(int(num_worlds), dtype=np.int64))
+    errors = []
+    for name in BATCH_SHARED:
+        values = sorted({str(v) for v in np.asarray(d[name]).tolist()})
+        if len(values) > 1:
+            errors.append(f"randomize.{name}: drew {values} over {num_worlds} worlds; expected one value (it is shared "
+                          "by the solver batch: make it a constant)")
+    if errors:
+        raise ConfigError(errors)
+    return worm_params(cfg, d)
+
+
+def draw_group(cfg, group: str, index: np.ndarray) -> rnd.Draws:
+    """Draw the ``<group>.*`` distributions of the config for ``index`` (n,) (attempt 0)."""
+    return rnd.draw({f"{group}.{k}": v for k, v in cfg.randomize[group].items()}, cfg.seed, index)
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# Appearance and sensor
+APPEARANCE_GROUPS = ("light", "color", "texture", "sensor")
+
+
+def appearance_draws(cfg, traj: np.ndarray) -> dict[str, np.ndarray]:
+    """The ``light / color / texture / sensor`` draws of trajectories ``traj`` (B,), each (B,), plus
+    ``texture.seed``: the procedural textures' offset, keyed by the trajectory so that the floor grain and paper fibre
+    stay put across a trajectory's frames (a per-sample seed would make them crawl between frames of one camera)."""
+    app = {}
+    for g in APPEARANCE_GROUPS:
+        app.update(draw_group(cfg, g, traj).values)
+    app["texture.seed"] = rnd.derived_seed(rnd.sample_keys(cfg.seed, traj), "texture") % (2**31 - 1)
+    return app
+
+
+def appearance_from_draws(app: dict, seeds: np.ndarray):
+    """The renderer's :class:`~warpworm.render.Appearance` from the drawn ``light/color/texture`` values (B,) each."""
+    from .render import default_appearance, hsv_to_rgb
+
+    B = len(seeds)
+    a = default_appearance(B)
+    worm = hsv_to_rgb(app["color.worm_hue"], app["color.worm_saturation"], app["color.worm_value"])
+    floor = hsv_to_rgb(app["color.floor_hue"], app["color.floor_saturation"], app["color.floor_value"])
+    a.albedo = a.albedo.copy()
+    a.albedo[:, 2:7] = worm[:, None]
+    a.albedo[:, 1] = floor
+    a.floor_color2 = floor * 0.55
+    tex = np.asarray(app["texture.floor"]).astype(str)
+    ft = a.floor_tex.copy()
+    ft[:, 0] = app["texture.floor_scale"]
+    ft[:, 1] = np.where(tex == "checker", 0.6, 0.0)  # checker contrast
+    ft[:, 2] = np.where(tex == "noise", 0.5, 0.0)  # grain amplitude
+    ft[:, 3] = 1.0 / np.maximum(app["texture.floor_scale"], 1e-4) * 5.0
+    a.floor_tex = ft
+    fibre = np.asarray(app["texture.worm"]).astype(str) == "fibre"
+    a.paper_tex = np.stack([np.where(fibre, 0.25, 0.0), np.where(fibre, 0.10, 0.0)], axis=1)
+    tex_seed = app.get("texture.seed")  # per trajectory (appearance_draws); a bare per-sample seed otherwise
+    a.tex_seed = ((seeds if tex_seed is None else np.asarray(tex_seed)) % (2**31 - 1)).astype(np.int32)
+    el, az = app["light.elevation"], app["light.azimuth"]
+    a.sun_dir = np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], axis=1)
+    a.sun_color = app["light.intensity"][:, None] * np.ones(3)
+    a.ambient = app["light.ambient"][:, None] * np.ones(3)
+    bg = app["color.background_value"][:, None] * np.ones(3)
+    a.bg_top, a.bg_bottom = bg, 0.6 * bg
+    return a
+
+
+def sample_appearance(cfg, index: np.ndarray):
+    """The renderer's :class:`~warpworm.render.Appearance` of ``index`` (n,) trajectories (or any ids) drawn from the
+    config's ``light / color / texture`` distributions: the look a dataset job gives those trajectories."""
+    index = np.asarray(index, dtype=np.int64).reshape(-1)
+    return appearance_from_draws(appearance_draws(cfg, index), rnd.derived_seed(rnd.sample_keys(cfg.seed, index)))
+
+
+def sensor_values(app: dict) -> dict:
+    """The dataset's drawn ``sensor.*`` values (B,) -> :func:`warpworm.render.sensor.apply_sensor` ``values``.
+
+    Brightness and noise are configured in 8-bit levels (the renderer takes fractions of full scale); JPEG quality 100
+    means no round trip (the renderer's 0). White balance, hue, saturation and shot noise are not dataset parameters:
+    neutral (the renderer then skips the colour conversions).
+    """
+    q = np.asarray(app["sensor.jpeg_quality"]).astype(np.int64)
+    B = len(q)
+    f32 = np.float32  # float32 values keep the per-image arithmetic in float32 (measured ~25 % faster than float64)
+    return {"wb_r": np.ones(B), "wb_g": np.ones(B), "wb_b": np.ones(B), "hue_deg": np.zeros(B),
+            "saturation": np.ones(B), "contrast": np.asarray(app["sensor.contrast"], f32),
+            "brightness": (np.asarray(app["sensor.brightness"], np.float64) / 255.0).astype(f32),
+            "blur_sigma": np.asarray(app["sensor.blur_sigma"], np.float64),
+            "noise_sigma": np.asarray(app["sensor.noise_std"], np.float64) / 255.0, "shot_noise": np.zeros(B),
+            "jpeg_quality": np.where(q >= 100, 0, q)}
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# Cameras
+def _range(dist: rnd.Distribution) -> tuple[float, float]:
+    """(lo, hi) of a camera range (config validation allows only constants and uniforms)."""
+    if isinstance(dist, rnd.Uniform):
+        return (float(dist.low), float(dist.high))
+    return (float(dist.value), float(dist.value))
+
+
+def dataset_cameras(cfg, index: np.ndarray, worm_points: np.ndarray):
+    """Cameras of ``index`` (n,) trajectory or sample ids (whatever the camera is keyed by) from the ``camera.*``
+    ranges, with :func:`warpworm.render.sample_cameras`: on a shell around the mean of ``worm_points`` (n, P, 3) (the
+    worm's vertices over every frame the camera shows), redrawn until at least ``camera.min_in_frame`` of those
+    points project inside the image (up to ``camera.max_tries``; then the best view is kept). Square pixels, principal
+    point at the image centre, ``fov_y`` vertical.
+
+    Each camera draws from its own seed, derived from (master seed, index), so it is the same in any batch, shard or
+    worker. Returns (cameras, ``camera.*`` values (n,) each as stored in ``params/``: the kept view's distance,
+    elevation, azimuth, roll, fov_y [rad], look-at offset length [m], its in-frame fraction, max_tries).
+    """
+    from .render import sample_cameras
+
+    c = cfg.randomize["camera"]
+    index = np.asarray(index, dtype=np.int64)
+    seeds = rnd.derived_seed(rnd.sample_keys(cfg.seed, index), "camera")
+    pts = np.asarray(worm_points, dtype=np.float64)
+    target = pts.mean(axis=1)
+    deg = lambda name: tuple(np.rad2deg(_range(c[name])))  # noqa: E731
+    cams = sample_cameras(
+        seeds, pts, width=cfg.render.width, height=cfg.render.height, world_index=np.arange(len(index)),
+        target=target, distance=_range(c["distance"]), elevation_deg=deg("elevation"), azimuth_deg=deg("azimuth"),
+        roll_deg=deg("roll"), fov_deg=deg("fov_y"), fov_axis="y", lookat_jitter=_range(c["lookat_jitter"])[0],
+        aspect_jitter=0.0, principal_jitter=0.0, min_in_frame=_range(c["min_in_frame"])[0],
+        max_tries=int(_range(c["max_tries"])[0]))
+    d = cams.draws
+    n = len(index)
+    values = {
+        "camera.distance": d["distance"], "camera.elevation": np.deg2rad(d["elevation_deg"]),
+        "camera.azimuth": np.deg2rad(d["azimuth_deg"]), "camera.roll": np.deg2rad(d["roll_deg"]),
+        "camera.fov_y": np.deg2rad(d["fov_deg"]),
+        "camera.lookat_jitter": np.linalg.norm(d["lookat"] - target, axis=1),
+        "camera.min_in_frame": cams.in_frame.astype(np.float64),
+        "camera.max_tries": np.full(n, float(_range(c["max_tries"])[0])),
+    }
+    return cams, values
+
+
+__all__ = ["appearance_draws", "appearance_from_draws", "dataset_cameras", "draw_group", "draw_worm",
+           "randomized_params", "sample_appearance", "sensor_values", "worm_params"]

@@ -1,0 +1,222 @@
+"""The pipeline's two heavy stages (simulation, rendering) behind one small interface, and warpworm's own.
+
+The job (:mod:`warpworm.job`) never imports the simulator or the renderer: it calls a *stages* object (see
+:class:`Stages`) given as ``"module:attribute"`` so that worker processes can import it. The default,
+:class:`WarpStages`, is warpworm's simulator and renderer; tests plug in a closed-form double.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import os
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+
+from .config import DatasetConfig
+from .params import WormParams
+from .sampling import appearance_from_draws, sensor_values
+
+DEFAULT_STAGES = "warpworm.stages:WarpStages"
+
+
+@dataclass
+class SimResult:
+    """What :meth:`Stages.simulate_batch` returns for B worlds.
+
+    frames: one snapshot dict per ``sim.frame_times`` entry, each with at least ``positions (B,V,3)``,
+        ``magnet_pos (B,4,3)``, ``magnet_rot (B,4,3,3)``, ``crease_angle (B,H)``, ``bar_strain (B,E)`` [SI].
+    unstable: (B,) bool: the world went unstable at some point (it is dropped and redrawn).
+    """
+
+    frames: list[dict[str, np.ndarray]]
+    unstable: np.ndarray
+
+
+class Stages(Protocol):
+    """The two heavy stages of the pipeline (simulation, rendering), pluggable for tests and other engines."""
+
+    def metadata(self, cfg: DatasetConfig) -> dict:
+        """Static per-dataset facts: ``keypoint_names`` (P,), ``triangles (T,3)``, ``triangle_segment (T,)``,
+        ``hinges (H,4)``, ``hinge_label (H,)``, ``edges (E,2)``, ``num_vertices``."""
+
+    def simulate_batch(self, params: WormParams, num_worlds: int, cfg: DatasetConfig) -> SimResult:
+        """Settle for ``sim.settle_time`` then drive the EPM paths; snapshots at ``sim.frame_times``."""
+
+    def render_batch(self, frame: dict[str, np.ndarray], params: WormParams, cameras,
+                     appearance: dict[str, np.ndarray], seeds: np.ndarray, cfg: DatasetConfig) -> dict[str, np.ndarray]:
+        """Render B images of one snapshot per world and compute their labels.
+
+        ``cameras`` is a :class:`warpworm.render.Cameras` of B images (``K (B,3,3)``, ``R (B,3,3)``, ``t (B,3)``,
+        ``width``, ``height``; image b shows world b of ``frame``).
+
+        Returns name -> (B, ...) arrays for the image and label datasets of :data:`warpworm.dataset.SCHEMA`
+        (rgb, depth, segmentation, poses/*, keypoints/*, creases/angle, bars/strain, worm/vertices, labels/*).
+        ``appearance`` holds the drawn ``light.*``, ``color.*``, ``texture.*``, ``sensor.*`` values, (B,) each;
+        ``seeds`` (B,) int64 seeds all pixel noise must derive from.
+        """
+
+
+def load_stages(spec: str | Any) -> Any:
+    """``"package.module:attr"`` -> a stages instance (attr is instantiated if it is a class or factory)."""
+    if not isinstance(spec, str):
+        return spec
+    mod, _, attr = spec.partition(":")
+    obj = getattr(importlib.import_module(mod), attr or "Stages")
+    return obj() if callable(obj) else obj
+
+
+class WarpStages:
+    """warpworm's own simulator (:mod:`warpworm.simulator`) and rasterizer (:mod:`warpworm.render`).
+
+    Simulation: ``Model.from_params`` -> ``Simulator(dt, substeps)`` -> ``settle(settle_time)`` -> ``step`` to each
+    frame time -> ``snapshot``. A world flagged unstable at any frame is reported unstable.
+    Rendering: ``render.build_scene`` (worm sheet, IPM disks, EPM bar, floor) with an appearance built from the drawn
+    ``light/color/texture`` values, ``Renderer.render``, then sensor effects (:func:`warpworm.render.sensor.apply_sensor`
+    with the drawn ``sensor.*`` values, :func:`sensor_values`) and labels (:func:`compute_labels`).
+    """
+
+    @staticmethod
+    def kernel_modules() -> list[str]:
+        """Every module of ``warpworm.kernels`` and ``warpworm.render`` whose name says it holds kernels
+        (:meth:`warm` compiles them together). Discovered, not listed, so a new solver module is warmed too."""
+        import pkgutil
+
+        from . import kernels, render
+
+        names = []
+        for pkg in (kernels, render):
+            names += [f"{pkg.__name__}.{m.name}" for m in pkgutil.iter_modules(pkg.__path__)
+                      if "kernel" in m.name or pkg is kernels]
+        return names
+
+    def __init__(self):
+        self._renderers = {}
+        self._patterns = {}
+
+    def preload(self):
+        """Heavy imports (Warp, the simulator, the renderer), so a worker does them while the parent warms the cache."""
+        from . import quiet_warp
+
+        quiet_warp()
+        from . import model, simulator  # noqa: F401
+        from . import render  # noqa: F401
+
+        for name in self.kernel_modules():
+            importlib.import_module(name)
+
+    def warm(self, cfg, max_workers: int | None = None):
+        """Load every kernel module of :meth:`kernel_modules` on ``sim.device``, compiling the missing ones into
+        Warp's kernel cache in parallel (``max_workers`` threads; default one per available core).
+
+        Run once in the parent before workers start: with a cold cache (a kernel source changed, a fresh install)
+        each worker would otherwise compile the same modules itself (measured ~33 s of CPU per process here, ~23 s
+        wall when the three modules compile in parallel). With a hot cache it costs the module hashing (~0.3 s).
+        """
+        import warp as wp
+
+        self.preload()
+        if max_workers is None:
+            try:
+                max_workers = len(os.sched_getaffinity(0))
+            except AttributeError:  # pragma: no cover - not Linux
+                max_workers = os.cpu_count() or 1
+        names = self.kernel_modules()
+        wp.force_load(device=cfg.sim.device, modules=[wp.get_module(n) for n in names], max_workers=max_workers)
+
+    def _pattern(self, n_units: int):
+        from . import crease
+
+        p = self._patterns.get(n_units)
+        if p is None:
+            w = WormParams()
+            p = self._patterns[n_units] = crease.build_worm(w.a, w.b, n_units, l0=w.l0)
+        return p
+
+    def metadata(self, cfg):
+        p = self._pattern(cfg.sim.n_units)
+        from .render.labels import KEYPOINT_NAMES
+
+        return {"keypoint_names": list(KEYPOINT_NAMES), "triangles": p.triangles,
+                "triangle_segment": p.triangle_segment, "hinges": p.hinges, "hinge_label": p.hinge_label,
+                "edges": p.edges, "num_vertices": p.num_vertices}
+
+    def simulate_batch(self, params, num_worlds, cfg):
+        from .model import Model
+        from .simulator import Simulator
+
+        model = Model.from_params(params, num_worlds, device=cfg.sim.device)
+        sim = Simulator(model, dt=cfg.sim.dt, substeps=cfg.sim.substeps)
+        state = sim.initial_state()
+        rest = sim.snapshot(state)["positions"]  # per-world rest geometry (a, b, l0 may differ per world)
+        sim.settle(state, cfg.sim.settle_time)
+        keep = ("positions", "magnet_pos", "magnet_rot", "crease_angle", "bar_strain")
+        frames, unstable, steps_done = [], np.zeros(num_worlds, bool), 0
+        for t in cfg.sim.frame_times:
+            n = int(round(t / cfg.sim.dt)) - steps_done
+            if n > 0:
+                sim.step(state, n)
+                steps_done += n
+            snap = sim.snapshot(state)
+            unstable |= snap["unstable"] | ~np.isfinite(snap["positions"]).all(axis=(1, 2))
+            frames.append({**{k: snap[k] for k in keep}, "rest_positions": rest})
+        return SimResult(frames=frames, unstable=unstable)
+
+    def _renderer(self, cfg):
+        from .render import Renderer
+
+        key = (cfg.render.width, cfg.render.height, cfg.sim.device)
+        r = self._renderers.get(key)
+        if r is None:
+            r = self._renderers[key] = Renderer(cfg.render.width, cfg.render.height, device=cfg.sim.device)
+        return r
+
+    def render_batch(self, frame, params, cameras, appearance, seeds, cfg):
+        from . import render
+
+        B = len(seeds)
+        pattern = self._pattern(cfg.sim.n_units)
+        scene = render.build_scene(
+            frame["positions"], pattern.triangles, pattern.triangle_segment, magnet_pos=frame["magnet_pos"],
+            magnet_rot=frame["magnet_rot"], worm_texcoords=pattern.vertices, ipm_diameter=params.ipm_diameter,
+            ipm_thickness=params.ipm_thickness, epm_size=params.epm_size, floor_incline=params.floor_incline,
+            appearance=appearance_from_draws(appearance, seeds))
+        from .render.sensor import apply_sensor
+
+        cams = dataclasses.replace(cameras, world=np.arange(B, dtype=np.int32))
+        img = self._renderer(cfg).render(scene, cams)
+        rgb = apply_sensor(img["rgb"], seeds, values=sensor_values(appearance))
+        labels = compute_labels(pattern, frame, params, cams, img)
+        return {"rgb": rgb, "depth": img["depth"], "segmentation": img["seg"], **labels}
+
+
+def compute_labels(pattern, frame: dict, params: WormParams, cameras, images: dict) -> dict:
+    """Schema label arrays of B images from :func:`warpworm.render.labels.compute_labels` (its body frame, keypoints
+    and COCO visibility rules; see docs/render.md), reshaped to the dataset's names: poses as 4x4 object -> world,
+    boxes as (x, y, w, h) [px]."""
+    from . import transforms as tf
+    from .render import labels as rl
+
+    lab = rl.compute_labels(frame, pattern, cameras, images, rest_positions=frame.get("rest_positions"),
+                            ipm_diameter=params.ipm_diameter, ipm_thickness=params.ipm_thickness)
+    body = tf.pose_matrix(lab["body_R_world"], lab["body_t_world"])
+    mags = tf.pose_matrix(lab["magnet_R_world"], lab["magnet_t_world"])
+    wb = lab["worm_box"]
+    vb = lab["worm_box_visible"].astype(np.float32)
+    bbv = np.where(vb[:, :1] >= 0, np.concatenate([vb[:, :2], vb[:, 2:] - vb[:, :2] + 1], axis=1), 0)
+    return {
+        "poses/body": body, "poses/ipm": mags[:, 1:4], "poses/epm": mags[:, 0],
+        "poses/body_quat": lab["body_q_world"],
+        "keypoints/world": lab["keypoints_world"], "keypoints/camera": lab["keypoints_cam"],
+        "keypoints/pixel": lab["keypoints_2d"], "keypoints/visibility": lab["keypoint_visibility"],
+        "creases/angle": np.asarray(frame["crease_angle"], np.float32),
+        "bars/strain": np.asarray(frame["bar_strain"], np.float32),
+        "worm/vertices": np.asarray(frame["positions"], np.float32),
+        "labels/bbox_obj": np.concatenate([wb[:, :2], wb[:, 2:] - wb[:, :2]], axis=1).astype(np.float32),
+        "labels/bbox_visib": bbv.astype(np.float32),
+        "labels/visib_fract": lab["visible_fraction"].astype(np.float32),
+        "labels/worm_mask": images["worm_mask"].astype(np.uint8),
+        "labels/deformation": lab["deformation_ratio"].astype(np.float32),
+    }
