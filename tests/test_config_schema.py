@@ -6,6 +6,7 @@ import math
 import subprocess
 import sys
 from importlib import resources
+from pathlib import Path
 
 import jsonschema
 import pytest
@@ -49,6 +50,11 @@ def test_schema_lists_every_key_for_completion():
             assert spec.doc in props[name]["description"], (group, name)
     assert all(defs[k].get("additionalProperties") is False
                for k in ("SimConfig", "RenderConfig", "OutputConfig", "Randomize", "RandomizeWorm"))
+
+
+def test_every_yaml_in_dataset_configs_is_packaged():
+    folder = Path(__file__).resolve().parents[1] / "dataset_configs"
+    assert sorted(p.stem for p in folder.glob("*.yaml")) == config_packaged_names()
 
 
 @pytest.mark.parametrize("name", config_packaged_names())

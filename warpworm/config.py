@@ -189,7 +189,8 @@ def _problem(detail: str, path: str | None = None) -> PydanticCustomError:
     return PydanticCustomError("config", "{detail}", {"detail": detail, "path": path})
 
 
-# Strict scalars: YAML 'yes', "0.1" or 1.5 for an integer are mistakes, not values to convert; an integer is a number.
+# Strict scalars: the string "yes", "0.1" or 1.5 for an integer are mistakes, not values to convert; an integer is
+# a number (stored as a float).
 Int = Annotated[int, Field(strict=True)]
 Num = Annotated[float, Field(strict=True)]
 Bool = Annotated[bool, Field(strict=True)]
