@@ -21,10 +21,73 @@ import warp as wp
 
 from warpworm import quiet_warp
 
-NBODY_PAIRS_PER_S = 2.6e8
-NOTES = ("pairs_per_s: point-dipole pair interactions/s ('dipoles', 19,296 per world at 64/cm³); DESIGN-NOTES n-body "
-         "reference on this machine: 2.6e8/s. magpylib_est rows are linear extrapolations of the measured magpylib "
-         "per-world cost, not measurements.")
+NBODY_BODIES = 2048
+NOTES = ("pairs_per_s: point-dipole pair interactions/s ('dipoles', 19,296 per world at 64/cm³ with the wrench on the "
+         "EPM, 10,080 without); vs_nbody: that rate over the inverse-square n-body row of the same run (vs_dipole_nbody: "
+         "over the plain point-dipole force+field n-body row). magpylib_est rows are linear extrapolations of the "
+         "measured magpylib per-world cost, not measurements.")
+
+
+@wp.kernel
+def _nbody_inverse_square(pos: wp.array(dtype=wp.vec3), mass: wp.array(dtype=float), acc: wp.array(dtype=wp.vec3)):
+    """The simplest n-body kernel: acceleration of body i from all bodies (softened inverse square)."""
+    i = wp.tid()
+    p = pos[i]
+    a = wp.vec3(0.0)
+    for j in range(pos.shape[0]):
+        r = pos[j] - p
+        d2 = wp.dot(r, r) + 1.0e-6
+        inv = 1.0 / wp.sqrt(d2)
+        a += (mass[j] * inv * inv * inv) * r
+    acc[i] = a
+
+
+@wp.kernel
+def _nbody_dipoles(pos: wp.array(dtype=wp.vec3), moment: wp.array(dtype=wp.vec3), force: wp.array(dtype=wp.vec3),
+                   field: wp.array(dtype=wp.vec3)):
+    """A plain point-dipole n-body kernel: force on dipole i and field at i from all other dipoles (the pair term of
+    the 'dipoles' model, written directly with per-body moments)."""
+    i = wp.tid()
+    p = pos[i]
+    mt = moment[i]
+    f = wp.vec3(0.0)
+    b = wp.vec3(0.0)
+    for j in range(pos.shape[0]):
+        if j != i:
+            r = p - pos[j]
+            ms = moment[j]
+            inv_r2 = 1.0 / wp.dot(r, r)
+            inv_r = wp.sqrt(inv_r2)
+            inv_r3 = inv_r * inv_r2
+            inv_r5 = inv_r3 * inv_r2
+            a = wp.dot(r, ms)
+            c = wp.dot(r, mt)
+            b += 1.0e-7 * (3.0 * a * inv_r5 * r - inv_r3 * ms)
+            f += (3.0e-7 * inv_r5) * (c * ms + a * mt + (wp.dot(ms, mt) - 5.0 * a * c * inv_r2) * r)
+    force[i] = f
+    field[i] = b
+
+
+def _nbody_rows(device, repeats=5):
+    """Pair rates of the two plain n-body kernels on NBODY_BODIES bodies (N² pairs per launch), this run."""
+    rng = np.random.default_rng(0)
+    n = NBODY_BODIES
+    pos = wp.array(rng.normal(size=(n, 3)).astype(np.float32) * 0.05, dtype=wp.vec3, device=device)
+    mass = wp.array(rng.uniform(0.5, 1.5, n).astype(np.float32), dtype=float, device=device)
+    moment = wp.array(rng.normal(size=(n, 3)).astype(np.float32) * 1e-3, dtype=wp.vec3, device=device)
+    out_a = wp.zeros(n, dtype=wp.vec3, device=device)
+    out_b = wp.zeros(n, dtype=wp.vec3, device=device)
+    rows = []
+    for name, kernel, args in (("inverse-square", _nbody_inverse_square, [pos, mass, out_a]),
+                               ("point-dipole F+B", _nbody_dipoles, [pos, moment, out_a, out_b])):
+        def call():
+            wp.launch(kernel, dim=n, inputs=args, device=device)
+            wp.synchronize_device(device)
+
+        t = _time(call, repeats)
+        rows.append({"impl": "n-body reference", "model": name, "W": n, "ms_per_call": 1e3 * t,
+                     "pairs_per_s": n * n / t})
+    return rows
 
 
 def _worlds(W, seed=0):
@@ -132,7 +195,9 @@ def run(quick: bool = False) -> list[dict]:
     magnets = _magnets()
     density = 64e6
     pairs_per_world = _dipole_pairs_per_world(magnets, density)
-    rows = []
+    rows = _nbody_rows(device)
+    nbody_rate = rows[0]["pairs_per_s"]
+    dipole_nbody_rate = rows[1]["pairs_per_s"]
     for model in ("dipoles", "analytic"):
         for W in sizes:
             pos, rot = _worlds(W)
@@ -162,7 +227,8 @@ def run(quick: bool = False) -> list[dict]:
                    "pair_wrenches_per_s": 12 * W / t}
             if model == "dipoles":
                 row["pairs_per_s"] = pairs_per_world * W / t
-                row["vs_nbody"] = row["pairs_per_s"] / NBODY_PAIRS_PER_S
+                row["vs_nbody"] = row["pairs_per_s"] / nbody_rate
+                row["vs_dipole_nbody"] = row["pairs_per_s"] / dipole_nbody_rate
             else:
                 row["field_evals_per_s"] = (
                     _analytic_evals_per_world(pos, rot, magnets, mg.DEFAULT_QUAD_ORDER, mg.DEFAULT_MAX_PANELS) * W / t

@@ -101,6 +101,7 @@ def world_wrench_kernel(
     gl_x: wp.array(dtype=wp.float64),
     gl_w: wp.array(dtype=wp.float64),
     max_panels: int,
+    epm_wrench: int,
     # Data in:
     pos: wp.array2d(dtype=wp.vec3),
     rot: wp.array2d(dtype=wp.quat),
@@ -112,9 +113,15 @@ def world_wrench_kernel(
 
     Launch dim (W, M). Model arrays are read as ``a[world % a.shape[0]]`` (rows of ``shape``/``size``/``moment``
     too), so one shared row or one per world both work. A magnet with zero moment is absent: it neither acts nor
-    is acted on (its outputs are zero).
+    is acted on (its outputs are zero). ``epm_wrench`` = 0 skips the wrench on magnet 0 (the EPM, which the
+    dynamics moves along its path whatever acts on it): its outputs are written as zero at no cost, and the
+    other magnets' wrenches (from magnet 0 as well) are unchanged.
     """
     world, i = wp.tid()
+    if epm_wrench == 0 and i == 0:
+        force_out[world, i] = wp.vec3(0.0)
+        torque_out[world, i] = wp.vec3(0.0)
+        return
     num_magnets = pos.shape[1]
     mw = model[world % model.shape[0]]
     dens = density[world % density.shape[0]]

@@ -242,3 +242,46 @@ def test_world_kernel_zero_moment_is_absent_and_string_model():
     assert np.all(F3[:, 3] == 0)
     f, _ = mg.wrench(magnets[3], magnets[1], (pos[0, 3], rot[0, 3]), (pos[0, 1], rot[0, 1]))
     assert np.allclose(F4[0, 1] - F3[0, 1], f, rtol=1e-4, atol=1e-6 * np.abs(F4[0, 1]).max())
+
+
+@pytest.mark.parametrize("model", ["dipoles", "analytic"])
+def test_world_kernel_without_epm_wrench(model):
+    """epm_wrench=False writes zero for magnet 0 and leaves every IPM's wrench exactly as with the EPM's computed."""
+    magnets, pos, rot = _worm_worlds(4, seed=2)
+    F, T = mg.world_wrenches(magnets, pos, rot, model=model)
+    F0, T0 = mg.world_wrenches(magnets, pos, rot, model=model, epm_wrench=False)
+    assert np.all(F0[:, 0] == 0) and np.all(T0[:, 0] == 0)
+    assert np.array_equal(F0[:, 1:], F[:, 1:]) and np.array_equal(T0[:, 1:], T[:, 1:])
+    assert np.all(np.linalg.norm(F[:, 0], axis=1) > 0)  # with True the EPM's wrench is there
+
+
+def _dipoles_double_sum(src, tgt, ps, Rs, pt, Rt, density=mg.DEFAULT_DENSITY):
+    """The 'dipoles' model written out in float64 NumPy: every source/target dipole pair, point-dipole force and
+    field, torque about the target centre Σ (x_k − c) × F_k + m_k × B_k."""
+    gs, gt = mg.dipole_grid(src, density), mg.dipole_grid(tgt, density)
+    xs, xt = ps + gs @ Rs.T, pt + gt @ Rt.T
+    ms, mt = Rs @ src.moment / len(gs), Rt @ tgt.moment / len(gt)
+    r = xt[:, None, :] - xs[None, :, :]
+    d = np.linalg.norm(r, axis=-1, keepdims=True)
+    rh = r / d
+    a, b = rh @ ms, rh @ mt
+    f = 3e-7 / d**4 * (b[..., None] * ms + a[..., None] * mt + ((ms @ mt) - 5 * a * b)[..., None] * rh)
+    B = 1e-7 / d**3 * (3 * a[..., None] * rh - ms)
+    F = f.sum((0, 1))
+    T = np.cross(xt - pt, f.sum(1)).sum(0) + np.cross(mt, B.sum((0, 1)))
+    return F, T
+
+
+@pytest.mark.parametrize("pair", [(EPM, IPM), (IPM, EPM), (IPM, IPM), (CUBE, EPM)],
+                         ids=["epm-ipm", "ipm-epm", "ipm-ipm", "cube-epm"])
+def test_dipoles_equal_float64_double_sum(pair):
+    """The kernel's summation (columns of the larger grid inner; a target with more dipoles than its source through
+    the pair's conservation laws) against the literal double sum in float64. Measured: F <= 1.6e-6, T <= 1.1e-5
+    relative (the EPM's torque from a disk is the difference of a lever term ~10x larger)."""
+    src, tgt = pair
+    ps, Rs, pt, Rt = _random_pairs(4, seed=13, dist=(0.03, 0.05))
+    F, T = mg.wrench(src, tgt, (ps, Rs), (pt, Rt), model="dipoles")
+    for k in range(4):
+        Fr, Tr = _dipoles_double_sum(src, tgt, ps[k], Rs[k], pt[k], Rt[k])
+        assert np.linalg.norm(F[k] - Fr) < 1e-5 * np.linalg.norm(Fr), (k, F[k], Fr)
+        assert np.linalg.norm(T[k] - Tr) < 5e-5 * np.linalg.norm(Tr), (k, T[k], Tr)
