@@ -113,7 +113,7 @@ def bench_end_to_end(W: int, width: int = 128, height: int = 96) -> tuple[dict, 
     out = Path(tempfile.mkdtemp(prefix="ww-e2e-")) / "d"
     try:
         t0 = time.perf_counter()
-        s = generate(cfg, out, progress=False, preview=False)
+        s = generate(cfg, out, progress=False)
         total = time.perf_counter() - t0
         r = ds.open(out)
         samples = {k: r.read(k, np.arange(min(len(r), 256))) for k in ("rgb", "depth", "segmentation")}
@@ -198,7 +198,7 @@ def bench_memory(num_shards: int, W: int) -> dict:
     th.start()
     wk.run_shards = tracking
     try:
-        generate(cfg, out, progress=False, preview=False)
+        generate(cfg, out, progress=False)
     finally:
         wk.run_shards = real
         stop.set()
@@ -218,7 +218,7 @@ def run(quick: bool = False) -> list[dict]:
     # warm the kernel cache so that compile time is not billed to the first measurement
     tmp = Path(tempfile.mkdtemp(prefix="ww-warm-"))
     generate(_cfg(["sim.worlds=2", "shard_size=8", "render.width=32", "render.height=24"], num_samples=8),
-             tmp / "d", progress=False, preview=False)
+             tmp / "d", progress=False)
     shutil.rmtree(tmp, ignore_errors=True)
     rows = []
     sizes = (16, 64) if quick else (256, 1024, 4096)
@@ -233,6 +233,31 @@ def run(quick: bool = False) -> list[dict]:
     rows.append(bench_memory(6, 16) if quick else bench_memory(40, 64))
     return rows
 
+
+
+def headline(device: str = "cpu", quick: bool = False) -> dict:
+    """One row for the summary table of ``benchmarks/run.py``: samples/s of ``warpworm.pipeline.generate`` end to
+    end (simulate, render 128x96, write HDF5) on ``device`` with the default config's short physics (:data:`SHORT`),
+    after a warm-up job that compiles the kernels: W = 16 worlds on the CPU (quick: 4), 1024 on CUDA (4096 samples,
+    one shard: gzip on the host, not the GPU, bounds it)."""
+    from warpworm.pipeline import generate
+
+    W = 1024 if str(device).startswith("cuda") else (4 if quick else 16)
+    F = 4
+    dev = [f"sim.device={device}"]
+    tmp = Path(tempfile.mkdtemp(prefix="ww-headline-"))
+    try:
+        generate(_cfg(dev + ["sim.worlds=2", "shard_size=8", "render.width=32", "render.height=24"], num_samples=8),
+                 tmp / "warm", progress=False)
+        cfg = _cfg(dev + [f"sim.worlds={W}", f"shard_size={W * F}"], num_samples=W * F)
+        t0 = time.perf_counter()
+        generate(cfg, tmp / "d", progress=False)
+        total = time.perf_counter() - t0
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return {"system": "warpworm generate (simulate + render + write)", "device": str(device), "W": W,
+            "rate": W * F / total, "unit": "samples/s", "time_base": "wall",
+            "note": "default config, 128x96, settle 8 ms + 4 frames 8 ms apart, one process"}
 
 if __name__ == "__main__":
     import json

@@ -1,20 +1,26 @@
-"""Dynamics benchmark: worm-substeps per second of the batched implicit solver on the CPU (and CUDA when present).
+"""Dynamics benchmark: worm-substeps per second of the batched implicit solver, beside the NumPy reference and, when
+the ``newton`` package is importable, Newton on the same mesh.
 
-Rows (one per device, magnet model and W), in the gait setting (``gaits.DEFAULT_DT`` at ``gaits.DEFAULT_SUBSTEPS``
-= 1 ms substeps):
-- ``substep_rate``: worm-substeps/s of the substeps alone (the one per-step launch of
+Rows of :func:`run` (one per device, magnet model and W), in the gait setting (peristaltic preset,
+``gaits.DEFAULT_DT`` = 4 ms steps of ``gaits.DEFAULT_SUBSTEPS`` = 4 substeps of 1 ms):
+- ``step_rate``: worm-substeps/s of whole steps (1 magnetic wrench + 4 substeps): what a gait run gets;
+- ``substep_rate``: worm-substeps/s of the substeps alone (``Simulator.run_substeps``: the one launch of
   ``implicit_euler.implicit_step``);
-- ``wrench_ms_per_world``: one magnetic-wrench evaluation (poses, ``launch_world_wrenches``, distribution) per world;
-- ``step_rate``: worm-substeps/s of whole steps (1 wrench + ``substeps`` substeps, the gait setting dt = 4 ms,
-  4 substeps), i.e. what a simulation actually gets;
-- ``realtime_factor``: simulated seconds per wall second per world at that rate (>= 1: real time for W = 1);
-- ``sim_s_per_wall_s``: simulated seconds per wall second of the whole batch (W × realtime_factor);
+- ``wrench_ms_per_world``: one magnetic-wrench evaluation (poses, wrench, distribution) per world;
+- ``realtime_factor``: simulated seconds per second per world at the step rate (>= 1: real time for W = 1);
+- ``sim_s_per_wall_s``: simulated worm-seconds per second of the whole batch (W × realtime_factor);
 - ``numpy_substep_rate`` and ``speedup_vs_numpy``: the same substep in NumPy (``numpy_substep.py``, float64: the
   implicit step with a dense batched ``np.linalg.solve``, floor contact left out);
-- ``launches_per_substep``, ``bytes_per_world``;
-- ``paper_ratio``: substep_rate(W) / 400, the paper's ~400 Kangaroo iterations per second for one worm.
+- ``launches_per_substep``, ``bytes_per_world``; ``time_base``.
 
-``python benchmarks/run.py dynamics [--quick]``; or ``python benchmarks/bench_dynamics.py [--quick]``.
+Time base: on the CPU the CPU time of this process (``time.process_time``), i.e. what one dedicated core delivers
+(Warp runs a CPU kernel on the launching thread; on this shared 2-core machine the wall clock also counts other
+processes' turns, up to several times the CPU time); on CUDA the wall clock after a device synchronize.
+
+:func:`compare` is the one table of ``python benchmarks/run.py``: warpworm (whole gait steps and substeps alone),
+the NumPy reference and Newton (or a "not installed" row), all measured in the same run.
+
+``python benchmarks/run.py dynamics [--quick] [--device cuda]``; or ``python benchmarks/bench_dynamics.py [--quick]``.
 """
 
 from __future__ import annotations
@@ -30,79 +36,225 @@ from warpworm import quiet_warp
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-PAPER_ITERATIONS_PER_S = 400.0
+NEWTON_MESH = "39 vertices, 111 bars, 105 hinges"
 
 
-def _timeit(fn, min_time=0.5, max_reps=200):
-    fn()  # warm
-    wp.synchronize()
-    reps, t0 = 0, time.perf_counter()
+def clock_for(device) -> tuple:
+    """(clock, name): process CPU time on the CPU, wall time on CUDA (see the module docstring)."""
+    if wp.get_device(device).is_cuda:
+        return time.perf_counter, "wall"
+    return time.process_time, "process CPU time"
+
+
+def timeit(fn, device, min_time: float = 0.5, max_reps: int = 200) -> float:
+    """Mean time [s] per call of ``fn`` (after one warm-up call) on ``device``'s clock, over at least ``min_time``."""
+    clock, _ = clock_for(device)
+    fn()
+    wp.synchronize_device(device)
+    reps, t0 = 0, clock()
     while True:
         fn()
         reps += 1
-        wp.synchronize()
-        el = time.perf_counter() - t0
+        wp.synchronize_device(device)
+        el = clock() - t0
         if el >= min_time or reps >= max_reps:
             return el / reps
 
 
-def bench_one(W: int, magnet_model: str, device: str, with_numpy: bool, min_time: float) -> dict:
-    from numpy_substep import NumpyImplicit
-
+def gait_sim(W: int, magnet_model: str = "analytic", device: str = "cpu"):
+    """The peristaltic preset on ``W`` worlds at the gait setting, settled briefly: (model, sim, state)."""
     from warpworm import gaits
     from warpworm.model import Model
     from warpworm.simulator import Simulator
 
-    DT = gaits.DEFAULT_DT
-    SUBSTEPS = gaits.DEFAULT_SUBSTEPS
     model = Model.from_params(gaits.preset_params("peristaltic", magnet_model=magnet_model), W, device)
-    sim = Simulator(model, dt=DT, substeps=SUBSTEPS)
+    sim = Simulator(model, dt=gaits.DEFAULT_DT, substeps=gaits.DEFAULT_SUBSTEPS)
     state = sim.initial_state()
-    sim.step(state, 1)
-    cmd = sim._world_cmd(state, sim.control, SUBSTEPS)
-    t_sub = _timeit(cmd.launch, min_time) / SUBSTEPS
-    t_wrench = _timeit(lambda: sim.update_magnets(state), min_time, max_reps=20)
-    t_step = t_wrench + SUBSTEPS * t_sub  # one step = one wrench + SUBSTEPS substeps (measured apart: cheaper)
+    sim.settle(state, 2 * sim.dt)  # compiles (and on CUDA captures) the step
+    return model, sim, state
+
+
+def bench_one(W: int, magnet_model: str, device: str, with_numpy: bool, min_time: float) -> dict:
+    model, sim, state = gait_sim(W, magnet_model, device)
+    S = sim.substeps
+    t_step = timeit(lambda: sim.step(state, 1), device, min_time)
+    t_sub = timeit(lambda: sim.run_substeps(state, S), device, min_time) / S
+    t_wrench = timeit(lambda: sim.update_magnets(state), device, min_time, max_reps=20)
     row = {
-        "device": device,
+        "device": str(model.device),
         "magnets": magnet_model,
         "W": W,
         "substep_us": 1e6 * sim.dt_sub,
+        "step_rate": W * S / t_step,
         "substep_rate": W / t_sub,
         "wrench_ms_per_world": 1e3 * t_wrench / W,
-        "step_rate": W * SUBSTEPS / t_step,
-        "realtime_factor": DT / t_step,
-        "sim_s_per_wall_s": W * DT / t_step,
+        "realtime_factor": sim.dt / t_step,
+        "sim_s_per_wall_s": W * sim.dt / t_step,
         "launches_per_substep": sim.launches_per_substep,
         "bytes_per_world": model.bytes_per_world(),
-        "paper_ratio": (W / t_sub) / PAPER_ITERATIONS_PER_S,
+        "time_base": clock_for(device)[1],
     }
     if with_numpy:
-        ref = NumpyImplicit(model, sim.dt_sub, newton=sim.newton)
-        x, v, a = ref.init(state)
-        f = state.external_force.numpy().astype(np.float64)
-        t_np = _timeit(lambda: ref.substep(x, v, a, f), min_time, max_reps=50)
+        t_np = numpy_substep_time(model, sim, state, min_time)
         row["numpy_substep_rate"] = W / t_np
         row["speedup_vs_numpy"] = t_np / t_sub
     return row
 
 
-def run(quick: bool = False) -> list[dict]:
+def numpy_substep_time(model, sim, state, min_time: float) -> float:
+    """Process CPU time [s] of one NumPy reference substep of all ``model``'s worlds (NumPy's BLAS may use threads:
+    they count too)."""
+    from numpy_substep import NumpyImplicit
+
+    ref = NumpyImplicit(model, sim.dt_sub, newton=sim.newton)
+    x, v, a = ref.init(state, sim.control)
+    f = state.external_force.numpy().astype(np.float64)
+    return timeit(lambda: ref.substep(x, v, a, f), "cpu", min_time, max_reps=50)
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# Newton (optional; not a dependency)
+
+
+def newton_row(device: str = "cpu", *, dt: float = 5.0e-5, hinge_scale: float = 0.3, duration: float = 0.02) -> dict:
+    """Newton's semi-implicit particle solver on the same mesh (the worm's rest shape, vertex masses, bars as springs
+    EA/L0, creases as Newton's dihedral bending elements with ``hinge_scale`` × k_α, a ground plane with the worm's
+    friction): one world, ``dt`` [s] steps (semi-implicit needs ~50 µs; it was stable only with the hinges softened
+    to 0.3×), timed over ``duration`` simulated seconds. A "not installed" row when ``newton`` is not importable."""
+    base = {"system": "Newton (semi-implicit)", "device": str(device), "W": 1, "mesh": NEWTON_MESH}
+    try:
+        import newton
+    except ImportError:
+        return {**base, "substep_us": "", "note": "not installed (pip install newton: optional, not a dependency)"}
+    from warpworm import gaits
+    from warpworm.model import Model
+
+    model = Model.from_params(gaits.preset_params("peristaltic"), 1, "cpu")
+    pat = model.pattern
+    x0 = model.rest_positions_host[0].astype(np.float64)
+    mass = np.asarray(model.vertex_mass_host)[0]
+    EA = np.broadcast_to(model.bar_stiffness.numpy().reshape(-1), (model.num_edges,))
+    L0 = model.rest_length.numpy().reshape(-1)[: model.num_edges]
+    k_hinge = float(np.asarray(model.hinge_stiffness.numpy()).reshape(-1)[0]) * hinge_scale
+    mu = float(np.asarray(model.mu_kinetic.numpy()).reshape(-1)[0])
+    b = newton.ModelBuilder(gravity=(0.0, 0.0, -float(np.asarray(model.gravity.numpy()).reshape(-1)[0])))
+    for v in range(model.num_vertices):
+        b.add_particle(wp.vec3(*(float(c) for c in x0[v])), wp.vec3(0.0, 0.0, 0.0), float(mass[v]), radius=1.0e-4)
+    for e, (i, j) in enumerate(pat.edges):
+        b.add_spring(int(i), int(j), float(EA[e] / L0[e]), 0.0, 0.0)
+    for i, j, k, l in pat.hinges:  # warpworm (i, j, k, l): edge j-k, wings i, l -> Newton (wing, wing, edge, edge)
+        b.add_edge(int(i), int(l), int(j), int(k), edge_ke=k_hinge, edge_kd=0.0)
+    b.add_ground_plane()
+    nm = b.finalize(device=device)
+    nm.soft_contact_mu = mu
+    nm.particle_grid = None  # no particle-particle contact (neighbouring vertices of one sheet)
+    pipeline = newton.CollisionPipeline(nm, reduce_contacts=False, broad_phase="nxn")
+    contacts = pipeline.contacts()
+    solver = newton.solvers.SolverSemiImplicit(nm)
+    s0, s1 = nm.state(), nm.state()
+    n = max(2, 2 * int(round(duration / dt / 2)))
+
+    def two_steps():  # an even number of steps leaves s0 / s1 where they were: one capturable unit
+        for a, b_ in ((s0, s1), (s1, s0)):
+            a.clear_forces()
+            pipeline.collide(a, contacts)
+            solver.step(a, b_, None, contacts, dt)
+
+    two_steps()  # compile
+    graph = None
+    try:  # graph capture (CPU graphs too in Warp >= 1.19): the launches recorded once, replayed
+        with wp.ScopedCapture(device=device) as cap:
+            two_steps()
+        graph = cap.graph
+    except Exception:
+        graph = None
+
+    def run():
+        for _ in range(n // 2):
+            if graph is not None:
+                wp.capture_launch(graph)
+            else:
+                two_steps()
+
+    t = timeit(run, device, min_time=0.5, max_reps=20)
+    rate = n / t
+    z = s0.particle_q.numpy()[:, 2]
+    return {**base, "substep_us": 1e6 * dt, "step_rate": rate, "sim_s_per_wall_s": rate * dt,
+            "time_base": clock_for(device)[1],
+            "note": f"newton {getattr(newton, '__version__', '?')}, hinges x{hinge_scale}, "
+                    f"{'graph' if graph is not None else 'no graph'}, "
+                    f"{'finite' if np.all(np.isfinite(z)) else 'NOT FINITE'} after the run, lowest vertex z "
+                    f"{1e3 * float(np.min(z)):.2f} mm"}
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+
+
+def compare(device: str = "cpu", sizes=None, quick: bool = False) -> list[dict]:
+    """The one table of ``python benchmarks/run.py``: per W, warpworm's whole gait steps (analytic magnets) and its
+    substeps alone, then the NumPy reference of the substep and Newton on the same mesh, measured in this run.
+
+    ``sizes`` default: (1, 64) on the CPU (quick: (1, 16)), (1024, 16384, 65536) on CUDA. The NumPy reference runs
+    at the smallest W only on CUDA (a dense 117-unknown solve per world: 64k worlds would take minutes).
+    """
     quiet_warp()
     wp.init()
-    sizes = [1, 16, 256] if quick else [1, 16, 256, 1024, 4096, 16384]
-    devices = ["cpu"] + (["cuda:0"] if wp.is_cuda_available() else [])
+    cuda = wp.get_device(device).is_cuda
+    if sizes is None:
+        sizes = (1024, 16384, 65536) if cuda else ((1, 16) if quick else (1, 64))
+    min_time = 0.2 if quick else 0.5
     rows = []
-    for device in devices:
+    for W in sizes:
+        model, sim, state = gait_sim(W, "analytic", device)
+        S, base = sim.substeps, clock_for(device)[1]
+        t_step = timeit(lambda: sim.step(state, 1), device, min_time)
+        t_sub = timeit(lambda: sim.run_substeps(state, S), device, min_time) / S
+        common = {"device": str(model.device), "W": W, "substep_us": 1e6 * sim.dt_sub, "time_base": base}
+        rows.append({"system": "warpworm gait step (analytic magnets)", **common, "step_rate": W * S / t_step,
+                     "sim_s_per_wall_s": W * sim.dt / t_step, "note": "1 wrench + 4 substeps per 4 ms"})
+        rows.append({"system": "warpworm substeps alone", **common, "step_rate": W / t_sub,
+                     "sim_s_per_wall_s": W * sim.dt_sub / t_sub, "note": "implicit_step, 3 Newton"})
+        if not cuda or W == min(sizes):
+            t_np = numpy_substep_time(model, sim, state, min_time)
+            rows.append({"system": "NumPy reference substep", "device": "cpu", "W": W, "substep_us": 1e6 * sim.dt_sub,
+                         "time_base": "process CPU time", "step_rate": W / t_np,
+                         "sim_s_per_wall_s": W * sim.dt_sub / t_np,
+                         "note": "float64 dense solve, no floor"})
+        del model, sim, state
+    try:
+        rows.append(newton_row("cpu"))
+    except Exception as exc:  # an API change in an optional package must not sink the table
+        rows.append({"system": "Newton (semi-implicit)", "device": "cpu", "W": 1, "mesh": NEWTON_MESH,
+                     "note": f"failed: {type(exc).__name__}: {exc}"[:160]})
+    ref = {r["W"]: r["step_rate"] for r in rows if r["system"] == "NumPy reference substep"}
+    for r in rows:
+        if r["system"] == "warpworm substeps alone" and r["W"] in ref:
+            r["vs_numpy"] = r["step_rate"] / ref[r["W"]]
+    return rows
+
+
+def run(quick: bool = False, device: str | None = None) -> list[dict]:
+    quiet_warp()
+    wp.init()
+    if device is None:
+        devices = ["cpu"] + (["cuda:0"] if wp.is_cuda_available() else [])
+    else:
+        devices = [device]
+    rows = []
+    for dev in devices:
+        cuda = wp.get_device(dev).is_cuda
+        if cuda:
+            sizes = [1024, 16384] if quick else [1024, 16384, 65536]
+        else:
+            sizes = [1, 16, 256] if quick else [1, 16, 256, 1024, 4096]
         for magnet_model in ("analytic", "dipoles"):
             for W in sizes:
-                with_numpy = W <= 4096
-                rows.append(bench_one(W, magnet_model, device, with_numpy, 0.2 if quick else 0.5))
+                with_numpy = W <= (1024 if cuda else 4096)
+                rows.append(bench_one(W, magnet_model, dev, with_numpy, 0.2 if quick else 0.5))
     return rows
 
 
 if __name__ == "__main__":
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
     from run import table  # noqa: E402
 
     print(table(run("--quick" in sys.argv)))
