@@ -1,5 +1,6 @@
-"""The exported JSON Schema (``warpworm config-schema``) against an independent validator (jsonschema): every packaged
-config passes it, and it agrees with load_config on what is a mistake, key by key."""
+"""The exported JSON Schema (``warpworm config-schema``, warpworm.commands.config_schema) against an independent
+validator (jsonschema): every packaged config passes it, and it agrees with load_config on what is a mistake, key by
+key."""
 
 import json
 import math
@@ -12,7 +13,8 @@ import jsonschema
 import pytest
 import yaml
 
-from warpworm.config import PARAM_SPECS, ConfigError, SimConfig, config_packaged_names, json_schema, load_config
+from warpworm.commands.config_schema import json_schema
+from warpworm.config import PARAM_SPECS, ConfigError, SimConfig, config_packaged_names, load_config
 
 SCHEMA = json_schema()
 VALIDATOR = jsonschema.Draft7Validator(SCHEMA)  # what yaml-language-server (VS Code) implements

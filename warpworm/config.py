@@ -1,7 +1,7 @@
 """Dataset job configuration: YAML -> validated dataclasses (a pydantic v2 schema), with dotted command-line overrides.
 
 The schema is the dataclasses below (their field docstrings are the documentation) and :data:`PARAM_SPECS` (every
-randomizable parameter); :func:`json_schema` exports it for editors (``warpworm config-schema``, docs/config.md).
+randomizable parameter); ``warpworm config-schema`` exports it as a JSON Schema for editors (docs/config.md).
 All SI: m, s, rad, kg.
 
 Every mistake (unknown key, wrong type, negative size, low > high, unknown gait, unwritable output folder) raises
@@ -287,8 +287,7 @@ class OutputConfig:
 
 # ---------------------------------------------------------------------------------------------------------------------
 # randomize: group -> parameter -> distribution, one TypedDict per group generated from PARAM_SPECS. A parameter is
-# parsed by warpworm.randomize.parse_distribution, then checked against its ParamSpec (_check_spec); the JSON Schema
-# of each parameter lists the YAML forms its spec allows (_dist_schema).
+# parsed by warpworm.randomize.parse_distribution, then checked against its ParamSpec (_check_spec).
 def _check_spec(dist: rnd.Distribution, spec: ParamSpec) -> list[str]:
     """What is wrong with ``dist`` for a parameter of ``spec`` ("got X; expected Y" each); [] if nothing."""
     got = f"got {_fmt(dist.to_yaml())}"
@@ -334,51 +333,10 @@ def _dist_validator(spec: ParamSpec):
     return parse
 
 
-_FORMS: dict[str, dict] = {}
-"""Schema name -> JSON Schema of the YAML forms a kind of parameter may take; many parameters share one."""
-
-
-def _forms(spec: ParamSpec) -> str:
-    """Register the forms a parameter of ``spec`` may take (warpworm.randomize's module docstring); their name."""
-    def obj(**props):
-        return {"type": "object", "properties": props, "required": list(props)[:1], "additionalProperties": False}
-
-    def listof(item, n=None):
-        return {"type": "array", "items": item, "minItems": n or 1, **({"maxItems": n} if n else {})}
-
-    if spec.values is not None:
-        value = {"enum": list(spec.values)}
-        name = "one_of_" + "_".join(str(v).lower() for v in spec.values)
-    else:
-        value = {"type": "integer" if spec.integer else "number"}
-        name = value["type"]
-        if spec.positive:
-            value["exclusiveMinimum"], name = 0, name + "_gt_0"
-        if spec.low is not None:
-            value["minimum"], name = spec.low, name + f"_ge_{spec.low:.4g}"
-        if spec.high is not None:
-            value["maximum"], name = spec.high, name + f"_le_{spec.high:.4g}"
-        name += "_constant" if spec.constant_only else "_range" if spec.ranges_only else "_distribution"
-    forms = [value, obj(constant=value)]
-    if spec.values is None and not spec.constant_only:
-        forms.append(obj(uniform=listof(value, 2)))
-        if not spec.ranges_only:
-            positive = {**value, "exclusiveMinimum": max(0, value.get("exclusiveMinimum", 0))}
-            normal = obj(mean={"type": "number"}, std={"type": "number", "minimum": 0}, low=value, high=value)
-            # a normal is truncated to [low, high]; a bounded parameter needs the bound (an open side reaches it)
-            normal["required"] = ["mean", "std"] + (["low"] if "minimum" in value or spec.positive else []) + \
-                (["high"] if "maximum" in value else [])
-            forms += [obj(loguniform=listof(positive, 2)), obj(normal=normal)]
-    if not spec.constant_only and not spec.ranges_only:
-        forms += [obj(choice=listof(value), weights=listof({"type": "number", "minimum": 0})), obj(grid=listof(value))]
-    assert _FORMS.setdefault(name, {"anyOf": forms}) == {"anyOf": forms}, name  # one name, one set of forms
-    return name
-
-
-def _dist_schema(spec: ParamSpec) -> dict:
-    """A parameter's JSON Schema: its forms (by reference), what it is and its default."""
-    out = {"forms": _forms(spec),  # -> {"allOf": [{"$ref": "#/$defs/<forms>"}]} in json_schema (pydantic checks refs)
-           "description": f"{spec.doc} [{spec.unit}]" if spec.unit else spec.doc}
+def _param_schema(spec: ParamSpec) -> dict:
+    """A parameter's JSON Schema as pydantic exports it: what it is and its default. The YAML forms it may take are
+    added from the same ParamSpec by warpworm.commands.config_schema."""
+    out = {"description": f"{spec.doc} [{spec.unit}]" if spec.unit else spec.doc}
     default = rnd.parse_distribution(spec.default).to_yaml()
     if not (isinstance(default, float) and math.isnan(default)):  # NaN (the gait preset's value) has no JSON spelling
         out["default"] = default
@@ -386,7 +344,7 @@ def _dist_schema(spec: ParamSpec) -> dict:
 
 
 def _group(name: str, specs: dict[str, ParamSpec]):
-    params = {n: Annotated[Any, PlainValidator(_dist_validator(s)), WithJsonSchema(_dist_schema(s))]
+    params = {n: Annotated[Any, PlainValidator(_dist_validator(s)), WithJsonSchema(_param_schema(s))]
               for n, s in specs.items()}
     td = TypedDict(f"Randomize{name.capitalize()}", params, total=False)
     td.__doc__ = f"randomize.{name}: parameter -> distribution; parameters not named keep their defaults."
@@ -469,20 +427,10 @@ class DatasetConfig:
 
 
 @functools.cache
-def _adapter() -> TypeAdapter:
-    """pydantic's validator of DatasetConfig, built on first use (0.3 s: not paid by processes that only import)."""
+def schema_adapter() -> TypeAdapter:
+    """pydantic's validator (and JSON Schema) of DatasetConfig, built on first use (0.3 s, not paid by processes that
+    only import this module)."""
     return TypeAdapter(DatasetConfig)
-
-
-def json_schema() -> dict:
-    """The config's JSON Schema, for editors and validators (docs/config.md). Draft 7 is what yaml-language-server
-    (VS Code's YAML support) implements; the schema uses nothing later (``$defs`` is only where references point)."""
-    schema = _adapter().json_schema()
-    for group in PARAM_SPECS:
-        for param in schema["$defs"][f"Randomize{group.capitalize()}"]["properties"].values():
-            param["allOf"] = [{"$ref": f"#/$defs/{param.pop('forms')}"}]
-    schema["$defs"].update(_FORMS)
-    return {"$schema": "http://json-schema.org/draft-07/schema#", **schema, "title": "warpworm dataset config"}
 
 
 # ---------------------------------------------------------------------------------------------------------------------
@@ -524,7 +472,7 @@ def config_from_dict(raw: dict) -> DatasetConfig:
     if not isinstance(raw, dict):
         raise ConfigError([f"<root>: got {_fmt(raw)}; expected a mapping"])
     try:
-        return _adapter().validate_python(raw)
+        return schema_adapter().validate_python(raw)
     except ValidationError as exc:
         raise ConfigError([_message(e) for e in exc.errors(include_url=False)]) from None
 
