@@ -35,7 +35,7 @@ import functools
 
 import warp as wp
 
-from .band_cholesky import band_add_block
+from .band_cholesky import band_add_block, band_cholesky_solve, inverse_lower_cholesky3
 from .common import dihedral_angle_and_gradient, fold_range, freeze_world, pw, wrap_angle
 from .implicit_euler import (
     CONTACT_FIXED,
@@ -430,13 +430,43 @@ def finish_vertex(
     return bad
 
 
+@wp.func
+def block_band_cholesky_factor(world: int, lane: int, bd: int, nv: int, bw: int, mat: wp.array3d(dtype=wp.mat33)):
+    """:func:`warpworm.kernels.band_cholesky.band_cholesky_factor`, column-parallel over the block's ``bd`` threads
+    (every thread must call it; ``lane`` its index) with the same arithmetic, entry by entry, so the factor is bit for
+    bit the band path's. Column j: thread 0 factors the diagonal block (it also updated row j + 1 in column j − 1, so
+    it needs no barrier for it); a barrier; the ≤ B blocks below it, one row per thread. One barrier per column."""
+    for j in range(nv):
+        if lane == 0:
+            s = mat[world, j, 0]
+            for k in range(wp.max(0, j - bw), j):
+                l = mat[world, j, j - k]
+                s = s - l * wp.transpose(l)
+            mat[world, j, 0] = inverse_lower_cholesky3(s)
+        block_max(0)  # the diagonal's inverse before the rows below read it
+        for i in range(j + 1 + lane, wp.min(nv, j + bw + 1), bd):
+            inv_t = wp.transpose(mat[world, j, 0])
+            t = mat[world, i, i - j]
+            for k in range(wp.max(0, i - bw), j):
+                t = t - mat[world, i, i - k] * wp.transpose(mat[world, j, j - k])
+            mat[world, i, i - j] = t * inv_t
+    block_max(0)  # the last column before anyone reads the factor
+    return 0
+
+
 @functools.cache
-def make_tile_substep_kernel(num_vertices: int, bandwidth: int):
+def make_tile_substep_kernel(num_vertices: int, bandwidth: int, dense: bool = True):
     """The block-per-world substep kernel for worms of ``num_vertices`` vertices and Newton-matrix half-bandwidth
-    ``bandwidth`` (vertex blocks): the dense tile's side 3V is a compile-time constant. One module per shape."""
+    ``bandwidth`` (vertex blocks); one module per (shape, solve).
+
+    ``dense``: the Newton systems are factored as a dense 3V × 3V float32 tile in shared memory (``wp.tile_cholesky``;
+    the tile's side is a compile-time constant, hence the factory). Otherwise the block band is factored in place
+    in ``hess`` by :func:`block_band_cholesky_factor` (column-parallel, bit for bit the band path's factor; ~0 shared
+    memory) and solved by thread 0 with :func:`band_cholesky_solve`."""
     if num_vertices < 1 or bandwidth < 0:
         raise ValueError(f"num_vertices must be >= 1 and bandwidth >= 0, got {num_vertices}, {bandwidth}")
     N = 3 * num_vertices
+    DENSE = bool(dense)
     SLOTS = num_vertices * (bandwidth + 1) * 9  # 3x3 entries of the lower block band, with the out-of-range ones
 
     @wp.kernel(enable_backward=False, module="unique")
@@ -520,9 +550,10 @@ def make_tile_substep_kernel(num_vertices: int, bandwidth: int):
         slot_rounds = (SLOTS + bd - 1) // bd
         rhs_rounds = (N + bd - 1) // bd
 
-        # the world's Newton matrix (lower triangle; factored in place) and right-hand side, in shared memory
-        mat = wp.tile_zeros(shape=(N, N), dtype=float, storage="shared")
-        rhs = wp.tile_zeros(shape=(N,), dtype=float, storage="shared")
+        if wp.static(DENSE):
+            # the world's Newton matrix (lower triangle; factored in place) and right-hand side, in shared memory
+            mat = wp.tile_zeros(shape=(N, N), dtype=float, storage="shared")
+            rhs = wp.tile_zeros(shape=(N,), dtype=float, storage="shared")
 
         for s in range(num_substeps):
             # 1. prediction (implicit_step's step 1)
@@ -564,40 +595,50 @@ def make_tile_substep_kernel(num_vertices: int, bandwidth: int):
                 bad = block_max(flag)  # also the barrier: every row assembled before the scatter reads it
                 if bad != 0:
                     break
-                # the band into the tile: one entry per thread per round, block (u, u - d) entry (a, b); the
-                # diagonal blocks' upper entries are skipped (the factorisation reads the lower triangle only)
-                for r in range(slot_rounds):
-                    q = r * bd + lane
-                    u = q // (9 * (bandwidth + 1))
-                    rem = q - u * 9 * (bandwidth + 1)
-                    d = rem // 9
-                    a = (rem - d * 9) // 3
-                    b = rem - d * 9 - a * 3
-                    vv = u - d
-                    ok = q < SLOTS and vv >= 0 and (d > 0 or b <= a)
-                    row = int(0)
-                    col = int(0)
-                    val = float(0.0)
-                    if ok:
-                        row = 3 * u + a
-                        col = 3 * vv + b
-                        val = hess[world, u, d][a, b]
-                    wp.tile_scatter_masked(mat, row, col, val, ok)
-                for r in range(rhs_rounds):
-                    q = r * bd + lane
-                    ok = q < N
-                    val = float(0.0)
-                    idx = int(0)
-                    if ok:
-                        idx = q
-                        val = grad[world, q // 3][q - (q // 3) * 3]
-                    wp.tile_scatter_masked(rhs, idx, val, ok)
-                wp.tile_cholesky_inplace(mat)
-                wp.tile_cholesky_solve_inplace(mat, rhs)
-                for i in range(lane, nv, bd):
-                    dx = -wp.vec3(rhs[3 * i], rhs[3 * i + 1], rhs[3 * i + 2])
-                    x[world, i] = x[world, i] + dx
-                    delta[world, i] = delta[world, i] + dx
+                if wp.static(DENSE):
+                    # the band into the tile: one entry per thread per round, block (u, u - d) entry (a, b); the
+                    # diagonal blocks' upper entries are skipped (the factorisation reads the lower triangle only)
+                    for r in range(slot_rounds):
+                        q = r * bd + lane
+                        u = q // (9 * (bandwidth + 1))
+                        rem = q - u * 9 * (bandwidth + 1)
+                        d = rem // 9
+                        a = (rem - d * 9) // 3
+                        b = rem - d * 9 - a * 3
+                        vv = u - d
+                        ok = q < SLOTS and vv >= 0 and (d > 0 or b <= a)
+                        row = int(0)
+                        col = int(0)
+                        val = float(0.0)
+                        if ok:
+                            row = 3 * u + a
+                            col = 3 * vv + b
+                            val = hess[world, u, d][a, b]
+                        wp.tile_scatter_masked(mat, row, col, val, ok)
+                    for r in range(rhs_rounds):
+                        q = r * bd + lane
+                        ok = q < N
+                        val = float(0.0)
+                        idx = int(0)
+                        if ok:
+                            idx = q
+                            val = grad[world, q // 3][q - (q // 3) * 3]
+                        wp.tile_scatter_masked(rhs, idx, val, ok)
+                    wp.tile_cholesky_inplace(mat)
+                    wp.tile_cholesky_solve_inplace(mat, rhs)
+                    for i in range(lane, nv, bd):
+                        dx = -wp.vec3(rhs[3 * i], rhs[3 * i + 1], rhs[3 * i + 2])
+                        x[world, i] = x[world, i] + dx
+                        delta[world, i] = delta[world, i] + dx
+                else:
+                    block_band_cholesky_factor(world, lane, bd, nv, bandwidth, hess)
+                    if lane == 0:
+                        band_cholesky_solve(world, nv, bandwidth, hess, grad)
+                    bad = block_max(0)  # barrier: the step solved before every thread reads its rows
+                    for i in range(lane, nv, bd):
+                        dx = -grad[world, i]
+                        x[world, i] = x[world, i] + dx
+                        delta[world, i] = delta[world, i] + dx
                 bad = block_max(0)  # barrier: the step taken before the next rows read x
             if bad != 0:
                 if lane == 0:

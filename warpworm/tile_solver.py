@@ -1,11 +1,13 @@
 """Host launcher of the block-per-world implicit substeps (:mod:`warpworm.kernels.implicit_tile`), the GPU path.
 
-:class:`TileSubsteps` does what ``Simulator._world_cmd(state, n).launch()`` does (``n`` implicit substeps of every
-world, in place on the :class:`~warpworm.model.State`), with one block of ``block_dim`` threads per world instead of
-one thread, and the same results to float rounding (the systems it solves are the band path's bit for bit; its
-dense tile Cholesky rounds differently from the block-band one). Typical use, in place of ``_world_cmd``::
+:class:`TileSubsteps` does what ``Simulator._world_cmd(state, control, n).launch()`` does (``n`` implicit substeps
+of every world, in place on the :class:`~warpworm.model.State`), with one block of ``block_dim`` threads per world
+instead of one thread. It assembles the band path's Newton systems bit for bit; with ``factorization="band"`` it
+also factors them with the same arithmetic (results identical on the CPU), with "dense" (``wp.tile_cholesky``) the
+factor rounds differently: results agree to float rounding where the dynamics is continuous (a contact decision
+near its threshold can flip on a 1e-9 m difference, in the band path too). Typical use, in place of ``_world_cmd``::
 
-    tiles = TileSubsteps(sim.model, sim)             # block_dim: 128 on CUDA, 1 on the CPU
+    tiles = TileSubsteps(sim.model, sim)             # band; block_dim: 32 on CUDA, 1 on the CPU
     tiles.launch(state, sim.substeps, control)       # = sim._world_cmd(state, control, sim.substeps).launch()
 
 Everything the kernel reads from the Model, the Simulator, the State and the Control goes through
@@ -18,9 +20,15 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-DEFAULT_CUDA_BLOCK_DIM = 128
-"""Threads per world on a GPU: 4 warps, so the shared-memory-bound 4 worlds per SM still give 16 warps to hide
-latency; the Cholesky's row updates and the band scatter split over them (see the report / docs)."""
+FACTORIZATIONS = ("band", "dense")
+"""How a block solves its world's Newton systems: "band", the block band factored in place column-parallel (bit for
+bit the band path's factor; ~no shared memory: one warp per world, many worlds per SM); "dense", the 3V × 3V matrix
+as a float32 tile in shared memory, ``wp.tile_cholesky`` (cuSolverDx on a GPU; 55 KB per world: 4 worlds per SM)."""
+
+DEFAULT_CUDA_BLOCK_DIM = {"band": 32, "dense": 128}
+"""Threads per world on a GPU. band: one warp (a column of the band has at most B = 6 blocks below the diagonal, the
+rows 39 vertices); dense: 4 warps, so the 4 worlds an SM's shared memory holds still give 16 warps to hide latency,
+and the dense Cholesky's row updates and the band scatter split over them."""
 
 
 def vertex_incidence(pairs_or_stencils: np.ndarray, num_vertices: int) -> tuple[np.ndarray, np.ndarray]:
@@ -62,18 +70,22 @@ class TileSubsteps:
         model: the batch (:class:`~warpworm.model.Model`); its topology sets the kernel's tile size (3V).
         simulator: the :class:`~warpworm.simulator.Simulator` whose substep length, Newton count, friction and
             stability settings are used (read at each new recording, as ``_world_cmd`` does).
-        block_dim: threads per world; default 128 on CUDA, 1 on the CPU. On the CPU values above 1 run as
-            cooperative fibers only with ``wp.config.enable_cpu_blocks`` set (slower; for testing the block logic),
-            else Warp runs 1.
+        factorization: one of :data:`FACTORIZATIONS` (default "band").
+        block_dim: threads per world; default :data:`DEFAULT_CUDA_BLOCK_DIM` on CUDA, 1 on the CPU. On the CPU values
+            above 1 run as cooperative fibers only with ``wp.config.enable_cpu_blocks`` set (slower; for testing the
+            block logic), else Warp runs 1.
     """
 
-    def __init__(self, model, simulator, block_dim: int | None = None):
+    def __init__(self, model, simulator, factorization: str = "band", block_dim: int | None = None):
         from .kernels.implicit_tile import make_tile_substep_kernel
 
+        if factorization not in FACTORIZATIONS:
+            raise ValueError(f"factorization: expected one of {FACTORIZATIONS}, got {factorization!r}")
+        self.factorization = factorization
         self.model = model
         self.simulator = simulator
         if block_dim is None:
-            block_dim = DEFAULT_CUDA_BLOCK_DIM if model.device.is_cuda else 1
+            block_dim = DEFAULT_CUDA_BLOCK_DIM[factorization] if model.device.is_cuda else 1
         if not 1 <= int(block_dim) <= 1024:
             raise ValueError(f"block_dim: expected 1..1024 threads per world, got {block_dim}")
         self.block_dim = int(block_dim)
@@ -86,7 +98,7 @@ class TileSubsteps:
         dev = model.device
         self.incidence = [wp.array(a, dtype=wp.int32, device=dev) for a in (bs, bi, hs, hi)]
         """Vertex -> bars and vertex -> hinges, CSR: [bar start (V + 1,), bars, hinge start (V + 1,), hinges]."""
-        self.kernel = make_tile_substep_kernel(V, self.bandwidth)
+        self.kernel = make_tile_substep_kernel(V, self.bandwidth, factorization == "dense")
         W = model.num_worlds
         self.scratch = {
             "x_prev": wp.zeros((W, V), dtype=wp.vec3, device=dev),
@@ -100,8 +112,8 @@ class TileSubsteps:
 
     @property
     def shared_bytes_per_world(self) -> int:
-        """Shared memory one block (world) needs [bytes]: the 3V × 3V float32 tile, the right-hand side and the
-        reductions' scratch, as Warp computes it (needs the module built for this device)."""
+        """Shared memory one block (world) needs [bytes], as Warp computes it (builds the module for this device):
+        dense, the 3V × 3V float32 tile, the right-hand side and the reductions' scratch; band, the scratch only."""
         self.kernel.module.load(self.model.device, self.block_dim)
         return int(self.kernel.adj.get_total_required_shared())
 

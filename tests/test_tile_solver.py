@@ -1,0 +1,261 @@
+"""The block-per-world implicit substeps (:mod:`warpworm.tile_solver`, the GPU path) against the band path.
+
+The truth is the band path (``Simulator.run_substeps``: one thread per world, block-band Cholesky). The tile path
+assembles the same Newton systems bit for bit (row by row instead of element by element). With
+``factorization="band"`` it also factors them with the same arithmetic, column-parallel, so the runs must be
+identical to the last bit in every scenario here: falling, landing, sticking and sliding on inclines, anchors, worlds
+frozen by the speed check, the peristaltic preset's magnets. With "dense" (``wp.tile_cholesky``) the factor rounds
+differently, so positions must agree to float32 rounding, 1e-6 m after 200 substeps, in the scenarios whose outcome
+is continuous in the input: settling on a flat floor and magnet-driven gait steps. Not on the inclines: there the band
+path disagrees with itself by 1.3e-5 m at a landing and 1.3 mm for a sliding worm after 200 substeps when its
+start is moved by 4e-9 m (a contact's stick/slip test near its threshold flips), so no float rounding could match.
+
+On the CPU Warp runs a block as one thread (``block_dim=1``) unless ``wp.config.enable_cpu_blocks`` is set; two tests
+run several cooperative threads per world that way (4 threads: fewer than a column's 6 band rows and ~10 vertices
+each; 32: some threads own two vertices), so the block logic (barriers, thread-strided rows, the scatter rounds,
+the flag reductions) is checked here, not only on a GPU. The sm_90 compile check needs NVRTC (shipped with Warp),
+not a GPU.
+
+Cold, the CPU builds take ~15-30 s per (factorization, block size) and the sm_90 builds ~70 s (cuSolverDx LTOs);
+Warp's kernel cache keeps them afterwards.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+import warp as wp
+
+from warpworm import gaits, quiet_warp
+from warpworm.model import Model
+from warpworm.params import WormParams
+from warpworm.simulator import Simulator
+from warpworm.tile_solver import DEFAULT_CUDA_BLOCK_DIM, FACTORIZATIONS, TileSubsteps, vertex_incidence
+
+quiet_warp()
+
+TOL = 1.0e-6
+"""Position agreement [m] of the dense tile factorisation with the band path after 200 substeps."""
+
+FIELDS = ("positions", "velocities", "floor_force", "contact", "crease_angle", "bar_strain", "unstable", "step_count")
+"""The State arrays the substeps write."""
+
+
+def _copy_state(src, dst) -> None:
+    for f in dataclasses.fields(src):
+        getattr(dst, f.name).assign(getattr(src, f.name))
+
+
+def _lift(sim, states, lift, incline) -> None:
+    """Move every world of each state ``lift[w]`` [m] off its floor (along the normal of its ``incline[w]``)."""
+    n = np.stack([-np.sin(incline), np.zeros_like(incline), np.cos(incline)], axis=-1)
+    x = states[0].positions.numpy() + (np.asarray(lift)[:, None] * n)[:, None, :].astype(np.float32)
+    for s in states:
+        s.positions.assign(x)
+
+
+def landing(**sim_kwargs):
+    """Three worlds dropped 1, 2, 3 mm onto floors inclined 0, 0.15 and 0.35 rad (the last above the friction
+    angle atan(0.268) = 0.26 rad: it slides), 1 ms substeps. Returns (sim, band state, tile state)."""
+    incline = np.array([0.0, 0.15, 0.35])
+    model = Model.from_params(WormParams(floor_incline=incline), 3, "cpu")
+    sim = Simulator(model, dt=1.0e-3, substeps=1, **sim_kwargs)
+    band, tile = sim.initial_state(), sim.initial_state()
+    _lift(sim, (band, tile), [1.0e-3, 2.0e-3, 3.0e-3], incline)
+    return sim, band, tile
+
+
+def settling_flat():
+    """Three worlds dropped 1, 2 and 3 mm onto a flat floor, 1 ms substeps."""
+    model = Model.from_params(WormParams(), 3, "cpu")
+    sim = Simulator(model, dt=1.0e-3, substeps=1)
+    band, tile = sim.initial_state(), sim.initial_state()
+    _lift(sim, (band, tile), [1.0e-3, 2.0e-3, 3.0e-3], np.zeros(3))
+    return sim, band, tile
+
+
+def anchored():
+    """Two worlds hanging from three anchored tail vertices (force plate springs) 2 mm above a flat floor."""
+    model = Model.from_params(WormParams(), 2, "cpu", anchors=[0, 1, 2], anchor_stiffness=[[50.0, 50.0, 50.0],
+                                                                                          [200.0, 100.0, 50.0]])
+    sim = Simulator(model, dt=1.0e-3, substeps=1)
+    band, tile = sim.initial_state(), sim.initial_state()
+    _lift(sim, (band, tile), [2.0e-3, 2.0e-3], np.zeros(2))
+    sim.control.set_anchor_targets(sim.control.anchor_target.numpy() + np.float32([0.0, 0.0, 2.0e-3]))
+    return sim, band, tile
+
+
+def _run_substeps(sim, band, tile, tiles, n: int) -> None:
+    sim.run_substeps(band, n)
+    tiles.launch(tile, n)
+
+
+def _gait_steps(sim, band, tile, tiles, steps: int) -> None:
+    """``steps`` steps of each state, each step's magnetic wrench evaluated from that state's own positions."""
+    for _ in range(steps):
+        sim.update_magnets(band)
+        sim.run_substeps(band, sim.substeps)
+        sim.update_magnets(tile)
+        tiles.launch(tile, sim.substeps)
+
+
+def gait():
+    """The peristaltic preset on two worlds: settled 0.1 s by the band path, then steps of 2 ms (2 substeps)."""
+    model = Model.from_params(gaits.preset_params("peristaltic"), 2, "cpu")
+    sim = Simulator(model, dt=2.0e-3, substeps=2)
+    band = sim.initial_state()
+    sim.settle(band, 0.1)
+    tile = model.state()
+    _copy_state(band, tile)
+    return sim, band, tile
+
+
+def test_vertex_incidence_lists_every_element_of_each_vertex_in_order():
+    model = Model.from_params(WormParams(), 1, "cpu")
+    for elements in (model.edges.numpy(), model.hinges.numpy()):
+        start, index = vertex_incidence(elements, model.num_vertices)
+        for u in range(model.num_vertices):
+            expected = np.flatnonzero((elements == u).any(axis=1))  # ascending by construction
+            np.testing.assert_array_equal(index[start[u]:start[u + 1]], expected)
+    with pytest.raises(ValueError, match="vertex indices"):
+        vertex_incidence(np.array([[0, 5]]), 5)
+
+
+def test_bad_arguments_name_the_key():
+    model = Model.from_params(WormParams(), 1, "cpu")
+    sim = Simulator(model)
+    with pytest.raises(ValueError, match="factorization"):
+        TileSubsteps(model, sim, factorization="lu")
+    with pytest.raises(ValueError, match="block_dim"):
+        TileSubsteps(model, sim, block_dim=0)
+    with pytest.raises(ValueError, match="num_substeps"):
+        TileSubsteps(model, sim).launch(sim.initial_state(), 0)
+
+
+def _assert_identical(band, tile) -> None:
+    for f in FIELDS:
+        np.testing.assert_array_equal(getattr(tile, f).numpy(), getattr(band, f).numpy(), err_msg=f)
+
+
+def test_band_factorization_is_bit_for_bit_the_band_path_landing_and_sliding():
+    sim, band, tile = landing()
+    x0 = band.positions.numpy().copy()
+    _run_substeps(sim, band, tile, TileSubsteps(sim.model, sim, "band"), 200)
+    # the run did what it is meant to exercise: every world landed and touches its floor, the steep one slid
+    assert (band.unstable.numpy() == 0).all() and (band.step_count.numpy() == 200).all()
+    assert band.contact.numpy().any(axis=1).all()
+    slide = np.abs(band.positions.numpy()[2, :, 0] - x0[2, :, 0]).mean()
+    assert slide > 1.0e-3, f"the worm on the 0.35 rad floor slid only {slide * 1e3:.3f} mm"
+    _assert_identical(band, tile)
+
+
+def test_band_factorization_is_bit_for_bit_the_band_path_anchored():
+    sim, band, tile = anchored()
+    _run_substeps(sim, band, tile, TileSubsteps(sim.model, sim, "band"), 200)
+    x = band.positions.numpy()
+    assert x[:, 3:, 2].min() < 1.0e-4 < x[:, :3, 2].min()  # the body reached the floor, the anchored tail did not
+    _assert_identical(band, tile)
+
+
+def test_band_factorization_freezes_the_same_worlds():
+    """The speed check at 0.17 m/s: the worlds dropped 2 and 3 mm (0.20, 0.24 m/s at impact) are frozen, the one
+    dropped 1 mm (0.14 m/s) is not; a frozen world stays as the band path leaves it."""
+    sim, band, tile = landing(speed_limit=0.17)
+    _run_substeps(sim, band, tile, TileSubsteps(sim.model, sim, "band"), 60)
+    np.testing.assert_array_equal(band.unstable.numpy(), [0, 1, 1])
+    _assert_identical(band, tile)
+
+
+def test_band_factorization_is_bit_for_bit_the_band_path_under_the_gait_magnets():
+    sim, band, tile = gait()
+    x0 = band.positions.numpy().copy()
+    _gait_steps(sim, band, tile, TileSubsteps(sim.model, sim, "band"), 100)
+    assert np.linalg.norm(band.positions.numpy() - x0, axis=-1).max() > 1.0e-3  # the magnets moved the worm
+    _assert_identical(band, tile)
+
+
+@pytest.mark.parametrize("scenario", ["settling_flat", "gait"])
+def test_dense_tile_factorization_matches_the_band_path_to_rounding(scenario):
+    sim, band, tile = globals()[scenario]()
+    x0 = band.positions.numpy().copy()
+    tiles = TileSubsteps(sim.model, sim, "dense")
+    if scenario == "gait":
+        _gait_steps(sim, band, tile, tiles, 100)
+    else:
+        _run_substeps(sim, band, tile, tiles, 200)
+    xb, xt = band.positions.numpy(), tile.positions.numpy()
+    assert np.linalg.norm(xb - x0, axis=-1).max() > 1.0e-3  # the worms moved (fell / were driven)
+    assert (band.unstable.numpy() == 0).all()
+    err = np.abs(xt - xb).max()
+    assert err < TOL, f"dense tile and band positions differ by {err:.3e} m after 200 substeps ({scenario})"
+    for f in ("contact", "unstable", "step_count"):
+        np.testing.assert_array_equal(getattr(tile, f).numpy(), getattr(band, f).numpy(), err_msg=f)
+
+
+@pytest.mark.parametrize("factorization, block_dim", [("band", 4), ("dense", 32)])
+def test_cooperative_threads_per_world_match_the_band_path(factorization, block_dim):
+    """Several threads per world on CPU fibers (module docstring), 30 substeps: band, the landing worlds (exactly);
+    dense, the worlds settling on the flat floor (to rounding)."""
+    sim, band, tile = landing() if factorization == "band" else settling_flat()
+    old = wp.config.enable_cpu_blocks
+    wp.config.enable_cpu_blocks = True
+    try:
+        tiles = TileSubsteps(sim.model, sim, factorization, block_dim=block_dim)
+        tiles.launch(tile, 30)
+    finally:
+        wp.config.enable_cpu_blocks = old
+    sim.run_substeps(band, 30)
+    if factorization == "band":
+        _assert_identical(band, tile)
+    else:
+        err = np.abs(tile.positions.numpy() - band.positions.numpy()).max()
+        assert err < TOL, f"dense tile ({block_dim} threads) and band positions differ by {err:.3e} m"
+        np.testing.assert_array_equal(tile.contact.numpy(), band.contact.numpy())
+        np.testing.assert_array_equal(tile.step_count.numpy(), np.full(3, 30))
+
+
+def test_shared_memory_per_world():
+    """The budget the occupancy rests on. dense: the 3V × 3V float32 tile, the 3V right-hand side and < 1 KB of
+    reduction scratch, and four such blocks (with the 1 KB the hardware reserves per block) fit the 228 KB of an
+    H200 (sm_90) SM; band: the reduction scratch only."""
+    model = Model.from_params(WormParams(), 1, "cpu")
+    sim = Simulator(model)
+    n = 3 * model.num_vertices
+    dense = TileSubsteps(model, sim, "dense").shared_bytes_per_world
+    assert 4 * (n * n + n) <= dense < 4 * (n * n + n) + 1024, dense
+    assert 4 * (dense + 1024) <= 228 * 1024
+    assert TileSubsteps(model, sim, "band").shared_bytes_per_world < 1024
+
+
+def _nvrtc_reason() -> str | None:
+    """None when NVRTC can build sm_90 code in this process; else why not (the skip reason)."""
+    wp.init()
+    from warp._src.context import runtime
+
+    if not getattr(runtime, "is_cuda_enabled", False):
+        return "this Warp build has no CUDA support (NVRTC unavailable)"
+    if 90 not in getattr(runtime, "nvrtc_supported_archs", set()):
+        return "NVRTC cannot target sm_90"
+    return None
+
+
+@pytest.mark.parametrize("factorization", FACTORIZATIONS)
+def test_tile_kernel_compiles_for_sm90(factorization):
+    """The kernel's own module (one per shape and factorisation, so the package-wide compile test cannot discover
+    it) builds to sm_90 PTX at its GPU block size, dense with the cuSolverDx factorisation where Warp has libmathdx."""
+    reason = _nvrtc_reason()
+    if reason:
+        pytest.skip(reason)
+    from warpworm.kernels.implicit_tile import make_tile_substep_kernel
+
+    model = Model.from_params(WormParams(), 1, "cpu")
+    kernel = make_tile_substep_kernel(model.num_vertices, model.vertex_bandwidth, factorization == "dense")
+    module = kernel.module  # a module of this kernel alone: its options are ours to set
+    module.options["block_dim"] = DEFAULT_CUDA_BLOCK_DIM[factorization]
+    paths = wp.compile_aot_module(module, arch=90, use_ptx=True)  # into the kernel cache: rebuilt only on change
+    assert paths
+    for p in paths:
+        assert p.exists() and p.stat().st_size > 0, p
+        assert p.read_text(errors="replace").lstrip().startswith("//"), p  # PTX text (NVRTC's header comment)
