@@ -2,19 +2,34 @@
 
 Each world: EPM 10×10×40 mm cuboid (3.6 A·m²) above three 10 mm × 1 mm axial disks (0.0707 A·m²), the worm's
 layout with small random perturbations; the net force and torque on all four magnets from the other three
-(12 ordered pair wrenches per world), by one ``launch_world_wrenches`` call.
+(12 ordered pair wrenches per world), by one ``launch_world_wrenches`` call; ``epm`` = False rows skip the wrench
+on the EPM (``epm_wrench=False``, what the dynamics uses: 9 ordered pairs).
 
-Columns: ``ms_per_call`` (median of repeats, after a warm-up that includes compilation), ``us_per_world``,
-``pairs_per_s`` (point-dipole pair interactions per second, 'dipoles' model: 19,296 per world at 64/cm³; compare
-the simple n-body kernel of DESIGN-NOTES, 2.6e8/s on this machine), ``field_evals_per_s`` ('analytic': closed-form
-source-field evaluations at quadrature points). magpylib rows run ``getFT`` for the same 12 pair wrenches per world
-(meshing 1000 cells per target, ~1e-4 agreement) for small W only; ``magpylib_est`` rows extrapolate that
-per-world cost linearly to larger W and are labelled as estimates.
+Columns: ``ms_per_call`` (best of repeats, after a warm-up that includes compilation: the machine is shared, and
+the fastest repeat is the one least disturbed), ``us_per_world``, ``pairs_per_s`` (point-dipole pair interactions
+per second, 'dipoles' model: 19,296 per world at 64/cm³, 10,080 without the EPM's wrench), ``vs_nbody`` (that rate
+over the plain inverse-square n-body kernel's, measured in the same run; ``vs_dipole_nbody``: over a plain
+point-dipole force+field n-body kernel's), ``field_evals_per_s`` ('analytic': closed-form source-field evaluations
+at quadrature points). magpylib rows run ``getFT`` for the same 12 pair wrenches per world (meshing 1000 cells per
+target, ~1e-4 agreement) for small W only; ``magpylib_est`` rows extrapolate that per-world cost linearly to larger
+W and are labelled as estimates.
+
+Before/after in one run: with ``WARPWORM_BENCH_BASELINE=<git revision>`` in the environment, the kernel modules of
+that revision (``kernels/magnet_fields.py``, ``kernels/magnet_wrench.py``, read with ``git show``) are loaded under
+another module name and timed on the same worlds in the same run (rows ``warpworm@<rev>``; ``speedup`` = their
+time over today's at the same model and W).
 """
 
 from __future__ import annotations
 
+import importlib
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 import warp as wp
@@ -122,20 +137,21 @@ def _time(fn, repeats):
         t0 = time.perf_counter()
         fn()
         ts.append(time.perf_counter() - t0)
-    return float(np.median(ts))
+    return float(np.min(ts))
 
 
-def _dipole_pairs_per_world(magnets, density):
+def _dipole_pairs_per_world(magnets, density, targets=range(4)):
+    """Point-dipole pairs of the wrench on ``targets`` from all the other magnets."""
     from warpworm import magnets as mg
 
     n = [len(mg.dipole_grid(m, density)) for m in magnets]
-    return sum(n[i] * n[j] for i in range(4) for j in range(4) if i != j)
+    return sum(n[i] * n[j] for i in targets for j in range(4) if i != j)
 
 
-def _analytic_evals_per_world(pos, rot, magnets, quad_order, max_panels):
+def _analytic_evals_per_world(pos, rot, magnets, quad_order, max_panels, epm=True):
     """Field evaluations the 'analytic' kernel makes in world 0 (mirrors the panel rule of magnet_fields.py)."""
     total = 0
-    for i in range(4):
+    for i in range(0 if epm else 1, 4):
         for j in range(4):
             if i == j:
                 continue
@@ -162,7 +178,7 @@ def _analytic_evals_per_world(pos, rot, magnets, quad_order, max_panels):
                 R = t.size[0] / 2
                 for sign in (1, -1):
                     g = gap(trel + Rrel[:, 2] * sign * t.size[2] / 2, R)
-                    total += panels(R, g) * quad_order * 4 * quad_order * panels(2 * R, g)
+                    total += panels(R, g) * quad_order * 3 * quad_order * panels(2 * R, g)
     return total
 
 
@@ -185,8 +201,48 @@ def _magpylib_world(magnets, pos, rot, meshing=1000):
             magpy.getFT(sources, objs[i], pivot="centroid", meshing=meshing)
 
 
+def _baseline_kernels(rev: str):
+    """``world_wrench_kernel`` of git revision ``rev``, loaded from that revision's kernel files as another module."""
+    root = Path(__file__).resolve().parents[1]
+    tmp = Path(tempfile.mkdtemp(prefix="warpworm_bench_baseline_"))
+    name = "warpworm_baseline_" + "".join(c if c.isalnum() else "_" for c in rev)
+    pkg = tmp / name
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    for f in ("magnet_fields", "magnet_wrench"):
+        src = subprocess.run(["git", "show", f"{rev}:kernels/{f}.py"], cwd=root, capture_output=True, text=True)
+        if src.returncode != 0:
+            raise ValueError(f"WARPWORM_BENCH_BASELINE={rev!r}: git show failed: {src.stderr.strip()}")
+        (pkg / f"{f}.py").write_text(src.stdout)
+    sys.path.insert(0, str(tmp))
+    try:
+        module = importlib.import_module(f"{name}.magnet_wrench")
+    finally:
+        sys.path.remove(str(tmp))
+    return module.world_wrench_kernel, tmp
+
+
+def _launcher(kernel, model_arr, arrays, device, epm):
+    """One world-wrench launch of ``kernel`` (today's or a baseline revision's, with or without ``epm_wrench``)."""
+    from warpworm import magnets as mg
+
+    gl_x, gl_w = mg._gauss_legendre(mg.DEFAULT_QUAD_ORDER, str(device))
+    a = arrays
+    flag = [int(epm)] if "epm_wrench" in [arg.label for arg in kernel.adj.args] else []
+    inputs = [model_arr, a["shape"], a["size"], a["moment"], a["density"], gl_x, gl_w, mg.DEFAULT_MAX_PANELS, *flag,
+              a["pos"], a["rot"]]
+
+    def call():
+        wp.launch(kernel, dim=a["pos"].shape, inputs=inputs, outputs=[a["force_out"], a["torque_out"]], device=device)
+        wp.synchronize_device(device)
+
+    return call
+
+
 def run(quick: bool = False) -> list[dict]:
     from warpworm import magnets as mg
+    from warpworm.kernels.magnet_wrench import world_wrench_kernel
+    from warpworm.transforms import matrix_to_quat_wxyz, quat_wxyz_to_xyzw
 
     quiet_warp()
     wp.init()
@@ -195,45 +251,60 @@ def run(quick: bool = False) -> list[dict]:
     magnets = _magnets()
     density = 64e6
     pairs_per_world = _dipole_pairs_per_world(magnets, density)
+    pairs_no_epm = pairs_per_world - _dipole_pairs_per_world(magnets, density, targets=[0])
+    baseline_rev = os.environ.get("WARPWORM_BENCH_BASELINE", "").strip()
+    variants = [("warpworm", world_wrench_kernel, True), ("warpworm", world_wrench_kernel, False)]
+    tmp = None
+    if baseline_rev:
+        base_kernel, tmp = _baseline_kernels(baseline_rev)
+        variants.insert(0, (f"warpworm@{baseline_rev}", base_kernel, True))
     rows = _nbody_rows(device)
-    nbody_rate = rows[0]["pairs_per_s"]
-    dipole_nbody_rate = rows[1]["pairs_per_s"]
-    for model in ("dipoles", "analytic"):
-        for W in sizes:
-            pos, rot = _worlds(W)
-            from warpworm.transforms import matrix_to_quat_wxyz, quat_wxyz_to_xyzw
-
-            q = quat_wxyz_to_xyzw(matrix_to_quat_wxyz(rot.reshape(-1, 3, 3))).reshape(W, 4, 4)
-            arrays = dict(
-                shape=wp.array(np.array([[m.shape for m in magnets]], np.int32), dtype=wp.int32, device=device),
-                size=wp.array(np.array([[m.size for m in magnets]], np.float32), dtype=wp.vec3, device=device),
-                moment=wp.array(np.array([[m.moment for m in magnets]], np.float32), dtype=wp.vec3, device=device),
-                pos=wp.array(pos.astype(np.float32), dtype=wp.vec3, device=device),
-                rot=wp.array(q.astype(np.float32), dtype=wp.quat, device=device),
-                force_out=wp.zeros((W, 4), dtype=wp.vec3, device=device),
-                torque_out=wp.zeros((W, 4), dtype=wp.vec3, device=device),
-                density=wp.array([density], dtype=wp.float32, device=device),
-            )
+    try:
+        for model in ("dipoles", "analytic"):
             model_arr = wp.array([mg.MODELS[model]], dtype=wp.int32, device=device)
-
-            def call():
-                mg.launch_world_wrenches(model_arr, device=device, **arrays)
-                wp.synchronize_device(device)
-
-            work = W * 12
-            repeats = 3 if work * (1 if model == "dipoles" else 1) > 3000 else 10
-            t = _time(call, repeats)
-            row = {"impl": "warpworm", "model": model, "W": W, "ms_per_call": 1e3 * t, "us_per_world": 1e6 * t / W,
-                   "pair_wrenches_per_s": 12 * W / t}
-            if model == "dipoles":
-                row["pairs_per_s"] = pairs_per_world * W / t
-                row["vs_nbody"] = row["pairs_per_s"] / nbody_rate
-                row["vs_dipole_nbody"] = row["pairs_per_s"] / dipole_nbody_rate
-            else:
-                row["field_evals_per_s"] = (
-                    _analytic_evals_per_world(pos, rot, magnets, mg.DEFAULT_QUAD_ORDER, mg.DEFAULT_MAX_PANELS) * W / t
+            for W in sizes:
+                pos, rot = _worlds(W)
+                q = quat_wxyz_to_xyzw(matrix_to_quat_wxyz(rot.reshape(-1, 3, 3))).reshape(W, 4, 4)
+                arrays = dict(
+                    shape=wp.array(np.array([[m.shape for m in magnets]], np.int32), dtype=wp.int32, device=device),
+                    size=wp.array(np.array([[m.size for m in magnets]], np.float32), dtype=wp.vec3, device=device),
+                    moment=wp.array(np.array([[m.moment for m in magnets]], np.float32), dtype=wp.vec3,
+                                    device=device),
+                    pos=wp.array(pos.astype(np.float32), dtype=wp.vec3, device=device),
+                    rot=wp.array(q.astype(np.float32), dtype=wp.quat, device=device),
+                    force_out=wp.zeros((W, 4), dtype=wp.vec3, device=device),
+                    torque_out=wp.zeros((W, 4), dtype=wp.vec3, device=device),
+                    density=wp.array([density], dtype=wp.float32, device=device),
                 )
-            rows.append(row)
+                repeats = 3 if W * 12 > 3000 else 10
+                base_t = None
+                for impl, kernel, epm in variants:
+                    t = _time(_launcher(kernel, model_arr, arrays, device, epm), repeats)
+                    row = {"impl": impl, "model": model, "epm": epm, "W": W, "ms_per_call": 1e3 * t,
+                           "us_per_world": 1e6 * t / W, "pair_wrenches_per_s": (12 if epm else 9) * W / t}
+                    if impl != "warpworm":
+                        base_t = t
+                    elif base_t is not None:
+                        row["speedup"] = base_t / t
+                    if model == "dipoles":
+                        row["pairs_per_s"] = (pairs_per_world if epm else pairs_no_epm) * W / t
+                    else:
+                        row["field_evals_per_s"] = _analytic_evals_per_world(
+                            pos, rot, magnets, mg.DEFAULT_QUAD_ORDER, mg.DEFAULT_MAX_PANELS, epm) * W / t
+                    rows.append(row)
+    finally:
+        if tmp is not None:
+            shutil.rmtree(tmp, ignore_errors=True)
+    # the references once more, after: the ratios use the faster of the two measurements of each (the conservative
+    # choice on a shared machine)
+    for ref, again in zip(rows[:2], _nbody_rows(device)):
+        if again["pairs_per_s"] > ref["pairs_per_s"]:
+            ref.update(again)
+    nbody_rate, dipole_nbody_rate = rows[0]["pairs_per_s"], rows[1]["pairs_per_s"]
+    for row in rows[2:]:
+        if row["model"] == "dipoles":
+            row["vs_nbody"] = row["pairs_per_s"] / nbody_rate
+            row["vs_dipole_nbody"] = row["pairs_per_s"] / dipole_nbody_rate
     # magpylib: the same 12 pair wrenches per world, measured at small W
     try:
         import magpylib  # noqa: F401

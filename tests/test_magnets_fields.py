@@ -92,6 +92,32 @@ def test_cuboid_field_matches_magpylib(J):
     assert err.max() < 1e-4, err.max()
 
 
+@pytest.mark.parametrize("J", [(0.0, 0.0, 1.2), (0.3, -0.5, 1.1), (1.0, 0.2, 0.0)])
+def test_cuboid_field_on_face_planes_and_edge_lines(J):
+    """Observers exactly on the planes of the faces, on the lines of the edges and on the axes (outside the magnet),
+    in the magnet's own frame: where atan2 terms sit on their branch cut and the log arguments are smallest."""
+    half = np.array([0.005, 0.01, 0.02])
+    m = mg.Cuboid(2 * half, polarization=J)
+    ref = magpy.magnet.Cuboid(polarization=J, dimension=2 * half)
+    pts = []
+    for sx in (-1, 0, 1):
+        for sy in (-1, 0, 1):
+            for sz in (-1, 0, 1):
+                for far in (1.5, 3.0):
+                    for k in range(3):  # one coordinate pushed out of the box, the others on a plane or axis
+                        p = np.array([sx, sy, sz], float) * half
+                        if p[k] == 0:
+                            p[k] = far * half[k]
+                        else:
+                            p[k] *= far
+                        pts.append(p)
+    pts = np.unique(np.array(pts, dtype=np.float32), axis=0).astype(np.float64)
+    B = mg.field(m, (np.zeros(3), I3), pts)
+    Bref = ref.getB(pts)
+    err = np.linalg.norm(B - Bref, axis=1) / np.linalg.norm(Bref, axis=1)
+    assert err.max() < 1e-4, (err.max(), pts[err.argmax()])
+
+
 @pytest.mark.parametrize("J", [(0.0, 0.0, 1.2), (0.6, 0.8, 0.0), (0.4, 0.2, 1.0)])
 @pytest.mark.parametrize("dims", [(0.01, 0.001), (0.006, 0.02)])
 def test_cylinder_field_matches_magpylib(J, dims):
