@@ -65,7 +65,8 @@ class State:
     magnet_rot: wp.array
     """Magnet orientations (magnet -> world), shape (W, 4), ``wp.quat`` (x, y, z, w)."""
     magnet_force: wp.array
-    """Net magnetic force on each magnet [N], shape (W, 4), vec3 (from the last wrench evaluation)."""
+    """Net magnetic force on each magnet [N], shape (W, 4), vec3 (from the last wrench evaluation; the dynamics
+    skips the EPM's own, slot 0, which stays zero)."""
     magnet_torque: wp.array
     """Net magnetic torque on each magnet about its centre [N·m], shape (W, 4), vec3."""
     crease_angle: wp.array

@@ -32,8 +32,11 @@ from .model import Control, Model, State
 from .transforms import quat_wxyz_to_matrix, quat_xyzw_to_wxyz
 
 
-def launch_world_wrenches(model: Model, state: State, moment: wp.array) -> None:
-    """Net magnetic force and torque on every magnet of every world (the one place the magnet API is called)."""
+def launch_world_wrenches(model: Model, state: State, moment: wp.array, *, epm_wrench: bool = True,
+                          force_out: wp.array | None = None, torque_out: wp.array | None = None) -> None:
+    """Net magnetic force and torque on every magnet of every world (the one place the magnet API is called), into
+    ``state.magnet_force`` / ``magnet_torque`` unless other outputs are given. ``epm_wrench=False`` leaves the EPM's
+    own wrench (slot 0) zero and spends nothing on it: the dynamics needs only the IPMs'."""
     from .magnets import launch_world_wrenches as _launch
 
     _launch(
@@ -43,10 +46,11 @@ def launch_world_wrenches(model: Model, state: State, moment: wp.array) -> None:
         moment,
         state.magnet_pos,
         state.magnet_rot,
-        state.magnet_force,
-        state.magnet_torque,
+        state.magnet_force if force_out is None else force_out,
+        state.magnet_torque if torque_out is None else torque_out,
         model.dipole_density,
         model.device,
+        epm_wrench=epm_wrench,
     )
 
 
@@ -131,6 +135,9 @@ class Simulator:
         self.scratch.delta = wp.zeros((W, V), dtype=wp.vec3, device=dev)
         self.scratch.hess = wp.zeros((W, V, model.vertex_bandwidth + 1), dtype=wp.mat33, device=dev)
         self.scratch.grad = wp.zeros((W, V), dtype=wp.vec3, device=dev)
+        self._snapshot_wrench = (wp.zeros((W, 4), dtype=wp.vec3, device=dev),
+                                 wp.zeros((W, 4), dtype=wp.vec3, device=dev))
+        self._last_moment = model.magnet_moment
         self._cmds = {}
         self._graphs = {}
 
@@ -174,7 +181,7 @@ class Simulator:
     def _wrench(self, state: State, control: Control, moment: wp.array) -> None:
         m = self.model
         self._magnet_poses(state, control)
-        launch_world_wrenches(m, state, moment)
+        launch_world_wrenches(m, state, moment, epm_wrench=False)
         state.external_force.zero_()
         wp.launch(self._kpose.distribute_wrench, dim=(m.num_worlds, 3),
                   inputs=[m.mount_vertices, state.positions, state.magnet_pos, state.magnet_force,
@@ -233,6 +240,7 @@ class Simulator:
         """
         control = control or self.control
         moment = self.model.magnet_moment if epm else self.model.magnet_moment_parked
+        self._last_moment = moment
         if self.use_graph:
             key = (id(state), id(control), epm)
             g = self._graphs.get(key)
@@ -302,7 +310,7 @@ class Simulator:
 
         Returns ``positions (W, V, 3)``, ``velocities (W, V, 3)`` [m, m/s]; ``magnet_pos (W, 4, 3)`` [m],
         ``magnet_rot (W, 4, 3, 3)`` (magnet -> world; slots EPM, tail, centre, head); ``magnet_force``,
-        ``magnet_torque (W, 4, 3)`` [N, N·m]; ``crease_angle (W, H)`` [rad]; ``bar_strain (W, E)``;
+        ``magnet_torque (W, 4, 3)`` [N, N·m] (net magnetic wrench on each magnet at these poses, the EPM's too); ``crease_angle (W, H)`` [rad]; ``bar_strain (W, E)``;
         ``anchor_force (W, A, 3)`` [N]: the force each anchor applies, the pull of the worm on it (force plate);
         ``contact (W, V)`` bool; ``unstable (W,)`` bool (exploded or crumpled); ``crumpled (W,)`` bool (a crease
         folded through its range by more than ``fold_tolerance``); ``time (W,)`` [s].
@@ -310,6 +318,10 @@ class Simulator:
         m = self.model
         control = control or self.control
         self._magnet_poses(state, control)  # poses at the current time (the wrench kept the step's starting ones)
+        # the whole wrench at these poses, the EPM's included (the dynamics skips it), with the magnets of the last
+        # step (the EPM parked after settle)
+        f_snap, t_snap = self._snapshot_wrench
+        launch_world_wrenches(m, state, self._last_moment, force_out=f_snap, torque_out=t_snap)
         # .numpy() aliases device memory on the CPU: copy, so a snapshot never changes after it is taken
         x = state.positions.numpy().copy()
         q = state.magnet_rot.numpy()
@@ -325,8 +337,8 @@ class Simulator:
             "velocities": state.velocities.numpy().copy(),
             "magnet_pos": state.magnet_pos.numpy().copy(),
             "magnet_rot": quat_wxyz_to_matrix(quat_xyzw_to_wxyz(q)).astype(np.float32),
-            "magnet_force": state.magnet_force.numpy().copy(),
-            "magnet_torque": state.magnet_torque.numpy().copy(),
+            "magnet_force": f_snap.numpy().copy(),
+            "magnet_torque": t_snap.numpy().copy(),
             "crease_angle": state.crease_angle.numpy().copy(),
             "bar_strain": state.bar_strain.numpy().copy(),
             "anchor_force": anchor_force.astype(np.float32),
