@@ -79,6 +79,26 @@ def test_gait_experiments_run_and_report():
     json.dumps(ex.to_jsonable(d)), json.dumps(ex.to_jsonable(fp))
 
 
+def test_worlds_split_over_processes_equal_one_process():
+    """Worlds never interact: each experiment's arrays from two worker processes (contiguous world shares, their
+    parameters sliced) equal the one-process batch exactly. Covers a per-world incline (slope), per-world hinge
+    stiffness with anchors (compression) and per-world gait presets with the force-plate anchors (3 worlds: shares
+    of 2 and 1)."""
+    kw = dict(duration=0.02, settle=0.02)
+    one, two = (ex.slope((-2.0, 2.0, 3.0), workers=w, **kw) for w in (1, 2))
+    for k in ("time", "slide", "predicted", "slides", "unstable"):
+        np.testing.assert_array_equal(one[k], two[k], err_msg=k)
+    assert one["summary"] == two["summary"]
+    one, two = (ex.compression((0.01, 0.02, 0.04), increments=1, hold=0.02, settle=0.02, workers=w) for w in (1, 2))
+    for k in ("force_raw", "force_pusher_raw", "displacement", "unstable", "final_positions", "linear"):
+        np.testing.assert_array_equal(one[k], two[k], err_msg=k)
+    one, two = (ex.run_gaits(duration=0.02, settle=0.01, anchors=ex.section_vertices(6, 0), workers=w)
+                for w in (1, 2))
+    for k in ("time", "positions", "bar_strain", "anchor_force", "magnet_pos", "unstable", "rest_positions"):
+        np.testing.assert_array_equal(one[k], two[k], err_msg=k)
+    assert ex.world_shares(3, 2) == [(0, 1), (1, 3)] and ex.world_shares(2, 8) == [(0, 1), (1, 2)]
+
+
 def test_cli_writes_png_and_json(tmp_path, capsys):
     pytest.importorskip("matplotlib")
     from warpworm.cli import main

@@ -26,6 +26,7 @@ presets' per-gait scalars become per-world arrays and each world gets its own ga
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import fields, replace
 from pathlib import Path
 
@@ -60,6 +61,46 @@ def _dt_substeps(dt, substeps):
             getattr(gaits, "DEFAULT_SUBSTEPS", 32) if substeps is None else int(substeps))
 
 
+
+
+def world_shares(num_worlds: int, workers: int | None) -> list[tuple[int, int]]:
+    """Contiguous world ranges [lo, hi) for ``workers`` processes (None: every core; never more than the worlds)."""
+    workers = max(1, min(int(workers or os.cpu_count() or 1), int(num_worlds)))
+    bounds = np.linspace(0, num_worlds, workers + 1).astype(int)
+    return [(int(lo), int(hi)) for lo, hi in zip(bounds[:-1], bounds[1:])]
+
+
+def _run_share(job) -> dict:
+    """One process's share of :func:`split_run`: build the share's model, run ``core`` on it."""
+    core, params, num_worlds, device, model_kw, run_kw = job
+    from .model import Model
+
+    quiet_warp()
+    model = Model.from_params(params, num_worlds, device, **model_kw)
+    return core(model, params, **run_kw)
+
+
+def split_run(core, params: WormParams, num_worlds: int, world_axis: dict, *, workers: int | None = 1,
+              device="cpu", model_kw: dict | None = None, **run_kw) -> dict:
+    """``core(model, params, **run_kw) -> dict of arrays`` on ``num_worlds`` worlds, the worlds split over
+    ``workers`` processes (spawned; None: every core), each a batch of a contiguous share (its parameters sliced by
+    :func:`warpworm.commands.simulate.slice_worlds`, as ``simulate --workers`` does). Worlds never interact, so every
+    per-world result equals one process's. Each output key is concatenated along ``world_axis[key]`` (a key not in
+    ``world_axis``: the first share's value, for outputs that do not depend on the worlds).
+    """
+    from .commands.simulate import slice_worlds
+
+    shares = world_shares(num_worlds, workers)
+    mkw = dict(model_kw or {})
+    if len(shares) == 1:
+        return _run_share((core, params, num_worlds, device, mkw, run_kw))
+    import multiprocessing as mp
+
+    jobs = [(core, slice_worlds(params, num_worlds, lo, hi), hi - lo, device, mkw, run_kw) for lo, hi in shares]
+    with mp.get_context("spawn").Pool(len(jobs)) as pool:
+        parts = pool.map(_run_share, jobs)
+    return {k: (np.concatenate([q[k] for q in parts], axis=world_axis[k]) if k in world_axis else parts[0][k])
+            for k in parts[0]}
 
 
 def section_vertices(n_units: int, section: int, corners=(0, 1, 2)) -> np.ndarray:
@@ -162,34 +203,46 @@ def _gait_model(gait_list, *, anchors=None, anchor_stiffness=1.0e4, base=None, d
     return model, p
 
 
+GAIT_RECORD = ("positions", "bar_strain", "anchor_force", "magnet_pos", "time", "unstable")
+"""Snapshot keys a gait record keeps (``time`` per world, (S, W))."""
+
+
+def _gait_core(model, params, *, duration, sample_every, settle, dt, substeps) -> dict:
+    """Settle, then record the keys of :data:`GAIT_RECORD` every ``sample_every`` steps for ``duration`` [s]."""
+    from .simulator import Simulator
+
+    sim = Simulator(model, dt=dt, substeps=substeps)
+    state = sim.initial_state()
+    if settle > 0:
+        sim.settle(state, settle)
+    n_samples = max(1, int(round(duration / (dt * sample_every))))
+    rec = sim.run(state, dt * sample_every * np.arange(n_samples + 1), keys=GAIT_RECORD, stack=True)
+    rec.pop("clock", None)
+    return rec
+
+
 def run_gaits(gait_list=GAITS, duration: float = 2.0, *, sample_every: int = 2, settle: float = 0.2, anchors=None,
-              anchor_stiffness: float = 1.0e4, dt=None, substeps=None, device="cpu", base=None, **overrides) -> dict:
+              anchor_stiffness: float = 1.0e4, dt=None, substeps=None, device="cpu", base=None, workers: int | None = 1,
+              **overrides) -> dict:
     """Run each gait preset as one world of a batch for ``duration`` [s]; record a trajectory.
 
     Returns ``gaits`` (list), ``time (S,)``, ``positions (S, W, V, 3)``, ``bar_strain (S, W, E)``,
     ``anchor_force (S, W, A, 3)``, ``magnet_pos (S, W, 4, 3)``, ``unstable (W,)``, ``rest_positions (W, V, 3)``
-    (the settled shape at t = 0), and ``model``.
+    (the settled shape at t = 0), and ``model``. ``workers`` processes share the worlds (:func:`split_run`).
     """
-    from .simulator import Simulator
-
     quiet_warp()
     gait_list = list(gait_list)
     dt, substeps = _dt_substeps(dt, substeps)
     model, p = _gait_model(gait_list, anchors=anchors, anchor_stiffness=anchor_stiffness, base=base,
                            device=device, **overrides)
-    sim = Simulator(model, dt=dt, substeps=substeps)
-    state = sim.initial_state()
-    if settle > 0:
-        sim.settle(state, settle)
-    snaps = [sim.snapshot(state)]
-    n_samples = max(1, int(round(duration / (dt * sample_every))))
-    for _ in range(n_samples):
-        sim.step(state, sample_every)
-        snaps.append(sim.snapshot(state))
-    rec = {k: np.stack([s[k] for s in snaps]) for k in ("positions", "bar_strain", "anchor_force", "magnet_pos")}
-    rec["time"] = np.array([s["time"].max() for s in snaps])  # an unstable world's clock stops: take the max
-    rec["unstable"] = snaps[-1]["unstable"]
-    rec["rest_positions"] = snaps[0]["positions"]
+    axis = {"positions": 1, "bar_strain": 1, "anchor_force": 1, "magnet_pos": 1, "time": 1, "unstable": 1}
+    frames = split_run(_gait_core, p, len(gait_list), axis, workers=workers, device=device,
+                       model_kw=dict(anchors=anchors, anchor_stiffness=anchor_stiffness), duration=duration,
+                       sample_every=sample_every, settle=settle, dt=dt, substeps=substeps)
+    rec = {k: frames[k] for k in ("positions", "bar_strain", "anchor_force", "magnet_pos")}
+    rec["time"] = frames["time"].max(axis=1)  # an unstable world's clock stops: take the max
+    rec["unstable"] = frames["unstable"][-1]
+    rec["rest_positions"] = frames["positions"][0]
     rec["gaits"] = gait_list
     rec["model"] = model
     rec["params"] = p
@@ -234,19 +287,11 @@ def force_distance(gaps=None, densities=(1e6, 8e6, 64e6), moment: float = 0.9, s
 # 2./3. compression and 3-point flexure (§IV-B)
 
 
-def _quasi_static(model, params, anchors_moving, direction, displacements, *, lift=0.0, settle=0.2, hold=0.1,
-                  dt=None, substeps=None) -> dict:
-    """Shared driver: moving anchors' targets stepped by ``displacements`` along ``direction``; other anchors fixed.
-
-    Returns ``force (K+1, W)`` [N]: the load on the fixed anchors along ``direction`` (the load cell) minus its value
-    at zero displacement, ``force_raw`` (without that subtraction), ``force_pusher`` / ``force_pusher_raw``: the same
-    read on the moving anchors (equal at equilibrium; coarser, since the anchor force is k_a times a float32
-    position difference and float32 positions are coarser far from the origin), ``displacement (K+1, W)`` (measured
-    mean motion of the moving vertices along ``direction``), ``prescribed (K+1,)``, ``unstable (W,)``.
-    """
+def _quasi_static_core(model, params, *, anchors_moving, direction, displacements, lift, settle, hold, dt,
+                       substeps) -> dict:
+    """The simulation of :func:`_quasi_static` on one batch (one process's share): raw per-world readings."""
     from .simulator import Simulator
 
-    dt, substeps = _dt_substeps(dt, substeps)
     sim = Simulator(model, dt=dt, substeps=substeps)
     state = sim.initial_state()
     av = model.anchor_vertex.numpy()
@@ -262,7 +307,7 @@ def _quasi_static(model, params, anchors_moving, direction, displacements, *, li
     d = np.concatenate([[0.0], np.asarray(displacements, np.float64)])
     u = np.asarray(direction, np.float64) / np.linalg.norm(direction)
     fm, disp, reac, snaps = [], [], [], None
-    for dk in d:
+    for dk in d:  # the anchor targets change between holds: not one Simulator.run
         t = base_t.copy()
         t[:, moving] += dk * u
         sim.set_anchor_targets(t)
@@ -273,10 +318,31 @@ def _quasi_static(model, params, anchors_moving, direction, displacements, *, li
         reac.append((af[:, ~moving] @ u).sum(axis=1))  # and loads the fixed supports along +u
         xs = snaps["positions"][:, av].astype(np.float64) - x0[:, av]
         disp.append((xs[:, moving] @ u).mean(axis=1) - (xs[:, ~moving] @ u).mean(axis=1))
-    reac, fm = np.array(reac), np.array(fm)
-    return {"force_raw": reac, "force": reac - reac[0], "force_pusher_raw": fm, "force_pusher": fm - fm[0],
-            "displacement": np.array(disp), "prescribed": d, "unstable": snaps["unstable"],
-            "final_positions": snaps["positions"]}
+    return {"force_raw": np.array(reac), "force_pusher_raw": np.array(fm), "displacement": np.array(disp),
+            "prescribed": d, "unstable": snaps["unstable"], "final_positions": snaps["positions"]}
+
+
+def _quasi_static(params, num_worlds, anchors, anchor_stiffness, anchors_moving, direction, displacements, *,
+                  lift=0.0, settle=0.2, hold=0.1, dt=None, substeps=None, device="cpu", workers=1) -> dict:
+    """Shared driver: moving anchors' targets stepped by ``displacements`` along ``direction``; other anchors fixed;
+    the worlds split over ``workers`` processes (:func:`split_run`).
+
+    Returns ``force (K+1, W)`` [N]: the load on the fixed anchors along ``direction`` (the load cell) minus its value
+    at zero displacement, ``force_raw`` (without that subtraction), ``force_pusher`` / ``force_pusher_raw``: the same
+    read on the moving anchors (equal at equilibrium; coarser, since the anchor force is k_a times a float32
+    position difference and float32 positions are coarser far from the origin), ``displacement (K+1, W)`` (measured
+    mean motion of the moving vertices along ``direction``), ``prescribed (K+1,)``, ``unstable (W,)``,
+    ``final_positions (W, V, 3)``.
+    """
+    dt, substeps = _dt_substeps(dt, substeps)
+    axis = {"force_raw": 1, "force_pusher_raw": 1, "displacement": 1, "unstable": 0, "final_positions": 0}
+    r = split_run(_quasi_static_core, params, num_worlds, axis, workers=workers, device=device,
+                  model_kw=dict(anchors=anchors, anchor_stiffness=anchor_stiffness),
+                  anchors_moving=np.asarray(anchors_moving), direction=tuple(direction), displacements=displacements,
+                  lift=lift, settle=settle, hold=hold, dt=dt, substeps=substeps)
+    r["force"] = r["force_raw"] - r["force_raw"][0]
+    r["force_pusher"] = r["force_pusher_raw"] - r["force_pusher_raw"][0]
+    return r
 
 
 def _steps(max_displacement, increments, displacements) -> np.ndarray:
@@ -301,7 +367,8 @@ def _stiffness_sweep(hinge_stiffness, base: WormParams | None, overrides: dict):
 
 def compression(hinge_stiffness=DEFAULT_HINGE_SWEEP, max_displacement: float = 2.0e-3, increments: int = 8,
                 *, displacements=None, base: WormParams | None = None, hold: float = 0.1, settle: float = 0.2,
-                anchor_stiffness: float = 1.0e4, dt=None, substeps=None, device="cpu", **overrides) -> dict:
+                anchor_stiffness: float = 1.0e4, dt=None, substeps=None, device="cpu", workers: int | None = 1,
+                **overrides) -> dict:
     """Compression test (§IV-B): tail section (3 vertices) anchored, head section pushed along −x; one world per k_α.
 
     The worm lies on the floor (gravity and friction on, magnets off unless ``overrides`` turn them on). The head
@@ -310,16 +377,19 @@ def compression(hinge_stiffness=DEFAULT_HINGE_SWEEP, max_displacement: float = 2
     minus its value before loading [N]; ``displacement`` the head section's measured shortening [m]; ``linear`` the
     independent linear quasi-static prediction (no gravity, no friction) at the prescribed displacement.
     ``displacements`` (K,) [m], ascending and > 0, replaces the uniform ``max_displacement`` / ``increments`` steps
-    (:mod:`warpworm.material_fit` prescribes a measured table's displacements).
+    (:mod:`warpworm.material_fit` prescribes a measured table's displacements). ``workers`` processes share the
+    worlds (:func:`split_run`; results equal one process's).
     """
     from .model import Model
 
     ks, W, p = _stiffness_sweep(hinge_stiffness, base, overrides)
     n = int(p.n_units)
     tail, head = section_vertices(n, 0), section_vertices(n, 2 * n)
-    model = Model.from_params(p, W, device, anchors=np.concatenate([tail, head]), anchor_stiffness=anchor_stiffness)
+    anchors = np.concatenate([tail, head])
+    model = Model.from_params(p, W, device, anchors=anchors, anchor_stiffness=anchor_stiffness)  # for the prediction
     steps = _steps(max_displacement, increments, displacements)
-    r = _quasi_static(model, p, head, (-1.0, 0.0, 0.0), steps, settle=settle, hold=hold, dt=dt, substeps=substeps)
+    r = _quasi_static(p, W, anchors, anchor_stiffness, head, (-1.0, 0.0, 0.0), steps, settle=settle, hold=hold,
+                      dt=dt, substeps=substeps, device=device, workers=workers)
     lin = np.zeros_like(r["force"])
     for w in range(W):  # host reference, one small dense solve per stiffness (not the simulation)
         off = np.zeros((len(tail) + len(head), 3))
@@ -343,7 +413,8 @@ def compression(hinge_stiffness=DEFAULT_HINGE_SWEEP, max_displacement: float = 2
 
 def flexure(hinge_stiffness=DEFAULT_HINGE_SWEEP, max_deflection: float = 2.0e-3, increments: int = 8, *,
             displacements=None, lift: float = 0.02, base: WormParams | None = None, hold: float = 0.1, settle: float = 0.2,
-            anchor_stiffness: float = 1.0e4, dt=None, substeps=None, device="cpu", **overrides) -> dict:
+            anchor_stiffness: float = 1.0e4, dt=None, substeps=None, device="cpu", workers: int | None = 1,
+            **overrides) -> dict:
     """3-point flexure (§IV-B): worm lifted ``lift`` [m] off the floor, held at the bottom corners of the sections
     next to both ends (two line supports free to rotate about y), centre section pushed down; one world per k_α.
 
@@ -351,6 +422,7 @@ def flexure(hinge_stiffness=DEFAULT_HINGE_SWEEP, max_deflection: float = 2.0e-3,
     measured deflection [m]. The supports are anchors (pins, not rollers), so at large deflection the span's stretch
     adds a membrane stiffening that a roller test would not have; ``linear`` is the linear prediction.
     ``displacements`` (K,) [m], ascending and > 0, replaces the uniform ``max_deflection`` / ``increments`` steps.
+    ``workers`` processes share the worlds (:func:`split_run`; results equal one process's).
     """
     from .model import Model
 
@@ -358,10 +430,11 @@ def flexure(hinge_stiffness=DEFAULT_HINGE_SWEEP, max_deflection: float = 2.0e-3,
     n = int(p.n_units)
     sup = np.concatenate([section_vertices(n, 1, (0, 1)), section_vertices(n, 2 * n - 1, (0, 1))])
     load = section_vertices(n, n)
-    model = Model.from_params(p, W, device, anchors=np.concatenate([sup, load]), anchor_stiffness=anchor_stiffness)
+    anchors = np.concatenate([sup, load])
+    model = Model.from_params(p, W, device, anchors=anchors, anchor_stiffness=anchor_stiffness)  # for the prediction
     steps = _steps(max_deflection, increments, displacements)
-    r = _quasi_static(model, p, load, (0.0, 0.0, -1.0), steps, lift=lift, settle=settle, hold=hold, dt=dt,
-                      substeps=substeps)
+    r = _quasi_static(p, W, anchors, anchor_stiffness, load, (0.0, 0.0, -1.0), steps, lift=lift, settle=settle,
+                      hold=hold, dt=dt, substeps=substeps, device=device, workers=workers)
     lin = np.zeros_like(r["force"])
     for w in range(W):
         off = np.zeros((len(sup) + len(load), 3))
@@ -385,20 +458,29 @@ def flexure(hinge_stiffness=DEFAULT_HINGE_SWEEP, max_deflection: float = 2.0e-3,
 # 4. slope (§IV-F)
 
 
+def _slope_core(model, params, *, frame_times, dt, substeps) -> dict:
+    """The simulation of :func:`slope` on one batch: vertex centroids ``(S, W, 3)`` [m] (float64) and world times
+    ``(S, W)`` [s] at ``frame_times`` from t = 0, magnets off; ``unstable (W,)`` at the end."""
+    from .simulator import Simulator
+
+    sim = Simulator(model, dt=dt, substeps=substeps)
+    state = sim.initial_state()
+    rec = sim.run(state, frame_times, epm=False, keys=("positions", "time", "unstable"), stack=True)
+    return {"centroid": rec["positions"].astype(np.float64).mean(axis=2), "time": rec["time"],
+            "unstable": rec["unstable"][-1]}
+
+
 def slope(offsets_deg=(-4.0, -2.0, -1.0, 1.0, 2.0, 4.0), duration: float = 0.5, *, settle: float = 0.2,
           sample_every: int = 5, base: WormParams | None = None, dt=None, substeps=None, device="cpu",
-          slide_threshold: float = 1.0e-4, **overrides) -> dict:
+          slide_threshold: float = 1.0e-4, workers: int | None = 1, **overrides) -> dict:
     """Slope sliding test (§IV-F): the worm (magnets off, damping 0) on inclines β = atan(μs) + offsets, one world each.
 
     The centroid's motion down the slope is recorded from t = 0 (worm built unloaded at rest on the slope) for
     ``settle + duration`` [s]: ``slide (S, W)`` [m] down-slope, ``predicted (S, W)`` = ½ g (sin β − μk cos β) t² where
     β > atan(μs), else 0. A world "slides" when it moves more than ``slide_threshold`` [m] after ``settle`` (the
     worm takes its weight first; a contact transient may slip a few vertices by ~0.1 mm); the summary gives
-    the transition angle bracket.
+    the transition angle bracket. ``workers`` processes share the worlds (:func:`split_run`).
     """
-    from .model import Model
-    from .simulator import Simulator
-
     quiet_warp()
     dt, substeps = _dt_substeps(dt, substeps)
     b = base or WormParams()
@@ -408,19 +490,13 @@ def slope(offsets_deg=(-4.0, -2.0, -1.0, 1.0, 2.0, 4.0), duration: float = 0.5, 
     kw.update(overrides)
     p = replace(b, floor_incline=beta, **kw)
     W = len(beta)
-    model = Model.from_params(p, W, device)
-    sim = Simulator(model, dt=dt, substeps=substeps)
-    state = sim.initial_state()
     down = np.stack([-np.cos(beta), np.zeros(W), -np.sin(beta)], axis=1)  # (W, 3) down the slope
-    c0 = sim.snapshot(state)["positions"].astype(np.float64).mean(axis=1)
-    ts, slide = [0.0], [np.zeros(W)]
-    total = settle + duration
-    for _ in range(max(1, int(round(total / (dt * sample_every))))):
-        sim.step(state, sample_every, epm=False)
-        s = sim.snapshot(state)
-        ts.append(s["time"].max())
-        slide.append(np.einsum("wc,wc->w", s["positions"].astype(np.float64).mean(axis=1) - c0, down))
-    ts, slide = np.array(ts), np.array(slide)
+    n_frames = max(1, int(round((settle + duration) / (dt * sample_every))))
+    r = split_run(_slope_core, p, W, {"centroid": 1, "time": 1, "unstable": 0}, workers=workers, device=device,
+                  frame_times=dt * sample_every * np.arange(n_frames + 1), dt=dt, substeps=substeps)
+    ts = r["time"].max(axis=1)  # an unstable world's clock stops: take the max
+    slide = np.einsum("swc,wc->sw", r["centroid"] - r["centroid"][0], down)
+    s = {"unstable": r["unstable"]}
     g = float(np.asarray(p.gravity))
     mu_k = float(np.asarray(p.mu_kinetic))
     acc = np.where(beta > np.arctan(mu_s), g * (np.sin(beta) - mu_k * np.cos(beta)), 0.0)

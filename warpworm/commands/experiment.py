@@ -24,6 +24,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--fit", metavar="TABLE.csv", default=None,
                         help="compression / flexure only: fit k_α to a measured curve, a CSV with columns "
                              "displacement_m,force_n (header line optional); writes <name>-fit.json / .png")
+    parser.add_argument("--workers", type=int, default=None,
+                        help="processes to split the worlds over (default: every core; results equal one "
+                             "process's; each worker pays ~2-4 s of start-up)")
     parser.add_argument("--k-range", nargs=2, type=float, metavar=("LO", "HI"), default=(5.0e-4, 0.1),
                         help="--fit search range for k_α [N/rad] (default 5e-4 0.1)")
 
@@ -41,20 +44,22 @@ def _run(name: str, args, cache: dict, base=None):
 
     q = args.quick
     dur = args.duration if args.duration is not None else (0.3 if q else 2.0)
+    workers = args.workers  # None: every core (split_run caps it at the world count)
     if name == "force-distance":
         return ex.force_distance(gaps=np.geomspace(0.5e-3, 40e-3, 20 if q else 60))
     if name in ("compression", "flexure"):
         ks = _sweep(0.0025, 0.04, args.worlds or (2 if q else 5))
         fn = ex.compression if name == "compression" else ex.flexure
-        return fn(ks, increments=3 if q else 8, hold=0.05 if q else 0.1, settle=0.1 if q else 0.2, base=base)
+        return fn(ks, increments=3 if q else 8, hold=0.05 if q else 0.1, settle=0.1 if q else 0.2, base=base,
+                  workers=workers)
     if name == "slope":
         n = args.worlds or (2 if q else 6)
         offs = np.array([-2.0, 2.0]) if n == 2 else np.linspace(-4.0, 4.0, n)
-        return ex.slope(offs, duration=0.2 if q else 0.5, settle=0.1 if q else 0.2, base=base)
+        return ex.slope(offs, duration=0.2 if q else 0.5, settle=0.1 if q else 0.2, base=base, workers=workers)
     if name == "force-plate":
-        return ex.force_plate(duration=dur, settle=0.1 if q else 0.2, base=base)
+        return ex.force_plate(duration=dur, settle=0.1 if q else 0.2, base=base, workers=workers)
     if "free" not in cache:  # strain and deformation share one free-worm run
-        cache["free"] = ex.run_gaits(duration=dur, settle=0.1 if q else 0.2, base=base)
+        cache["free"] = ex.run_gaits(duration=dur, settle=0.1 if q else 0.2, base=base, workers=workers)
     fn = ex.strain if name == "strain" else ex.deformation
     return fn(record=cache["free"])
 
@@ -87,7 +92,7 @@ def _fit(args, base) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     t0 = time.perf_counter()
-    kw = dict(k_range=tuple(args.k_range))
+    kw = dict(k_range=tuple(args.k_range), workers=args.workers)
     if args.worlds:
         kw["coarse"] = args.worlds
     if args.quick:
@@ -138,6 +143,9 @@ def main(args) -> int:
         base = material_params(args.material)
     except ValueError as exc:
         print(f"error: --{exc}", file=sys.stderr)
+        return 2
+    if args.workers is not None and args.workers < 1:
+        print(f"error: --workers {args.workers}: expected >= 1", file=sys.stderr)
         return 2
     if args.fit is not None:
         return _fit(args, base)
