@@ -2,7 +2,8 @@
 
 Public API::
 
-    from warpworm.render import Renderer, sample_cameras, build_scene, compute_labels
+    from warpworm.render import Renderer, sample_cameras, build_scene
+    from warpworm.render.labels import schema_labels
 """
 
 from warpworm.render.camera import Cameras, focal_from_fov, intrinsics, look_at, make_cameras, sample_cameras

@@ -10,6 +10,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from warpworm import ids
 from warpworm.render.labels import KEYPOINT_NAMES
 
 # segmentation colours (RGB) by id: background, floor, five worm segments, three IPMs, EPM
@@ -50,12 +51,14 @@ def depth_colormap(depth: np.ndarray) -> np.ndarray:
 def seg_overlay(rgb: np.ndarray, seg: np.ndarray, alpha: float = 0.55) -> np.ndarray:
     """Blend the segmentation colours over the image (background and floor are left mostly untouched)."""
     col = SEG_COLORS[seg]
-    a = np.where(seg[..., None] >= 2, alpha, 0.15 * (seg[..., None] == 1))
+    a = np.where(seg[..., None] >= ids.SEG_WORM_FIRST, alpha, 0.15 * (seg[..., None] == ids.SEG_FLOOR))
     return (rgb * (1 - a) + col * a).astype(np.uint8)
 
 
 def draw_labels(img: np.ndarray, labels: dict, n: int, scale: float = 1.0) -> np.ndarray:
-    """Draw image ``n``'s labels on ``img`` (RGB, already ``scale`` times the render size)."""
+    """Draw image ``n``'s labels (dataset names: ``camera/K|R|t``, ``poses/body``, ``keypoints/pixel`` and, when
+    present, ``keypoints/visibility``, ``labels/bbox_obj``, ``labels/bbox_visib``, ``labels/visib_fract``) on ``img``
+    (RGB, already ``scale`` times the render size)."""
     img = np.ascontiguousarray(img)
     s = scale
     sh = 4  # fixed-point bits for sub-pixel drawing
@@ -65,61 +68,75 @@ def draw_labels(img: np.ndarray, labels: dict, n: int, scale: float = 1.0) -> np
         # pixel centres are integer coordinates: (u + 0.5) * s - 0.5 maps them to the scaled image's centres
         return (int(round(((uv[0] + 0.5) * s - 0.5) * f)), int(round(((uv[1] + 0.5) * s - 0.5) * f)))
 
-    if "worm_box" in labels:
-        b = labels["worm_box"][n]
-        if np.all(np.isfinite(b)):
-            cv2.rectangle(img, pt(b[:2]), pt(b[2:]), (200, 200, 200), 1, cv2.LINE_AA, sh)
-    if "worm_box_visible" in labels and labels["worm_box_visible"][n][0] >= 0:
-        b = labels["worm_box_visible"][n].astype(float)
-        cv2.rectangle(img, pt(b[:2] - 0.5), pt(b[2:] + 0.5), (255, 255, 255), 2, cv2.LINE_AA, sh)
-    # body axes, 1 cm
-    K, R, t = labels["K"][n], labels["R"][n], labels["t"][n]
-    o = labels["body_t_world"][n]
-    Rb = labels["body_R_world"][n]
-    ends = np.concatenate([o[None], o + 0.01 * Rb.T], axis=0)
-    pc = ends @ R.T + t
-    if np.all(pc[:, 2] > 1e-4):
-        uv = pc[:, :2] / pc[:, 2:] * [K[0, 0], K[1, 1]] + [K[0, 2], K[1, 2]]
-        for a, c in zip(range(1, 4), [(255, 0, 0), (0, 255, 0), (0, 80, 255)]):
-            cv2.line(img, pt(uv[0]), pt(uv[a]), c, 2, cv2.LINE_AA, sh)
-    vis = labels.get("keypoint_visibility")
+    _draw_boxes(img, labels, n, pt, sh)
+    _draw_body_axes(img, labels, n, pt, sh)
+    vis = labels.get("keypoints/visibility")
     r = max(2, int(round(2.5 * s)))
     for p, name in enumerate(KEYPOINT_NAMES):
         v = 2 if vis is None else int(vis[n, p])
         if v == 0:
             continue
-        uv = labels["keypoints_2d"][n, p]
+        uv = labels["keypoints/pixel"][n, p]
         c = _kp_color(name)
         if v == 2:
             cv2.circle(img, pt(uv), r * int(f), c, -1, cv2.LINE_AA, sh)
             cv2.circle(img, pt(uv), r * int(f), (0, 0, 0), 1, cv2.LINE_AA, sh)
         else:
             cv2.circle(img, pt(uv), r * int(f), c, 1, cv2.LINE_AA, sh)
-    if "visible_fraction" in labels:
-        cv2.putText(img, f"vis {labels['visible_fraction'][n]:.2f}", (4, img.shape[0] - 6),
+    if "labels/visib_fract" in labels:
+        cv2.putText(img, f"vis {labels['labels/visib_fract'][n]:.2f}", (4, img.shape[0] - 6),
                     cv2.FONT_HERSHEY_SIMPLEX, 0.4, (255, 255, 255), 1, cv2.LINE_AA)
     return img
 
 
-def contact_sheet(images: dict, labels: dict, *, rgb=None, max_rows: int = 8, scale: float = 1.0,
+def _draw_boxes(img, labels, n, pt, sh) -> None:
+    """The projected worm's box (thin) and its visible pixels' box (thick), both (x, y, w, h) [px]."""
+    if "labels/bbox_obj" in labels:
+        b = labels["labels/bbox_obj"][n]
+        if np.all(np.isfinite(b)):
+            cv2.rectangle(img, pt(b[:2]), pt(b[:2] + b[2:]), (200, 200, 200), 1, cv2.LINE_AA, sh)
+    if "labels/bbox_visib" in labels and labels["labels/bbox_visib"][n][2] > 0:
+        b = labels["labels/bbox_visib"][n].astype(float)  # whole pixels: around the first and last pixel centres
+        cv2.rectangle(img, pt(b[:2] - 0.5), pt(b[:2] + b[2:] - 0.5), (255, 255, 255), 2, cv2.LINE_AA, sh)
+
+
+def _draw_body_axes(img, labels, n, pt, sh) -> None:
+    """The body frame's x, y, z axes (red, green, blue), 1 cm long, when all in front of the camera."""
+    K, R, t = labels["camera/K"][n], labels["camera/R"][n], labels["camera/t"][n]
+    body = labels["poses/body"][n]
+    o, Rb = body[:3, 3], body[:3, :3]
+    ends = np.concatenate([o[None], o + 0.01 * Rb.T], axis=0)
+    pc = ends @ R.T + t
+    if np.all(pc[:, 2] > 1e-4):
+        uv = pc[:, :2] / pc[:, 2:] * [K[0, 0], K[1, 1]] + [K[0, 2], K[1, 2]]
+        for a, c in zip(range(1, 4), [(255, 0, 0), (0, 255, 0), (0, 80, 255)]):
+            cv2.line(img, pt(uv[0]), pt(uv[a]), c, 2, cv2.LINE_AA, sh)
+
+
+def contact_sheet(samples: dict, labels: dict | None = None, *, rgb=None, max_rows: int = 8, scale: float = 1.0,
                   titles=None) -> np.ndarray:
     """Contact sheet (RGB uint8) of the first ``max_rows`` images.
 
     Args:
-        images: renderer output (``rgb``, ``depth``, ``seg``). labels: :func:`compute_labels` output.
-        rgb: images to show in the first column instead of ``images['rgb']`` (e.g. with sensor effects).
+        samples: images and labels under the dataset's names (``rgb``, ``depth``, ``segmentation``, ``camera/*``,
+            ``poses/body``, ``keypoints/*``, ``labels/*``): dataset samples stacked, or the renderer's output with
+            :func:`warpworm.render.labels.schema_labels`'s labels (``labels``, merged in; the renderer's ``seg``
+            stands for ``segmentation``).
+        rgb: images to show in the first column instead of ``rgb`` (e.g. with sensor effects).
         scale: tile scale factor (nearest-neighbour up-scaling for small renders).
         titles: optional text per row.
     """
-    rgb = images["rgb"] if rgb is None else rgb
+    d = {**samples, **(labels or {})}
+    segm = d["segmentation"] if "segmentation" in d else d["seg"]
+    rgb = d["rgb"] if rgb is None else rgb
     N = min(len(rgb), max_rows)
     rows = []
     for n in range(N):  # drawing is per image by nature (OpenCV)
         def up(a, interp=cv2.INTER_NEAREST):
             return cv2.resize(a, None, fx=scale, fy=scale, interpolation=interp) if scale != 1 else a.copy()
 
-        tiles = [up(rgb[n], cv2.INTER_LINEAR), up(depth_colormap(images["depth"][n])),
-                 draw_labels(up(seg_overlay(images["rgb"][n], images["seg"][n])), labels, n, scale)]
+        tiles = [up(rgb[n], cv2.INTER_LINEAR), up(depth_colormap(d["depth"][n])),
+                 draw_labels(up(seg_overlay(d["rgb"][n], segm[n])), d, n, scale)]
         if titles is not None:
             cv2.putText(tiles[0], str(titles[n]), (4, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (255, 255, 255), 1,
                         cv2.LINE_AA)

@@ -2,7 +2,7 @@
 
 :func:`posed_worm_states` bends the crease pattern's rest sheet along its axis (a smooth, seeded arc in the vertical
 and the horizontal plane), places it on the floor at a random yaw and offset, computes the IPM poses from the mounts
-and puts the EPM above it: a snapshot-like dict with the keys :func:`warpworm.render.labels.compute_labels` reads.
+and puts the EPM above it: a snapshot-like dict with the keys :func:`warpworm.render.labels.schema_labels` reads.
 """
 
 from __future__ import annotations

@@ -41,8 +41,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from warpworm.render.camera import Cameras
-from warpworm.render.raster_kernels import LABEL_IPM_FIRST, LABEL_WORM_FIRST, LABEL_WORM_LAST
-from warpworm.transforms import matrix_to_quat_wxyz
+from warpworm.ids import SEG_IPM_FIRST as LABEL_IPM_FIRST
+from warpworm.ids import SEG_WORM_FIRST as LABEL_WORM_FIRST
+from warpworm.ids import SEG_WORM_LAST as LABEL_WORM_LAST
+from warpworm.transforms import matrix_to_quat_wxyz, pose_matrix
 
 VIS_EPS = 5e-4
 """Depth tolerance [m] of the visibility test for any surface in front of a keypoint."""
@@ -116,19 +118,6 @@ class WormBody:
         return np.stack([ex, ey, ez], axis=-1), origin
 
 
-def _pose_block(prefix: str, R_world, t_world, cam_R, cam_t) -> dict:
-    """World and camera poses with quaternions (w, x, y, z); R (N, ..., 3, 3), t (N, ..., 3), cameras (N, ...)."""
-    extra = R_world.ndim - 3
-    cR = cam_R.reshape(cam_R.shape[:1] + (1,) * extra + (3, 3))
-    ct = cam_t.reshape(cam_t.shape[:1] + (1,) * extra + (3,))
-    R_cam = cR @ R_world
-    t_cam = np.einsum("...ij,...j->...i", cR, t_world) + ct
-    return {
-        f"{prefix}_R_world": R_world, f"{prefix}_t_world": t_world, f"{prefix}_q_world": matrix_to_quat_wxyz(R_world),
-        f"{prefix}_R_cam": R_cam, f"{prefix}_t_cam": t_cam, f"{prefix}_q_cam": matrix_to_quat_wxyz(R_cam),
-    }
-
-
 def _pixel_lookup(arr: np.ndarray, px: np.ndarray, py: np.ndarray) -> np.ndarray:
     """arr (N, H, W) sampled at integer pixels (N, P) (already clipped)."""
     n = np.arange(arr.shape[0])[:, None]
@@ -150,39 +139,79 @@ def _box_from_mask(mask: np.ndarray) -> np.ndarray:
     return box
 
 
-def compute_labels(states: dict, body, cameras: Cameras, images: dict | None = None, *,
-                   rest_positions=None, ipm_diameter=0.010, ipm_thickness=0.001) -> dict:
-    """Labels of N images of W worlds.
+def keypoints_in_body(body: np.ndarray, kp_world: np.ndarray) -> np.ndarray:
+    """``keypoints/body`` (n, P, 3) [m]: world keypoints (n, P, 3) in the body frame, R_b^T (x - t_b) for body ->
+    world poses ``body`` (n, 4, 4)."""
+    body = np.asarray(body, np.float64)
+    return np.einsum("nji,npj->npi", body[:, :3, :3], np.asarray(kp_world, np.float64) - body[:, None, :3, 3])
+
+
+def keypoint_depth_tolerance(body: WormBody, ipm_diameter) -> np.ndarray:
+    """Per-keypoint depth tolerance [m] of the visibility rule (module docstring), (W, P) for ``ipm_diameter`` ()
+    or (W,) [m]: interior points may show through their own surface by this much."""
+    d_ipm = np.atleast_1d(np.asarray(ipm_diameter, dtype=np.float64))
+    tol = np.full((d_ipm.shape[0], len(KEYPOINT_NAMES)), VIS_EPS)
+    tol[:, 0:7] = body.axis_radius + 1e-3
+    tol[:, 7:10] = (0.5 * d_ipm + VIS_EPS)[:, None]
+    return tol
+
+
+def keypoint_visibility(uv: np.ndarray, z: np.ndarray, depth: np.ndarray, segm: np.ndarray,
+                        tol: np.ndarray) -> np.ndarray:
+    """COCO visibility (N, P) uint8 of keypoints at pixels ``uv`` (N, P, 2) with camera depth ``z`` (N, P) [m]
+    against the rendered ``depth`` / ``segm`` (N, H, W) and the depth tolerances ``tol`` (N, P) [m]."""
+    H, Wd = depth.shape[1:]
+    P = uv.shape[1]
+    with np.errstate(invalid="ignore"):
+        px = np.rint(uv[..., 0])
+        py = np.rint(uv[..., 1])
+        inside = (z > 0) & (px >= 0) & (px < Wd) & (py >= 0) & (py < H)
+    pxi = np.where(inside, px, 0).astype(np.int64)
+    pyi = np.where(inside, py, 0).astype(np.int64)
+    D = _pixel_lookup(depth, pxi, pyi).astype(np.float64)
+    L = _pixel_lookup(segm, pxi, pyi).astype(np.int64)
+    # each keypoint's own object: the worm's ids for worm keypoints, its magnet's id for an IPM centre
+    worm_kp = np.ones(P, bool)
+    worm_kp[7:10] = False
+    own = np.where(worm_kp[None], (L >= LABEL_WORM_FIRST) & (L <= LABEL_WORM_LAST),
+                   L == (LABEL_IPM_FIRST + np.arange(P) - 7)[None])
+    gap = z - D
+    visible = (D == 0) | (gap <= VIS_EPS) | ((gap <= tol) & own)
+    return np.where(inside, np.where(visible, 2, 1), 0).astype(np.uint8)
+
+
+def _xywh(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    return np.concatenate([lo, hi - lo], axis=1)
+
+
+def schema_labels(states: dict, body, cameras: Cameras, images: dict | None = None, *,
+                  rest_positions=None, ipm_diameter=0.010, ipm_thickness=0.001) -> dict:
+    """Labels of N images of W worlds, named and typed as the dataset schema (:data:`warpworm.dataset.SCHEMA`).
 
     Args:
         states: snapshot dict with ``positions`` (W, V, 3), ``magnet_pos`` (W, 4, 3), ``magnet_rot`` (W, 4, 3, 3) and,
             passed through when present, ``crease_angle`` (W, H), ``bar_strain`` (W, E).
         body: a :class:`WormBody` or a crease pattern (converted with :meth:`WormBody.from_pattern`).
         cameras: the images' cameras; ``cameras.world`` (N,) indexes the worlds.
-        images: :meth:`Renderer.render` output (``depth``, ``seg``, ``worm_mask``) for visibility, visible boxes and
-            the visible fraction; None skips those labels.
+        images: :meth:`Renderer.render` output (``depth``, ``seg``, ``worm_mask``) for visibility, the visible box,
+            the visible fraction and the worm mask; None skips those labels.
         rest_positions: rest vertices (V, 3) or (W, V, 3) for the deformation ratios' rest distances
             (default: the body's rest vertices; pass per-world rest geometry when a, b, l0 vary per world).
         ipm_diameter, ipm_thickness: [m], () or (W,): visibility tolerance of the IPM centres.
 
     Returns:
-        dict of arrays with a leading image axis N (float64 unless stated; poses as R (..., 3, 3), t (..., 3) [m] and
-        quaternions (w, x, y, z)):
-        ``K`` (N, 3, 3), ``R`` (N, 3, 3), ``t`` (N, 3) (world -> camera), ``world_index`` (N,) int32;
-        ``body_{R,t,q}_{world,cam}``: worm body frame; ``magnet_{R,t,q}_{world,cam}`` (N, 4, ...) in slot order
-        EPM, tail, centre, head IPM; ``keypoints_world``, ``keypoints_cam``, ``keypoints_body`` (N, P, 3),
-        ``keypoints_2d`` (N, P, 2) [px]; ``worm_box`` (N, 4) float (xmin, ymin, xmax, ymax) of all projected worm
-        vertices, unclipped; ``deformation_ratio`` (N, 4); ``crease_angle`` (N, H), ``bar_strain`` (N, E) when
-        present. With ``images``: ``keypoint_visibility`` (N, P) uint8, ``keypoint_depth_tol`` (N, P),
-        ``worm_box_visible`` (N, 4) int (inclusive pixels, -1 when hidden), ``worm_pixels_visible``,
-        ``worm_pixels_total`` (N,) int, ``visible_fraction`` (N,).
+        name -> (N, ...) array: ``poses/body`` (N, 4, 4) body -> world, ``poses/ipm`` (N, 3, 4, 4), ``poses/epm``
+        (N, 4, 4), ``poses/body_quat`` (N, 4) (w, x, y, z); ``keypoints/world``, ``keypoints/camera``,
+        ``keypoints/body`` (N, P, 3) [m], ``keypoints/pixel`` (N, P, 2) [px]; ``labels/bbox_obj`` (N, 4) (x, y, w, h)
+        of all projected worm vertices, unclipped [px]; ``labels/deformation`` (N, 4); ``creases/angle``,
+        ``bars/strain``, ``worm/vertices`` when ``states`` has them. With ``images``: ``keypoints/visibility``
+        (N, P) uint8, ``labels/bbox_visib`` (N, 4) (x, y, w, h) of the visible worm pixels (0s when hidden),
+        ``labels/visib_fract`` (N,), ``labels/worm_mask`` (N, H, W) uint8.
     """
     if not isinstance(body, WormBody):
         body = WormBody.from_pattern(body)
     wi = np.asarray(cameras.world, dtype=np.int64)
-    N = wi.shape[0]
     pos = np.asarray(states["positions"], dtype=np.float64)
-    W = pos.shape[0]
     mpos = np.asarray(states["magnet_pos"], dtype=np.float64)
     mrot = np.asarray(states["magnet_rot"], dtype=np.float64)
 
@@ -191,63 +220,58 @@ def compute_labels(states: dict, body, cameras: Cameras, images: dict | None = N
     sheet = body.sheet_keypoints(pos)  # (W, 13, 3)
     kp_world = np.concatenate([sheet[:, :7], mpos[:, 1:4], sheet[:, 7:]], axis=1)  # (W, 16, 3)
     rest = body.rest_vertices if rest_positions is None else np.asarray(rest_positions, dtype=np.float64)
-    rest_seg = body.sheet_keypoints(rest)[..., 0:5, :]
-    seg = sheet[:, 0:5]
-    dist = np.linalg.norm(np.diff(seg, axis=1), axis=-1)
-    rest_dist = np.linalg.norm(np.diff(rest_seg, axis=-2), axis=-1)
-    ratio = dist / rest_dist  # (W, 4), rest broadcast
+    rest_dist = np.linalg.norm(np.diff(body.sheet_keypoints(rest)[..., 0:5, :], axis=-2), axis=-1)
+    ratio = np.linalg.norm(np.diff(sheet[:, 0:5], axis=1), axis=-1) / rest_dist  # (W, 4), rest broadcast
 
     # --- per image ---
-    cR, ct = cameras.R, cameras.t
-    out = {"K": cameras.K.copy(), "R": cR.copy(), "t": ct.copy(), "world_index": wi.astype(np.int32)}
-    out.update(_pose_block("body", Rb[wi], ob[wi], cR, ct))
-    out.update(_pose_block("magnet", mrot[wi], mpos[wi], cR, ct))
+    pose_body = pose_matrix(Rb[wi], ob[wi])
+    mags = pose_matrix(mrot[wi], mpos[wi])
     kw = kp_world[wi]
     uv, kc = cameras.project(kw)
-    out["keypoints_world"] = kw
-    out["keypoints_cam"] = kc
-    out["keypoints_body"] = np.einsum("nji,npj->npi", Rb[wi], kw - ob[wi][:, None])
-    out["keypoints_2d"] = uv
-    wuv, wc = cameras.project(pos[wi])
-    out["worm_box"] = np.concatenate([wuv.min(axis=1), wuv.max(axis=1)], axis=1)
-    out["deformation_ratio"] = ratio[wi]
-    for key in ("crease_angle", "bar_strain"):
-        if key in states:
-            out[key] = np.asarray(states[key])[wi]
-
+    wuv, _ = cameras.project(pos[wi])
+    out = {
+        "poses/body": pose_body, "poses/ipm": mags[:, 1:4], "poses/epm": mags[:, 0],
+        "poses/body_quat": matrix_to_quat_wxyz(Rb[wi]),
+        "keypoints/world": kw, "keypoints/camera": kc, "keypoints/pixel": uv,
+    }
+    img = {} if images is None else _image_labels(images, uv, kc[..., 2], keypoint_depth_tolerance(
+        body, np.broadcast_to(np.asarray(ipm_diameter, dtype=np.float64), (pos.shape[0],)))[wi])
+    # (the order of the keys is the order a shard creates its HDF5 datasets in: kept as it always was, so that the
+    # files stay byte-identical)
     if images is not None:
-        depth = images["depth"]
-        segm = images["seg"]
-        H, Wd = depth.shape[1:]
-        P = kw.shape[1]
-        z = kc[..., 2]
-        with np.errstate(invalid="ignore"):
-            px = np.rint(uv[..., 0])
-            py = np.rint(uv[..., 1])
-            inside = (z > 0) & (px >= 0) & (px < Wd) & (py >= 0) & (py < H)
-        pxi = np.where(inside, px, 0).astype(np.int64)
-        pyi = np.where(inside, py, 0).astype(np.int64)
-        D = _pixel_lookup(depth, pxi, pyi).astype(np.float64)
-        L = _pixel_lookup(segm, pxi, pyi).astype(np.int64)
-        # per-keypoint own labels and tolerances
-        d_ipm = np.broadcast_to(np.asarray(ipm_diameter, dtype=np.float64), (W,))[wi]
-        tol = np.full((N, P), VIS_EPS)
-        tol[:, 0:7] = body.axis_radius + 1e-3
-        tol[:, 7:10] = (0.5 * d_ipm + VIS_EPS)[:, None]
-        worm_kp = np.ones(P, bool)
-        worm_kp[7:10] = False
-        own = np.where(worm_kp[None], (L >= LABEL_WORM_FIRST) & (L <= LABEL_WORM_LAST),
-                       L == (LABEL_IPM_FIRST + np.arange(P) - 7)[None])
-        gap = z - D
-        visible = (D == 0) | (gap <= VIS_EPS) | ((gap <= tol) & own)
-        vis = np.where(inside, np.where(visible, 2, 1), 0).astype(np.uint8)
-        out["keypoint_visibility"] = vis
-        out["keypoint_depth_tol"] = tol
-        worm_vis = (segm >= LABEL_WORM_FIRST) & (segm <= LABEL_WORM_LAST)
-        out["worm_box_visible"] = _box_from_mask(worm_vis)
-        nv = worm_vis.sum(axis=(1, 2))
-        nt = images["worm_mask"].sum(axis=(1, 2))
-        out["worm_pixels_visible"] = nv
-        out["worm_pixels_total"] = nt
-        out["visible_fraction"] = np.where(nt > 0, nv / np.maximum(nt, 1), 0.0)
+        out["keypoints/visibility"] = img.pop("keypoints/visibility")
+    for key, name in (("crease_angle", "creases/angle"), ("bar_strain", "bars/strain"), ("positions", "worm/vertices")):
+        if key in states:
+            out[name] = np.asarray(states[key])[wi].astype(np.float32)
+    out["labels/bbox_obj"] = _xywh(wuv.min(axis=1), wuv.max(axis=1)).astype(np.float32)
+    out.update(img)
+    out["labels/deformation"] = ratio[wi].astype(np.float32)
+    out["keypoints/body"] = keypoints_in_body(pose_body, kw)
+    return out
+
+
+def _image_labels(images: dict, uv: np.ndarray, z: np.ndarray, tol: np.ndarray) -> dict:
+    """The labels that need the rendered images: visibility, the visible box and fraction, the worm mask."""
+    segm = images["seg"]
+    worm_vis = (segm >= LABEL_WORM_FIRST) & (segm <= LABEL_WORM_LAST)
+    vb = _box_from_mask(worm_vis).astype(np.float32)  # inclusive pixels, -1 when hidden
+    nv = worm_vis.sum(axis=(1, 2))
+    nt = images["worm_mask"].sum(axis=(1, 2))
+    return {
+        "keypoints/visibility": keypoint_visibility(uv, z, images["depth"], segm, tol),
+        "labels/bbox_visib": np.where(vb[:, :1] >= 0, _xywh(vb[:, :2], vb[:, 2:] + 1), 0).astype(np.float32),
+        "labels/visib_fract": np.where(nt > 0, nv / np.maximum(nt, 1), 0.0).astype(np.float32),
+        "labels/worm_mask": images["worm_mask"].astype(np.uint8),
+    }
+
+
+def compute_labels(states: dict, body, cameras: Cameras, images: dict | None = None, **kwargs) -> dict:
+    """:func:`schema_labels` plus ``camera/K``, ``camera/R``, ``camera/t`` and the three names
+    ``warpworm/commands/render.py`` still reads (``keypoints_2d``, ``keypoint_visibility``, ``visible_fraction``).
+    For that command only, until it reads the schema names; then this goes."""
+    out = schema_labels(states, body, cameras, images, **kwargs)
+    out.update({"camera/K": cameras.K, "camera/R": cameras.R, "camera/t": cameras.t,
+                "keypoints_2d": out["keypoints/pixel"]})
+    if images is not None:
+        out.update({"keypoint_visibility": out["keypoints/visibility"], "visible_fraction": out["labels/visib_fract"]})
     return out

@@ -39,12 +39,12 @@ wp.set_module_options({"enable_backward": False})
 NUM_LABELS = ids.NUM_SEGMENTATION_IDS
 """Segmentation ids 0..10 (:mod:`warpworm.ids`): 0 background, 1 floor, 2..6 worm segments, 7..9 IPMs, 10 EPM."""
 
-LABEL_BACKGROUND = ids.SEG_BACKGROUND
-LABEL_FLOOR = ids.SEG_FLOOR
-LABEL_WORM_FIRST = ids.SEG_WORM_FIRST
-LABEL_WORM_LAST = ids.SEG_WORM_LAST
-LABEL_IPM_FIRST = ids.SEG_IPM_FIRST
-LABEL_EPM = ids.SEG_EPM
+LABEL_BACKGROUND = wp.constant(ids.SEG_BACKGROUND)
+LABEL_FLOOR = wp.constant(ids.SEG_FLOOR)
+LABEL_WORM_FIRST = wp.constant(ids.SEG_WORM_FIRST)
+LABEL_WORM_LAST = wp.constant(ids.SEG_WORM_LAST)
+LABEL_IPM_FIRST = wp.constant(ids.SEG_IPM_FIRST)
+LABEL_EPM = wp.constant(ids.SEG_EPM)
 
 TRI_BITS = 24
 """Low bits of the packed key that hold the triangle index."""
@@ -56,12 +56,6 @@ EMPTY_KEY = (1 << 63) - 1
 _TRI_SCALE = wp.constant(wp.int64(1 << TRI_BITS))
 _DEPTH_SCALE = wp.constant(DEPTH_SCALE)
 _EMPTY = wp.constant(wp.int64(EMPTY_KEY))
-# hash multipliers as typed constants (a bare literal above 2**31 would be read as int32 first)
-_HM1 = wp.constant(wp.uint32(0x7FEB352D))
-_HM2 = wp.constant(wp.uint32(0x846CA68B))
-_PX = wp.constant(wp.uint32(0x8DA6B343))
-_PY = wp.constant(wp.uint32(0xD8163841))
-_PZ = wp.constant(wp.uint32(0xCB1AB31F))
 
 
 # ---------------------------------------------------------------------------------------------------------------------
@@ -87,62 +81,6 @@ def is_top_left(ax: float, ay: float, bx: float, by: float) -> bool:
 @wp.func
 def covers(e: float, top_left: bool) -> bool:
     return e > 0.0 or (e == 0.0 and top_left)
-
-
-@wp.func
-def hash_u32(x: wp.uint32) -> wp.uint32:
-    """lowbias32 integer hash (Wellons): cheap, well mixed, identical on CPU and CUDA."""
-    x = x ^ (x >> wp.uint32(16))
-    x = x * _HM1
-    x = x ^ (x >> wp.uint32(15))
-    x = x * _HM2
-    x = x ^ (x >> wp.uint32(16))
-    return x
-
-
-@wp.func
-def lattice(ix: int, iy: int, iz: int, seed: int) -> float:
-    """Hash of an integer lattice point to [0, 1)."""
-    h = hash_u32(wp.uint32(ix) * _PX ^ wp.uint32(iy) * _PY ^ wp.uint32(iz) * _PZ ^ wp.uint32(seed))
-    return float(h >> wp.uint32(8)) * (1.0 / 16777216.0)
-
-
-@wp.func
-def value_noise2(x: float, y: float, seed: int) -> float:
-    """2-D value noise in [0, 1): smoothstep interpolation of hashed lattice values (4 hashes)."""
-    fx = wp.floor(x)
-    fy = wp.floor(y)
-    ix = int(fx)
-    iy = int(fy)
-    tx = x - fx
-    ty = y - fy
-    tx = tx * tx * (3.0 - 2.0 * tx)
-    ty = ty * ty * (3.0 - 2.0 * ty)
-    a = wp.lerp(lattice(ix, iy, 0, seed), lattice(ix + 1, iy, 0, seed), tx)
-    b = wp.lerp(lattice(ix, iy + 1, 0, seed), lattice(ix + 1, iy + 1, 0, seed), tx)
-    return wp.lerp(a, b, ty)
-
-
-@wp.func
-def value_noise3(p: wp.vec3, seed: int) -> float:
-    """3-D value noise in [0, 1) (8 hashes); used on material coordinates so texture sticks to the sheet."""
-    fx = wp.floor(p[0])
-    fy = wp.floor(p[1])
-    fz = wp.floor(p[2])
-    ix = int(fx)
-    iy = int(fy)
-    iz = int(fz)
-    tx = p[0] - fx
-    ty = p[1] - fy
-    tz = p[2] - fz
-    tx = tx * tx * (3.0 - 2.0 * tx)
-    ty = ty * ty * (3.0 - 2.0 * ty)
-    tz = tz * tz * (3.0 - 2.0 * tz)
-    a0 = wp.lerp(lattice(ix, iy, iz, seed), lattice(ix + 1, iy, iz, seed), tx)
-    b0 = wp.lerp(lattice(ix, iy + 1, iz, seed), lattice(ix + 1, iy + 1, iz, seed), tx)
-    a1 = wp.lerp(lattice(ix, iy, iz + 1, seed), lattice(ix + 1, iy, iz + 1, seed), tx)
-    b1 = wp.lerp(lattice(ix, iy + 1, iz + 1, seed), lattice(ix + 1, iy + 1, iz + 1, seed), tx)
-    return wp.lerp(wp.lerp(a0, b0, ty), wp.lerp(a1, b1, ty), tz)
 
 
 NOISE_SIZE = 128
@@ -175,6 +113,37 @@ def to_srgb8(c: float) -> wp.uint8:
     """Linear [0, 1] -> 8-bit with a square-root display gamma (clamped; gamma 2 costs a sqrt, 2.2 a pow)."""
     c = wp.clamp(c, 0.0, 1.0)
     return wp.uint8(int(wp.sqrt(c) * 255.0 + 0.5))
+
+
+@wp.func
+def project(p: wp.vec3, k: wp.vec4) -> wp.vec2:
+    """Pixel (u, v) of camera-frame point ``p`` [m] through intrinsics ``k`` = (fx, fy, cx, cy) [px]."""
+    return wp.vec2(k[0] * p[0] / p[2] + k[2], k[1] * p[1] / p[2] + k[3])
+
+
+@wp.func
+def depth_plane(p0: wp.vec3, p1: wp.vec3, p2: wp.vec3, k: wp.vec4) -> wp.vec4:
+    """(nd, a, b, c) of a camera-frame triangle's plane n.p = nd, so that its camera depth at pixel (x, y) is
+    z = nd / (a x + b y + c) along the ray ((x - cx) / fx, (y - cy) / fy, 1): exact for any triangle
+    (perspective-correct), and the one formula of the raster and resolve passes (their depths agree bit for bit)."""
+    n = wp.cross(p1 - p0, p2 - p0)
+    pa = n[0] / k[0]
+    pb = n[1] / k[1]
+    return wp.vec4(wp.dot(n, p0), pa, pb, n[2] - pa * k[2] - pb * k[3])
+
+
+@wp.func
+def pixel_box(u0: float, v0: float, u1: float, v1: float, u2: float, v2: float, width: int,
+              height: int) -> wp.vec4i:
+    """(xmin, xmax, ymin, ymax): the pixel centres (integers) a screen triangle's bounding box covers, clamped to
+    the image (clamped before the conversion to int: no overflow); xmin > xmax or ymin > ymax when none."""
+    fw = float(width)
+    fh = float(height)
+    xmin = int(wp.ceil(wp.clamp(wp.min(wp.min(u0, u1), u2), -1.0, fw)))
+    xmax = int(wp.floor(wp.clamp(wp.max(wp.max(u0, u1), u2), -1.0, fw)))
+    ymin = int(wp.ceil(wp.clamp(wp.min(wp.min(v0, v1), v2), -1.0, fh)))
+    ymax = int(wp.floor(wp.clamp(wp.max(wp.max(v0, v1), v2), -1.0, fh)))
+    return wp.vec4i(wp.max(xmin, 0), wp.min(xmax, width - 1), wp.max(ymin, 0), wp.min(ymax, height - 1))
 
 
 # ---------------------------------------------------------------------------------------------------------------------
@@ -226,49 +195,28 @@ def raster_triangles(
     if wp.min(wp.min(p0[2], p1[2]), p2[2]) < near:
         return
     k = cam_intr[img]
-    fx = k[0]
-    fy = k[1]
-    cx = k[2]
-    cy = k[3]
-    u0 = fx * p0[0] / p0[2] + cx
-    v0 = fy * p0[1] / p0[2] + cy
-    u1 = fx * p1[0] / p1[2] + cx
-    v1 = fy * p1[1] / p1[2] + cy
-    u2 = fx * p2[0] / p2[2] + cx
-    v2 = fy * p2[1] / p2[2] + cy
+    q0 = project(p0, k)
+    q1 = project(p1, k)
+    q2 = project(p2, k)
+    u0 = q0[0]
+    v0 = q0[1]
+    u1 = q1[0]
+    v1 = q1[1]
+    u2 = q2[0]
+    v2 = q2[1]
     area = edge_fn(u0, v0, u1, v1, u2, v2)
     if area == 0.0:
         return
     if area < 0.0:
         # double-sided: reorder to positive screen area so one inside test and one top-left rule serve both sides
-        tu = u1
-        tv = v1
-        u1 = u2
-        v1 = v2
-        u2 = tu
-        v2 = tv
-
-    # pixel centres are integers: cover columns ceil(umin)..floor(umax), clamped (clamp first: no int overflow)
-    fw = float(width)
-    fh = float(height)
-    xmin = int(wp.ceil(wp.clamp(wp.min(wp.min(u0, u1), u2), -1.0, fw)))
-    xmax = int(wp.floor(wp.clamp(wp.max(wp.max(u0, u1), u2), -1.0, fw)))
-    ymin = int(wp.ceil(wp.clamp(wp.min(wp.min(v0, v1), v2), -1.0, fh)))
-    ymax = int(wp.floor(wp.clamp(wp.max(wp.max(v0, v1), v2), -1.0, fh)))
-    xmin = wp.max(xmin, 0)
-    ymin = wp.max(ymin, 0)
-    xmax = wp.min(xmax, width - 1)
-    ymax = wp.min(ymax, height - 1)
-    if xmin > xmax or ymin > ymax:
+        u1 = q2[0]
+        v1 = q2[1]
+        u2 = q1[0]
+        v2 = q1[1]
+    box = pixel_box(u0, v0, u1, v1, u2, v2, width, height)
+    if box[0] > box[1] or box[2] > box[3]:
         return
-
-    # camera depth at pixel (x, y) from the triangle's plane n.p = nd along the ray ((x-cx)/fx, (y-cy)/fy, 1):
-    # z = nd / (a x + b y + c). Exact for any triangle (perspective-correct) and shared with the resolve pass.
-    n = wp.cross(p1 - p0, p2 - p0)
-    nd = wp.dot(n, p0)
-    pa = n[0] / fx
-    pb = n[1] / fy
-    pc = n[2] - pa * cx - pb * cy
+    plane = depth_plane(p0, p1, p2, k)
 
     tl0 = is_top_left(u1, v1, u2, v2)
     tl1 = is_top_left(u2, v2, u0, v0)
@@ -276,17 +224,17 @@ def raster_triangles(
     worm = tri_label[tri] >= LABEL_WORM_FIRST and tri_label[tri] <= LABEL_WORM_LAST
     tkey = wp.int64(tri)
 
-    for y in range(ymin, ymax + 1):
+    for y in range(box[2], box[3] + 1):
         py = float(y)
         entered = bool(False)
-        for x in range(xmin, xmax + 1):
+        for x in range(box[0], box[1] + 1):
             px = float(x)
             e0 = edge_fn(u1, v1, u2, v2, px, py)
             e1 = edge_fn(u2, v2, u0, v0, px, py)
             e2 = edge_fn(u0, v0, u1, v1, px, py)
             if covers(e0, tl0) and covers(e1, tl1) and covers(e2, tl2):
                 entered = True
-                z = nd / (pa * px + pb * py + pc)
+                z = plane[0] / (plane[1] * px + plane[2] * py + plane[3])
                 key = wp.int64(z * _DEPTH_SCALE) * _TRI_SCALE + tkey
                 pix = y * width + x
                 wp.atomic_min(zkey, img, pix, key)
@@ -343,6 +291,135 @@ def light_surface(
         if ndp > 0.0:
             color = color + lpow * (spec[0] * spec_power(hl, spec[1]))
     return color
+
+
+@wp.func
+def mesh_surface(
+    key: wp.int64,
+    triangles: wp.array(dtype=wp.vec3i),
+    tri_label: wp.array(dtype=wp.int32),
+    vertices: wp.array2d(dtype=wp.vec3),
+    texcoords: wp.array2d(dtype=wp.vec3),
+    w: int,
+    R: wp.mat33,
+    t: wp.vec3,
+    k: wp.vec4,
+    px: float,
+    py: float,
+    eye: wp.vec3,
+    d_world: wp.vec3,
+):
+    """The triangle the raster pass kept at pixel (px, py) (its ``zkey``): (camera z, segmentation id, unnormalized
+    world normal, material coordinates of the hit), or (1e30, background, 0, 0) where no triangle covers it."""
+    best_z = float(1.0e30)
+    label = int(LABEL_BACKGROUND)
+    n_world = wp.vec3(0.0)
+    mat = wp.vec3(0.0)
+    if key != _EMPTY:
+        tri = int(key % _TRI_SCALE)
+        f = triangles[tri]
+        a = vertices[w, f[0]]
+        b = vertices[w, f[1]]
+        c = vertices[w, f[2]]
+        plane = depth_plane(R * a + t, R * b + t, R * c + t, k)
+        best_z = plane[0] / (plane[1] * px + plane[2] * py + plane[3])  # the raster pass's formula, bit for bit
+        label = tri_label[tri]
+        # perspective-correct barycentrics: areas of the 3-D hit point against the world triangle
+        hit = eye + best_z * d_world
+        nw = wp.cross(b - a, c - a)
+        inv = 1.0 / wp.dot(nw, nw)
+        la = wp.dot(nw, wp.cross(c - b, hit - b)) * inv
+        lb = wp.dot(nw, wp.cross(a - c, hit - c)) * inv
+        mat = la * texcoords[w, f[0]] + lb * texcoords[w, f[1]] + (1.0 - la - lb) * texcoords[w, f[2]]
+        n_world = nw * wp.sqrt(inv)
+    return best_z, label, n_world, mat
+
+
+@wp.struct
+class FloorRow:
+    """One image row's ray against the floor plane: along a row the world ray is affine in x, d(x) = d0 + x dx, and
+    so are its dot products with the floor normal and axes (``den``, ``du``, ``dv``: value at x = 0, step per pixel).
+    ``height``: the eye's height above the plane; ``eu``, ``ev``: the eye's floor coordinates; ``half``: half side."""
+
+    den0: float
+    dden: float
+    du0: float
+    ddu: float
+    dv0: float
+    ddv: float
+    eu: float
+    ev: float
+    height: float
+    half: float
+
+
+@wp.func
+def nearer_floor(fr: FloorRow, px: float, best_z: float, label: int, mat: wp.vec3):
+    """The analytic floor (the square |u|, |v| <= half of its plane, seen from above only) where it is nearer
+    than the mesh's surface at pixel x = px: (z, label, material coordinates (u, v, 0))."""
+    z_out = best_z
+    label_out = label
+    mat_out = mat
+    denom = fr.den0 + px * fr.dden
+    if denom < 0.0 and fr.height > 0.0:
+        zf = -fr.height / denom
+        if zf < best_z:
+            fu = fr.eu + zf * (fr.du0 + px * fr.ddu)
+            fv = fr.ev + zf * (fr.dv0 + px * fr.ddv)
+            if wp.abs(fu) <= fr.half and wp.abs(fv) <= fr.half:
+                z_out = zf
+                label_out = int(LABEL_FLOOR)
+                mat_out = wp.vec3(fu, fv, 0.0)
+    return z_out, label_out, mat_out
+
+
+@wp.func
+def shade_floor(
+    base: wp.vec3,
+    mat: wp.vec3,
+    inv_tile: float,
+    ft: wp.vec4,
+    fc2: wp.vec3,
+    noise: wp.array2d(dtype=float),
+    off_u: float,
+    off_v: float,
+    p: wp.vec3,
+    fn: wp.vec3,
+    floor_irr: wp.vec3,
+    lp: wp.vec3,
+    lpw: wp.vec3,
+) -> wp.vec3:
+    """Checker + grain in floor coordinates [m]; matte: ambient + sun (``floor_irr``, constant) + lamp (per pixel)."""
+    cu = int(wp.floor(mat[0] * inv_tile))
+    cv = int(wp.floor(mat[1] * inv_tile))
+    albedo = base
+    if ((cu + cv) & 1) != 0:
+        albedo = wp.lerp(base, fc2, ft[1])
+    g = noise_tex(noise, mat[0] * ft[3] + off_u, mat[1] * ft[3] + off_v)
+    albedo = albedo * (1.0 + ft[2] * (g - 0.5))
+    to_lamp = lp - p
+    inv_r2 = 1.0 / wp.max(wp.dot(to_lamp, to_lamp), 1.0e-6)
+    ndp = wp.max(wp.dot(fn, to_lamp), 0.0) * wp.sqrt(inv_r2)
+    return wp.cw_mul(albedo, floor_irr + lpw * (ndp * inv_r2))
+
+
+@wp.func
+def object_albedo(base: wp.vec3, label: int, mat: wp.vec3, pt: wp.vec2, noise: wp.array2d(dtype=float),
+                  off_u: float, off_v: float) -> wp.vec3:
+    """A worm or magnet surface's albedo at material coordinates ``mat``: paper texture on the sheet, the EPM's
+    painted half."""
+    albedo = base
+    if label <= LABEL_WORM_LAST:
+        # paper: short fibres (noise stretched along the sheet's x) over a soft mottle; material coordinates
+        # are the rest positions [m], so the texture sticks to the sheet as it folds
+        sw = mat[1] + mat[2]
+        fib = noise_tex(noise, mat[0] * 2500.0 + off_v, sw * 600.0 + off_u)
+        mot = noise_tex(noise, mat[0] * 180.0 - off_u, (mat[1] - mat[2]) * 180.0 + off_v)
+        albedo = base * (1.0 + pt[0] * (fib - 0.5) + pt[1] * (mot - 0.5))
+    elif label == LABEL_EPM:
+        if mat[2] > 0.0:
+            albedo = base * 0.55  # a painted north half breaks the bar's 180 degree symmetry
+    return albedo
 
 
 @wp.kernel
@@ -448,80 +525,32 @@ def resolve_shade(
     # along a row the world ray is affine in x: d(x) = d0 + x * dx, and so are its dot products with the floor axes
     d0 = Rt * wp.vec3(-k[2] / k[0], (py - k[3]) / k[1], 1.0)
     dx = Rt * wp.vec3(1.0 / k[0], 0.0, 0.0)
-    den0 = wp.dot(fn, d0)
-    dden = wp.dot(fn, dx)
-    eu = wp.dot(eye, fa)
-    ev = wp.dot(eye, fb)
-    du0 = wp.dot(d0, fa)
-    ddu = wp.dot(dx, fa)
-    dv0 = wp.dot(d0, fb)
-    ddv = wp.dot(dx, fb)
+    fr = FloorRow()
+    fr.den0 = wp.dot(fn, d0)
+    fr.dden = wp.dot(fn, dx)
+    fr.eu = wp.dot(eye, fa)
+    fr.ev = wp.dot(eye, fb)
+    fr.du0 = wp.dot(d0, fa)
+    fr.ddu = wp.dot(dx, fa)
+    fr.dv0 = wp.dot(d0, fb)
+    fr.ddv = wp.dot(dx, fb)
+    fr.height = hgt
+    fr.half = half
 
     for x in range(x_begin, x_end):
         px = float(x)
         d_world = d0 + px * dx  # a point at camera depth z lies at eye + z * d_world
-
-        best_z = float(1.0e30)
-        label = int(LABEL_BACKGROUND)
-        n_world = wp.vec3(0.0)
-        mat = wp.vec3(0.0)
-
-        key = zkey[img, row + x]
-        if key != _EMPTY:
-            tri = int(key % _TRI_SCALE)
-            f = triangles[tri]
-            a = vertices[w, f[0]]
-            b = vertices[w, f[1]]
-            c = vertices[w, f[2]]
-            p0 = R * a + t
-            p1 = R * b + t
-            p2 = R * c + t
-            n = wp.cross(p1 - p0, p2 - p0)
-            nd = wp.dot(n, p0)
-            pa = n[0] / k[0]
-            pb = n[1] / k[1]
-            pc = n[2] - pa * k[2] - pb * k[3]
-            best_z = nd / (pa * px + pb * py + pc)  # the raster pass's formula, bit for bit
-            label = tri_label[tri]
-            # perspective-correct barycentrics: areas of the 3-D hit point against the world triangle
-            hit = eye + best_z * d_world
-            nw = wp.cross(b - a, c - a)
-            inv = 1.0 / wp.dot(nw, nw)
-            la = wp.dot(nw, wp.cross(c - b, hit - b)) * inv
-            lb = wp.dot(nw, wp.cross(a - c, hit - c)) * inv
-            mat = la * texcoords[w, f[0]] + lb * texcoords[w, f[1]] + (1.0 - la - lb) * texcoords[w, f[2]]
-            n_world = nw * wp.sqrt(inv)
-
-        # analytic floor: the square |u|, |v| <= half of the plane fn . p = 0, seen from above only
-        denom = den0 + px * dden
-        if denom < 0.0 and hgt > 0.0:
-            zf = -hgt / denom
-            if zf < best_z:
-                fu = eu + zf * (du0 + px * ddu)
-                fv = ev + zf * (dv0 + px * ddv)
-                if wp.abs(fu) <= half and wp.abs(fv) <= half:
-                    best_z = zf
-                    label = LABEL_FLOOR
-                    mat = wp.vec3(fu, fv, 0.0)
+        best_z, label, n_world, mat = mesh_surface(zkey[img, row + x], triangles, tri_label, vertices, texcoords, w,
+                                                   R, t, k, px, py, eye, d_world)
+        best_z, label, mat = nearer_floor(fr, px, best_z, label, mat)
 
         color = bg
         nrm = wp.vec3(0.0)
         if label == LABEL_BACKGROUND:
             best_z = 0.0
         elif label == LABEL_FLOOR:
-            # checker + grain in floor coordinates [m]; matte: ambient + sun (constant) + lamp (per pixel)
-            base = albedo[wa, LABEL_FLOOR]
-            cu = int(wp.floor(mat[0] * inv_tile))
-            cv = int(wp.floor(mat[1] * inv_tile))
-            if ((cu + cv) & 1) != 0:
-                base = wp.lerp(base, fc2, ft[1])
-            g = noise_tex(noise, mat[0] * ft[3] + off_u, mat[1] * ft[3] + off_v)
-            base = base * (1.0 + ft[2] * (g - 0.5))
-            p = eye + best_z * d_world
-            to_lamp = lp - p
-            inv_r2 = 1.0 / wp.max(wp.dot(to_lamp, to_lamp), 1.0e-6)
-            ndp = wp.max(wp.dot(fn, to_lamp), 0.0) * wp.sqrt(inv_r2)
-            color = wp.cw_mul(base, floor_irr + lpw * (ndp * inv_r2))
+            color = shade_floor(albedo[wa, LABEL_FLOOR], mat, inv_tile, ft, fc2, noise, off_u, off_v,
+                                eye + best_z * d_world, fn, floor_irr, lp, lpw)
             if write_normals != 0:
                 nrm = R * fn
         else:
@@ -529,17 +558,7 @@ def resolve_shade(
             view = -d_world  # toward the camera (unnormalized)
             if wp.dot(n_world, view) < 0.0:
                 n_world = -n_world  # double-sided sheet: light the side the camera sees
-            base = albedo[wa, label]
-            if label <= LABEL_WORM_LAST:
-                # paper: short fibres (noise stretched along the sheet's x) over a soft mottle; material coordinates
-                # are the rest positions [m], so the texture sticks to the sheet as it folds
-                sw = mat[1] + mat[2]
-                fib = noise_tex(noise, mat[0] * 2500.0 + off_v, sw * 600.0 + off_u)
-                mot = noise_tex(noise, mat[0] * 180.0 - off_u, (mat[1] - mat[2]) * 180.0 + off_v)
-                base = base * (1.0 + pt[0] * (fib - 0.5) + pt[1] * (mot - 0.5))
-            elif label == LABEL_EPM:
-                if mat[2] > 0.0:
-                    base = base * 0.55  # a painted north half breaks the bar's 180 degree symmetry
+            base = object_albedo(albedo[wa, label], label, mat, pt, noise, off_u, off_v)
             color = light_surface(base, specular[wa, label], p, n_world, view, amb, sd, sc, lp, lpw)
             if write_normals != 0:
                 nrm = R * n_world

@@ -32,7 +32,11 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from warpworm import ids
-from warpworm.render.raster_kernels import LABEL_EPM, LABEL_FLOOR, LABEL_IPM_FIRST, LABEL_WORM_FIRST, NUM_LABELS
+from warpworm.ids import NUM_SEGMENTATION_IDS as NUM_LABELS
+from warpworm.ids import SEG_EPM as LABEL_EPM
+from warpworm.ids import SEG_FLOOR as LABEL_FLOOR
+from warpworm.ids import SEG_IPM_FIRST as LABEL_IPM_FIRST
+from warpworm.ids import SEG_WORM_FIRST as LABEL_WORM_FIRST
 
 LABEL_NAMES = ids.SEGMENTATION_NAMES
 """Name of every segmentation id, indexed by id."""

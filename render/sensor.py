@@ -41,9 +41,9 @@ class SensorConfig:
 
 SENSOR_PARAMS = ("wb_r", "wb_g", "wb_b", "hue_deg", "saturation", "contrast", "brightness", "blur_sigma",
                  "noise_sigma", "shot_noise", "jpeg_quality")
-"""Per-image effect values (:func:`draw_sensor`): white-balance gains, hue shift [deg], saturation gain, contrast,
-brightness (fraction of full scale), blur sigma [px], read noise and shot noise (fraction of full scale), JPEG quality
-(0 = no JPEG round trip)."""
+"""Per-image effect values (:func:`apply_sensor` ``values``, or drawn from a :class:`SensorConfig`): white-balance
+gains, hue shift [deg], saturation gain, contrast, brightness (fraction of full scale), blur sigma [px], read noise and
+shot noise (fraction of full scale), JPEG quality (0 = no JPEG round trip)."""
 
 
 def _draws(u: np.ndarray, cfg: SensorConfig) -> dict:
@@ -55,13 +55,6 @@ def _draws(u: np.ndarray, cfg: SensorConfig) -> dict:
             "brightness": draw(cfg.brightness, 6), "blur_sigma": draw(cfg.blur_sigma, 7),
             "noise_sigma": draw(cfg.noise_sigma, 8), "shot_noise": draw(cfg.shot_noise, 9),
             "jpeg_quality": int(round(draw(cfg.jpeg_quality, 11))) if u[10] < cfg.jpeg_probability else 0}
-
-
-def draw_sensor(seeds, config: SensorConfig | None = None) -> dict:
-    """The effect values :func:`apply_sensor` draws for each seed: name (:data:`SENSOR_PARAMS`) -> (N,) array."""
-    cfg = SensorConfig() if config is None else config
-    rows = [_draws(np.random.default_rng([int(s), 0x5E75]).uniform(size=12), cfg) for s in np.asarray(seeds).ravel()]
-    return {k: np.array([r[k] for r in rows]) for k in SENSOR_PARAMS}
 
 
 def apply_sensor(rgb: np.ndarray, seeds, config: SensorConfig | None = None, *, values: dict | None = None

@@ -131,6 +131,7 @@ class FakeStages:
             "poses/body": body, "poses/ipm": mags[:, 1:4], "poses/epm": mags[:, 0],
             "poses/body_quat": tf.matrix_to_quat_wxyz(body[:, :3, :3]),
             "keypoints/world": kw, "keypoints/camera": kc, "keypoints/pixel": kpix,
+            "keypoints/body": np.einsum("nji,npj->npi", body[:, :3, :3], kw - body[:, None, :3, 3]),
             "keypoints/visibility": vis,
             "creases/angle": frame["crease_angle"].astype(np.float32),
             "bars/strain": frame["bar_strain"].astype(np.float32),

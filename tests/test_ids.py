@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-from warpworm import crease, dataset, ids, magnets, model, params
+import json
+
+from warpworm import crease, dataset, export_bop, ids, magnets, model, params
 from warpworm.kernels import common, magnet_fields, magnet_wrench
 from warpworm.render import raster_kernels, scene
 
@@ -12,10 +14,19 @@ def test_segmentation_ids_are_one_table():
     assert len(ids.SEGMENTATION_NAMES) == ids.NUM_SEGMENTATION_IDS == raster_kernels.NUM_LABELS
     assert raster_kernels.LABEL_EPM == ids.SEG_EPM == ids.NUM_SEGMENTATION_IDS - 1
     assert raster_kernels.LABEL_WORM_LAST - raster_kernels.LABEL_WORM_FIRST + 1 == crease.NUM_SEGMENTS
-    # warpworm/dataset.py keeps its own names (the files' ``segmentation_ids`` attribute): same ids, same order
-    assert sorted(dataset.SEGMENTATION_IDS.values()) == list(range(ids.NUM_SEGMENTATION_IDS))
-    by_id = sorted(dataset.SEGMENTATION_IDS, key=dataset.SEGMENTATION_IDS.get)
-    assert [n.replace("worm_segment_", "worm_seg") for n in by_id] == list(ids.SEGMENTATION_NAMES)
+    assert dataset.SEGMENTATION_IDS is ids.SEGMENTATION_IDS
+    assert export_bop.OBJECTS[1][1] == tuple(range(ids.SEG_WORM_FIRST, ids.SEG_WORM_LAST + 1))
+    assert [v[1][0] for k, v in sorted(export_bop.OBJECTS.items())][1:] == [*ids.SEG_IPMS, ids.SEG_EPM]
+
+
+def test_dataset_files_spell_the_ids_as_schema_version_1_always_did():
+    # the files' attribute and the docs' text, written out by hand (schema version 1): the table may not drift
+    assert json.dumps(dataset.SEGMENTATION_IDS) == (
+        '{"background": 0, "floor": 1, "worm_segment_0": 2, "worm_segment_1": 3, "worm_segment_2": 4, '
+        '"worm_segment_3": 5, "worm_segment_4": 6, "ipm_tail": 7, "ipm_centre": 8, "ipm_head": 9, "epm": 10}')
+    assert ids.SEGMENTATION_TEXT == ("0 background, 1 floor, 2..6 worm segments tail->head, 7/8/9 tail/centre/head "
+                                     "IPM, 10 EPM")
+    assert ids.HINGE_LABEL_TEXT == "0 flat, 1 mountain, 2 valley"
 
 
 def test_magnet_and_crease_ids_are_one_table():

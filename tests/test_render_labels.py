@@ -14,7 +14,7 @@ from warpworm.render import (
 )
 from warpworm.render.camera import intrinsics, look_at
 from warpworm.render.demo import default_pattern, posed_worm_states
-from warpworm.render.labels import KEYPOINT_NAMES, VIS_EPS, WormBody, compute_labels
+from warpworm.render.labels import KEYPOINT_NAMES, VIS_EPS, WormBody, keypoint_depth_tolerance, schema_labels
 
 from warpworm import quiet_warp
 from warpworm.transforms import axis_angle_to_matrix, quat_wxyz_to_matrix
@@ -35,20 +35,29 @@ def batch():
     cams = sample_cameras(500 + np.arange(W * C), states["positions"], width=SIZE, height=SIZE,
                           world_index=np.arange(W * C) % W, distance=(0.1, 0.3))
     images = Renderer(SIZE, SIZE).render(scene, cams)
-    labels = compute_labels(states, pattern, cams, images)
+    labels = schema_labels(states, pattern, cams, images)
     return pattern, states, cams, images, labels
+
+
+def _body_in_camera(lab, cams):
+    """Body -> camera rotation and translation of every image, from the stored body -> world pose."""
+    Rb, tb = lab["poses/body"][:, :3, :3], lab["poses/body"][:, :3, 3]
+    return cams.R @ Rb, np.einsum("nij,nj->ni", cams.R, tb) + cams.t
 
 
 def test_keypoints_equal_cv2_project_points(batch):
     _, _, cams, _, lab = batch
+    R_cam, t_cam = _body_in_camera(lab, cams)
     for n in range(len(cams)):
-        rvec, _ = cv2.Rodrigues(lab["R"][n])
-        uv, _ = cv2.projectPoints(lab["keypoints_world"][n], rvec, lab["t"][n], lab["K"][n], None)
-        assert np.abs(uv[:, 0] - lab["keypoints_2d"][n]).max() <= 0.01
-        # and from the body frame with the stored camera-frame body pose
-        rvec_b, _ = cv2.Rodrigues(lab["body_R_cam"][n])
-        uv_b, _ = cv2.projectPoints(lab["keypoints_body"][n], rvec_b, lab["body_t_cam"][n], lab["K"][n], None)
-        assert np.abs(uv_b[:, 0] - lab["keypoints_2d"][n]).max() <= 0.01
+        rvec, _ = cv2.Rodrigues(cams.R[n])
+        uv, _ = cv2.projectPoints(lab["keypoints/world"][n], rvec, cams.t[n], cams.K[n], None)
+        assert np.abs(uv[:, 0] - lab["keypoints/pixel"][n]).max() <= 0.01
+        # and from the body frame with the body pose seen from the camera
+        rvec_b, _ = cv2.Rodrigues(R_cam[n])
+        uv_b, _ = cv2.projectPoints(lab["keypoints/body"][n], rvec_b, t_cam[n], cams.K[n], None)
+        assert np.abs(uv_b[:, 0] - lab["keypoints/pixel"][n]).max() <= 0.01
+        # camera-frame keypoints are R x + t of the world ones
+        assert np.allclose(lab["keypoints/camera"][n], lab["keypoints/world"][n] @ cams.R[n].T + cams.t[n])
 
 
 def _rot_angle(Ra, Rb):
@@ -58,43 +67,48 @@ def _rot_angle(Ra, Rb):
 
 def test_solve_pnp_recovers_body_pose(batch):
     _, _, cams, _, lab = batch
+    R_cam, t_cam = _body_in_camera(lab, cams)
     for n in range(len(cams)):
-        obj = lab["keypoints_body"][n].astype(np.float64)
-        img = lab["keypoints_2d"][n].astype(np.float64)
-        ok, rvec, tvec = cv2.solvePnP(obj, img, lab["K"][n], None, flags=cv2.SOLVEPNP_SQPNP)
+        obj = lab["keypoints/body"][n].astype(np.float64)
+        img = lab["keypoints/pixel"][n].astype(np.float64)
+        ok, rvec, tvec = cv2.solvePnP(obj, img, cams.K[n], None, flags=cv2.SOLVEPNP_SQPNP)
         assert ok
-        rvec, tvec = cv2.solvePnPRefineLM(obj, img, lab["K"][n], None, rvec, tvec)
+        rvec, tvec = cv2.solvePnPRefineLM(obj, img, cams.K[n], None, rvec, tvec)
         R, _ = cv2.Rodrigues(rvec)
-        assert _rot_angle(R, lab["body_R_cam"][n]) <= 1e-3
-        assert np.linalg.norm(tvec[:, 0] - lab["body_t_cam"][n]) <= 1e-4
+        assert _rot_angle(R, R_cam[n]) <= 1e-3
+        assert np.linalg.norm(tvec[:, 0] - t_cam[n]) <= 1e-4
 
 
 def test_pose_blocks_are_consistent(batch):
     _, states, cams, _, lab = batch
     wi = cams.world
-    # quaternions (w, x, y, z) reproduce the matrices; camera pose = camera extrinsics o world pose
-    assert np.allclose(quat_wxyz_to_matrix(lab["body_q_cam"]), lab["body_R_cam"], atol=1e-9)
-    assert np.allclose(quat_wxyz_to_matrix(lab["magnet_q_world"]), lab["magnet_R_world"], atol=1e-9)
-    assert np.allclose(lab["magnet_t_world"], states["magnet_pos"][wi])
-    assert np.allclose(lab["body_R_cam"], lab["R"] @ lab["body_R_world"])
-    for n in range(len(cams)):
-        m = 2  # centre IPM
-        t_cam = lab["R"][n] @ states["magnet_pos"][wi[n], m] + lab["t"][n]
-        assert np.allclose(lab["magnet_t_cam"][n, m], t_cam)
+    # the quaternion (w, x, y, z) reproduces the body rotation; poses are homogeneous object -> world transforms
+    body = lab["poses/body"]
+    assert np.allclose(quat_wxyz_to_matrix(lab["poses/body_quat"]), body[:, :3, :3], atol=1e-9)
+    assert np.all(body[:, 3] == [0, 0, 0, 1])
+    # magnet poses are the simulator's, slot order EPM, tail, centre, head IPM
+    assert np.array_equal(lab["poses/epm"][:, :3, 3], states["magnet_pos"][wi, 0])
+    assert np.array_equal(lab["poses/ipm"][:, :, :3, 3], states["magnet_pos"][wi, 1:4])
+    assert np.array_equal(lab["poses/ipm"][:, :, :3, :3], states["magnet_rot"][wi, 1:4])
     # IPM keypoints are the magnets' centres
     k = KEYPOINT_NAMES.index("ipm_centre")
-    assert np.allclose(lab["keypoints_world"][:, k], lab["magnet_t_world"][:, 2])
-    assert np.all(np.linalg.det(lab["body_R_world"]) > 0.999999)
+    assert np.allclose(lab["keypoints/world"][:, k], lab["poses/ipm"][:, 1, :3, 3])
+    assert np.all(np.linalg.det(body[:, :3, :3]) > 0.999999)
+    # body keypoints: the world ones through the inverse body pose
+    inv = np.linalg.inv(body)
+    kb = np.einsum("nij,npj->npi", inv[:, :3, :3], lab["keypoints/world"]) + inv[:, None, :3, 3]
+    assert np.allclose(kb, lab["keypoints/body"], atol=1e-12)
 
 
 def test_visibility_agrees_with_depth(batch):
-    _, _, cams, images, lab = batch
-    vis = lab["keypoint_visibility"]
+    pattern, _, cams, images, lab = batch
+    vis = lab["keypoints/visibility"]
     assert (vis == 2).any() and (vis == 1).any()  # the scenes show both
+    tol_all = keypoint_depth_tolerance(WormBody.from_pattern(pattern), 0.010)[0]  # the default IPM diameter
     for n in range(len(cams)):  # re-derive with a plain per-keypoint loop
         for p in range(len(KEYPOINT_NAMES)):
-            u, v = lab["keypoints_2d"][n, p]
-            z = lab["keypoints_cam"][n, p, 2]
+            u, v = lab["keypoints/pixel"][n, p]
+            z = lab["keypoints/camera"][n, p, 2]
             x, y = int(round(u)), int(round(v))
             if z <= 0 or not (0 <= x < SIZE and 0 <= y < SIZE):
                 assert vis[n, p] == 0
@@ -102,7 +116,7 @@ def test_visibility_agrees_with_depth(batch):
             D = float(images["depth"][n, y, x])
             L = int(images["seg"][n, y, x])
             own = (L == 7 + p - 7) if 7 <= p < 10 else (2 <= L <= 6)
-            tol = lab["keypoint_depth_tol"][n, p]
+            tol = tol_all[p]
             visible = D == 0 or z - D <= VIS_EPS or (z - D <= tol and own)
             assert vis[n, p] == (2 if visible else 1), (n, KEYPOINT_NAMES[p], z, D, L)
             if vis[n, p] == 2:  # a visible keypoint is never behind another object's surface by more than VIS_EPS
@@ -123,11 +137,11 @@ def test_occluder_and_outside():
     R1, t1 = look_at(centre + [0, 0, 0.3], centre + [0, 0, 1.0] + [0.5, 0, 0])  # looking away, up
     cams = make_cameras(K, np.stack([R0, R1]), np.stack([t0, t1]), 0, 128, 128)
     images = Renderer(128, 128).render(scene, cams)
-    lab = compute_labels(states, pattern, cams, images)
-    assert np.all(lab["keypoint_visibility"][0] == 1)
-    assert np.all(lab["keypoint_visibility"][1] == 0)
-    assert lab["visible_fraction"][0] == 0.0 and lab["worm_pixels_total"][0] > 100
-    assert np.all(lab["worm_box_visible"][0] == -1)
+    lab = schema_labels(states, pattern, cams, images)
+    assert np.all(lab["keypoints/visibility"][0] == 1)
+    assert np.all(lab["keypoints/visibility"][1] == 0)
+    assert lab["labels/visib_fract"][0] == 0.0 and lab["labels/worm_mask"][0].sum() > 100
+    assert np.all(lab["labels/bbox_visib"][0] == 0)
 
 
 def test_body_frame_and_ratios_follow_rigid_motion():
@@ -146,18 +160,32 @@ def test_body_frame_and_ratios_follow_rigid_motion():
     states = {"positions": np.stack([x, x * [0.9, 1, 1]]), "magnet_pos": np.zeros((2, 4, 3)),
               "magnet_rot": np.tile(np.eye(3), (2, 4, 1, 1))}
     cams = make_cameras(intrinsics(100, 100, 31.5, 31.5), np.tile(np.eye(3), (2, 1, 1)), [[0, 0, 1]] * 2, [0, 1], 64, 64)
-    lab = compute_labels(states, body, cams)
-    assert np.allclose(lab["deformation_ratio"][0], 1.0)
-    assert np.allclose(lab["deformation_ratio"][1], 0.9)
+    lab = schema_labels(states, body, cams)
+    assert np.allclose(lab["labels/deformation"][0], 1.0)
+    assert np.allclose(lab["labels/deformation"][1], 0.9)
 
 
 def test_boxes_and_visible_fraction(batch):
-    _, _, cams, images, lab = batch
-    box, vbox = lab["worm_box"], lab["worm_box_visible"]
-    has = vbox[:, 0] >= 0
-    assert has.all()
+    _, states, cams, images, lab = batch
+    # (x, y, w, h) boxes; corners (inclusive pixels for the visible box)
+    b, vb = lab["labels/bbox_obj"].astype(np.float64), lab["labels/bbox_visib"]
+    box = np.concatenate([b[:, :2], b[:, :2] + b[:, 2:]], axis=1)
+    vbox = np.concatenate([vb[:, :2], vb[:, :2] + vb[:, 2:] - 1], axis=1)
+    assert np.all(vb[:, 2:] > 0)
+    # the projected-mesh box is that of every vertex projected with cv2
+    for n in range(len(cams)):
+        rvec, _ = cv2.Rodrigues(cams.R[n])
+        uv, _ = cv2.projectPoints(states["positions"][cams.world[n]], rvec, cams.t[n], cams.K[n], None)
+        assert np.allclose(box[n], np.concatenate([uv[:, 0].min(0), uv[:, 0].max(0)]), atol=1e-3)
+    # the visible box is that of the worm's pixels in the segmentation
+    seg = images["seg"]
+    for n in range(len(cams)):
+        ys, xs = np.nonzero((seg[n] >= 2) & (seg[n] <= 6))
+        assert vbox[n].tolist() == [xs.min(), ys.min(), xs.max(), ys.max()]
     # the visible pixels lie inside the box of the projected vertices (pixel centres: within half a pixel)
     assert np.all(vbox[:, 0] >= np.floor(box[:, 0])) and np.all(vbox[:, 2] <= np.ceil(box[:, 2]))
     assert np.all(vbox[:, 1] >= np.floor(box[:, 1])) and np.all(vbox[:, 3] <= np.ceil(box[:, 3]))
-    assert np.all((lab["visible_fraction"] > 0.3) & (lab["visible_fraction"] <= 1.0))
-    assert np.all(lab["worm_pixels_visible"] <= lab["worm_pixels_total"])
+    frac = lab["labels/visib_fract"]
+    assert np.all((frac > 0.3) & (frac <= 1.0))
+    visible = ((seg >= 2) & (seg <= 6)).sum(axis=(1, 2))
+    assert np.allclose(frac, visible / images["worm_mask"].sum(axis=(1, 2)), rtol=1e-6)

@@ -37,16 +37,15 @@ from typing import Any, Iterable
 import h5py
 import numpy as np
 
+from . import ids
+
 SCHEMA_VERSION = 1
 MANIFEST = "manifest.json"
 SHARD_RE = re.compile(r"^shard-(\d{5})\.h5$")
 QUATERNION_ORDER = "wxyz"
 
-SEGMENTATION_IDS = {
-    "background": 0, "floor": 1, "worm_segment_0": 2, "worm_segment_1": 3, "worm_segment_2": 4, "worm_segment_3": 5,
-    "worm_segment_4": 6, "ipm_tail": 7, "ipm_centre": 8, "ipm_head": 9, "epm": 10,
-}
-"""Segmentation ids (docs/architecture.md): worm segments 0..4 run tail -> head."""
+SEGMENTATION_IDS = ids.SEGMENTATION_IDS
+"""Segmentation ids (:mod:`warpworm.ids`, docs/architecture.md): worm segments 0..4 run tail -> head."""
 
 UNITS = {"length": "m", "depth": "m (camera z; 0 = background)", "angle": "rad", "time": "s", "pixel": "px",
          "mass": "kg", "moment": "A*m^2", "frames": "OpenCV camera (+z forward, +y down), x_cam = R x_world + t; "
@@ -74,8 +73,7 @@ FIELDS: tuple[Field, ...] = (
     Field("rgb", ("N", "H", "W", 3), "uint8", "", "colour image, sRGB, after sensor effects"),
     Field("depth", ("N", "H", "W"), "float32", "m", "camera-frame z of the first surface; 0 = background"),
     Field("segmentation", ("N", "H", "W"), "uint8", "",
-          "ids, see root attribute segmentation_ids: 0 background, 1 floor, 2..6 worm segments tail->head, "
-          "7/8/9 tail/centre/head IPM, 10 EPM"),
+          f"ids, see root attribute segmentation_ids: {ids.SEGMENTATION_TEXT}"),
     Field("camera/K", ("N", 3, 3), "float64", "px", "intrinsics, row-major, fx, fy > 0, pixel centres at integers"),
     Field("camera/R", ("N", 3, 3), "float64", "", "world -> camera rotation (x_cam = R x_world + t)"),
     Field("camera/t", ("N", 3), "float64", "m", "world -> camera translation"),
@@ -453,11 +451,6 @@ def clean_temporaries(out_dir, pattern: str = ".*.tmp-*") -> list[str]:
         except OSError:
             pass
     return removed
-
-
-def shard_is_valid(path, expected_first: int, expected_count: int) -> bool:
-    """A final-named shard that opens, is marked complete and holds the expected sample ids."""
-    return shard_problem(path, expected_first, expected_count) is None
 
 
 def shard_problem(path, expected_first: int, expected_count: int, sha256: str | None = None) -> str | None:

@@ -29,9 +29,10 @@ from pathlib import Path
 import numpy as np
 
 from . import dataset as ds
+from . import ids
 
-OBJECTS = {1: ("worm", (2, 3, 4, 5, 6)), 2: ("ipm_tail", (7,)), 3: ("ipm_centre", (8,)), 4: ("ipm_head", (9,)),
-           5: ("epm", (10,))}
+OBJECTS = {1: ("worm", ids.SEG_WORM), 2: ("ipm_tail", (ids.SEG_IPMS[0],)), 3: ("ipm_centre", (ids.SEG_IPMS[1],)),
+           4: ("ipm_head", (ids.SEG_IPMS[2],)), 5: ("epm", (ids.SEG_EPM,))}
 """obj_id -> (name, segmentation ids)."""
 SCENE_SIZE = 1000
 DEPTH_SCALE = 0.1

@@ -177,13 +177,6 @@ def _json_rt(d):
     return json.loads(json.dumps(d, default=str))
 
 
-def plan(cfg: DatasetConfig, out_dir, resume: bool, requested_shard_size: int | None = None,
-         log=None) -> tuple[list[int], dict[int, dict]]:
-    """Which shards to write (see :func:`plan_job`, which also returns the config the job must run)."""
-    _, todo, done = plan_job(cfg, out_dir, resume, requested_shard_size, log)
-    return todo, done
-
-
 def plan_job(cfg: DatasetConfig, out_dir, resume: bool, requested_shard_size: int | None = None,
              log=None) -> tuple[DatasetConfig, list[int], dict[int, dict]]:
     """(config to run, shards to write, shards already done {k: {bytes, sha256}}).
@@ -391,4 +384,4 @@ def _summary(cfg, out, written: dict[int, ShardStats], *, wall_s, done_before, w
                    cameras_below_min=sum(s.cameras_below_min for s in w))
 
 
-__all__ = ["Interrupted", "Summary", "device_line", "generate", "plan", "plan_job", "shard_plan"]
+__all__ = ["Interrupted", "Summary", "device_line", "generate", "plan_job", "shard_plan"]

@@ -4,7 +4,7 @@ signals), :mod:`warpworm.shard` (one shard), :mod:`warpworm.stages` (the stages 
 :mod:`warpworm.sampling` (every randomized draw) and :mod:`warpworm.previews`.
 """
 
-from .job import Interrupted, Summary, device_line, generate, plan, plan_job, shard_plan  # noqa: F401
+from .job import Interrupted, Summary, device_line, generate, plan_job, shard_plan  # noqa: F401
 from .sampling import (  # noqa: F401
     appearance_draws,
     appearance_from_draws,
@@ -14,5 +14,5 @@ from .sampling import (  # noqa: F401
     sensor_values,
     worm_params,
 )
-from .shard import ShardStats, keypoints_in_body, root_attributes, run_shard  # noqa: F401
+from .shard import ShardStats, root_attributes, run_shard  # noqa: F401
 from .stages import DEFAULT_STAGES, SimResult, Stages, WarpStages, load_stages  # noqa: F401

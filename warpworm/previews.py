@@ -17,27 +17,6 @@ from .shard import ShardStats, simulate_with_replacement
 from .stages import DEFAULT_STAGES, load_stages
 
 
-def _sheet_inputs(samples: list[dict]) -> tuple[dict, dict]:
-    """Dataset samples -> the (images, labels) that :func:`warpworm.render.contact_sheet.contact_sheet` draws:
-    boxes back from (x, y, w, h) to corners, the body pose from ``poses/body``."""
-    def st(k):
-        return np.stack([s[k] for s in samples])
-
-    box, vb, body = st("labels/bbox_obj"), st("labels/bbox_visib"), st("poses/body")
-    visible = vb[:, 2] > 0
-    images = {"rgb": st("rgb"), "depth": st("depth"), "seg": st("segmentation")}
-    labels = {
-        "K": st("camera/K"), "R": st("camera/R"), "t": st("camera/t"),
-        "body_R_world": body[:, :3, :3], "body_t_world": body[:, :3, 3],
-        "keypoints_2d": st("keypoints/pixel"), "keypoint_visibility": st("keypoints/visibility"),
-        "worm_box": np.concatenate([box[:, :2], box[:, :2] + box[:, 2:]], axis=1),
-        "worm_box_visible": np.where(visible[:, None], np.concatenate([vb[:, :2], vb[:, :2] + vb[:, 2:] - 1], axis=1),
-                                     -1).astype(np.int64),
-        "visible_fraction": st("labels/visib_fract"),
-    }
-    return images, labels
-
-
 def write_previews(cfg: DatasetConfig, out, stages=DEFAULT_STAGES, max_rows: int = 8) -> list[Path]:
     """``preview.png``: the renderer's contact sheet (:func:`warpworm.render.contact_sheet.contact_sheet`) of the
     first samples; ``preview.mp4``: trajectory 0 resimulated at 20 fps over ``sim.frame_times`` with the same draws,
@@ -54,8 +33,9 @@ def write_previews(cfg: DatasetConfig, out, stages=DEFAULT_STAGES, max_rows: int
         paths = []
         if n == 0:
             return paths
-        images, labels = _sheet_inputs([reader[i] for i in range(n)])
-        save_png(out / "preview.png", contact_sheet(images, labels, max_rows=n, scale=2))
+        samples = [reader[i] for i in range(n)]
+        stacked = {k: np.stack([smp[k] for smp in samples]) for k in samples[0] if not k.startswith("params/")}
+        save_png(out / "preview.png", contact_sheet(stacked, max_rows=n, scale=2))
         paths.append(out / "preview.png")
         cam = {k: reader.read(f"camera/{k}", [0]) for k in ("K", "R", "t")}
     finally:

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import dataset as ds
+from . import ids
 from . import randomize as rnd
 from .config import BATCH_SHARED, DatasetConfig
 from .sampling import appearance_draws, dataset_cameras, draw_worm, worm_params
@@ -140,7 +141,7 @@ def root_attributes(cfg: DatasetConfig, meta: dict) -> dict:
         "segmentation_ids": json.dumps(ds.SEGMENTATION_IDS),
         "keypoint_names": json.dumps(list(meta["keypoint_names"])),
         "crease_order": "creases/angle[c] is hinge c of the crease pattern: stencil crease_hinges[c] = (i, j, k, l), "
-                        "shared edge j-k; crease_labels[c]: 0 flat, 1 mountain, 2 valley",
+                        f"shared edge j-k; crease_labels[c]: {ids.HINGE_LABEL_TEXT}",
         "crease_hinges": np.asarray(meta["hinges"], dtype=np.int32),
         "crease_labels": np.asarray(meta["hinge_label"], dtype=np.int8),
         "bar_edges": np.asarray(meta["edges"], dtype=np.int32),
@@ -285,7 +286,6 @@ def _render_rows(stages, cfg: DatasetConfig, batch: _Trajectories, sid: np.ndarr
     app = _take(batch.appearance, tsel)
     t0 = time.perf_counter()
     out = stages.render_batch(fr, worm_params(cfg, batch.draws, tsel), cams, app, seeds, cfg)
-    out["keypoints/body"] = keypoints_in_body(out["poses/body"], out["keypoints/world"])
     stats.render_s += time.perf_counter() - t0
     t0 = time.perf_counter()
     rows = {
@@ -302,13 +302,6 @@ def _render_rows(stages, cfg: DatasetConfig, batch: _Trajectories, sid: np.ndarr
     return rows
 
 
-def keypoints_in_body(body: np.ndarray, kp_world: np.ndarray) -> np.ndarray:
-    """``keypoints/body`` (n, P, 3) [m]: world keypoints in the body frame, R_b^T (x - t_b) for body -> world poses
-    (n, 4, 4)."""
-    body = np.asarray(body, np.float64)
-    return np.einsum("nji,npj->npi", body[:, :3, :3], np.asarray(kp_world, np.float64) - body[:, None, :3, 3])
-
-
 def _stack_frames(frames: list[dict]) -> dict:
     """F snapshots of B worlds -> dict of (B, F, ...) arrays (once per simulated batch)."""
     return {k: np.stack([f[k] for f in frames], axis=1) for k in frames[0]}
@@ -319,5 +312,5 @@ def _gather_frames(stacked: dict, tsel: np.ndarray, fidx: np.ndarray) -> dict:
     return {k: v[tsel, fidx] for k, v in stacked.items()}
 
 
-__all__ = ["Interrupted", "ShardStats", "keypoints_in_body", "root_attributes", "run_shard",
+__all__ = ["Interrupted", "ShardStats", "root_attributes", "run_shard",
            "simulate_with_replacement"]

@@ -75,7 +75,8 @@ class WarpStages:
     frame time -> ``snapshot``. A world flagged unstable at any frame is reported unstable.
     Rendering: ``render.build_scene`` (worm sheet, IPM disks, EPM bar, floor) with an appearance built from the drawn
     ``light/color/texture`` values, ``Renderer.render``, then sensor effects (:func:`warpworm.render.sensor.apply_sensor`
-    with the drawn ``sensor.*`` values, :func:`sensor_values`) and labels (:func:`compute_labels`).
+    with the drawn ``sensor.*`` values, :func:`warpworm.sampling.sensor_values`) and labels in the dataset's form
+    (:func:`warpworm.render.labels.schema_labels`).
     """
 
     @staticmethod
@@ -183,40 +184,12 @@ class WarpStages:
             magnet_rot=frame["magnet_rot"], worm_texcoords=pattern.vertices, ipm_diameter=params.ipm_diameter,
             ipm_thickness=params.ipm_thickness, epm_size=params.epm_size, floor_incline=params.floor_incline,
             appearance=appearance_from_draws(appearance, seeds))
+        from .render.labels import schema_labels
         from .render.sensor import apply_sensor
 
         cams = dataclasses.replace(cameras, world=np.arange(B, dtype=np.int32))
         img = self._renderer(cfg).render(scene, cams)
         rgb = apply_sensor(img["rgb"], seeds, values=sensor_values(appearance))
-        labels = compute_labels(pattern, frame, params, cams, img)
+        labels = schema_labels(frame, pattern, cams, img, rest_positions=frame.get("rest_positions"),
+                               ipm_diameter=params.ipm_diameter, ipm_thickness=params.ipm_thickness)
         return {"rgb": rgb, "depth": img["depth"], "segmentation": img["seg"], **labels}
-
-
-def compute_labels(pattern, frame: dict, params: WormParams, cameras, images: dict) -> dict:
-    """Schema label arrays of B images from :func:`warpworm.render.labels.compute_labels` (its body frame, keypoints
-    and COCO visibility rules; see docs/render.md), reshaped to the dataset's names: poses as 4x4 object -> world,
-    boxes as (x, y, w, h) [px]."""
-    from . import transforms as tf
-    from .render import labels as rl
-
-    lab = rl.compute_labels(frame, pattern, cameras, images, rest_positions=frame.get("rest_positions"),
-                            ipm_diameter=params.ipm_diameter, ipm_thickness=params.ipm_thickness)
-    body = tf.pose_matrix(lab["body_R_world"], lab["body_t_world"])
-    mags = tf.pose_matrix(lab["magnet_R_world"], lab["magnet_t_world"])
-    wb = lab["worm_box"]
-    vb = lab["worm_box_visible"].astype(np.float32)
-    bbv = np.where(vb[:, :1] >= 0, np.concatenate([vb[:, :2], vb[:, 2:] - vb[:, :2] + 1], axis=1), 0)
-    return {
-        "poses/body": body, "poses/ipm": mags[:, 1:4], "poses/epm": mags[:, 0],
-        "poses/body_quat": lab["body_q_world"],
-        "keypoints/world": lab["keypoints_world"], "keypoints/camera": lab["keypoints_cam"],
-        "keypoints/pixel": lab["keypoints_2d"], "keypoints/visibility": lab["keypoint_visibility"],
-        "creases/angle": np.asarray(frame["crease_angle"], np.float32),
-        "bars/strain": np.asarray(frame["bar_strain"], np.float32),
-        "worm/vertices": np.asarray(frame["positions"], np.float32),
-        "labels/bbox_obj": np.concatenate([wb[:, :2], wb[:, 2:] - wb[:, :2]], axis=1).astype(np.float32),
-        "labels/bbox_visib": bbv.astype(np.float32),
-        "labels/visib_fract": lab["visible_fraction"].astype(np.float32),
-        "labels/worm_mask": images["worm_mask"].astype(np.uint8),
-        "labels/deformation": lab["deformation_ratio"].astype(np.float32),
-    }

@@ -28,6 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import ids
+
 HELP = "Export a dataset folder to COCO keypoints (images/*.png + annotations/keypoints.json)."
 
 
@@ -90,7 +92,7 @@ def export_coco(src, out, limit: int | None = None) -> dict:
         kp[:, :2] = np.where(vis[:, None] > 0, uv, 0.0)
         kp[:, 2] = vis
         seg = s["segmentation"]
-        worm = (seg >= 2) & (seg <= 6)
+        worm = (seg >= ids.SEG_WORM_FIRST) & (seg <= ids.SEG_WORM_LAST)
         area = int(worm.sum())
         bv = s["labels/bbox_visib"].astype(np.float64)
         if bv[2] > 0 and bv[3] > 0:

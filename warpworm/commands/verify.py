@@ -12,7 +12,7 @@ there with the documented shape and dtype (and every ``params/*`` has one value 
 * visibility consistent with depth (docs/render.md's rule): 0 exactly where the keypoint is behind the camera or its
   rounded pixel is outside the image; where the depth there is 0 or at most 0.5 mm in front of the keypoint it is 2;
   1 only where a surface is more than 0.5 mm in front;
-* segmentation ids in [0, 10], depth finite and >= 0.
+* segmentation ids in [0, ids.SEG_EPM] (0..10), depth finite and >= 0.
 
 Exit code 0 only if every check holds; 1 if any fails (one line per problem, naming the shard); 2 if DIR is not a
 dataset folder at all.
@@ -26,6 +26,8 @@ import sys
 from pathlib import Path
 
 import numpy as np
+
+from .. import ids
 
 HELP = "Check a dataset folder: shard checksums, sample ids, shapes and label invariants (exit 0 only if all hold)."
 
@@ -129,8 +131,8 @@ def check_labels(d: dict, H: int, W: int) -> list[str]:
     if bad1.any():
         out.append(f"keypoints/visibility: {int(bad1.sum())} keypoint(s) marked occluded without a surface in front")
     seg = d["segmentation"]
-    if seg.size and seg.max() > 10:
-        out.append(f"segmentation: id {int(seg.max())} > 10")
+    if seg.size and seg.max() > ids.SEG_EPM:
+        out.append(f"segmentation: id {int(seg.max())} > {ids.SEG_EPM}")
     dep = d["depth"]
     if not np.isfinite(dep).all() or (dep < 0).any():
         out.append("depth: non-finite or negative values")
