@@ -50,3 +50,52 @@ def test_distributions_have_the_right_law():
 def test_bad_specs(spec):
     with pytest.raises(rnd.DistributionError):
         rnd.parse_distribution(spec)
+
+
+def test_seed_uniforms_are_the_counter_generator_keyed_by_seed():
+    # an independent re-implementation of the seed-keyed chain (SplitMix64 finalizer, module docstring)
+    M = (1 << 64) - 1
+
+    def mix(x):
+        x = ((x ^ (x >> 30)) * 0xBF58476D1CE4E5B9) & M
+        x = ((x ^ (x >> 27)) * 0x94D049BB133111EB) & M
+        return x ^ (x >> 31)
+
+    seeds, stream = [0, 7, 2**40 + 3], 0xCA3E0 + 2
+    got = rnd.seed_uniforms(seeds, stream, 5)
+    for i, s in enumerate(seeds):
+        x = mix((s * 0x9E3779B97F4A7C15 + stream * 0xD1B54A32D192ED03) & M)
+        want = [(mix(x ^ (((j + 1) * 0x9E3779B97F4A7C15) & M)) >> 11) / 2.0**53 for j in range(5)]
+        assert got[i].tolist() == want
+    # batch-independent, and render.seeding is the same function (one generator)
+    assert np.array_equal(rnd.seed_uniforms(seeds[1:2], stream, 5)[0], got[1])
+    from warpworm.render import seeding
+
+    assert seeding.uniforms is rnd.seed_uniforms and seeding.derive_seeds is rnd.derive_seeds
+
+
+def test_randomized_params_are_the_dataset_jobs_draws():
+    from warpworm.config import ConfigError, load_config
+    from warpworm.sampling import draw_worm, randomized_params
+
+    cfg = load_config("default")
+    p = randomized_params("default", 5, seed=11)
+    # world w is trajectory w at attempt 0 of the same config with master seed 11
+    d = draw_worm(load_config("default", seed=11), np.arange(5), np.zeros(5, np.int64))
+    assert np.array_equal(p.hinge_stiffness, d["worm.hinge_stiffness"])
+    assert np.array_equal(p.mu_kinetic, np.minimum(d["worm.mu_kinetic"], d["worm.mu_static"]))
+    assert np.array_equal(p.ipm_moment[:, 1], d["worm.ipm_moment_centre"])
+    assert p.ipm_moment.shape == (5, 3) and p.epm_size.shape == (5, 3)
+    assert not np.isnan(p.orientation).any()  # the gait preset filled in
+    # gait and direction per world where they differ (the default config draws both)
+    assert np.array_equal(np.broadcast_to(p.gait, (5,)), np.asarray(d["worm.gait"]).astype(str))
+    assert np.array_equal(np.broadcast_to(p.backward, (5,)), np.asarray(d["worm.backward"]).astype(bool))
+    assert not np.array_equal(randomized_params(cfg, 5, seed=12).hinge_stiffness, p.hinge_stiffness)
+    one = randomized_params(load_config("default", ["randomize.worm.gait=inchworm"]), 3, seed=0)
+    assert one.gait == "inchworm"
+    # the magnet model is one per solver batch: drawn with two values, refused, naming it
+    two = load_config("default", ["randomize.worm.magnet_model={choice: [analytic, dipoles]}"])
+    with pytest.raises(ConfigError, match="randomize.worm.magnet_model"):
+        randomized_params(two, 64, seed=0)
+    with pytest.raises(ConfigError, match="num_worlds"):
+        randomized_params(cfg, 0, seed=0)

@@ -81,27 +81,31 @@ def randomized_params(cfg_name_or_cfg, num_worlds: int, seed: int) -> WormParams
     counter-based generator: world ``w`` is trajectory ``w`` at attempt 0 of that config with master seed ``seed``
     (the same values a dataset job with that seed draws for its trajectory ``w``).
 
-    The batch-shared fields (``gait``, ``backward``, ``magnet_model``) must come out equal for every world (they are
-    one value per solver batch); a config that randomizes them is refused, naming the field and the values drawn.
+    ``gait`` and ``backward`` come out per world ((W,) arrays) when they differ between worlds; ``magnet_model`` is
+    one value per solver batch, so a config whose draws give it two values is refused, naming the field.
     """
     import dataclasses
 
-    from .config import BATCH_SHARED, ConfigError, load_config
+    from .config import ConfigError, load_config
 
     cfg = load_config(cfg_name_or_cfg) if isinstance(cfg_name_or_cfg, str) else cfg_name_or_cfg
     if int(num_worlds) < 1:
         raise ConfigError([f"num_worlds: got {num_worlds}; expected >= 1"])
     cfg = dataclasses.replace(cfg, seed=int(seed))
-    d = draw_worm(cfg, np.arange(int(num_worlds), dtype=np.int64), np.zeros(int(num_worlds), dtype=np.int64))
-    errors = []
-    for name in BATCH_SHARED:
-        values = sorted({str(v) for v in np.asarray(d[name]).tolist()})
-        if len(values) > 1:
-            errors.append(f"randomize.{name}: drew {values} over {num_worlds} worlds; expected one value (it is shared "
-                          "by the solver batch: make it a constant)")
-    if errors:
-        raise ConfigError(errors)
-    return worm_params(cfg, d)
+    n = int(num_worlds)
+    d = draw_worm(cfg, np.arange(n, dtype=np.int64), np.zeros(n, dtype=np.int64))
+    models = sorted({str(v) for v in np.asarray(d["worm.magnet_model"]).tolist()})
+    if len(models) > 1:
+        raise ConfigError([f"randomize.worm.magnet_model: drew {models} over {n} worlds; expected one value (the "
+                           "force model is shared by the solver batch: make it a constant)"])
+    p = worm_params(cfg, d)
+    gait = np.asarray(d["worm.gait"]).astype(str)
+    back = np.asarray(d["worm.backward"]).astype(bool)
+    if len(set(gait.tolist())) > 1:
+        p.gait = gait
+    if len(set(back.tolist())) > 1:
+        p.backward = back
+    return p
 
 
 def draw_group(cfg, group: str, index: np.ndarray) -> rnd.Draws:
