@@ -454,8 +454,16 @@ def block_band_cholesky_factor(world: int, lane: int, bd: int, nv: int, bw: int,
     return 0
 
 
+MAX_REGISTERS = 128
+"""Registers per thread the kernel is compiled for on CUDA (``__maxnreg__``). Unbounded, ptxas (CUDA 13.0, sm_90)
+gives it 192 (band) and 241 (dense), which caps an H200 SM at 10 one-warp worlds (band) and 2 four-warp worlds
+(dense, although its shared memory holds 4); at 128 it spills 168 / 296 bytes per thread (stores; L1-resident local
+memory) and 16 band or 4 dense worlds fit an SM. To be confirmed on a GPU (``None`` lifts the bound)."""
+
+
 @functools.cache
-def make_tile_substep_kernel(num_vertices: int, bandwidth: int, dense: bool = True):
+def make_tile_substep_kernel(num_vertices: int, bandwidth: int, dense: bool = True,
+                             max_registers: int | None = MAX_REGISTERS):
     """The block-per-world substep kernel for worms of ``num_vertices`` vertices and Newton-matrix half-bandwidth
     ``bandwidth`` (vertex blocks); one module per (shape, solve).
 
@@ -469,7 +477,7 @@ def make_tile_substep_kernel(num_vertices: int, bandwidth: int, dense: bool = Tr
     DENSE = bool(dense)
     SLOTS = num_vertices * (bandwidth + 1) * 9  # 3x3 entries of the lower block band, with the out-of-range ones
 
-    @wp.kernel(enable_backward=False, module="unique")
+    @wp.kernel(enable_backward=False, module="unique", cuda_max_registers=max_registers)
     def implicit_step_tile(
         # Model:
         inv_mass: wp.array2d(dtype=float),

@@ -16,7 +16,8 @@ each; 32: some threads own two vertices), so the block logic (barriers, thread-s
 the flag reductions) is checked here, not only on a GPU. The sm_90 compile check needs NVRTC (shipped with Warp),
 not a GPU.
 
-Cold, the CPU builds take ~15-30 s per (factorization, block size) and the sm_90 builds ~70 s (cuSolverDx LTOs);
+Cold, the CPU builds take ~15-30 s per (factorization, block size), the sm_90 builds 40-60 s (PTX) and ~110 s (the
+dense cubin, with the cuSolverDx LTOs);
 Warp's kernel cache keeps them afterwards.
 """
 
@@ -241,21 +242,31 @@ def _nvrtc_reason() -> str | None:
     return None
 
 
-@pytest.mark.parametrize("factorization", FACTORIZATIONS)
-def test_tile_kernel_compiles_for_sm90(factorization):
+@pytest.mark.parametrize("factorization, use_ptx", [("band", True), ("dense", True), ("dense", False)],
+                         ids=["band-ptx", "dense-ptx", "dense-cubin"])
+def test_tile_kernel_compiles_for_sm90(factorization, use_ptx):
     """The kernel's own module (one per shape and factorisation, so the package-wide compile test cannot discover
-    it) builds to sm_90 PTX at its GPU block size, dense with the cuSolverDx factorisation where Warp has libmathdx."""
+    it) builds for sm_90 at its GPU block size and register bound. PTX builds the cooperative tile Cholesky (Warp
+    links cuSolverDx only into a cubin); the dense cubin links cuSolverDx's potrf / potrs for the 117 × 117 tile and
+    128 threads where Warp has libmathdx, as a GPU run would."""
     reason = _nvrtc_reason()
     if reason:
         pytest.skip(reason)
-    from warpworm.kernels.implicit_tile import make_tile_substep_kernel
+    from warp._src.context import runtime
+
+    from warpworm.kernels.implicit_tile import MAX_REGISTERS, make_tile_substep_kernel
 
     model = Model.from_params(WormParams(), 1, "cpu")
     kernel = make_tile_substep_kernel(model.num_vertices, model.vertex_bandwidth, factorization == "dense")
     module = kernel.module  # a module of this kernel alone: its options are ours to set
     module.options["block_dim"] = DEFAULT_CUDA_BLOCK_DIM[factorization]
-    paths = wp.compile_aot_module(module, arch=90, use_ptx=True)  # into the kernel cache: rebuilt only on change
+    paths = wp.compile_aot_module(module, arch=90, use_ptx=use_ptx)  # into the kernel cache: rebuilt only on change
     assert paths
     for p in paths:
         assert p.exists() and p.stat().st_size > 0, p
-        assert p.read_text(errors="replace").lstrip().startswith("//"), p  # PTX text (NVRTC's header comment)
+        if use_ptx:
+            ptx = p.read_text(errors="replace")
+            assert ptx.lstrip().startswith("//"), p  # PTX text (NVRTC's header comment)
+            assert f".maxnreg {MAX_REGISTERS}" in ptx  # the register bound the occupancy figures assume
+        elif runtime.core.wp_is_mathdx_enabled():
+            assert b"cusolverdx" in p.read_bytes(), p

@@ -20,6 +20,8 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from .kernels.implicit_tile import MAX_REGISTERS, make_tile_substep_kernel
+
 FACTORIZATIONS = ("band", "dense")
 """How a block solves its world's Newton systems: "band", the block band factored in place column-parallel (bit for
 bit the band path's factor; ~no shared memory: one warp per world, many worlds per SM); "dense", the 3V × 3V matrix
@@ -74,11 +76,12 @@ class TileSubsteps:
         block_dim: threads per world; default :data:`DEFAULT_CUDA_BLOCK_DIM` on CUDA, 1 on the CPU. On the CPU values
             above 1 run as cooperative fibers only with ``wp.config.enable_cpu_blocks`` set (slower; for testing the
             block logic), else Warp runs 1.
+        max_registers: CUDA registers per thread (default
+            :data:`warpworm.kernels.implicit_tile.MAX_REGISTERS`; ``None`` unbounded); ignored on the CPU.
     """
 
-    def __init__(self, model, simulator, factorization: str = "band", block_dim: int | None = None):
-        from .kernels.implicit_tile import make_tile_substep_kernel
-
+    def __init__(self, model, simulator, factorization: str = "band", block_dim: int | None = None,
+                 max_registers: int | None = MAX_REGISTERS):
         if factorization not in FACTORIZATIONS:
             raise ValueError(f"factorization: expected one of {FACTORIZATIONS}, got {factorization!r}")
         self.factorization = factorization
@@ -98,7 +101,7 @@ class TileSubsteps:
         dev = model.device
         self.incidence = [wp.array(a, dtype=wp.int32, device=dev) for a in (bs, bi, hs, hi)]
         """Vertex -> bars and vertex -> hinges, CSR: [bar start (V + 1,), bars, hinge start (V + 1,), hinges]."""
-        self.kernel = make_tile_substep_kernel(V, self.bandwidth, factorization == "dense")
+        self.kernel = make_tile_substep_kernel(V, self.bandwidth, factorization == "dense", max_registers)
         W = model.num_worlds
         self.scratch = {
             "x_prev": wp.zeros((W, V), dtype=wp.vec3, device=dev),
