@@ -9,7 +9,6 @@ from warpworm.render import (
     Renderer,
     build_scene,
     make_cameras,
-    sample_appearance,
     sample_cameras,
 )
 from warpworm.render.camera import intrinsics, look_at
@@ -17,6 +16,8 @@ from warpworm.render.demo import default_pattern, posed_worm_states
 from warpworm.render.labels import KEYPOINT_NAMES, VIS_EPS, WormBody, keypoint_depth_tolerance, schema_labels
 
 from warpworm import quiet_warp
+from warpworm.config import load_config
+from warpworm.sampling import sample_appearance
 from warpworm.transforms import axis_angle_to_matrix, quat_wxyz_to_matrix
 
 quiet_warp()
@@ -31,7 +32,7 @@ def batch():
     states = posed_worm_states(100 + np.arange(W), pattern)
     scene = build_scene(states["positions"], pattern.triangles, pattern.triangle_segment,
                         magnet_pos=states["magnet_pos"], magnet_rot=states["magnet_rot"],
-                        worm_texcoords=pattern.vertices, appearance=sample_appearance(np.arange(W)))
+                        worm_texcoords=pattern.vertices, appearance=sample_appearance(load_config("default"), np.arange(W)))
     cams = sample_cameras(500 + np.arange(W * C), states["positions"], width=SIZE, height=SIZE,
                           world_index=np.arange(W * C) % W, distance=(0.1, 0.3))
     images = Renderer(SIZE, SIZE).render(scene, cams)

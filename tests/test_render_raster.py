@@ -11,7 +11,6 @@ from warpworm.render import (
     SceneBatch,
     build_scene,
     make_cameras,
-    sample_appearance,
     sample_cameras,
 )
 from warpworm.render.camera import intrinsics, look_at
@@ -20,6 +19,8 @@ from warpworm.render.raycast import RayCaster
 from warpworm.render.scene import box_mesh
 
 from warpworm import quiet_warp
+from warpworm.config import load_config
+from warpworm.sampling import sample_appearance
 
 quiet_warp()
 
@@ -122,7 +123,7 @@ def _random_worm_batch(num_worlds, cams_per_world, size, seed):
     scene = build_scene(states["positions"], pattern.triangles, pattern.triangle_segment,
                         magnet_pos=states["magnet_pos"], magnet_rot=states["magnet_rot"],
                         worm_texcoords=pattern.vertices, floor_incline=0.0,
-                        appearance=sample_appearance(seed * 1000 + np.arange(num_worlds)))
+                        appearance=sample_appearance(load_config("default"), seed * 1000 + np.arange(num_worlds)))
     N = num_worlds * cams_per_world
     cams = sample_cameras(seed * 7919 + np.arange(N), states["positions"], width=size, height=size,
                           world_index=np.arange(N) % num_worlds, distance=(0.08, 0.3))
