@@ -5,7 +5,7 @@ of every world, in place on the :class:`~warpworm.model.State`), with one block 
 instead of one thread. It assembles the band path's Newton systems bit for bit; with ``factorization="band"`` it
 also factors them with the same arithmetic (results identical on the CPU), with "dense" (``wp.tile_cholesky``) the
 factor rounds differently: results agree to float rounding where the dynamics is continuous (a contact decision
-near its threshold can flip on a 1e-9 m difference, in the band path too). Typical use, in place of ``_world_cmd``::
+near its threshold can flip on a difference of a few 1e-9 m, in the band path too). Typical use, in place of ``_world_cmd``::
 
     tiles = TileSubsteps(sim.model, sim)             # band; block_dim: 32 on CUDA, 1 on the CPU
     tiles.launch(state, sim.substeps, control)       # = sim._world_cmd(state, control, sim.substeps).launch()
@@ -115,12 +115,21 @@ class TileSubsteps:
 
     @property
     def shared_bytes_per_world(self) -> int:
-        """Shared memory one block (world) needs [bytes], as Warp computes it (builds the module for this device):
-        dense, the 3V × 3V float32 tile, the right-hand side and the reductions' scratch; band, the scratch only."""
-        self.kernel.module.load(self.model.device, self.block_dim)
-        return int(self.kernel.adj.get_total_required_shared())
+        """Shared memory one block (world) needs on CUDA [bytes], as Warp records it in the module's metadata (builds
+        or loads the module for this device): dense, the 3V × 3V float32 tile, the right-hand side and the
+        reductions' scratch; band, the scratch only."""
+        exe = self.kernel.module.load(self.model.device, self.block_dim)
+        sizes = [v for k, v in exe.meta.items() if k.endswith("_cuda_kernel_forward_smem_bytes")]
+        if len(sizes) != 1:
+            raise RuntimeError(f"module metadata: expected one forward kernel's shared memory size, got {exe.meta}")
+        return int(sizes[0])
 
-    def _cmd(self, state, control, num_substeps: int):
+    def command(self, state, control, num_substeps: int):
+        """The recorded launch (``wp.launch_tiled(..., record_cmd=True)``) of ``num_substeps`` substeps of every world
+        of ``state`` under ``control``: what ``Simulator._world_cmd`` returns, to ``.launch()`` or capture in a graph.
+        Recorded once per (state, control, count)."""
+        if int(num_substeps) < 1:
+            raise ValueError(f"num_substeps: expected >= 1, got {num_substeps}")
         key = (id(state), id(control), int(num_substeps))
         cmd = self._cmds.get(key)
         if cmd is not None and cmd[0] is state and cmd[1] is control:
@@ -134,8 +143,5 @@ class TileSubsteps:
 
     def launch(self, state, num_substeps: int, control=None) -> None:
         """Advance every world of ``state`` by ``num_substeps`` implicit substeps (in place) under ``control``
-        (default the simulator's), as ``Simulator._world_cmd(state, control, num_substeps).launch()`` does.
-        Recorded once per (state, control, count)."""
-        if int(num_substeps) < 1:
-            raise ValueError(f"num_substeps: expected >= 1, got {num_substeps}")
-        self._cmd(state, control if control is not None else self.simulator.control, num_substeps).launch()
+        (default the simulator's), as ``Simulator._world_cmd(state, control, num_substeps).launch()`` does."""
+        self.command(state, control if control is not None else self.simulator.control, num_substeps).launch()
