@@ -8,22 +8,29 @@ speed checks, crumple flag; read that module's docstring), but laid out for a GP
 - Per-vertex phases (prediction, the contact update between Newton steps, the velocity update) and the crease
   angles: thread ``lane`` takes vertices (hinges) ``lane, lane + T, ...``.
 - Assembly by rows, without atomics: thread ``lane`` owns the 3×3 block row of its vertex u in the block band
-  ``hess[world, u, 0..B]`` (the band path's layout and scratch, ``State.newton_matrix``) and ``grad[world, u]``, and
+  ``hess[world, u, 0..B]`` (the band path's layout, in the launcher's scratch) and ``grad[world, u]``, and
   gathers the bars and creases incident on u (host-built incidence lists, ascending element index). Each block
   receives the same contributions in the same order as :func:`~warpworm.kernels.implicit_euler.assemble` gives it,
   so the assembled system is bit for bit the band path's; only the factorisation differs.
-- Solve: the band is scattered (``wp.tile_scatter_masked``, one entry per thread per call) into a dense 3V × 3V
-  float32 tile in shared memory, factored by ``wp.tile_cholesky_inplace`` and solved by
-  ``wp.tile_cholesky_solve_inplace`` (cuSolverDx on a GPU when Warp has libmathdx, a cooperative scalar
-  factorisation otherwise and on the CPU). The tile is zeroed once per launch: an in-place Cholesky of a matrix
-  keeps each row's envelope (its first non-zero to the diagonal), which for this block band lies inside the band,
-  so the entries outside it stay exact zeros and every later Newton step need only rewrite the band.
+- Solve, ``dense``: the band is scattered (``wp.tile_scatter_masked``, one entry per thread per call) into a dense
+  3V × 3V float32 tile in shared memory, factored by ``wp.tile_cholesky_inplace`` and solved by
+  ``wp.tile_cholesky_solve_inplace`` (cuSolverDx in a CUDA cubin when Warp has libmathdx, a cooperative scalar
+  factorisation otherwise and on the CPU). The tile is zeroed once per launch: an in-place Cholesky keeps each row's
+  envelope (its first non-zero to the diagonal), which for this block band lies inside the band, so the entries
+  outside it stay exact zeros and every later Newton step need only rewrite the band. 55 KB of shared memory per
+  world (4 worlds per H200 SM). The factor rounds differently from the band path's.
+- Solve, band (not ``dense``): the block band is factored in place in ``hess``, column-parallel
+  (:func:`block_band_cholesky_factor`: thread 0 the diagonal block, the ≤ B blocks below it one per thread), with
+  the band path's arithmetic, so the results are the band path's bit for bit; thread 0 then runs the band path's
+  :func:`band_cholesky_solve`. ~No shared memory: one warp per world.
 - Block barriers: Warp has no bare ``__syncthreads``; :func:`block_max` (a tile reduction) is one, and also makes a
   flag (a bad strain, a crumpled crease) the whole block's, so every thread takes the same branches and calls the
   same cooperative tile operations (a barrier inside divergent code hangs a GPU block).
 
 Every tile operation must be called by every thread of the block the same number of times: loops around them run
-the same count on every thread (e.g. the scatter rounds), never ``range(lane, n, T)``.
+the same count on every thread (e.g. the scatter rounds), never ``range(lane, n, T)``. In Warp 1.19 that includes a
+shared tile's element assignment ``t[i, j] = v`` (it ends in a block barrier: per-thread writes of different
+entries in divergent code hang or, on CPU fibers, corrupt the tile), hence ``tile_scatter_masked``.
 
 The tile's side N = 3V is a compile-time constant, so the kernel is built per vertex count by
 :func:`make_tile_substep_kernel` (one cached module each). float32, SI units.
