@@ -52,40 +52,20 @@ def allow_intermixed(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from ..config import ConfigError, check_output_dir, load_config
-    from ..dataset import DatasetError, DatasetLockedError, DatasetWriteError, FolderLock, lock_holder
-
-    try:
-        cfg = load_config(args.config, args.overrides, num_samples=args.num, seed=args.seed)
-        if args.print_config:
-            print(cfg.to_yaml(), end="")
-            return EXIT_OK
-        if args.workers < 1:
-            raise ConfigError([f"--workers: got {args.workers}; expected >= 1"])
-        if args.engine == "ray":
-            import importlib.util
-
-            if importlib.util.find_spec("ray") is None:  # before anything is written to --out
-                raise ConfigError(["--engine: got 'ray'; expected Ray to be installed "
-                                   "(pip install 'warpworm[ray]') or --engine local"])
-        holder = lock_holder(args.out)
-        if holder is not None:
-            raise DatasetLockedError(f"{args.out} is in use by another job: {FolderLock.describe(holder)}; wait for it "
-                                     "to finish or stop it (kill -TERM <pid>), then rerun with --resume")
-        check_output_dir(args.out, args.resume)
-    except ConfigError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return EXIT_CONFIG
-    except DatasetLockedError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return EXIT_LOCKED
-
+    from ..config import ConfigError, load_config
+    from ..dataset import DatasetError, DatasetLockedError, DatasetWriteError
     from ..job import Interrupted, generate
     from ..stages import DEFAULT_STAGES
     from ..workers import WorkerError
 
     stages = args.stages or DEFAULT_STAGES
     try:
+        cfg = load_config(args.config, args.overrides, num_samples=args.num, seed=args.seed)
+        if args.print_config:
+            print(cfg.to_yaml(), end="")
+            return EXIT_OK
+        _check_arguments(args)
+        # (generate checks the folder's lock and contents before it writes anything)
         summary = generate(cfg, args.out, workers=args.workers, resume=args.resume, stages=stages,
                            engine=args.engine, address=args.address, progress=not args.no_progress)
     except (ConfigError, DatasetError) as exc:
@@ -108,6 +88,20 @@ def main(args: argparse.Namespace) -> int:
         write_previews_or_warn(cfg, args.out, stages)
     print(summary.text())
     return EXIT_OK
+
+
+def _check_arguments(args) -> None:
+    """The command-line values the config does not check (before anything is written to --out)."""
+    from ..config import ConfigError
+
+    if args.workers < 1:
+        raise ConfigError([f"--workers: got {args.workers}; expected >= 1"])
+    if args.engine == "ray":
+        import importlib.util
+
+        if importlib.util.find_spec("ray") is None:
+            raise ConfigError(["--engine: got 'ray'; expected Ray to be installed "
+                               "(pip install 'warpworm[ray]') or --engine local"])
 
 
 def write_previews_or_warn(cfg, out, stages) -> None:
