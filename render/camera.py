@@ -135,6 +135,40 @@ def _between(u: np.ndarray, lo_hi) -> np.ndarray:
     return lo + (hi - lo) * u
 
 
+def _view_from_uniforms(u: np.ndarray, look_centre: np.ndarray, *, distance, elevation_deg, azimuth_deg, roll_deg,
+                        lookat_jitter, fov_deg, fov_axis, aspect_jitter, principal_jitter, width, height, up):
+    """One view per row of uniforms ``u`` (n, 12) around look-at centres (n, 3) [m] (the ranges of
+    :func:`sample_cameras`): (K (n, 3, 3), R (n, 3, 3), t (n, 3), the drawn values by name, (n,) or (n, 3))."""
+    dist = _between(u[:, 0], distance)
+    el_deg = _between(u[:, 1], elevation_deg)
+    az_deg = _between(u[:, 2], azimuth_deg)
+    roll_d = _between(u[:, 3], roll_deg)
+    el, az, roll = np.deg2rad(el_deg), np.deg2rad(az_deg), np.deg2rad(roll_d)
+    look = look_centre + lookat_jitter * (2 * u[:, 4:7] - 1)
+    eye = look + dist[:, None] * np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], 1)
+    R, t = look_at(eye, look, up=up, roll=roll)
+    fov = _between(u[:, 7], fov_deg)
+    if fov_axis == "x":
+        fx = focal_from_fov(np.deg2rad(fov), width)
+        fy = fx * (1 + aspect_jitter * (2 * u[:, 8] - 1))
+    else:
+        fy = focal_from_fov(np.deg2rad(fov), height)
+        fx = fy * (1 + aspect_jitter * (2 * u[:, 8] - 1))
+    cx = (width - 1) / 2 + principal_jitter * width * (2 * u[:, 9] - 1)
+    cy = (height - 1) / 2 + principal_jitter * height * (2 * u[:, 10] - 1)
+    drawn = {"distance": dist, "elevation_deg": el_deg, "azimuth_deg": az_deg, "roll_deg": roll_d, "fov_deg": fov,
+             "lookat": look}
+    return intrinsics(fx, fy, cx, cy), R, t, drawn
+
+
+def _in_frame_fraction(cams: "Cameras", pts: np.ndarray, margin: float) -> np.ndarray:
+    """Fraction of each image's points (n, P, 3) [m] in front of its camera and at least ``margin`` px inside."""
+    uv, pc = cams.project(pts)
+    inside = ((pc[..., 2] > 1e-3) & (uv[..., 0] >= margin) & (uv[..., 0] <= cams.width - 1 - margin)
+              & (uv[..., 1] >= margin) & (uv[..., 1] <= cams.height - 1 - margin))
+    return inside.mean(axis=1)
+
+
 def sample_cameras(
     seeds,
     worm_points,
@@ -198,34 +232,16 @@ def sample_cameras(
         if pending.size == 0:
             break
         u = seed_uniforms(seeds[pending], 0xCA3E0 + attempt, 12)
-        dist = _between(u[:, 0], distance)
-        el_deg = _between(u[:, 1], elevation_deg)
-        az_deg = _between(u[:, 2], azimuth_deg)
-        roll_d = _between(u[:, 3], roll_deg)
-        el, az, roll = np.deg2rad(el_deg), np.deg2rad(az_deg), np.deg2rad(roll_d)
-        look = tgt[wi[pending]] + lookat_jitter * (2 * u[:, 4:7] - 1)
-        eye = look + dist[:, None] * np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], 1)
-        Ri, ti = look_at(eye, look, up=up, roll=roll)
-        fov = _between(u[:, 7], fov_deg)
-        if fov_axis == "x":
-            fx = focal_from_fov(np.deg2rad(fov), width)
-            fy = fx * (1 + aspect_jitter * (2 * u[:, 8] - 1))
-        else:
-            fy = focal_from_fov(np.deg2rad(fov), height)
-            fx = fy * (1 + aspect_jitter * (2 * u[:, 8] - 1))
-        cx = (width - 1) / 2 + principal_jitter * width * (2 * u[:, 9] - 1)
-        cy = (height - 1) / 2 + principal_jitter * height * (2 * u[:, 10] - 1)
-        Ki = intrinsics(fx, fy, cx, cy)
+        Ki, Ri, ti, drawn = _view_from_uniforms(
+            u, tgt[wi[pending]], distance=distance, elevation_deg=elevation_deg, azimuth_deg=azimuth_deg,
+            roll_deg=roll_deg, lookat_jitter=lookat_jitter, fov_deg=fov_deg, fov_axis=fov_axis,
+            aspect_jitter=aspect_jitter, principal_jitter=principal_jitter, width=width, height=height, up=up)
         cams = Cameras(K=Ki, R=Ri, t=ti, world=wi[pending], width=width, height=height)
-        uv, pc = cams.project(pts[wi[pending]])
-        inside = ((pc[..., 2] > 1e-3) & (uv[..., 0] >= margin) & (uv[..., 0] <= width - 1 - margin)
-                  & (uv[..., 1] >= margin) & (uv[..., 1] <= height - 1 - margin))
-        fr = inside.mean(axis=1)
+        fr = _in_frame_fraction(cams, pts[wi[pending]], margin)
         better = fr > frac[pending]  # keep the best attempt for images that never pass
         idx = pending[better]
         K[idx], R[idx], t[idx], frac[idx] = Ki[better], Ri[better], ti[better], fr[better]
-        for k, v in (("distance", dist), ("elevation_deg", el_deg), ("azimuth_deg", az_deg), ("roll_deg", roll_d),
-                     ("fov_deg", fov), ("lookat", look)):
+        for k, v in drawn.items():
             draws[k][idx] = v[better]
         ok = fr >= min_in_frame
         accepted[pending[ok]] = True
