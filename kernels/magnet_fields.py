@@ -238,77 +238,82 @@ def dipole_column_sums(rx: float, ry: float, rz0: float, dz: float, nz: int, ms:
 
 
 @wp.func
-def dipoles_source_sum(s_shape: int, s_size: wp.vec3, ns: wp.vec3i, per_m: float, ms: wp.vec3, mt: wp.vec3,
-                       pt: wp.vec3):
-    """Force [N] on a point dipole ``mt`` at ``pt`` (source frame) from every dipole (moment ``ms`` each) of the
-    source grid, and the grid's field [T] there.
+def dipole_sums_to_force_field(sa: float, sb: float, s3: float, u: wp.vec3, v: wp.vec3, ms: wp.vec3, mt: wp.vec3):
+    """Force [N] and field [T] at the target from the summed weights of :func:`dipole_column_sums` (Σ a i5, Σ b i5,
+    Σ i3, Σ a i5 r, Σ g r)."""
+    f = (3.0 * MU0_OVER_4PI) * (sb * ms + sa * mt + v)
+    b = MU0_OVER_4PI * (3.0 * u - s3 * ms)
+    return f, b
 
-    The grid is walked as columns along z (cuboid: the n_x × n_y lattice columns; cylinder: one column per cell of
-    a layer, ring angles by rotation recurrence), each summed by :func:`dipole_column_sums`; the weights are
-    expanded into vectors once per target dipole.
-    """
+
+@wp.func
+def cuboid_source_sum(s_size: wp.vec3, ns: wp.vec3i, ms: wp.vec3, mt: wp.vec3, pt: wp.vec3):
+    """Force [N] on a point dipole ``mt`` at ``pt`` (source frame) from every dipole (moment ``ms`` each) of a cuboid
+    source's n_x × n_y × n_z lattice, and the lattice's field [T] there: one :func:`dipole_column_sums` per column."""
     sa = float(0.0)
     sb = float(0.0)
     s3 = float(0.0)
-    ux = float(0.0)
-    uy = float(0.0)
-    uz = float(0.0)
-    vx = float(0.0)
-    vy = float(0.0)
-    vz = float(0.0)
+    u = wp.vec3(0.0)
+    v = wp.vec3(0.0)
     msmt = wp.dot(ms, mt)
+    dx = s_size[0] / float(ns[0])
+    dy = s_size[1] / float(ns[1])
     dz = s_size[2] / float(ns[2])
+    rx0 = pt[0] - (0.5 * dx - 0.5 * s_size[0])
+    ry0 = pt[1] - (0.5 * dy - 0.5 * s_size[1])
     rz0 = pt[2] - (0.5 * dz - 0.5 * s_size[2])
-    if s_shape == SHAPE_CYLINDER:
-        r_per_m = 0.5 * s_size[0] * per_m
-        first = int(0)
-        for i in range(ns[0]):
-            c = cylinder_ring_cells(r_per_m, ns[0], i)
-            rho = cylinder_ring_radius(s_size, ns, first, c)
-            step = 2.0 * CYL_PI / float(c)
-            cs = wp.cos(step)
-            sn = wp.sin(step)
-            ca = rho * wp.cos(0.5 * step)
-            sa_ = rho * wp.sin(0.5 * step)
-            for j in range(c):
-                rx = pt[0] - ca
-                ry = pt[1] - sa_
-                ka, kb, k3, kg, kaz, kgz = dipole_column_sums(rx, ry, rz0, dz, ns[2], ms, mt, msmt)
-                sa += ka
-                sb += kb
-                s3 += k3
-                ux += ka * rx
-                uy += ka * ry
-                uz += kaz
-                vx += kg * rx
-                vy += kg * ry
-                vz += kgz
-                tmp = ca * cs - sa_ * sn
-                sa_ = sa_ * cs + ca * sn
-                ca = tmp
-            first += c
-    else:
-        dx = s_size[0] / float(ns[0])
-        dy = s_size[1] / float(ns[1])
-        rx0 = pt[0] - (0.5 * dx - 0.5 * s_size[0])
-        ry0 = pt[1] - (0.5 * dy - 0.5 * s_size[1])
-        for i in range(ns[0]):
-            rx = rx0 - float(i) * dx
-            for j in range(ns[1]):
-                ry = ry0 - float(j) * dy
-                ka, kb, k3, kg, kaz, kgz = dipole_column_sums(rx, ry, rz0, dz, ns[2], ms, mt, msmt)
-                sa += ka
-                sb += kb
-                s3 += k3
-                ux += ka * rx
-                uy += ka * ry
-                uz += kaz
-                vx += kg * rx
-                vy += kg * ry
-                vz += kgz
-    f = (3.0 * MU0_OVER_4PI) * (sb * ms + sa * mt + wp.vec3(vx, vy, vz))
-    b = MU0_OVER_4PI * (3.0 * wp.vec3(ux, uy, uz) - s3 * ms)
-    return f, b
+    for i in range(ns[0]):
+        rx = rx0 - float(i) * dx
+        for j in range(ns[1]):
+            ry = ry0 - float(j) * dy
+            ka, kb, k3, kg, kaz, kgz = dipole_column_sums(rx, ry, rz0, dz, ns[2], ms, mt, msmt)
+            sa += ka
+            sb += kb
+            s3 += k3
+            u += wp.vec3(ka * rx, ka * ry, kaz)
+            v += wp.vec3(kg * rx, kg * ry, kgz)
+    return dipole_sums_to_force_field(sa, sb, s3, u, v, ms, mt)
+
+
+@wp.func
+def cylinder_ring_start(rho: float, cells: int) -> wp.vec4:
+    """(x, y) [m] of the first of ``cells`` columns at radius ``rho`` (angle π / cells) and (cos, sin) of the step
+    2π / cells: what :func:`cylinder_ring_source_sum` walks the ring with."""
+    step = 2.0 * CYL_PI / float(cells)
+    return wp.vec4(rho * wp.cos(0.5 * step), rho * wp.sin(0.5 * step), wp.cos(step), wp.sin(step))
+
+
+@wp.func
+def cylinder_ring_source_sum(ring: wp.vec4, cells: int, s_size: wp.vec3, nz: int, ms: wp.vec3, mt: wp.vec3,
+                             pt: wp.vec3):
+    """Force [N] on a point dipole ``mt`` at ``pt`` (source frame) from the dipoles of one ring of a cylinder
+    source's grid (``cells`` columns of ``nz`` layers), and their field [T] there. ``ring`` = (x, y of the first
+    column [m], cos, sin of the angular step), the columns by rotation recurrence (:func:`cylinder_ring_start`)."""
+    sa = float(0.0)
+    sb = float(0.0)
+    s3 = float(0.0)
+    u = wp.vec3(0.0)
+    v = wp.vec3(0.0)
+    msmt = wp.dot(ms, mt)
+    dz = s_size[2] / float(nz)
+    rz0 = pt[2] - (0.5 * dz - 0.5 * s_size[2])
+    ca = ring[0]
+    sa_ = ring[1]
+    cs = ring[2]
+    sn = ring[3]
+    for j in range(cells):
+        rx = pt[0] - ca
+        ry = pt[1] - sa_
+        ka, kb, k3, kg, kaz, kgz = dipole_column_sums(rx, ry, rz0, dz, nz, ms, mt, msmt)
+        sa += ka
+        sb += kb
+        s3 += k3
+        u += wp.vec3(ka * rx, ka * ry, kaz)
+        v += wp.vec3(kg * rx, kg * ry, kgz)
+        tmp = ca * cs - sa_ * sn
+        sa_ = sa_ * cs + ca * sn
+        ca = tmp
+    return dipole_sums_to_force_field(sa, sb, s3, u, v, ms, mt)
 
 
 @wp.func
@@ -334,12 +339,27 @@ def dipoles_pair_wrench_direct(
     force = wp.vec3(0.0)
     torque = wp.vec3(0.0)
     b_sum = wp.vec3(0.0)
-    for idx in range(nt_count):
-        lever = r_rel * dipole_grid_point(t_shape, t_size, nt, per_m, idx)
-        f, b = dipoles_source_sum(s_shape, s_size, ns, per_m, ms, mt, t_rel + lever)
-        force += f
-        torque += wp.cross(lever, f)
-        b_sum += b
+    if s_shape == SHAPE_CYLINDER:
+        # ring by ring (outer), so that a ring's set-up is paid once per pair, not once per target dipole
+        r_per_m = 0.5 * s_size[0] * per_m
+        first = int(0)
+        for i in range(ns[0]):
+            c = cylinder_ring_cells(r_per_m, ns[0], i)
+            ring = cylinder_ring_start(cylinder_ring_radius(s_size, ns, first, c), c)
+            for idx in range(nt_count):
+                lever = r_rel * dipole_grid_point(t_shape, t_size, nt, per_m, idx)
+                f, b = cylinder_ring_source_sum(ring, c, s_size, ns[2], ms, mt, t_rel + lever)
+                force += f
+                torque += wp.cross(lever, f)
+                b_sum += b
+            first += c
+    else:
+        for idx in range(nt_count):
+            lever = r_rel * dipole_grid_point(t_shape, t_size, nt, per_m, idx)
+            f, b = cuboid_source_sum(s_size, ns, ms, mt, t_rel + lever)
+            force += f
+            torque += wp.cross(lever, f)
+            b_sum += b
     # every target dipole has the same moment: Σ mt × B_k = mt × Σ B_k
     return force, torque + wp.cross(mt, b_sum)
 
@@ -488,6 +508,14 @@ def atan2_rough(y: wp.float64, x: wp.float64) -> wp.float64:
 
 
 @wp.func
+def atan2_factor(re: wp.float64, im: wp.float64, n: wp.float64, d: wp.float64, sign: wp.float64):
+    """The product re + i im times (d + i n)^sign (sign ±1; the modulus is of no interest, so the conjugate stands for
+    the inverse), and sign · :func:`atan2_rough` (n, d)."""
+    ni = n * sign
+    return re * d - im * ni, re * ni + im * d, sign * atan2_rough(n, d)
+
+
+@wp.func
 def atan2_sum8(n: wp.vec4d, d: wp.vec4d, sign: wp.vec4d, n2: wp.vec4d, d2: wp.vec4d, sign2: wp.vec4d) -> wp.float64:
     """Σ_k sign_k atan2(n_k, d_k) over the 8 terms (two vec4 halves), with one atan2 instead of eight.
 
@@ -496,36 +524,28 @@ def atan2_sum8(n: wp.vec4d, d: wp.vec4d, sign: wp.vec4d, n2: wp.vec4d, d2: wp.ve
     same sum of :func:`atan2_rough` estimates (total error < 0.04 rad, far inside ±π). A term on the negative real
     axis (n = ±0, d <= 0) is where atan2 reads the sign of a zero (±π); there the eight atan2 are summed as they are.
     """
+    cut = False
+    for k in range(4):
+        if (n[k] == F64_0 and d[k] <= F64_0) or (n2[k] == F64_0 and d2[k] <= F64_0):
+            cut = True
+    if cut:
+        exact = F64_0
+        for k in range(4):
+            exact = exact + sign[k] * wp.atan2(n[k], d[k]) + sign2[k] * wp.atan2(n2[k], d2[k])
+        return exact
     re = F64_1
     im = F64_0
-    est = F64_0
-    exact = F64_0
-    cut = False
-    for k in range(8):
-        nk = n[k % 4]
-        dk = d[k % 4]
-        sk = sign[k % 4]
-        if k >= 4:
-            nk = n2[k - 4]
-            dk = d2[k - 4]
-            sk = sign2[k - 4]
-        if nk == F64_0 and dk <= F64_0:
-            cut = True
-        ni = nk * sk
-        re_new = re * dk - im * ni
-        im = re * ni + im * dk
-        re = re_new
-        est = est + sk * atan2_rough(nk, dk)
-    if cut:
-        for k in range(8):
-            if k < 4:
-                exact = exact + sign[k] * wp.atan2(n[k], d[k])
-            else:
-                exact = exact + sign2[k - 4] * wp.atan2(n2[k - 4], d2[k - 4])
-        return exact
+    re, im, e0 = atan2_factor(re, im, n[0], d[0], sign[0])
+    re, im, e1 = atan2_factor(re, im, n[1], d[1], sign[1])
+    re, im, e2 = atan2_factor(re, im, n[2], d[2], sign[2])
+    re, im, e3 = atan2_factor(re, im, n[3], d[3], sign[3])
+    re, im, e4 = atan2_factor(re, im, n2[0], d2[0], sign2[0])
+    re, im, e5 = atan2_factor(re, im, n2[1], d2[1], sign2[1])
+    re, im, e6 = atan2_factor(re, im, n2[2], d2[2], sign2[2])
+    re, im, e7 = atan2_factor(re, im, n2[3], d2[3], sign2[3])
     arg = wp.atan2(im, re)
     two_pi = F64_2 * F64_PI
-    return arg + two_pi * wp.round((est - arg) / two_pi)
+    return arg + two_pi * wp.round(((e0 + e1 + e2 + e3) + (e4 + e5 + e6 + e7) - arg) / two_pi)
 
 
 @wp.func
