@@ -54,6 +54,10 @@ def launch_world_wrenches(model: Model, state: State, moment: wp.array, *, epm_w
     )
 
 
+SOLVERS = ("band", "tile-band", "tile-dense")
+"""The ways a world's Newton system is solved (``Simulator(solver=...)``)."""
+
+
 class Simulator:
     """Integrator for a :class:`~warpworm.model.Model` (all worlds at once, CPU or CUDA).
 
@@ -74,6 +78,10 @@ class Simulator:
         slip_speed: regularisation speed ε of static friction [m/s]: below it friction is a stiff
             viscous force reaching mu_s F_n at ε, so a worm held by friction creeps at most ~ε (1e-5 m/s: < 0.02 mm
             in 2 s).
+        solver: how each world's Newton system is solved: ``"band"`` one thread per world, block-band Cholesky
+            (:mod:`warpworm.kernels.implicit_euler`); ``"tile-band"`` a block of threads per world, the same band
+            factored column-parallel (bit-identical to "band"); ``"tile-dense"`` a block per world, a dense tile
+            Cholesky in shared memory (:mod:`warpworm.tile_solver`; the GPU paths, designed for occupancy).
     """
 
     def __init__(
@@ -89,6 +97,7 @@ class Simulator:
         use_graph: bool | None = None,
         newton: int = 3,
         slip_speed: float = 1.0e-5,
+        solver: str = "band",
     ):
         from .kernels import implicit_euler, magnet_pose
 
@@ -135,6 +144,14 @@ class Simulator:
         self.scratch.delta = wp.zeros((W, V), dtype=wp.vec3, device=dev)
         self.scratch.hess = wp.zeros((W, V, model.vertex_bandwidth + 1), dtype=wp.mat33, device=dev)
         self.scratch.grad = wp.zeros((W, V), dtype=wp.vec3, device=dev)
+        if solver not in SOLVERS:
+            raise ValueError(f"solver: got {solver!r}; expected one of {SOLVERS}")
+        self.solver = solver
+        self._tiles = None
+        if solver.startswith("tile-"):
+            from .tile_solver import TileSubsteps
+
+            self._tiles = TileSubsteps(model, self, factorization=solver[len("tile-"):])
         self._snapshot_wrench = (wp.zeros((W, 4), dtype=wp.vec3, device=dev),
                                  wp.zeros((W, 4), dtype=wp.vec3, device=dev))
         self._last_moment = model.magnet_moment
@@ -198,6 +215,8 @@ class Simulator:
     def _world_cmd(self, state: State, control: Control, num_substeps: int):
         """The per-world launch of ``num_substeps`` implicit substeps over all worlds, recorded once per (state,
         control)."""
+        if self._tiles is not None:
+            return self._tiles.command(state, control, num_substeps)
         key = (id(state), id(control), num_substeps)
         cmd = self._cmds.get(key)
         if cmd is not None and cmd[0] is state and cmd[1] is control:
