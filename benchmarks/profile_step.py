@@ -85,13 +85,15 @@ def launch_timers():
 
 
 def _build(W: int, magnet_model: str, device: str, newton: int | None = None):
+    """The peristaltic gait's model and simulator; no CUDA graph (each launch must be seen to be timed: the
+    profile's whole-run figures on CUDA are therefore without graph replay, see ``benchmarks/run.py`` for those)."""
     from warpworm import gaits
     from warpworm.model import Model
     from warpworm.simulator import Simulator
 
     model = Model.from_params(gaits.preset_params("peristaltic", magnet_model=magnet_model), W, device)
     kw = {} if newton is None else {"newton": newton}
-    sim = Simulator(model, dt=gaits.DEFAULT_DT, substeps=gaits.DEFAULT_SUBSTEPS, **kw)
+    sim = Simulator(model, dt=gaits.DEFAULT_DT, substeps=gaits.DEFAULT_SUBSTEPS, use_graph=False, **kw)
     return model, sim
 
 
