@@ -20,15 +20,6 @@ import numpy as np
 
 HELP = "run a gait (peristaltic, omega, inchworm; forward or backward) on W worlds and report net displacement"
 
-RANDOMIZED = {  # parameter: relative half-range of the uniform draw around the preset value (--randomize)
-    "hinge_stiffness": 0.2,
-    "mu_static": 0.1,
-    "sheet_density": 0.2,
-    "closest_approach": 0.05,
-    "epm_moment": 0.05,
-}
-
-
 def add_arguments(parser) -> None:
     parser.add_argument("--gait", choices=["peristaltic", "omega", "inchworm"], default="peristaltic")
     parser.add_argument("--backward", action="store_true", help="drive the worm toward -x")
@@ -47,20 +38,22 @@ def add_arguments(parser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="seed of --randomize")
     parser.add_argument("--workers", type=int, default=None,
                         help="processes to split the worlds over (default: every core; results equal one process's)")
-    parser.add_argument("--randomize", action="store_true",
-                        help="draw per-world parameters uniformly around the preset (" + ", ".join(
-                            f"{k} ±{int(100 * v)}%%" for k, v in RANDOMIZED.items()) + ")")
+    parser.add_argument("--randomize", nargs="?", const="default", default=None, metavar="CONFIG",
+                        help="draw every world's parameters as a dataset job of CONFIG (default: default) with --seed "
+                             "draws its trajectories (the config's distributions around the gait preset), gait, "
+                             "direction and magnet model fixed to this command's")
 
 
-def randomized_params(params, num_worlds: int, seed: int):
-    """``params`` with the :data:`RANDOMIZED` fields drawn per world (uniform, relative half-range)."""
-    rng = np.random.default_rng(seed)
-    changes = {}
-    for name, rel in RANDOMIZED.items():
-        base = float(np.mean(getattr(params, name)))
-        changes[name] = base * (1.0 + rel * rng.uniform(-1.0, 1.0, num_worlds))
-    changes["mu_kinetic"] = np.minimum(float(np.mean(params.mu_kinetic)), changes["mu_static"])
-    return replace(params, **changes)
+def randomized_params(config: str, gait: str, backward: bool, magnet_model: str, num_worlds: int, seed: int):
+    """World w's parameters as trajectory w of a dataset job of ``config`` with master seed ``seed`` draws them
+    (:func:`warpworm.sampling.randomized_params`: the config's distributions, the counter-based generator), with the
+    gait, direction and magnet model fixed to the command's."""
+    from warpworm import sampling
+    from warpworm.config import load_config
+
+    cfg = load_config(config, [f"randomize.worm.gait={gait}", f"randomize.worm.backward={str(bool(backward)).lower()}",
+                               f"randomize.worm.magnet_model={magnet_model}"])
+    return sampling.randomized_params(cfg, num_worlds, seed)
 
 
 def axis_displacement(x0: np.ndarray, x1: np.ndarray, incline) -> np.ndarray:
@@ -323,7 +316,7 @@ def main(args) -> int:
 
     params = gaits.preset_params(args.gait, args.backward, magnet_model=args.magnet_model)
     if args.randomize:
-        params = randomized_params(params, args.worlds, args.seed)
+        params = randomized_params(args.randomize, args.gait, args.backward, args.magnet_model, args.worlds, args.seed)
     device = "cuda:0" if args.device == "cuda" else args.device
     want_files = not args.no_output
     if args.workers is not None and args.workers < 1:
