@@ -5,8 +5,9 @@ layout with small random perturbations; the net force and torque on all four mag
 (12 ordered pair wrenches per world), by one ``launch_world_wrenches`` call; ``epm`` = False rows skip the wrench
 on the EPM (``epm_wrench=False``, what the dynamics uses: 9 ordered pairs).
 
-Columns: ``ms_per_call`` (best of repeats, after a warm-up that includes compilation: the machine is shared, and
-the fastest repeat is the one least disturbed), ``us_per_world``, ``pairs_per_s`` (point-dipole pair interactions
+Columns: ``ms_per_call`` (process CPU time, best of repeats, after a warm-up that includes compilation: Warp runs a
+CPU launch on the calling thread, and on a shared machine CPU time leaves out the time the scheduler gave to other
+processes, which wall time would count; the best repeat is the least disturbed one), ``us_per_world``, ``pairs_per_s`` (point-dipole pair interactions
 per second, 'dipoles' model: 19,296 per world at 64/cm³, 10,080 without the EPM's wrench), ``vs_nbody`` (that rate
 over the plain inverse-square n-body kernel's, timed in launches interleaved with the row's repeats;
 ``vs_dipole_nbody``: over the plain point-dipole force+field n-body row of the same run), ``field_evals_per_s`` ('analytic': closed-form source-field evaluations
@@ -104,12 +105,12 @@ def _time_interleaved(fn, ref, repeats):
     ref()
     ts, tr = [], []
     for _ in range(repeats):
-        t0 = time.perf_counter()
+        t0 = time.process_time()
         fn()
-        ts.append(time.perf_counter() - t0)
-        t0 = time.perf_counter()
+        ts.append(time.process_time() - t0)
+        t0 = time.process_time()
         ref()
-        tr.append(time.perf_counter() - t0)
+        tr.append(time.process_time() - t0)
     return float(np.min(ts)), float(np.min(tr))
 
 
@@ -164,9 +165,9 @@ def _time(fn, repeats):
     fn()  # warm-up (compiles on first use)
     ts = []
     for _ in range(repeats):
-        t0 = time.perf_counter()
+        t0 = time.process_time()
         fn()
-        ts.append(time.perf_counter() - t0)
+        ts.append(time.process_time() - t0)
     return float(np.min(ts))
 
 

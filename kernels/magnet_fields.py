@@ -326,40 +326,70 @@ def dipoles_pair_wrench_direct(
     t_m: wp.vec3,
     r_rel: wp.mat33,
     t_rel: wp.vec3,
-    density: float,
+    per_m: float,
+    ns: wp.vec3i,
+    nt: wp.vec3i,
 ):
     """Force [N] and torque about the target centre [N·m] on a target from a source, 'dipoles' model, as the
-    literal double sum (target dipoles outer, source grid inner); frames as in :func:`dipoles_pair_wrench`."""
-    per_m = wp.pow(density, 1.0 / 3.0)
-    ns = dipole_grid_dims(s_shape, s_size, density)
-    nt = dipole_grid_dims(t_shape, t_size, density)
+    literal double sum over target dipoles and source dipoles (the source's columns innermost); frames as in
+    :func:`dipoles_pair_wrench`, ``per_m`` = density^(1/3), ``ns`` / ``nt`` the grids' :func:`dipole_grid_dims`.
+    Grid points as :func:`dipole_grid_point` gives them, in the same order per chunk."""
     ms = s_m / float(dipole_grid_count(s_shape, s_size, ns))
     nt_count = dipole_grid_count(t_shape, t_size, nt)
     mt = (r_rel * t_m) / float(nt_count)
     force = wp.vec3(0.0)
     torque = wp.vec3(0.0)
     b_sum = wp.vec3(0.0)
-    if s_shape == SHAPE_CYLINDER:
-        # ring by ring (outer), so that a ring's set-up is paid once per pair, not once per target dipole
-        r_per_m = 0.5 * s_size[0] * per_m
-        first = int(0)
-        for i in range(ns[0]):
-            c = cylinder_ring_cells(r_per_m, ns[0], i)
-            ring = cylinder_ring_start(cylinder_ring_radius(s_size, ns, first, c), c)
-            for idx in range(nt_count):
-                lever = r_rel * dipole_grid_point(t_shape, t_size, nt, per_m, idx)
-                f, b = cylinder_ring_source_sum(ring, c, s_size, ns[2], ms, mt, t_rel + lever)
-                force += f
-                torque += wp.cross(lever, f)
-                b_sum += b
-            first += c
-    else:
-        for idx in range(nt_count):
-            lever = r_rel * dipole_grid_point(t_shape, t_size, nt, per_m, idx)
-            f, b = cuboid_source_sum(s_size, ns, ms, mt, t_rel + lever)
-            force += f
-            torque += wp.cross(lever, f)
-            b_sum += b
+    # outer: the source in chunks (a cuboid's whole lattice; a cylinder's rings, so that a ring's set-up is paid once
+    # per pair); inner: the target's grid walked by its own loops (a cylinder's rings by rotation recurrence), no
+    # per-dipole index arithmetic or trigonometry
+    s_cyl = s_shape == SHAPE_CYLINDER
+    t_cyl = t_shape == SHAPE_CYLINDER
+    s_chunks = 1
+    if s_cyl:
+        s_chunks = ns[0]
+    s_r_per_m = 0.5 * s_size[0] * per_m
+    t_r_per_m = 0.5 * t_size[0] * per_m
+    t_step = wp.cw_div(t_size, wp.vec3(float(nt[0]), float(nt[1]), float(nt[2])))
+    t_first = 0.5 * t_step - 0.5 * t_size
+    s_first_cell = int(0)
+    for chunk in range(s_chunks):
+        s_cells = int(0)
+        s_ring = wp.vec4(0.0)
+        if s_cyl:
+            s_cells = cylinder_ring_cells(s_r_per_m, ns[0], chunk)
+            s_ring = cylinder_ring_start(cylinder_ring_radius(s_size, ns, s_first_cell, s_cells), s_cells)
+            s_first_cell += s_cells
+        t_first_cell = int(0)
+        for it in range(nt[0]):
+            n_cols = nt[1]
+            x = t_first[0] + float(it) * t_step[0]
+            y = float(0.0)
+            t_ring = wp.vec4(0.0)
+            if t_cyl:
+                n_cols = cylinder_ring_cells(t_r_per_m, nt[0], it)
+                t_ring = cylinder_ring_start(cylinder_ring_radius(t_size, nt, t_first_cell, n_cols), n_cols)
+                t_first_cell += n_cols
+                x = t_ring[0]
+                y = t_ring[1]
+            for jt in range(n_cols):
+                if not t_cyl:
+                    y = t_first[1] + float(jt) * t_step[1]
+                for kt in range(nt[2]):
+                    lever = r_rel * wp.vec3(x, y, t_first[2] + float(kt) * t_step[2])
+                    f = wp.vec3(0.0)
+                    b = wp.vec3(0.0)
+                    if s_cyl:
+                        f, b = cylinder_ring_source_sum(s_ring, s_cells, s_size, ns[2], ms, mt, t_rel + lever)
+                    else:
+                        f, b = cuboid_source_sum(s_size, ns, ms, mt, t_rel + lever)
+                    force += f
+                    torque += wp.cross(lever, f)
+                    b_sum += b
+                if t_cyl:
+                    tmp = x * t_ring[2] - y * t_ring[3]
+                    y = y * t_ring[2] + x * t_ring[3]
+                    x = tmp
     # every target dipole has the same moment: Σ mt × B_k = mt × Σ B_k
     return force, torque + wp.cross(mt, b_sum)
 
@@ -388,14 +418,15 @@ def dipoles_pair_wrench(
     summed and the target's follows from the pair's conservation laws, which every point-dipole pair obeys exactly:
     F_t = −F_s, T_t = −T_s + (c_t − c_s) × F_s (equal to the direct sum to float rounding).
     """
-    ns = dipole_grid_count(s_shape, s_size, dipole_grid_dims(s_shape, s_size, density))
-    nt = dipole_grid_count(t_shape, t_size, dipole_grid_dims(t_shape, t_size, density))
-    if nt <= ns:
-        return dipoles_pair_wrench_direct(s_shape, s_size, s_m, t_shape, t_size, t_m, r_rel, t_rel, density)
+    per_m = wp.pow(density, 1.0 / 3.0)
+    ns = dipole_grid_dims(s_shape, s_size, density)
+    nt = dipole_grid_dims(t_shape, t_size, density)
+    if dipole_grid_count(t_shape, t_size, nt) <= dipole_grid_count(s_shape, s_size, ns):
+        return dipoles_pair_wrench_direct(s_shape, s_size, s_m, t_shape, t_size, t_m, r_rel, t_rel, per_m, ns, nt)
     # the roles swapped: the source seen from the target's frame
     r_inv = wp.transpose(r_rel)
     f_s, tq_s = dipoles_pair_wrench_direct(t_shape, t_size, t_m, s_shape, s_size, s_m, r_inv, -(r_inv * t_rel),
-                                           density)
+                                           per_m, nt, ns)
     f_s = r_rel * f_s
     tq_s = r_rel * tq_s
     return -f_s, wp.cross(t_rel, f_s) - tq_s
