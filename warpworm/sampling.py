@@ -59,7 +59,9 @@ def _fill_gait_presets(d: rnd.Draws) -> None:
 
 
 def worm_params(cfg, draws: rnd.Draws, sel: np.ndarray | slice = slice(None)) -> WormParams:
-    """WormParams for the selected worlds of ``draws`` (the batch-shared fields must be equal over ``sel``)."""
+    """WormParams for the selected worlds of ``draws``. ``gait``, ``backward`` and ``magnet_model`` are one value
+    when equal over ``sel`` (always, for the fields of :data:`warpworm.config.BATCH_SHARED`, by which the job splits
+    its batches), else (W,) arrays."""
     p = WormParams(n_units=cfg.sim.n_units)
     for name, arr in draws.values.items():
         group, key = name.split(".", 1)
@@ -67,7 +69,9 @@ def worm_params(cfg, draws: rnd.Draws, sel: np.ndarray | slice = slice(None)) ->
             continue
         a = arr[sel]
         if key in _WORM_SHARED:
-            setattr(p, key, bool(a[0]) if key == "backward" else str(a[0]))
+            v = np.asarray(a).astype(bool if key == "backward" else str)
+            one = bool(v[0]) if key == "backward" else str(v[0])
+            setattr(p, key, one if (v == v[0]).all() else v)
         elif not any(key in comps for comps in _WORM_VECTOR.values()):
             setattr(p, key, np.asarray(a, dtype=np.float64))
     for vec, comps in _WORM_VECTOR.items():
@@ -98,14 +102,7 @@ def randomized_params(cfg_name_or_cfg, num_worlds: int, seed: int) -> WormParams
     if len(models) > 1:
         raise ConfigError([f"randomize.worm.magnet_model: drew {models} over {n} worlds; expected one value (the "
                            "force model is shared by the solver batch: make it a constant)"])
-    p = worm_params(cfg, d)
-    gait = np.asarray(d["worm.gait"]).astype(str)
-    back = np.asarray(d["worm.backward"]).astype(bool)
-    if len(set(gait.tolist())) > 1:
-        p.gait = gait
-    if len(set(back.tolist())) > 1:
-        p.backward = back
-    return p
+    return worm_params(cfg, d)
 
 
 def draw_group(cfg, group: str, index: np.ndarray) -> rnd.Draws:
