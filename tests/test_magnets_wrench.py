@@ -276,12 +276,13 @@ def _dipoles_double_sum(src, tgt, ps, Rs, pt, Rt, density=mg.DEFAULT_DENSITY):
                          ids=["epm-ipm", "ipm-epm", "ipm-ipm", "cube-epm"])
 def test_dipoles_equal_float64_double_sum(pair):
     """The kernel's summation (columns of the larger grid inner; a target with more dipoles than its source through
-    the pair's conservation laws) against the literal double sum in float64. Measured: F <= 1.6e-6, T <= 1.1e-5
-    relative (the EPM's torque from a disk is the difference of a lever term ~10x larger)."""
+    the pair's conservation laws) against the literal double sum in float64. Measured at these poses: F, T <= 6e-7
+    relative (at the benchmark's worm worlds the EPM's torque from the disks reaches 1.2e-5: there it is the small
+    difference of the reaction's lever term and the disks' torques)."""
     src, tgt = pair
     ps, Rs, pt, Rt = _random_pairs(4, seed=13, dist=(0.03, 0.05))
     F, T = mg.wrench(src, tgt, (ps, Rs), (pt, Rt), model="dipoles")
     for k in range(4):
         Fr, Tr = _dipoles_double_sum(src, tgt, ps[k], Rs[k], pt[k], Rt[k])
-        assert np.linalg.norm(F[k] - Fr) < 1e-5 * np.linalg.norm(Fr), (k, F[k], Fr)
-        assert np.linalg.norm(T[k] - Tr) < 5e-5 * np.linalg.norm(Tr), (k, T[k], Tr)
+        assert np.linalg.norm(F[k] - Fr) < 5e-6 * np.linalg.norm(Fr), (k, F[k], Fr)
+        assert np.linalg.norm(T[k] - Tr) < 5e-6 * np.linalg.norm(Tr), (k, T[k], Tr)
