@@ -7,13 +7,14 @@ on the EPM (``epm_wrench=False``, what the dynamics uses: 9 ordered pairs).
 
 Columns: ``ms_per_call`` (process CPU time, best of repeats, after a warm-up that includes compilation: Warp runs a
 CPU launch on the calling thread, and on a shared machine CPU time leaves out the time the scheduler gave to other
-processes, which wall time would count; the best repeat is the least disturbed one), ``us_per_world``, ``pairs_per_s`` (point-dipole pair interactions
-per second, 'dipoles' model: 19,296 per world at 64/cm³, 10,080 without the EPM's wrench), ``vs_nbody`` (that rate
-over the plain inverse-square n-body kernel's, timed in launches interleaved with the row's repeats;
-``vs_dipole_nbody``: over the plain point-dipole force+field n-body row of the same run), ``field_evals_per_s`` ('analytic': closed-form source-field evaluations
-at quadrature points). magpylib rows run ``getFT`` for the same 12 pair wrenches per world (meshing 1000 cells per
-target, ~1e-4 agreement) for small W only; ``magpylib_est`` rows extrapolate that per-world cost linearly to larger
-W and are labelled as estimates.
+processes, which wall time would count; the best repeat is the least disturbed one), ``us_per_world``,
+``pairs_per_s`` (point-dipole pair interactions per second, 'dipoles' model: 19,296 per world at 64/cm³, 10,080
+without the EPM's wrench), ``vs_nbody`` (that rate over the plain inverse-square n-body kernel's, timed in launches
+interleaved with the row's repeats; ``vs_dipole_nbody``: over the plain point-dipole force+field n-body row of the
+same run), ``field_evals_per_s`` ('analytic': closed-form source-field evaluations at quadrature points).
+magpylib rows run ``getFT`` for the same 12 pair wrenches per world (meshing 1000 cells per target, ~1e-4
+agreement) for small W only; ``magpylib_est`` rows extrapolate that per-world cost linearly to larger W and are
+labelled as estimates.
 
 Before/after in one run: with ``WARPWORM_BENCH_BASELINE=<git revision>`` in the environment, the kernel modules of
 that revision (``kernels/magnet_fields.py``, ``kernels/magnet_wrench.py``, read with ``git show``) are loaded under
@@ -39,7 +40,8 @@ from warpworm import quiet_warp
 
 NBODY_BODIES = 2048
 NOTES = ("pairs_per_s: point-dipole pair interactions/s ('dipoles', 19,296 per world at 64/cm³ with the wrench on the "
-         "EPM, 10,080 without; epm=False is what the dynamics runs); vs_nbody: that rate over the inverse-square n-body "
+         "EPM, 10,080 without; epm=False is what the dynamics runs); vs_nbody: that rate over the inverse-square "
+         "n-body "
          "kernel's, timed interleaved with the row (vs_dipole_nbody: over the point-dipole force+field n-body row). "
          "speedup: the warpworm@<rev> row's time over this one's (WARPWORM_BENCH_BASELINE). magpylib_est rows are "
          "linear extrapolations of the measured magpylib per-world cost, not measurements.")
