@@ -26,6 +26,11 @@ import sys
 import time
 from pathlib import Path
 
+# one BLAS thread (set before NumPy loads): the NumPy reference is compared per core, like Warp's CPU kernels (one
+# thread each); spinning BLAS threads would also bill idle CPU time to it on a shared machine
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
