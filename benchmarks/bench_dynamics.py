@@ -61,14 +61,15 @@ def timeit(fn, device, min_time: float = 0.5, max_reps: int = 200) -> float:
             return el / reps
 
 
-def gait_sim(W: int, magnet_model: str = "analytic", device: str = "cpu"):
+def gait_sim(W: int, magnet_model: str = "analytic", device: str = "cpu", solver: str = "band"):
     """The peristaltic preset on ``W`` worlds at the gait setting, settled briefly: (model, sim, state)."""
     from warpworm import gaits
     from warpworm.model import Model
     from warpworm.simulator import Simulator
 
     model = Model.from_params(gaits.preset_params("peristaltic", magnet_model=magnet_model), W, device)
-    sim = Simulator(model, dt=gaits.DEFAULT_DT, substeps=gaits.DEFAULT_SUBSTEPS)
+    kw = {} if solver == "band" else {"solver": solver}  # the one-thread-per-world band solve is the default
+    sim = Simulator(model, dt=gaits.DEFAULT_DT, substeps=gaits.DEFAULT_SUBSTEPS, **kw)
     state = sim.initial_state()
     sim.settle(state, 2 * sim.dt)  # compiles (and on CUDA captures) the step
     return model, sim, state
@@ -195,44 +196,65 @@ def newton_row(device: str = "cpu", *, dt: float = 5.0e-5, hinge_scale: float = 
 # ---------------------------------------------------------------------------------------------------------------------
 
 
-def compare(device: str = "cpu", sizes=None, quick: bool = False) -> list[dict]:
-    """The one table of ``python benchmarks/run.py``: per W, warpworm's whole gait steps (analytic magnets) and its
-    substeps alone, then the NumPy reference of the substep and Newton on the same mesh, measured in this run.
+def solvers_for(device) -> tuple:
+    """The solvers to compare: every ``simulator.SOLVERS`` entry on CUDA (the tile paths are the GPU's), the default
+    band solve on the CPU."""
+    from warpworm import simulator
 
-    ``sizes`` default: (1, 64) on the CPU (quick: (1, 16)), (1024, 16384, 65536) on CUDA. The NumPy reference runs
-    at the smallest W only on CUDA (a dense 117-unknown solve per world: 64k worlds would take minutes).
+    if wp.get_device(device).is_cuda:
+        return tuple(getattr(simulator, "SOLVERS", ("band",)))
+    return ("band",)
+
+
+def compare(device: str = "cpu", sizes=None, quick: bool = False, solvers=None) -> list[dict]:
+    """The one table of ``python benchmarks/run.py``: per W (and solver, :func:`solvers_for`), warpworm's whole gait
+    steps (analytic magnets) and its substeps alone, then the NumPy reference of the substep and Newton on the same
+    mesh, measured in this run.
+
+    ``sizes`` default: (1, 64) on the CPU (quick: (1, 16)), (1024, 16384, 65536) on CUDA. The gait step is timed over
+    one EPM cycle (a quarter with ``quick`` or on CUDA). The NumPy reference runs at the smallest W only on CUDA (a
+    dense 117-unknown solve per world on the host: 64k worlds would take minutes).
     """
     quiet_warp()
     wp.init()
     cuda = wp.get_device(device).is_cuda
     if sizes is None:
         sizes = (1024, 16384, 65536) if cuda else ((1, 16) if quick else (1, 64))
+    solvers = tuple(solvers or solvers_for(device))
     min_time = 0.2 if quick else 0.5
     rows = []
     for W in sizes:
-        model, sim, state = gait_sim(W, "analytic", device)
-        S, (clock, base) = sim.substeps, clock_for(device)
-        # whole steps over an EPM cycle (a quarter with quick): the analytic wrench costs more when the EPM is near
-        # (composite panels), so the gait's start alone (EPM far) would flatter it
-        n = max(1, int(round(float(np.max(np.asarray(model.params.cycle_period))) / sim.dt / (4 if quick else 1))))
-        t0 = clock()
-        sim.step(state, n)
-        wp.synchronize_device(device)
-        t_step = (clock() - t0) / n
-        t_sub = timeit(lambda: sim.run_substeps(state, S), device, min_time) / S
-        common = {"device": str(model.device), "W": W, "substep_us": 1e6 * sim.dt_sub, "time_base": base}
-        rows.append({"system": "warpworm gait step (analytic magnets)", **common, "step_rate": W * S / t_step,
-                     "sim_s_per_wall_s": W * sim.dt / t_step,
-                     "note": f"1 wrench + 4 substeps per 4 ms, {n} steps of the peristaltic gait"})
-        rows.append({"system": "warpworm substeps alone", **common, "step_rate": W / t_sub,
-                     "sim_s_per_wall_s": W * sim.dt_sub / t_sub, "note": "implicit_step, 3 Newton"})
-        if not cuda or W == min(sizes):
-            t_np = numpy_substep_time(model, sim, state, min_time)
-            rows.append({"system": "NumPy reference substep", "device": "cpu", "W": W, "substep_us": 1e6 * sim.dt_sub,
-                         "time_base": "process CPU time", "step_rate": W / t_np,
-                         "sim_s_per_wall_s": W * sim.dt_sub / t_np,
-                         "note": "float64 dense solve, no floor"})
-        del model, sim, state
+        for solver in solvers:
+            try:
+                model, sim, state = gait_sim(W, "analytic", device, solver)
+            except Exception as exc:  # e.g. a solver that does not fit this device: one row says so
+                rows.append({"system": f"warpworm ({solver})", "device": str(device), "W": W,
+                             "note": f"failed: {type(exc).__name__}: {exc}"[:160]})
+                continue
+            S, (clock, base) = sim.substeps, clock_for(device)
+            # whole steps over an EPM cycle (a quarter with quick / on CUDA): the analytic wrench costs more when the
+            # EPM is near (composite panels), so the gait's start alone (EPM far) would flatter it
+            period = float(np.max(np.asarray(model.params.cycle_period)))
+            n = max(1, int(round(period / sim.dt / (4 if (quick or cuda) else 1))))
+            t0 = clock()
+            sim.step(state, n)
+            wp.synchronize_device(device)
+            t_step = (clock() - t0) / n
+            t_sub = timeit(lambda: sim.run_substeps(state, S), device, min_time) / S
+            tag = "" if solver == "band" and len(solvers) == 1 else f", {solver}"
+            common = {"device": str(model.device), "W": W, "substep_us": 1e6 * sim.dt_sub, "time_base": base}
+            rows.append({"system": f"warpworm gait step (analytic magnets{tag})", **common,
+                         "step_rate": W * S / t_step, "sim_s_per_wall_s": W * sim.dt / t_step,
+                         "note": f"1 wrench + 4 substeps per 4 ms, {n} steps of the peristaltic gait"})
+            rows.append({"system": f"warpworm substeps alone{tag.replace(', ', ' (') + ')' if tag else ''}",
+                         **common, "step_rate": W / t_sub, "sim_s_per_wall_s": W * sim.dt_sub / t_sub,
+                         "note": "implicit substeps, 3 Newton"})
+            if solver == solvers[0] and (not cuda or W == min(sizes)):
+                t_np = numpy_substep_time(model, sim, state, min_time)
+                rows.append({"system": "NumPy reference substep", "device": "cpu", "W": W,
+                             "substep_us": 1e6 * sim.dt_sub, "time_base": "process CPU time", "step_rate": W / t_np,
+                             "sim_s_per_wall_s": W * sim.dt_sub / t_np, "note": "float64 dense solve, no floor"})
+            del model, sim, state
     try:
         rows.append(newton_row("cpu"))
     except Exception as exc:  # an API change in an optional package must not sink the table
@@ -240,7 +262,7 @@ def compare(device: str = "cpu", sizes=None, quick: bool = False) -> list[dict]:
                      "note": f"failed: {type(exc).__name__}: {exc}"[:160]})
     ref = {r["W"]: r["step_rate"] for r in rows if r["system"] == "NumPy reference substep"}
     for r in rows:
-        if r["system"] == "warpworm substeps alone" and r["W"] in ref:
+        if r["system"].startswith("warpworm substeps alone") and r["W"] in ref:
             r["vs_numpy"] = r["step_rate"] / ref[r["W"]]
     return rows
 

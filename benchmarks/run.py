@@ -91,18 +91,21 @@ SUMMARY_COLUMNS = ("system", "device", "W", "substep_us", "step_rate", "sim_s_pe
                    "unit", "time_base", "note")
 
 
-def summary(quick: bool, device: str) -> list[dict]:
-    """The rows of the summary table (see the module docstring), each stage guarded so one failure is one row."""
+def summary(quick: bool, device: str):
+    """The rows of the summary table (see the module docstring), yielded as they grow (after the dynamics, the
+    renderer, the pipeline) so that a run stopped by a time limit still leaves what it measured; each stage guarded
+    so one failure is one row."""
     modules = discover()
     rows = []
     dyn = load("dynamics", modules["dynamics"])
     rows += [{**r, "unit": "worm-substeps/s"} for r in dyn.compare(device, quick=quick)]
+    yield rows
     for name, label in (("render", "warpworm rasterizer"), ("dataset", "warpworm generate")):
         try:
             rows.append(load(name, modules[name]).headline(device, quick=quick))
         except Exception as exc:  # report, keep the table
             rows.append({"system": label, "device": device, "note": f"failed: {type(exc).__name__}: {exc}"[:160]})
-    return rows
+        yield rows
 
 
 SUMMARY_NOTES = ("step_rate: worm-substeps/s (1 ms substeps; Newton's: its own steps); sim_s_per_wall_s: simulated "
@@ -139,12 +142,13 @@ def main(argv=None) -> int:
     out_dir.mkdir(parents=True, exist_ok=True)
     if not names:
         t0 = time.perf_counter()
-        rows = summary(args.quick, device)
-        elapsed = time.perf_counter() - t0
+        for rows in summary(args.quick, device):  # written as it grows
+            elapsed = time.perf_counter() - t0
+            path = _write(out_dir, "summary", _meta("summary", args.quick, device, elapsed), rows, SUMMARY_NOTES)
         print(f"\n== summary on {device} ({'quick' if args.quick else 'full'}, {elapsed:.1f} s) ==")
         print(table(rows, SUMMARY_COLUMNS))
         print(SUMMARY_NOTES)
-        print(f"wrote {_write(out_dir, 'summary', _meta('summary', args.quick, device, elapsed), rows, SUMMARY_NOTES)}")
+        print(f"wrote {path}")
         return 0
     for name in names:
         module = load(name, available[name])
