@@ -3,7 +3,8 @@ the ``newton`` package is importable, Newton on the same mesh.
 
 Rows of :func:`run` (one per device, magnet model and W), in the gait setting (peristaltic preset,
 ``gaits.DEFAULT_DT`` = 4 ms steps of ``gaits.DEFAULT_SUBSTEPS`` = 4 substeps of 1 ms):
-- ``step_rate``: worm-substeps/s of whole steps (1 magnetic wrench + 4 substeps): what a gait run gets;
+- ``step_rate``: worm-substeps/s of whole steps (1 magnetic wrench + 4 substeps), timed at the gait's start (the EPM
+  far: the analytic wrench is cheaper there than over a cycle; :func:`compare` times a whole cycle);
 - ``substep_rate``: worm-substeps/s of the substeps alone (``Simulator.run_substeps``: the one launch of
   ``implicit_euler.implicit_step``);
 - ``wrench_ms_per_world``: one magnetic-wrench evaluation (poses, wrench, distribution) per world;
