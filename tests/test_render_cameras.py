@@ -77,5 +77,25 @@ def test_render_command_writes_contact_sheet(tmp_path):
     sheet = cv2.imread(str(tmp_path / "contact_sheet.png"))
     assert sheet is not None and sheet.shape[0] > 4 * 64 and sheet.shape[1] >= 3 * 64
     data = np.load(tmp_path / "labels.npz")
-    assert data["rgb"].shape == (4, 64, 64, 3) and data["keypoints_2d"].shape == (4, 16, 2)
+    assert data["rgb"].shape == (4, 64, 64, 3) and data["keypoints/pixel"].shape == (4, 16, 2)
     assert data["seg"].max() <= 10
+
+
+def test_render_command_simulates_worlds_drawn_from_the_config(tmp_path):
+    """--source sim: the worlds are the default config's draws (those of a dataset job's first trajectories with
+    that seed), with the command's gait; the labels are the dataset schema's."""
+    from warpworm.cli import main
+    from warpworm.commands.render import simulate_states
+    from warpworm.config import load_config
+    from warpworm.sampling import randomized_params
+
+    cfg = load_config("default", ["randomize.worm.gait=omega"], seed=3)
+    snap, model = simulate_states(cfg, 2, 3, "omega", 0.02, "cpu")
+    p = randomized_params(cfg, 2, 3)
+    np.testing.assert_array_equal(np.asarray(model.params.hinge_stiffness), np.asarray(p.hinge_stiffness))
+    assert np.all(np.asarray(model.params.gait) == "omega") and snap["positions"].shape[0] == 2
+    rc = main(["render", "--worlds", "2", "--cameras", "1", "--size", "48", "--out", str(tmp_path), "--gait", "omega",
+               "--sim-time", "0.02", "--json"])
+    assert rc == 0
+    data = np.load(tmp_path / "labels.npz")
+    assert data["poses/body"].shape == (2, 4, 4) and data["keypoints/visibility"].shape == (2, 16)

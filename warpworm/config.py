@@ -101,7 +101,7 @@ def _worm_specs() -> dict[str, ParamSpec]:
         "magnet_model": ParamSpec(_WP.magnet_model, "", values=MAGNET_MODELS, doc="magnet force model"),
     }
     # Path (and other) fields that the gait presets tune default to NaN = "the preset's value for the sample's gait",
-    # so a config that only names a gait gets the tuned path (resolved per sample in warpworm.pipeline.draw_worm).
+    # so a config that only names a gait gets the tuned path (resolved per sample in warpworm.sampling.draw_worm).
     from .gaits import GAIT_PRESETS
 
     for key in sorted({k for preset in GAIT_PRESETS.values() for k in preset}):
@@ -174,8 +174,9 @@ PARAM_SPECS: dict[str, dict[str, ParamSpec]] = {
 }
 """Every randomizable parameter. ``params/<group>.<name>`` in the files holds each sample's value."""
 
-# Parameters that are shared by one solver batch: a batch is split into groups by these.
-BATCH_SHARED = ("worm.gait", "worm.backward", "worm.magnet_model")
+# Parameters that are shared by one solver batch: a batch is split into groups by these. Gait and direction are
+# per-world parameters (the EPM path is per world); the magnet model is a different branch of the wrench kernel.
+BATCH_SHARED = ("worm.magnet_model",)
 
 
 # ---------------------------------------------------------------------------------------------------------------------

@@ -57,9 +57,13 @@ def stream_id(name: str) -> int:
 
 
 def sample_keys(seed: int, index: np.ndarray, attempt: np.ndarray | int = 0) -> np.ndarray:
-    """Per-sample 64-bit keys for (seed, index, attempt), shape of ``index``, uint64."""
+    """Per-sample 64-bit keys for (seed, index, attempt), shape of ``index``, uint64.
+
+    The seed is mixed before the index joins it: unmixed, seed ^ (index + golden) made (seed s, index i) and
+    (s + 1, i − 1) collide for even s, so seeds 0, 1, 2 drew the same samples shifted by one (seed 0 is unchanged:
+    the mixer maps 0 to 0)."""
     index = np.asarray(index, dtype=np.uint64)
-    h = _combine(np.full(index.shape, np.uint64(seed & 0xFFFFFFFFFFFFFFFF)), index)
+    h = _combine(np.full(index.shape, _mix64(np.uint64(seed & 0xFFFFFFFFFFFFFFFF))), index)
     return _combine(h, np.broadcast_to(np.asarray(attempt, dtype=np.uint64), index.shape))
 
 

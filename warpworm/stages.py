@@ -151,18 +151,15 @@ class WarpStages:
         model = Model.from_params(params, num_worlds, device=cfg.sim.device)
         sim = Simulator(model, dt=cfg.sim.dt, substeps=cfg.sim.substeps)
         state = sim.initial_state()
-        rest = sim.snapshot(state)["positions"]  # per-world rest geometry (a, b, l0 may differ per world)
+        rest = model.rest_positions_host.astype(np.float32)  # per-world rest geometry (a, b, l0 may differ)
         sim.settle(state, cfg.sim.settle_time)
-        keep = ("positions", "magnet_pos", "magnet_rot", "crease_angle", "bar_strain")
-        frames, unstable, steps_done = [], np.zeros(num_worlds, bool), 0
-        for t in cfg.sim.frame_times:
-            n = int(round(t / cfg.sim.dt)) - steps_done
-            if n > 0:
-                sim.step(state, n)
-                steps_done += n
-            snap = sim.snapshot(state)
-            unstable |= snap["unstable"] | ~np.isfinite(snap["positions"]).all(axis=(1, 2))
-            frames.append({**{k: snap[k] for k in keep}, "rest_positions": rest})
+        keep = ("positions", "magnet_pos", "magnet_rot", "crease_angle", "bar_strain", "unstable")
+        frames = sim.run(state, cfg.sim.frame_times, keys=keep)
+        unstable = np.zeros(num_worlds, bool)
+        for f in frames:
+            unstable |= f.pop("unstable") | ~np.isfinite(f["positions"]).all(axis=(1, 2))
+            f.pop("clock")
+            f["rest_positions"] = rest
         return SimResult(frames=frames, unstable=unstable)
 
     def _renderer(self, cfg):

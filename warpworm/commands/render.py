@@ -3,15 +3,17 @@
 Outputs in ``--out``:
 - ``contact_sheet.png``: one row per image (RGB | depth colour map | segmentation overlay with keypoints, boxes and
   the body axes), for the first ``--sheet-rows`` images;
-- ``labels.npz``: every label array of :func:`warpworm.render.labels.compute_labels` (leading axis = image), plus
-  ``rgb``, ``depth`` [m] (0 = background), ``seg`` and ``keypoint_names``.
+- ``labels.npz``: every label array of :func:`warpworm.render.labels.schema_labels`, under the dataset schema's
+  names (leading axis = image), plus ``rgb``, ``depth`` [m] (0 = background), ``seg`` and ``keypoint_names``.
+
+Every draw is the default dataset config's: the worlds' parameters (:func:`warpworm.sampling.randomized_params`),
+their look (:func:`warpworm.sampling.sample_appearance`) and sensor effects, through the one counter-based generator.
 """
 
 from __future__ import annotations
 
 import json
 import time
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -24,7 +26,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--cameras", type=int, default=2, help="cameras per world C (default 2)")
     parser.add_argument("--out", default="render_out", help="output folder (default ./render_out)")
     parser.add_argument("--size", type=int, default=256, help="image width = height [px] (default 256)")
-    parser.add_argument("--seed", type=int, default=0, help="master seed (appearance, cameras, poses, sensor)")
+    parser.add_argument("--seed", type=int, default=0, help="master seed (parameters, appearance, cameras, poses, "
+                        "sensor), as a dataset job's --seed")
+    parser.add_argument("--config", default="default", help="dataset config whose distributions are drawn from")
     parser.add_argument("--source", choices=["sim", "posed"], default="sim",
                         help="sim: run the simulator's gait for --sim-time; posed: bent rest worms (no physics)")
     parser.add_argument("--gait", choices=["peristaltic", "omega", "inchworm"], default="peristaltic")
@@ -36,24 +40,19 @@ def add_arguments(parser) -> None:
     parser.add_argument("--json", action="store_true", help="print a JSON summary only")
 
 
-def simulate_states(num_worlds: int, seed: int, gait: str, sim_time: float, device=None) -> tuple[dict, object]:
-    """Run the gait preset on W worlds whose EPM path (closest approach, amplitude, period) varies per world.
+def simulate_states(cfg, num_worlds: int, seed: int, gait: str, sim_time: float, device=None) -> tuple[dict, object]:
+    """Run ``gait`` on W worlds drawn as a dataset job of ``cfg`` with master ``seed`` draws its trajectories
+    (material, magnets, EPM path; :func:`warpworm.sampling.randomized_params`); ``cfg`` draws ``gait`` only.
 
     Returns (snapshot dict, model).
     """
-    from warpworm import gaits
+    from warpworm import gaits, sampling
     from warpworm.model import Model
-    from warpworm.render.seeding import uniforms
     from warpworm.simulator import Simulator
 
-    p = gaits.preset_params(gait)
-    u = uniforms(np.arange(num_worlds) + 1000 * seed, 0x5114, 3)
-
-    def vary(name, rel, k):
-        return float(np.mean(getattr(p, name))) * (1 + rel * (2 * u[:, k] - 1))
-
-    p = replace(p, closest_approach=vary("closest_approach", 0.15, 0), amplitude=vary("amplitude", 0.2, 1),
-                cycle_period=vary("cycle_period", 0.3, 2))
+    p = sampling.randomized_params(cfg, num_worlds, seed)
+    if np.any(np.asarray(p.gait) != gait):
+        raise ValueError(f"randomize.worm.gait: the config draws {p.gait!r}; expected {gait!r}")
     model = Model.from_params(p, num_worlds, device)
     sim = Simulator(model, dt=gaits.DEFAULT_DT, substeps=gaits.DEFAULT_SUBSTEPS)
     state = sim.initial_state()
@@ -62,22 +61,25 @@ def simulate_states(num_worlds: int, seed: int, gait: str, sim_time: float, devi
 
 
 def main(args) -> int:
-    from warpworm.render import Renderer, sample_appearance, sample_cameras, scene_from_snapshot
+    from warpworm import sampling
+    from warpworm.config import load_config
+    from warpworm.randomize import derive_seeds
+    from warpworm.render import Renderer, sample_cameras, scene_from_snapshot
     from warpworm.render.contact_sheet import contact_sheet, save_png
     from warpworm.render.demo import default_pattern, posed_worm_states
-    from warpworm.render.labels import KEYPOINT_NAMES, compute_labels
-    from warpworm.render.seeding import derive_seeds
+    from warpworm.render.labels import KEYPOINT_NAMES, schema_labels
     from warpworm.render.sensor import apply_sensor
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     W, C, S = int(args.worlds), int(args.cameras), int(args.size)
+    cfg = load_config(args.config, [f"randomize.worm.gait={args.gait}"], seed=int(args.seed))
     t0 = time.perf_counter()
     notes = []
     params = None
     rest = None
     if args.source == "sim":
-        states, model = simulate_states(W, args.seed, args.gait, args.sim_time, args.device)
+        states, model = simulate_states(cfg, W, args.seed, args.gait, args.sim_time, args.device)
         pattern, params, rest = model.pattern, model.params, model.rest_positions_host
         bad = np.asarray(states["unstable"]) | ~np.isfinite(states["positions"]).all(axis=(1, 2))
         if bad.any():
@@ -93,7 +95,7 @@ def main(args) -> int:
         states = posed_worm_states(derive_seeds(args.seed, W, 3), pattern)
     t_sim = time.perf_counter() - t0
 
-    appearance = sample_appearance(derive_seeds(args.seed, W, 1))
+    appearance = sampling.sample_appearance(cfg, np.arange(W))
     scene = scene_from_snapshot(states, pattern, params, appearance=appearance)
     N = W * C
     cams = sample_cameras(derive_seeds(args.seed, N, 2), states["positions"], width=S, height=S,
@@ -102,23 +104,27 @@ def main(args) -> int:
     renderer = Renderer(S, S, device=args.device)
     images = renderer.render(scene, cams)
     t_render = time.perf_counter() - t1
-    labels = compute_labels(states, pattern, cams, images, rest_positions=rest,
-                            ipm_diameter=1e-2 if params is None else params.ipm_diameter)
-    shown = apply_sensor(images["rgb"][: args.sheet_rows], derive_seeds(args.seed, N, 4)[: args.sheet_rows]) \
-        if args.sensor else None
+    labels = schema_labels(states, pattern, cams, images, rest_positions=rest,
+                           ipm_diameter=1e-2 if params is None else params.ipm_diameter)
+    shown = None
+    if args.sensor:
+        rows = cams.world[: args.sheet_rows]
+        values = sampling.sensor_values(sampling.appearance_draws(cfg, np.asarray(rows)))
+        shown = apply_sensor(images["rgb"][: args.sheet_rows], derive_seeds(args.seed, N, 4)[: args.sheet_rows],
+                             values=values)
     titles = [f"world {w} cam {i % C}" for i, w in enumerate(cams.world)]
-    sheet = contact_sheet(images, labels, rgb=shown, max_rows=args.sheet_rows, titles=titles,
-                          scale=max(1.0, 192.0 / S))
+    sheet = contact_sheet({**images, "camera/K": cams.K, "camera/R": cams.R, "camera/t": cams.t}, labels, rgb=shown,
+                          max_rows=args.sheet_rows, titles=titles, scale=max(1.0, 192.0 / S))
     save_png(out / "contact_sheet.png", sheet)
     np.savez_compressed(out / "labels.npz", rgb=images["rgb"], depth=images["depth"], seg=images["seg"],
-                        keypoint_names=np.array(KEYPOINT_NAMES), **labels)
+                        keypoint_names=np.array(KEYPOINT_NAMES), **labels)  # keys as the dataset's, e.g. "poses/body"
     summary = {
         "worlds": W, "images": N, "size": S, "source": args.source, "cameras_accepted": int(cams.accepted.sum()),
         "sim_or_pose_s": round(t_sim, 3), "render_s": round(t_render, 3),
-        "visible_keypoints": int((labels["keypoint_visibility"] == 2).sum()),
-        "occluded_keypoints": int((labels["keypoint_visibility"] == 1).sum()),
-        "outside_keypoints": int((labels["keypoint_visibility"] == 0).sum()),
-        "mean_visible_fraction": float(labels["visible_fraction"].mean()),
+        "visible_keypoints": int((labels["keypoints/visibility"] == 2).sum()),
+        "occluded_keypoints": int((labels["keypoints/visibility"] == 1).sum()),
+        "outside_keypoints": int((labels["keypoints/visibility"] == 0).sum()),
+        "mean_visible_fraction": float(labels["labels/visib_fract"].mean()),
         "files": [str(out / "contact_sheet.png"), str(out / "labels.npz")], "notes": notes,
     }
     if args.json:
