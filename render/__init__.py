@@ -15,7 +15,6 @@ from warpworm.render.scene import (
     build_scene,
     default_appearance,
     hsv_to_rgb,
-    sample_appearance,
     scene_from_snapshot,
 )
 
@@ -32,7 +31,6 @@ __all__ = [
     "intrinsics",
     "look_at",
     "make_cameras",
-    "sample_appearance",
     "sample_cameras",
     "scene_from_snapshot",
 ]

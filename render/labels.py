@@ -263,15 +263,3 @@ def _image_labels(images: dict, uv: np.ndarray, z: np.ndarray, tol: np.ndarray) 
         "labels/visib_fract": np.where(nt > 0, nv / np.maximum(nt, 1), 0.0).astype(np.float32),
         "labels/worm_mask": images["worm_mask"].astype(np.uint8),
     }
-
-
-def compute_labels(states: dict, body, cameras: Cameras, images: dict | None = None, **kwargs) -> dict:
-    """:func:`schema_labels` plus ``camera/K``, ``camera/R``, ``camera/t`` and the three names
-    ``warpworm/commands/render.py`` still reads (``keypoints_2d``, ``keypoint_visibility``, ``visible_fraction``).
-    For that command only, until it reads the schema names; then this goes."""
-    out = schema_labels(states, body, cameras, images, **kwargs)
-    out.update({"camera/K": cameras.K, "camera/R": cameras.R, "camera/t": cameras.t,
-                "keypoints_2d": out["keypoints/pixel"]})
-    if images is not None:
-        out.update({"keypoint_visibility": out["keypoints/visibility"], "visible_fraction": out["labels/visib_fract"]})
-    return out

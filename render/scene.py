@@ -135,16 +135,6 @@ def hsv_to_rgb(h, s, v):
     return np.take_along_axis(table, i[None, ..., None].repeat(3, -1), 0)[0]
 
 
-def sample_appearance(seeds) -> Appearance:
-    """Randomized look per world, one seed (any integer id) per world: the packaged ``default`` config's ``light /
-    color / texture`` distributions drawn with the counter-based generator (:func:`warpworm.sampling.sample_appearance`,
-    the one appearance randomizer). Kept for ``warpworm/commands/render.py`` and ``benchmarks/bench_render.py``; new
-    code calls :func:`warpworm.sampling.sample_appearance` with its own config."""
-    from warpworm.sampling import sample_appearance as from_config
-
-    return from_config(_default_config(), np.asarray(seeds).reshape(-1))
-
-
 def _default_config():
     global _DEFAULT_CONFIG
     if _DEFAULT_CONFIG is None:
@@ -356,4 +346,4 @@ def scene_from_snapshot(snapshot: dict, pattern, params=None, *, rest_vertices=N
 
 
 __all__ = ["LABEL_NAMES", "Appearance", "SceneBatch", "box_mesh", "build_scene", "default_appearance", "disk_mesh",
-           "floor_frame", "sample_appearance", "scene_from_snapshot"]
+           "floor_frame", "scene_from_snapshot"]

@@ -67,11 +67,8 @@ def test_seed_uniforms_are_the_counter_generator_keyed_by_seed():
         x = mix((s * 0x9E3779B97F4A7C15 + stream * 0xD1B54A32D192ED03) & M)
         want = [(mix(x ^ (((j + 1) * 0x9E3779B97F4A7C15) & M)) >> 11) / 2.0**53 for j in range(5)]
         assert got[i].tolist() == want
-    # batch-independent, and render.seeding is the same function (one generator)
+    # batch-independent
     assert np.array_equal(rnd.seed_uniforms(seeds[1:2], stream, 5)[0], got[1])
-    from warpworm.render import seeding
-
-    assert seeding.uniforms is rnd.seed_uniforms and seeding.derive_seeds is rnd.derive_seeds
 
 
 def test_randomized_params_are_the_dataset_jobs_draws():
