@@ -15,6 +15,7 @@ from warpworm import ids
 LABEL_FLAT = wp.constant(ids.FLAT)
 LABEL_MOUNTAIN = wp.constant(ids.MOUNTAIN)
 LABEL_VALLEY = wp.constant(ids.VALLEY)
+WORLD_EXPLODED = wp.constant(ids.WORLD_EXPLODED)
 
 PI = wp.constant(3.14159265358979)
 TWO_PI = wp.constant(6.28318530717959)
@@ -48,8 +49,8 @@ def fold_range(label: int):
 def freeze_world(world: int, num_vertices: int, x: wp.array2d(dtype=wp.vec3), v: wp.array2d(dtype=wp.vec3),
                  x_prev: wp.array2d(dtype=wp.vec3), delta: wp.array2d(dtype=wp.vec3),
                  unstable: wp.array(dtype=wp.int32)):
-    """Flag ``world`` unstable and put it back, finite, to the start of the substep at rest (per-world solvers)."""
-    unstable[world] = 1
+    """Flag ``world`` unstable (exploded) and put it back, finite, to the start of the substep at rest."""
+    unstable[world] = WORLD_EXPLODED
     for i in range(num_vertices):
         x[world, i] = x_prev[world, i]
         v[world, i] = wp.vec3(0.0)

@@ -43,6 +43,8 @@ from __future__ import annotations
 
 import warp as wp
 
+from warpworm import ids
+
 from .band_cholesky import band_add_block, band_cholesky_factor, band_cholesky_solve
 from .common import dihedral_angle_and_gradient, fold_range, freeze_world, pw, wrap_angle
 
@@ -52,7 +54,7 @@ CONTACT_FREE = wp.constant(0)
 CONTACT_SLIDING = wp.constant(1)  # on the floor, kinetic friction
 CONTACT_STUCK = wp.constant(2)  # on the floor, static friction (regularised: a stiff viscous force)
 CONTACT_FIXED = wp.constant(3)  # a vertex of infinite mass (never moves; reported as free)
-WORLD_CRUMPLED = wp.constant(2)  # ``unstable`` flag of a world whose creases folded through (1: exploded)
+WORLD_CRUMPLED = wp.constant(ids.WORLD_CRUMPLED)  # ``unstable`` flag of a crumpled world (ids: the statuses)
 
 
 @wp.func

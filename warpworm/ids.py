@@ -51,3 +51,10 @@ CREASE_LABEL_NAMES = ("flat", "mountain", "valley", "boundary")
 """Name of every crease label, indexed by label."""
 HINGE_LABEL_TEXT = f"{FLAT} flat, {MOUNTAIN} mountain, {VALLEY} valley"
 """The labels a hinge (crease) can have, in one line (the dataset's ``crease_order`` attribute)."""
+
+# --- world status (``State.unstable``) -------------------------------------------------------------------------------
+WORLD_OK = 0
+WORLD_EXPLODED = 1
+"""A bar strained past its limit, a vertex too fast, or a non-finite value: the world is frozen."""
+WORLD_CRUMPLED = 2
+"""A crease folded through its NoFoldThrough range by more than the tolerance: the sheet crumpled; frozen."""
