@@ -101,7 +101,7 @@ def _config_diff(a, b, path="") -> list[str]:
     return [] if a == b else [f"{path}: dataset has {a!r}, this run asks for {b!r}"]
 
 
-class _SignalGuard:
+class SignalGuard:
     """While active (main thread only): SIGTERM / SIGINT raise :class:`Interrupted`, except inside :meth:`critical`
     sections (a manifest update), where the signal is held until the section ends."""
 
@@ -312,7 +312,7 @@ def generate(cfg: DatasetConfig, out_dir, *, workers: int = 1, resume: bool = Fa
         if lock.stale:
             log(f"note: {lock.path}: stale lock of a job that is gone ({ds.FolderLock.describe(lock.stale)}); "
                 "taking it over")
-        with _SignalGuard() as guard:
+        with SignalGuard() as guard:
             return _generate_locked(cfg, out, t0, guard, log, workers=workers, resume=resume, stages=stages,
                                     engine=engine, address=address, progress=progress)
     finally:

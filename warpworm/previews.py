@@ -6,6 +6,7 @@ after the job (:func:`warpworm.job.generate` does not write them), never part of
 from __future__ import annotations
 
 import dataclasses
+import os
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +16,16 @@ from .config import DatasetConfig
 from .sampling import appearance_draws, worm_params
 from .shard import ShardStats, simulate_with_replacement
 from .stages import DEFAULT_STAGES, load_stages
+
+
+PREVIEW_TEMPORARIES = (".preview.tmp.png", ".preview.tmp.mp4")
+"""Where the previews are written before they are renamed into place."""
+
+
+def remove_preview_temporaries(out) -> None:
+    """Remove what an interrupted :func:`write_previews` left (its temporaries; the finished previews stay)."""
+    for name in PREVIEW_TEMPORARIES:
+        (Path(out) / name).unlink(missing_ok=True)
 
 
 def write_previews(cfg: DatasetConfig, out, stages=DEFAULT_STAGES, max_rows: int = 8) -> list[Path]:
@@ -35,7 +46,9 @@ def write_previews(cfg: DatasetConfig, out, stages=DEFAULT_STAGES, max_rows: int
             return paths
         samples = [reader[i] for i in range(n)]
         stacked = {k: np.stack([smp[k] for smp in samples]) for k in samples[0] if not k.startswith("params/")}
-        save_png(out / "preview.png", contact_sheet(stacked, max_rows=n, scale=2))
+        # written under a temporary name and renamed: an interrupted preview leaves no half-written file
+        save_png(out / ".preview.tmp.png", contact_sheet(stacked, max_rows=n, scale=2))
+        os.replace(out / ".preview.tmp.png", out / "preview.png")
         paths.append(out / "preview.png")
         cam = {k: reader.read(f"camera/{k}", [0]) for k in ("K", "R", "t")}
     finally:
@@ -50,11 +63,14 @@ def write_previews(cfg: DatasetConfig, out, stages=DEFAULT_STAGES, max_rows: int
     cams = make_cameras(cam["K"], cam["R"], cam["t"], 0, cfg.render.width, cfg.render.height)
     traj = np.array([0])
     app = appearance_draws(cfg, traj)
-    vw = cv2.VideoWriter(str(out / "preview.mp4"), cv2.VideoWriter_fourcc(*"mp4v"), 20,
+    vw = cv2.VideoWriter(str(out / ".preview.tmp.mp4"), cv2.VideoWriter_fourcc(*"mp4v"), 20,
                          (cfg.render.width, cfg.render.height))
-    for f in frames:
-        img = stg.render_batch(f, worm_params(cfg, wdraws), cams, app, np.zeros(1, np.int64), cfg)["rgb"][0]
-        vw.write(np.ascontiguousarray(img[..., ::-1]))
-    vw.release()
+    try:
+        for f in frames:
+            img = stg.render_batch(f, worm_params(cfg, wdraws), cams, app, np.zeros(1, np.int64), cfg)["rgb"][0]
+            vw.write(np.ascontiguousarray(img[..., ::-1]))
+    finally:
+        vw.release()
+    os.replace(out / ".preview.tmp.mp4", out / "preview.mp4")
     paths.append(out / "preview.mp4")
     return paths

@@ -85,7 +85,18 @@ def main(args: argparse.Namespace) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_FAILED
     if cfg.output.preview and not args.no_preview:
-        write_previews_or_warn(cfg, args.out, stages)
+        from ..job import SignalGuard
+        from ..previews import remove_preview_temporaries
+
+        remove_preview_temporaries(args.out)  # a killed run's
+        try:
+            with SignalGuard():  # a stop while the previews are written is a clean stop too
+                write_previews_or_warn(cfg, args.out, stages)
+        except Interrupted as exc:
+            remove_preview_temporaries(args.out)
+            print(f"stopped: {exc} while writing the previews; the dataset is complete ({args.out}/manifest.json); "
+                  "rerun the same command with --resume to write them", file=sys.stderr)
+            return 128 + exc.signum
     print(summary.text())
     return EXIT_OK
 
@@ -107,9 +118,12 @@ def _check_arguments(args) -> None:
 def write_previews_or_warn(cfg, out, stages) -> None:
     """``preview.png`` / ``preview.mp4`` of the finished dataset; a failure is a warning (a preview must never fail a
     finished dataset)."""
+    from ..job import Interrupted
     from ..previews import write_previews
 
     try:
         write_previews(cfg, out, stages)
+    except Interrupted:
+        raise  # a stop, not a failed preview
     except Exception as exc:  # noqa: BLE001
         print(f"warning: preview not written: {exc}", file=sys.stderr)
