@@ -113,6 +113,20 @@ def gait():
     return sim, band, tile
 
 
+def gait_off_floor():
+    """The peristaltic preset's magnets driving two worms held 3 cm above the floor without gravity: magnet-driven
+    and contact-free, so the dynamics is continuous and rounding differences stay rounding-sized (on the floor, a
+    stick/slip or landing decision near its threshold amplifies them: the band path itself moves 1.3e-5 m at a
+    landing when its start moves by 4e-9 m; there the band factorization is compared bit for bit instead)."""
+    model = Model.from_params(gaits.preset_params("peristaltic", gravity=0.0), 2, "cpu")
+    sim = Simulator(model, dt=2.0e-3, substeps=2)
+    band = sim.initial_state()
+    band.positions.assign(band.positions.numpy() + np.array([0.0, 0.0, 0.03], np.float32))
+    tile = model.state()
+    _copy_state(band, tile)
+    return sim, band, tile
+
+
 def test_vertex_incidence_lists_every_element_of_each_vertex_in_order():
     model = Model.from_params(WormParams(), 1, "cpu")
     for elements in (model.edges.numpy(), model.hinges.numpy()):
@@ -177,18 +191,20 @@ def test_band_factorization_is_bit_for_bit_the_band_path_under_the_gait_magnets(
     _assert_identical(band, tile)
 
 
-@pytest.mark.parametrize("scenario", ["settling_flat", "gait"])
+@pytest.mark.parametrize("scenario", ["settling_flat", "gait_off_floor"])
 def test_dense_tile_factorization_matches_the_band_path_to_rounding(scenario):
     sim, band, tile = globals()[scenario]()
     x0 = band.positions.numpy().copy()
     tiles = TileSubsteps(sim.model, sim, "dense")
-    if scenario == "gait":
+    if scenario == "gait_off_floor":
         _gait_steps(sim, band, tile, tiles, 100)
     else:
         _run_substeps(sim, band, tile, tiles, 200)
     xb, xt = band.positions.numpy(), tile.positions.numpy()
     assert np.linalg.norm(xb - x0, axis=-1).max() > 1.0e-3  # the worms moved (fell / were driven)
     assert (band.unstable.numpy() == 0).all()
+    if scenario == "gait_off_floor":
+        assert not band.contact.numpy().any()  # still contact-free: a continuous trajectory
     err = np.abs(xt - xb).max()
     assert err < TOL, f"dense tile and band positions differ by {err:.3e} m after 200 substeps ({scenario})"
     for f in ("contact", "unstable", "step_count"):
