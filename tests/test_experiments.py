@@ -145,3 +145,24 @@ def test_rise_fall_times_of_an_analytic_pulse_train():
     assert np.isnan(ex.rise_fall_times(t, y2 - 1.0, T)["rise_mean"])
     # fewer than two whole cycles: no mean
     assert np.isnan(ex.rise_fall_times(t[t <= 1.5], y[t <= 1.5], T)["rise_mean"])
+
+
+def test_set_overrides_name_the_item_and_reach_the_worlds(tmp_path, capsys):
+    """``--set FIELD=VALUE`` (experiment, search-gait): parsed to WormParams overrides; a bad field or value is refused
+    before any work, naming the item; a good one reaches every world (the force plate's EPM path scales with it)."""
+    from warpworm.cli import main
+    from warpworm.params import parse_overrides
+
+    assert parse_overrides(["closest_approach_scale=1.1", "hinge_damping=2e-4"]) == {
+        "closest_approach_scale": 1.1, "hinge_damping": 2e-4}
+    for bad, msg in (("bogus=1", "one of WormParams' fields"), ("hinge_damping", "FIELD=VALUE"),
+                     ("hinge_damping=abc", "expected a number")):
+        with pytest.raises(ValueError, match=msg):
+            parse_overrides([bad])
+        assert main(["experiment", "force-plate", "--set", bad, "--out", str(tmp_path / "x")]) == 2
+        assert bad in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()
+    model, _ = ex._gait_model(["peristaltic"], base=ex.replace(ex.WormParams(), closest_approach_scale=1.1))
+    model0, _ = ex._gait_model(["peristaltic"])
+    depth = model.default_path.depth - model0.default_path.depth
+    np.testing.assert_allclose(depth, 0.1 * ex.gaits.GAIT_PRESETS["peristaltic"]["closest_approach"], rtol=1e-9)

@@ -149,3 +149,19 @@ def per_world(value, num_worlds: int, inner_shape: tuple[int, ...] = ()) -> np.n
     raise ValueError(
         f"expected shape {inner_shape} (shared) or {(num_worlds,) + inner_shape} (per world), got {arr.shape}"
     )
+
+
+def parse_overrides(items) -> dict[str, float]:
+    """``["FIELD=VALUE", ...]`` (the commands' ``--set``) -> {field: float}; a ValueError names the item, the field
+    and what was expected."""
+    fields_ = set(WormParams().names())
+    out = {}
+    for item in items:
+        key, sep, value = str(item).partition("=")
+        if not sep or key not in fields_:
+            raise ValueError(f"--set {item!r}: expected FIELD=VALUE with FIELD one of WormParams' fields")
+        try:
+            out[key] = float(value)
+        except ValueError:
+            raise ValueError(f"--set {item!r}: got {value!r}; expected a number") from None
+    return out

@@ -18,6 +18,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--quick", action="store_true", help="short horizons and few increments (smoke runs)")
     parser.add_argument("--duration", type=float, default=None, help="gait run length [s] (default 2, quick 0.3)")
     parser.add_argument("--no-plot", action="store_true", help="write the JSON only (no matplotlib needed)")
+    parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
+                        help="override a WormParams field of every world, e.g. --set closest_approach_scale=1.1 (the "
+                             "gait experiments keep each preset's w, a, h and scale them)")
     parser.add_argument("--material", default="mineral_paper",
                         help="sheet material of the worm (warpworm.materials.MATERIALS: bopet, mineral_paper, "
                              "tracing_paper; default mineral_paper)")
@@ -139,10 +142,19 @@ def main(args) -> int:
     from warpworm import experiments as ex
     from warpworm.materials import material_params
 
+    from dataclasses import replace
+
+    from warpworm.params import parse_overrides
+
     try:
         base = material_params(args.material)
     except ValueError as exc:
         print(f"error: --{exc}", file=sys.stderr)
+        return 2
+    try:
+        base = replace(base, **parse_overrides(args.set))
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
         return 2
     if args.workers is not None and args.workers < 1:
         print(f"error: --workers {args.workers}: expected >= 1", file=sys.stderr)

@@ -46,19 +46,13 @@ def main(args) -> int:
     if args.cycles < 1:
         print(f"warpworm search-gait: --cycles {args.cycles}: expected >= 1", file=sys.stderr)
         return 2
-    from warpworm.params import WormParams
+    from warpworm.params import parse_overrides
 
-    fields = set(WormParams().names())
-    overrides = {}
-    for item in args.set:
-        key, _, value = item.partition("=")
-        try:
-            if key not in fields:
-                raise ValueError(f"unknown field {key!r}; expected one of WormParams' fields")
-            overrides[key] = float(value)
-        except ValueError as e:
-            print(f"warpworm search-gait: --set {item!r}: {e}", file=sys.stderr)
-            return 2
+    try:
+        overrides = parse_overrides(args.set)
+    except ValueError as e:
+        print(f"warpworm search-gait: {e}", file=sys.stderr)
+        return 2
     params = gaits.preset_params(args.gait, args.backward, base=base, magnet_model=args.magnet_model, **overrides)
     n = int(np.prod([len(v) for v in grid.values()]))
     workers = args.workers or os.cpu_count() or 1
