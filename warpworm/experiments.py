@@ -84,11 +84,11 @@ def split_run(core, params: WormParams, num_worlds: int, world_axis: dict, *, wo
               device="cpu", model_kw: dict | None = None, **run_kw) -> dict:
     """``core(model, params, **run_kw) -> dict of arrays`` on ``num_worlds`` worlds, the worlds split over
     ``workers`` processes (spawned; None: every core), each a batch of a contiguous share (its parameters sliced by
-    :func:`warpworm.commands.simulate.slice_worlds`, as ``simulate --workers`` does). Worlds never interact, so every
+    :func:`warpworm.params.slice_worlds`, as ``simulate --workers`` does). Worlds never interact, so every
     per-world result equals one process's. Each output key is concatenated along ``world_axis[key]`` (a key not in
     ``world_axis``: the first share's value, for outputs that do not depend on the worlds).
     """
-    from .commands.simulate import slice_worlds
+    from .params import slice_worlds
 
     shares = world_shares(num_worlds, workers)
     mkw = dict(model_kw or {})

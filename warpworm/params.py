@@ -10,7 +10,7 @@ its tail at the smaller x. Magnet slots in every world: 0 = EPM, 1 = tail IPM, 2
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
@@ -165,3 +165,23 @@ def parse_overrides(items) -> dict[str, float]:
         except ValueError:
             raise ValueError(f"--set {item!r}: got {value!r}; expected a number") from None
     return out
+
+
+VECTOR_FIELDS = ("epm_size", "ipm_moment")
+"""WormParams fields whose per-world form is (W, 3) (shared: (3,))."""
+
+
+def slice_worlds(params: WormParams, num_worlds: int, lo: int, hi: int) -> WormParams:
+    """``params`` for worlds [lo, hi) of ``num_worlds``: every per-world array field sliced (``gait`` and
+    ``backward`` too when they are per world), shared values kept. Worlds never interact, so a batch split this way
+    and run share by share gives each world the result it has in the whole batch."""
+    changes = {}
+    for f in fields(params):
+        v = getattr(params, f.name)
+        if isinstance(v, (str, bool)) or v is None:
+            continue
+        a = np.asarray(v)
+        per_world = a.ndim == 2 if f.name in VECTOR_FIELDS else a.ndim == 1
+        if per_world and a.shape[0] == num_worlds:
+            changes[f.name] = a[lo:hi].copy()
+    return replace(params, **changes)

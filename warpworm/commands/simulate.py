@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from warpworm.params import slice_worlds
+
 HELP = "run a gait (peristaltic, omega, inchworm; forward or backward) on W worlds and report net displacement"
 
 def add_arguments(parser) -> None:
@@ -114,26 +116,6 @@ def run_gait(params, num_worlds: int, cycles: float, *, device="cpu", dt=None, s
         "model": model,
         "sim": sim,
     }
-
-
-VECTOR_FIELDS = ("epm_size", "ipm_moment")
-"""WormParams fields whose per-world form is (W, 3) (shared: (3,))."""
-
-
-def slice_worlds(params, num_worlds: int, lo: int, hi: int):
-    """``params`` for worlds [lo, hi): every per-world array field sliced, shared values kept."""
-    from dataclasses import fields
-
-    changes = {}
-    for f in fields(params):
-        v = getattr(params, f.name)
-        if isinstance(v, (str, bool)) or v is None:
-            continue
-        a = np.asarray(v)
-        per_world = a.ndim == 2 if f.name in VECTOR_FIELDS else a.ndim == 1
-        if per_world and a.shape[0] == num_worlds:
-            changes[f.name] = a[lo:hi].copy()
-    return replace(params, **changes)
 
 
 def _run_share(job):
