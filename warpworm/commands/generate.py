@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
 HELP = "Generate a labeled synthetic dataset (sharded HDF5) from a YAML config (path or packaged name, e.g. 'default')."
@@ -52,9 +53,53 @@ def allow_intermixed(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
+    import signal
+    import threading
+
+    from ..job import Interrupted
+
+    phase = ["job"]
+
+    def stop(signum, frame):
+        # outside the job's own guard (before it starts, between it and the previews, during the previews): stop
+        # here and now, without raising into whatever runs (an exception raised inside an h5py or OpenCV callback
+        # becomes a SystemError): nothing of the dataset is in flight, a preview is only ever half-written under its
+        # temporary name, which goes
+        from ..previews import remove_preview_temporaries
+
+        remove_preview_temporaries(args.out)
+        name = signal.Signals(signum).name
+        if phase[0] == "job":
+            msg = (f"stopped: interrupted by {name}; completed shards are committed and listed in {args.out}/"
+                   "manifest.json; rerun the same command with --resume to continue")
+        else:
+            msg = (f"stopped: interrupted by {name} after the job; the dataset is complete ({args.out}/manifest.json); "
+                   "rerun the same command with --resume to write the previews")
+        print(msg, file=sys.stderr, flush=True)
+        os._exit(128 + signum)
+
+    main_thread = threading.current_thread() is threading.main_thread()
+    if main_thread:
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            signal.signal(sig, stop)  # the job's guard takes over while it runs and gives this back after
+    try:
+        return _generate(args, phase)
+    except Interrupted as exc:  # the job's guard: a clean stop of the job
+        print(f"stopped: {exc}; completed shards are committed and listed in {args.out}/manifest.json, the shard in "
+              "flight was discarded; rerun the same command with --resume to continue", file=sys.stderr)
+        return 128 + exc.signum
+    finally:
+        if main_thread:  # done (or stopped): a signal now would only kill a process that is already ending
+            for sig in (signal.SIGTERM, signal.SIGINT):
+                signal.signal(sig, signal.SIG_IGN)
+
+
+def _generate(args, phase: list) -> int:
+    """The command under the signal guard; ``phase[0]`` says whether the job ("job") or the previews ("previews")
+    is running, for the message of a stop."""
     from ..config import ConfigError, load_config
     from ..dataset import DatasetError, DatasetLockedError, DatasetWriteError
-    from ..job import Interrupted, generate
+    from ..job import generate
     from ..stages import DEFAULT_STAGES
     from ..workers import WorkerError
 
@@ -77,26 +122,15 @@ def main(args: argparse.Namespace) -> int:
     except DatasetWriteError as exc:
         print(f"error: {exc.strerror if exc.strerror else exc}", file=sys.stderr)
         return EXIT_WRITE
-    except Interrupted as exc:
-        print(f"stopped: {exc}; completed shards are committed and listed in {args.out}/manifest.json, the shard in "
-              "flight was discarded; rerun the same command with --resume to continue", file=sys.stderr)
-        return 128 + exc.signum
     except (WorkerError, RuntimeError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_FAILED
+    phase[0] = "previews"
     if cfg.output.preview and not args.no_preview:
-        from ..job import SignalGuard
         from ..previews import remove_preview_temporaries
 
         remove_preview_temporaries(args.out)  # a killed run's
-        try:
-            with SignalGuard():  # a stop while the previews are written is a clean stop too
-                write_previews_or_warn(cfg, args.out, stages)
-        except Interrupted as exc:
-            remove_preview_temporaries(args.out)
-            print(f"stopped: {exc} while writing the previews; the dataset is complete ({args.out}/manifest.json); "
-                  "rerun the same command with --resume to write them", file=sys.stderr)
-            return 128 + exc.signum
+        write_previews_or_warn(cfg, args.out, stages)
     print(summary.text())
     return EXIT_OK
 
