@@ -31,9 +31,13 @@ from .sampling import appearance_draws, dataset_cameras, draw_worm, worm_params
 from .stages import load_stages
 
 
-class Interrupted(Exception):
+class Interrupted(BaseException):
     """The job got SIGTERM or SIGINT and stopped cleanly: finished shards committed and in the manifest, the shard in
-    flight discarded (its temporary deleted), workers stopped. ``--resume`` continues. Exit code 128 + signal."""
+    flight discarded (its temporary deleted), workers stopped. ``--resume`` continues. Exit code 128 + signal.
+
+    A ``BaseException``, as ``KeyboardInterrupt`` is: the signal handler raises it wherever the main thread is, and
+    library code's ``except Exception`` (``inspect.getfullargspec`` turns any exception into ``TypeError('unsupported
+    callable')``, a best-effort clean-up swallows it) must not catch or transform a stop."""
 
     def __init__(self, signum: int):
         import signal as _signal
