@@ -24,6 +24,7 @@ Warp's kernel cache keeps them afterwards.
 from __future__ import annotations
 
 import dataclasses
+import os
 
 import numpy as np
 import pytest
@@ -258,9 +259,15 @@ def _nvrtc_reason() -> str | None:
     return None
 
 
-# dense as a cubin only: it builds the same kernel as its PTX would and links cuSolverDx (30 s cold each; the
-# package-wide tests/test_aot_compile.py builds every module's PTX as well)
-@pytest.mark.parametrize("factorization, use_ptx", [("band", True), ("dense", False)], ids=["band-ptx", "dense-cubin"])
+# band as PTX at its GPU block size and register bound; dense as the cubin that links cuSolverDx (30 s cold), which
+# runs when WARPWORM_CUBIN_TEST=1 (before a GPU run; the package-wide tests/test_aot_compile.py builds every module's
+# PTX, the dense kernel's included, on every CI run)
+@pytest.mark.parametrize("factorization, use_ptx", [
+    ("band", True),
+    pytest.param("dense", False, marks=pytest.mark.skipif(
+        os.environ.get("WARPWORM_CUBIN_TEST") != "1",
+        reason="the cuSolverDx cubin link (30 s cold) runs with WARPWORM_CUBIN_TEST=1")),
+], ids=["band-ptx", "dense-cubin"])
 def test_tile_kernel_compiles_for_sm90(factorization, use_ptx):
     """The kernel's own module (one per shape and factorisation, so the package-wide compile test cannot discover
     it) builds for sm_90 at its GPU block size and register bound. PTX builds the cooperative tile Cholesky (Warp
