@@ -155,7 +155,8 @@ def sine_path(params: WormParams, ipm_x: np.ndarray, num_worlds: int) -> EpmPath
     W = num_worlds
     ipm_x = np.broadcast_to(np.asarray(ipm_x, np.float64), (W, 3))
     gait, back = per_world_gait(params, W)
-    preset_theta = np.array([GAIT_ORIENTATION[g][int(b)] for g, b in zip(gait, back)], np.float64)
+    g_idx = np.argmax(gait[:, None] == np.asarray(GAITS)[None, :], axis=1)  # (W,) index into GAITS, no world loop
+    preset_theta = np.array([GAIT_ORIENTATION[g] for g in GAITS], np.float64)[g_idx, back.astype(np.int64)]
     theta = per_world(params.orientation, W)
     theta = np.where(np.isnan(theta), preset_theta, theta)
     h = per_world(params.closest_approach, W) * per_world(params.closest_approach_scale, W)
@@ -165,7 +166,7 @@ def sine_path(params: WormParams, ipm_x: np.ndarray, num_worlds: int) -> EpmPath
         raise ValueError(f"worm.closest_approach: {bad} m puts the EPM inside the support plate; expected >= "
                          f"worm.support_thickness ({float(np.max(plate))} m): h is the gap from the origami base "
                          "(z = 0) to the EPM's top face, and the EPM moves beneath the plate")
-    frac = np.array([GAIT_PLACEMENT[g] for g in gait], np.float64)
+    frac = np.array([GAIT_PLACEMENT[g] for g in GAITS], np.float64)[g_idx]
     end = np.where(back, ipm_x[:, 0], ipm_x[:, 2])
     place = ipm_x[:, 1] + frac * (end - ipm_x[:, 1])
     direction = np.where(back, -1.0, 1.0)

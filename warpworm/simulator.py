@@ -137,15 +137,17 @@ class Simulator:
             setattr(self._model_arrays, f, getattr(model, f))
         self._model_arrays.hinge_rest = model.hinge_rest_angle
         W, V, dev = model.num_worlds, model.num_vertices, model.device
-        self.scratch = ki.NewtonScratch()
-        """The solver's own scratch (:class:`warpworm.kernels.implicit_euler.NewtonScratch`), shared by every state
-        this simulator steps: nothing in it outlives a launch."""
-        self.scratch.x_prev = wp.zeros((W, V), dtype=wp.vec3, device=dev)
-        self.scratch.delta = wp.zeros((W, V), dtype=wp.vec3, device=dev)
-        self.scratch.hess = wp.zeros((W, V, model.vertex_bandwidth + 1), dtype=wp.mat33, device=dev)
-        self.scratch.grad = wp.zeros((W, V), dtype=wp.vec3, device=dev)
         if solver not in SOLVERS:
             raise ValueError(f"solver: got {solver!r}; expected one of {SOLVERS}")
+        self.scratch = ki.NewtonScratch()
+        """The solver's own scratch (:class:`warpworm.kernels.implicit_euler.NewtonScratch`), shared by every state
+        this simulator steps: nothing in it outlives a launch (a tile solver owns its own: none here)."""
+        B = model.vertex_bandwidth + 1 if solver == "band" else 1
+        Vs = V if solver == "band" else 1
+        self.scratch.x_prev = wp.zeros((W, Vs), dtype=wp.vec3, device=dev)
+        self.scratch.delta = wp.zeros((W, Vs), dtype=wp.vec3, device=dev)
+        self.scratch.hess = wp.zeros((W, Vs, B), dtype=wp.mat33, device=dev)
+        self.scratch.grad = wp.zeros((W, Vs), dtype=wp.vec3, device=dev)
         self.solver = solver
         self._tiles = None
         if solver.startswith("tile-"):
