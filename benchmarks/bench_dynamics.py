@@ -82,6 +82,10 @@ def bench_one(W: int, magnet_model: str, device: str, with_numpy: bool, min_time
     t_step = timeit(lambda: sim.step(state, 1), device, min_time)
     t_sub = timeit(lambda: sim.run_substeps(state, S), device, min_time) / S
     t_wrench = timeit(lambda: sim.update_magnets(state), device, min_time, max_reps=20)
+    sim.newton_steps_taken(reset=True)
+    sim.run_substeps(state, 10 * S)
+    steps = sim.newton_steps_taken()
+    mean_steps = float(steps.mean()) / (10 * S) if steps is not None else float(sim.newton)
     row = {
         "device": str(model.device),
         "magnets": magnet_model,
@@ -92,23 +96,25 @@ def bench_one(W: int, magnet_model: str, device: str, with_numpy: bool, min_time
         "wrench_ms_per_world": 1e3 * t_wrench / W,
         "realtime_factor": sim.dt / t_step,
         "sim_s_per_wall_s": W * sim.dt / t_step,
+        "newton_steps_per_substep": mean_steps,
         "launches_per_substep": sim.launches_per_substep,
         "bytes_per_world": model.bytes_per_world(),
         "time_base": clock_for(device)[1],
     }
     if with_numpy:
-        t_np = numpy_substep_time(model, sim, state, min_time)
+        # the reference takes as many Newton steps as the kernel took on average (rounded up): the same step
+        t_np = numpy_substep_time(model, sim, state, min_time, newton=max(2, int(np.ceil(mean_steps - 1e-9))))
         row["numpy_substep_rate"] = W / t_np
         row["speedup_vs_numpy"] = t_np / t_sub
     return row
 
 
-def numpy_substep_time(model, sim, state, min_time: float) -> float:
-    """Process CPU time [s] of one NumPy reference substep of all ``model``'s worlds (NumPy's BLAS may use threads:
-    they count too)."""
+def numpy_substep_time(model, sim, state, min_time: float, newton: int | None = None) -> float:
+    """Process CPU time [s] of one NumPy reference substep of all ``model``'s worlds with ``newton`` Newton steps
+    (default the simulator's most; NumPy's BLAS may use threads: they count too)."""
     from numpy_substep import NumpyImplicit
 
-    ref = NumpyImplicit(model, sim.dt_sub, newton=sim.newton)
+    ref = NumpyImplicit(model, sim.dt_sub, newton=sim.newton if newton is None else newton)
     x, v, a = ref.init(state, sim.control)
     f = state.external_force.numpy().astype(np.float64)
     return timeit(lambda: ref.substep(x, v, a, f), "cpu", min_time, max_reps=50)
@@ -237,24 +243,31 @@ def compare(device: str = "cpu", sizes=None, quick: bool = False, solvers=None) 
             # EPM is near (composite panels), so the gait's start alone (EPM far) would flatter it
             period = float(np.max(np.asarray(model.params.cycle_period)))
             n = max(1, int(round(period / sim.dt / (4 if (quick or cuda) else 1))))
+            sim.newton_steps_taken(reset=True)
             t0 = clock()
             sim.step(state, n)
             wp.synchronize_device(device)
             t_step = (clock() - t0) / n
+            counted = sim.newton_steps_taken()
+            mean_steps = float(counted.mean()) / (n * S) if counted is not None else float("nan")
             t_sub = timeit(lambda: sim.run_substeps(state, S), device, min_time) / S
             tag = "" if solver == "band" and len(solvers) == 1 else f", {solver}"
             common = {"device": str(model.device), "W": W, "substep_us": 1e6 * sim.dt_sub, "time_base": base}
             rows.append({"system": f"warpworm gait step (analytic magnets{tag})", **common,
                          "step_rate": W * S / t_step, "sim_s_per_wall_s": W * sim.dt / t_step,
+                         "newton_steps": mean_steps,
                          "note": f"1 wrench + 4 substeps per 4 ms, {n} steps of the peristaltic gait"})
             rows.append({"system": f"warpworm substeps alone{tag.replace(', ', ' (') + ')' if tag else ''}",
                          **common, "step_rate": W / t_sub, "sim_s_per_wall_s": W * sim.dt_sub / t_sub,
-                         "note": "implicit substeps, 3 Newton"})
+                         "note": "implicit substeps to the Newton tolerance"})
             if solver == solvers[0] and (not cuda or W == min(sizes)):
-                t_np = numpy_substep_time(model, sim, state, min_time)
+                # as many Newton steps as the kernel took on average in the gait (rounded up): the same step
+                k = max(2, int(np.ceil(mean_steps - 1e-9))) if mean_steps == mean_steps else sim.newton
+                t_np = numpy_substep_time(model, sim, state, min_time, newton=k)
                 rows.append({"system": "NumPy reference substep", "device": "cpu", "W": W,
                              "substep_us": 1e6 * sim.dt_sub, "time_base": "process CPU time", "step_rate": W / t_np,
-                             "sim_s_per_wall_s": W * sim.dt_sub / t_np, "note": "float64 dense solve, no floor"})
+                             "sim_s_per_wall_s": W * sim.dt_sub / t_np, "newton_steps": float(k),
+                             "note": "float64 dense solve, no floor"})
             del model, sim, state
     try:
         rows.append(newton_row("cpu"))

@@ -84,7 +84,7 @@ def launch_timers():
         wp.launch, wp.Launch.launch = orig_launch, orig_cmd
 
 
-def _build(W: int, magnet_model: str, device: str, newton: int | None = None):
+def _build(W: int, magnet_model: str, device: str, newton: int | None = None, newton_tol: float | None = None):
     """The peristaltic gait's model and simulator; no CUDA graph (each launch must be seen to be timed: the
     profile's whole-run figures on CUDA are therefore without graph replay, see ``benchmarks/run.py`` for those)."""
     from warpworm import gaits
@@ -93,6 +93,8 @@ def _build(W: int, magnet_model: str, device: str, newton: int | None = None):
 
     model = Model.from_params(gaits.preset_params("peristaltic", magnet_model=magnet_model), W, device)
     kw = {} if newton is None else {"newton": newton}
+    if newton_tol is not None:
+        kw["newton_tol"] = newton_tol
     sim = Simulator(model, dt=gaits.DEFAULT_DT, substeps=gaits.DEFAULT_SUBSTEPS, use_graph=False, **kw)
     return model, sim
 
@@ -115,12 +117,15 @@ def profile_run(W: int, *, duration: float, settle: float, magnet_model: str = "
     sim.settle(state, settle)
     n_steps = max(1, int(round(duration / sim.dt)))
     use_cpu = not model.device.is_cuda
+    sim.newton_steps_taken(reset=True)
     with launch_timers() as acc:
         wp.synchronize_device(model.device)
         t0, c0 = time.perf_counter(), time.thread_time()
         sim.step(state, n_steps)
         wp.synchronize_device(model.device)
         wall, cpu = time.perf_counter() - t0, time.thread_time() - c0
+    counted = sim.newton_steps_taken()
+    mean_newton = float(counted.mean()) / (n_steps * sim.substeps) if counted is not None else float("nan")
     total = cpu if use_cpu else wall
     unstable = int(state.unstable.numpy().astype(bool).sum())
     stages, timed, timed_wall = [], 0.0, 0.0
@@ -135,7 +140,8 @@ def profile_run(W: int, *, duration: float, settle: float, magnet_model: str = "
                    "us_per_step": 1e6 * host / n_steps, "us_per_world_step": 1e6 * host / n_steps / W,
                    "share": host / total, "wall_us_per_step": 1e6 * max(0.0, wall - timed_wall) / n_steps})
     return {"W": W, "magnets": magnet_model, "device": str(model.device), "steps": n_steps, "dt_s": sim.dt,
-            "substeps": sim.substeps, "newton": sim.newton, "wall_s": wall, "cpu_s": cpu,
+            "substeps": sim.substeps, "newton": sim.newton, "newton_steps_per_substep": mean_newton,
+            "wall_s": wall, "cpu_s": cpu,
             "time_base": "thread CPU time" if use_cpu else "wall",
             "us_per_world_step": 1e6 * total / n_steps / W,
             "worm_substeps_per_s": W * n_steps * sim.substeps / total,
@@ -151,7 +157,7 @@ def newton_cost(W: int, newtons=(2, 3, 4), device: str = "cpu", steps: int = 15)
     other work on a shared machine falls on all of them alike."""
     sims = []
     for k in newtons:
-        model, sim = _build(W, "analytic", device, newton=k)
+        model, sim = _build(W, "analytic", device, newton=k, newton_tol=0.0)  # every step: the cost of one
         state = sim.initial_state()
         sim.settle(state, 0.05)
         sims.append((sim, state, []))
@@ -222,7 +228,8 @@ def main(argv=None) -> int:
         r = profile_run(W, duration=args.duration, settle=args.settle, magnet_model=args.magnet_model, device=device)
         runs.append(r)
         print(f"\n== {args.magnet_model} magnets, peristaltic, W = {W}, {r['steps']} steps of {1e3 * r['dt_s']:g} ms "
-              f"({r['substeps']} substeps, {r['newton']} Newton) on {device}: {r['wall_s']:.2f} s wall, "
+              f"({r['substeps']} substeps, <= {r['newton']} Newton, {r['newton_steps_per_substep']:.2f} on average) "
+              f"on {device}: {r['wall_s']:.2f} s wall, "
               f"{r['cpu_s']:.2f} s CPU; per {r['time_base']}: {r['us_per_world_step']:.0f} µs per world-step, "
               f"{r['worm_substeps_per_s']:.3g} worm-substeps/s, {r['sim_s_per_wall_s']:.3g} worm-s per s; "
               f"{r['unstable_worlds']} unstable ==")

@@ -17,9 +17,12 @@ energy of the worm:
   and let a soft worm fold through;
 - every anchor ½ k |x − target|² (so the force plate reads k (x − target), the force it applies).
 
-``newton`` Gauss–Newton steps (bar and crease Hessians kept positive semi-definite: the compressive geometric
-stiffness and the crease curvature terms dropped) solve it; each assembles the gradient and the 3V × 3V Hessian as
-3×3 vertex blocks in a banded per-world scratch and factors it (:mod:`warpworm.kernels.band_cholesky`).
+Gauss–Newton steps (bar and crease Hessians kept positive semi-definite: the compressive geometric stiffness and
+the crease curvature terms dropped) solve it, at most ``newton`` of them, until a step (the second or later) moves no
+vertex farther than ``newton_tol``; each assembles the gradient and the 3V × 3V Hessian as 3×3 vertex blocks in a
+banded per-world scratch and factors it (:mod:`warpworm.kernels.band_cholesky`). With ``refactor`` = 0 (chord
+steps) only the first step of a substep, and a step after a contact changed, assembles and factors the Hessian; the
+others solve with that factor against a fresh gradient.
 
 Floor: a vertex on the floor (touching at the end of the last substep, or predicted below it) moves only along it
 (its rows of the Newton step are projected, P H P). Before every Newton step after the first, the floor's force at
@@ -54,6 +57,8 @@ CONTACT_FREE = wp.constant(0)
 CONTACT_SLIDING = wp.constant(1)  # on the floor, kinetic friction
 CONTACT_STUCK = wp.constant(2)  # on the floor, static friction (regularised: a stiff viscous force)
 CONTACT_FIXED = wp.constant(3)  # a vertex of infinite mass (never moves; reported as free)
+CONTACTS_CHANGED = wp.constant(1)  # update_contacts: a vertex changed its contact status
+CONTACTS_LANDED = wp.constant(2)  # update_contacts: a free vertex landed (its position moved)
 WORLD_CRUMPLED = wp.constant(ids.WORLD_CRUMPLED)  # ``unstable`` flag of a crumpled world (ids: the statuses)
 
 
@@ -159,7 +164,9 @@ class SubstepOptions:
 
     dt: float  # substep [s]
     num_substeps: int  # substeps per launch
-    newton: int  # Newton steps per substep (>= 2)
+    newton: int  # Newton steps per substep at most (>= 2)
+    newton_tol: float  # [m] a Newton step (the second or later) moving no vertex farther than this ends the substep
+    refactor: int  # 1: assemble and factor the Hessian at every Newton step; 0: chord steps (module docstring)
     slip_speed: float  # static-friction regularisation ε [m/s]
     strain_limit: wp.array(dtype=float)  # (E,) |strain| beyond which a world explodes
     speed_limit: float  # [m/s] beyond which (or non-finite) a world explodes
@@ -183,12 +190,13 @@ class BarHingeState:
 @wp.struct
 class NewtonScratch:
     """The solver's own scratch (:class:`warpworm.simulator.Simulator` owns it; its values mean nothing between
-    launches, except ``delta`` which is zero there)."""
+    launches, except ``delta``, which is zero there, and the ``newton_steps`` counter)."""
 
     x_prev: wp.array2d(dtype=wp.vec3)  # (W, V) positions at the start of the substep [m]
     delta: wp.array2d(dtype=wp.vec3)  # (W, V) x − x̃ [m]
     hess: wp.array3d(dtype=wp.mat33)  # (W, V, B + 1) lower block band of the Newton matrix
     grad: wp.array2d(dtype=wp.vec3)  # (W, V) right-hand side, then the Newton step
+    newton_steps: wp.array(dtype=wp.int32)  # (W,) Newton steps taken, summed over substeps (a diagnostic counter)
 
 
 @wp.struct
@@ -239,31 +247,48 @@ def world_coefficients(m: BarHingeModel, world: int, dt: float) -> WorldCoeffici
 
 
 @wp.func
-def inertia_and_friction(world: int, c: WorldCoefficients, m: BarHingeModel, slip_speed: float, with_hessian: bool,
-                         s: BarHingeState, w: NewtonScratch):
-    """Start ``grad`` (and the Hessian's band) with the inertia term M (x − x̃) / dt² and the floor friction."""
+def inertia_terms(world: int, c: WorldCoefficients, m: BarHingeModel, with_hessian: bool, s: BarHingeState,
+                  w: NewtonScratch):
+    """Start ``grad`` (and the Hessian's band) with the inertia term M (x − x̃) / dt²."""
     nv = s.x.shape[1]
     bw = w.hess.shape[2] - 1
     eye = wp.identity(n=3, dtype=float)
     for i in range(nv):
         m_dt2 = mass_over_dt2(m.inv_mass[c.im_row, i], c.inv_dt2)
-        g = w.delta[world, i] * m_dt2  # delta is 0 for a vertex of infinite mass
+        w.grad[world, i] = w.delta[world, i] * m_dt2  # delta is 0 for a vertex of infinite mass
         if with_hessian:
             # m/dt² on the diagonal in every direction, also the fixed ones (keeps the matrix definite; their rows
             # are decoupled by the projection and their update is zero)
-            diag = eye * m_dt2
-            st = s.contact[world, i]
-            if st == CONTACT_SLIDING or st == CONTACT_STUCK:
-                vel = s.v[world, i] + w.delta[world, i] * c.inv_dt
-                vt = vel - c.floor_n * wp.dot(vel, c.floor_n)
-                f, kf, t = friction_force(st, vt, wp.dot(s.floor_force[world, i], c.floor_n), c.mu_s, c.mu_k,
-                                          slip_speed)
-                g = g - f
-                diag = diag + (eye - wp.outer(c.floor_n, c.floor_n) - wp.outer(t, t)) * (kf * c.inv_dt)
-            w.hess[world, i, 0] = diag
+            w.hess[world, i, 0] = eye * m_dt2
             for k in range(1, bw + 1):
                 w.hess[world, i, k] = wp.mat33(0.0)
-        w.grad[world, i] = g
+
+
+@wp.func
+def friction_terms(world: int, c: WorldCoefficients, slip_speed: float, with_hessian: bool, s: BarHingeState,
+                   w: NewtonScratch):
+    """Add the floor friction of every vertex on the floor (:func:`friction_force`) to ``grad`` and, with the
+    Hessian, its stiffness to the diagonal blocks."""
+    eye = wp.identity(n=3, dtype=float)
+    for i in range(s.x.shape[1]):
+        st = s.contact[world, i]
+        if st == CONTACT_SLIDING or st == CONTACT_STUCK:
+            f, kf, t = vertex_friction(world, i, c, slip_speed, s, w)
+            w.grad[world, i] = w.grad[world, i] - f
+            if with_hessian:
+                w.hess[world, i, 0] = w.hess[world, i, 0] + (
+                    eye - wp.outer(c.floor_n, c.floor_n) - wp.outer(t, t)) * (kf * c.inv_dt)
+
+
+@wp.func
+def vertex_friction(world: int, i: int, c: WorldCoefficients, slip_speed: float, s: BarHingeState,
+                    w: NewtonScratch):
+    """:func:`friction_force` of vertex ``i`` on the floor at its current Newton iterate (velocity v' + (x − x̃)/dt,
+    normal force of ``floor_force``)."""
+    vel = s.v[world, i] + w.delta[world, i] * c.inv_dt
+    vt = vel - c.floor_n * wp.dot(vel, c.floor_n)
+    return friction_force(s.contact[world, i], vt, wp.dot(s.floor_force[world, i], c.floor_n), c.mu_s, c.mu_k,
+                          slip_speed)
 
 
 @wp.func
@@ -385,20 +410,30 @@ def project_on_contacts(world: int, c: WorldCoefficients, m: BarHingeModel, s: B
 
 
 @wp.func
-def assemble(world: int, c: WorldCoefficients, m: BarHingeModel, opt: SubstepOptions,
-             anchor_target: wp.array2d(dtype=wp.vec3), with_hessian: bool, s: BarHingeState,
-             w: NewtonScratch) -> int:
-    """Gradient ∂Φ/∂x of the substep's objective (inertia, bars, creases, anchors; with the Hessian also the floor
-    friction, :func:`friction_force`) into ``w.grad[world]`` and, ``with_hessian``, its Gauss–Newton Hessian
-    projected on each vertex's allowed directions into ``w.hess[world]``.
+def elastic_terms(world: int, c: WorldCoefficients, m: BarHingeModel, opt: SubstepOptions,
+                  anchor_target: wp.array2d(dtype=wp.vec3), with_hessian: bool, s: BarHingeState,
+                  w: NewtonScratch) -> int:
+    """The inertia, bars, creases and anchors of ``grad`` (and the unprojected Hessian): everything but the floor
+    friction, which is tangential and so not in the floor's normal balance that :func:`update_contacts` reads.
     Returns 1 if a bar is strained beyond its ``strain_limit`` (per bar; or non-finite), else 0."""
-    inertia_and_friction(world, c, m, opt.slip_speed, with_hessian, s, w)
+    inertia_terms(world, c, m, with_hessian, s, w)
     if bar_terms(world, c, m, opt.strain_limit, with_hessian, s, w) != 0:
         return 1
     crease_terms(world, c, m, with_hessian, s, w)
     anchor_terms(world, c, m, anchor_target, with_hessian, s, w)
-    if with_hessian:
-        project_on_contacts(world, c, m, s, w)
+    return 0
+
+
+@wp.func
+def assemble(world: int, c: WorldCoefficients, m: BarHingeModel, opt: SubstepOptions,
+             anchor_target: wp.array2d(dtype=wp.vec3), s: BarHingeState, w: NewtonScratch) -> int:
+    """Gradient ∂Φ/∂x of the substep's objective (inertia, bars, creases, anchors, floor friction) into
+    ``w.grad[world]`` and its Gauss–Newton Hessian projected on each vertex's allowed directions into
+    ``w.hess[world]``. Returns 1 if a bar is strained beyond its ``strain_limit`` (or non-finite), else 0."""
+    if elastic_terms(world, c, m, opt, anchor_target, True, s, w) != 0:
+        return 1
+    friction_terms(world, c, opt.slip_speed, True, s, w)
+    project_on_contacts(world, c, m, s, w)
     return 0
 
 
@@ -444,13 +479,15 @@ def predict(world: int, c: WorldCoefficients, m: BarHingeModel, slip_speed: floa
 
 @wp.func
 def update_contacts(world: int, c: WorldCoefficients, m: BarHingeModel, slip_speed: float, s: BarHingeState,
-                    w: NewtonScratch):
+                    w: NewtonScratch) -> int:
     """Between Newton steps (``w.grad`` holds ∂Φ/∂x at the current x): the floor's normal force at each contact is
     n · ∂Φ/∂x there (what holds the vertex against the rest of the implicit step); a contact the floor would have to
     pull lets go; a stuck vertex faster than the slip speed broke loose, a sliding one whose motion reversed (kinetic
     friction stopped it) or fell below half the slip speed sticks; a free vertex the last step put below the floor
-    lands."""
+    lands. Returns CONTACTS_LANDED if a vertex landed (x moved), else CONTACTS_CHANGED if one changed its status
+    (the Newton matrix's projection changed), else 0."""
     dt = c.dt
+    changed = int(0)
     for i in range(s.x.shape[1]):
         st = s.contact[world, i]
         if st == CONTACT_FIXED:
@@ -467,11 +504,13 @@ def update_contacts(world: int, c: WorldCoefficients, m: BarHingeModel, slip_spe
                 # stuck: it lets go at the next update if static friction cannot hold it
                 s.contact[world, i] = CONTACT_STUCK
                 s.floor_force[world, i] = c.floor_n * (depth * mass_over_dt2(m.inv_mass[c.im_row, i], c.inv_dt2))
+                changed = CONTACTS_LANDED
             continue
         fn = wp.dot(w.grad[world, i], c.floor_n)  # friction is tangential: not in the normal balance
         if not (fn > 0.0):
             s.contact[world, i] = CONTACT_FREE
             s.floor_force[world, i] = wp.vec3(0.0)
+            changed = wp.max(changed, CONTACTS_CHANGED)
             continue
         vt = vel - c.floor_n * vn
         vt_len = wp.length(vt)
@@ -483,13 +522,17 @@ def update_contacts(world: int, c: WorldCoefficients, m: BarHingeModel, slip_spe
             s.contact[world, i] = CONTACT_SLIDING
         elif st == CONTACT_SLIDING and (wp.dot(vt, ff) > 0.0 or vt_len < 0.5 * slip_speed):
             s.contact[world, i] = CONTACT_STUCK
+        if s.contact[world, i] != st:
+            changed = wp.max(changed, CONTACTS_CHANGED)
         f, kf, t = friction_force(s.contact[world, i], vt, fn, c.mu_s, c.mu_k, slip_speed)
         s.floor_force[world, i] = c.floor_n * fn + f
+    return changed
 
 
 @wp.func
-def newton_update(world: int, c: WorldCoefficients, s: BarHingeState, w: NewtonScratch):
-    """Solve H dx = −grad restricted to the allowed directions and apply dx to x and to x − x̃."""
+def newton_update(world: int, c: WorldCoefficients, factor: bool, s: BarHingeState, w: NewtonScratch) -> float:
+    """Solve H dx = −grad restricted to the allowed directions and apply dx to x and to x − x̃; ``factor``: factor
+    the freshly assembled H first, else reuse the factor left in ``w.hess`` (a chord step). Returns max |dx| [m]."""
     nv = s.x.shape[1]
     bw = w.hess.shape[2] - 1
     for i in range(nv):
@@ -498,12 +541,16 @@ def newton_update(world: int, c: WorldCoefficients, s: BarHingeState, w: NewtonS
         if st != CONTACT_FREE:
             g = dof_projector(st, c.floor_n) * g
         w.grad[world, i] = g
-    band_cholesky_factor(world, nv, bw, w.hess)
+    if factor:
+        band_cholesky_factor(world, nv, bw, w.hess)
     band_cholesky_solve(world, nv, bw, w.hess, w.grad)
+    step = float(0.0)
     for i in range(nv):
         dx = -w.grad[world, i]
         s.x[world, i] = s.x[world, i] + dx
         w.delta[world, i] = w.delta[world, i] + dx
+        step = wp.max(step, wp.length(dx))
+    return step
 
 
 @wp.func
@@ -578,15 +625,28 @@ def implicit_step(
         predict(world, c, m, opt.slip_speed, f_ext, s, w)
         bad = int(0)
         for it in range(opt.newton):
-            if it >= 1:
-                bad = assemble(world, c, m, opt, anchor_target, False, s, w)
+            fresh = it == 0 or opt.refactor != 0  # assemble and factor the Hessian (else: a chord step)
+            if it == 0:
+                bad = assemble(world, c, m, opt, anchor_target, s, w)
+            else:
+                # one assembly serves both the floor's normal forces and the Newton step: friction, the one term
+                # that depends on the contacts, is added after they are updated
+                bad = elastic_terms(world, c, m, opt, anchor_target, fresh, s, w)
                 if bad != 0:
                     break
-                update_contacts(world, c, m, opt.slip_speed, s, w)
-            bad = assemble(world, c, m, opt, anchor_target, True, s, w)
+                change = update_contacts(world, c, m, opt.slip_speed, s, w)
+                if change == CONTACTS_LANDED or (change != 0 and not fresh):
+                    fresh = True  # x moved, or the chord's factor has a stale projection: assemble anew
+                    bad = assemble(world, c, m, opt, anchor_target, s, w)
+                else:
+                    friction_terms(world, c, opt.slip_speed, fresh, s, w)
+                    if fresh:
+                        project_on_contacts(world, c, m, s, w)
             if bad != 0:
                 break
-            newton_update(world, c, s, w)
+            w.newton_steps[world] = w.newton_steps[world] + 1
+            if newton_update(world, c, fresh, s, w) < opt.newton_tol and it >= 1:
+                break  # converged (after one contact update at least)
         if bad == 0:
             bad = finish_substep(world, c, m, opt, s, w)
             crumpled = update_crease_angles(world, m, opt.fold_tolerance, s)

@@ -49,6 +49,8 @@ from .implicit_euler import (
     CONTACT_FREE,
     CONTACT_SLIDING,
     CONTACT_STUCK,
+    CONTACTS_CHANGED,
+    CONTACTS_LANDED,
     WORLD_CRUMPLED,
     dof_projector,
     floor_landing,
@@ -151,41 +153,26 @@ def assemble_row(
     k_limit: float,
     strain_limit: wp.array(dtype=float),
     inv_dt: float,
-    floor_n: wp.vec3,
-    mu_s: float,
-    mu_k: float,
-    slip_speed: float,
     with_hessian: bool,
     x: wp.array2d(dtype=wp.vec3),
-    v: wp.array2d(dtype=wp.vec3),
     delta: wp.array2d(dtype=wp.vec3),
     crease_angle: wp.array2d(dtype=float),
-    contact: wp.array2d(dtype=wp.int32),
-    floor_force: wp.array2d(dtype=wp.vec3),
     bar_strain: wp.array2d(dtype=float),
     hess: wp.array3d(dtype=wp.mat33),
     grad: wp.array2d(dtype=wp.vec3),
 ):
-    """Vertex ``u``'s row of :func:`implicit_euler.assemble`: ``grad[world, u]`` and, ``with_hessian``, the block row
-    ``hess[world, u, 0..B]`` (blocks (u, u − d)) projected on the allowed directions, and then the projected
-    gradient P_u ∂Φ/∂x_u (the right-hand side of the step). Only this row is written, so threads with different rows
-    need no atomics; ``bar_strain`` of a bar is written by its first vertex's thread. Reads every vertex's x and
-    contact: call it after a barrier. Returns 1 if a bar of the row is strained beyond its limit (or non-finite)."""
+    """Vertex ``u``'s row of :func:`implicit_euler.elastic_terms`: ``grad[world, u]`` and, ``with_hessian``, the
+    block row ``hess[world, u, 0..B]`` (blocks (u, u − d)), unprojected and without the friction
+    (:func:`finish_row` adds them). Only this row is written, so threads with different rows need no atomics;
+    ``bar_strain`` of a bar is written by its first vertex's thread. Reads every vertex's x: call it after a
+    barrier. Returns 1 if a bar of the row is strained beyond its limit (or non-finite)."""
     bw = hess.shape[2] - 1
     eye = wp.identity(n=3, dtype=float)
     inv_dt2 = inv_dt * inv_dt
     m_dt2 = mass_over_dt2(inv_mass[im_row, u], inv_dt2)
     g = delta[world, u] * m_dt2
     if with_hessian:
-        diag = eye * m_dt2
-        st = contact[world, u]
-        if st == CONTACT_SLIDING or st == CONTACT_STUCK:
-            vel = v[world, u] + delta[world, u] * inv_dt
-            vt = vel - floor_n * wp.dot(vel, floor_n)
-            f, c, t = friction_force(st, vt, wp.dot(floor_force[world, u], floor_n), mu_s, mu_k, slip_speed)
-            g = g - f
-            diag = diag + (eye - wp.outer(floor_n, floor_n) - wp.outer(t, t)) * (c * inv_dt)
-        hess[world, u, 0] = diag
+        hess[world, u, 0] = eye * m_dt2
         for k in range(1, bw + 1):
             hess[world, u, k] = wp.mat33(0.0)
     for q in range(vert_bar_start[u], vert_bar_start[u + 1]):
@@ -259,22 +246,55 @@ def assemble_row(
                 g = g + (x[world, u] - anchor_target[world, an]) * ka
                 if with_hessian:
                     band_add_block(world, hess, u, u, eye * ka)
-    if with_hessian:
-        # the row restricted to the allowed directions, as implicit_euler.assemble does it for every row
-        su = contact[world, u]
-        for band in range(bw + 1):
-            vv = u - band
-            if vv >= 0:
-                sv = contact[world, vv]
-                if su != CONTACT_FREE or sv != CONTACT_FREE:
-                    pu = dof_projector(su, floor_n)
-                    blk = pu * hess[world, u, band] * dof_projector(sv, floor_n)
-                    if band == 0:
-                        blk = blk + (eye - pu) * m_dt2
-                    hess[world, u, band] = blk
-        # the right-hand side of the restricted step (implicit_step does this after assemble)
-        if su != CONTACT_FREE:
-            g = dof_projector(su, floor_n) * g
+    grad[world, u] = g
+    return 0
+
+
+@wp.func
+def finish_row(
+    world: int,
+    u: int,
+    im_row: int,
+    inv_mass: wp.array2d(dtype=float),
+    inv_dt: float,
+    floor_n: wp.vec3,
+    mu_s: float,
+    mu_k: float,
+    slip_speed: float,
+    v: wp.array2d(dtype=wp.vec3),
+    delta: wp.array2d(dtype=wp.vec3),
+    contact: wp.array2d(dtype=wp.int32),
+    floor_force: wp.array2d(dtype=wp.vec3),
+    hess: wp.array3d(dtype=wp.mat33),
+    grad: wp.array2d(dtype=wp.vec3),
+):
+    """Row ``u`` after :func:`assemble_row` and the contact update: the floor friction (implicit_euler's
+    ``friction_terms``), the row restricted to the allowed directions (``project_on_contacts``) and the projected
+    right-hand side (``newton_update``). Touches only row u; reads every vertex's contact."""
+    bw = hess.shape[2] - 1
+    eye = wp.identity(n=3, dtype=float)
+    m_dt2 = mass_over_dt2(inv_mass[im_row, u], inv_dt * inv_dt)
+    g = grad[world, u]
+    su = contact[world, u]
+    if su == CONTACT_SLIDING or su == CONTACT_STUCK:
+        vel = v[world, u] + delta[world, u] * inv_dt
+        vt = vel - floor_n * wp.dot(vel, floor_n)
+        f, c, t = friction_force(su, vt, wp.dot(floor_force[world, u], floor_n), mu_s, mu_k, slip_speed)
+        g = g - f
+        hess[world, u, 0] = hess[world, u, 0] + (eye - wp.outer(floor_n, floor_n) - wp.outer(t, t)) * (c * inv_dt)
+    for band in range(bw + 1):
+        vv = u - band
+        if vv >= 0:
+            sv = contact[world, vv]
+            if su != CONTACT_FREE or sv != CONTACT_FREE:
+                pu = dof_projector(su, floor_n)
+                blk = pu * hess[world, u, band] * dof_projector(sv, floor_n)
+                if band == 0:
+                    blk = blk + (eye - pu) * m_dt2
+                hess[world, u, band] = blk
+    # the right-hand side of the restricted step
+    if su != CONTACT_FREE:
+        g = dof_projector(su, floor_n) * g
     grad[world, u] = g
     return 0
 
@@ -352,7 +372,8 @@ def update_contact(
     contact: wp.array2d(dtype=wp.int32),
 ):
     """implicit_step's contact update before a Newton step after the first, for vertex ``i`` (copied from its loop):
-    normal force from the gradient, let go / land / stick / slip. Touches only vertex i."""
+    normal force from the gradient, let go / land / stick / slip. Touches only vertex i. Returns
+    implicit_euler.update_contacts' code for this vertex (CONTACTS_LANDED, CONTACTS_CHANGED or 0)."""
     st = contact[world, i]
     if st == CONTACT_FIXED:
         return 0
@@ -367,12 +388,13 @@ def update_contact(
             delta[world, i] = (vel - vel0) * dt
             contact[world, i] = CONTACT_STUCK
             floor_force[world, i] = floor_n * (depth * mass_over_dt2(inv_mass[im_row, i], inv_dt2))
+            return CONTACTS_LANDED
         return 0
     fn = wp.dot(grad[world, i], floor_n)
     if not (fn > 0.0):
         contact[world, i] = CONTACT_FREE
         floor_force[world, i] = wp.vec3(0.0)
-        return 0
+        return CONTACTS_CHANGED
     vt = vel - floor_n * vn
     vt_len = wp.length(vt)
     ff = floor_force[world, i]
@@ -383,6 +405,8 @@ def update_contact(
         contact[world, i] = CONTACT_STUCK
     f, c, t = friction_force(contact[world, i], vt, fn, mu_s, mu_k, slip_speed)
     floor_force[world, i] = floor_n * fn + f
+    if contact[world, i] != st:
+        return CONTACTS_CHANGED
     return 0
 
 
@@ -514,6 +538,7 @@ def make_tile_substep_kernel(num_vertices: int, bandwidth: int, dense: bool = Tr
         dt: float,
         num_substeps: int,
         newton: int,
+        newton_tol: float,
         slip_speed: float,
         strain_limit: wp.array(dtype=float),
         speed_limit: float,
@@ -577,39 +602,46 @@ def make_tile_substep_kernel(num_vertices: int, bandwidth: int, dense: bool = Tr
                                f_ext, x, v, x_prev, delta, floor_force, contact)
             bad = block_max(0)  # barrier: every x predicted before any row reads it
 
-            # 2. Newton steps, the contacts updated before each after the first
+            # 2. Newton steps, the contacts updated before each after the first (implicit_step's order: one
+            # assembly without friction, the contact update, then friction and the projection row by row)
             for it in range(newton):
-                if it >= 1:
-                    flag = int(0)
-                    for u in range(lane, nv, bd):
-                        if assemble_row(world, u, im_row, rl_row, ea_row, hr_row, hl_row, ak_row, inv_mass, edges,
-                                        rest_length, bar_stiffness, bar_stop_strain, bar_stop_stiffness, hinges,
-                                        hinge_rest, hinge_length, hinge_label, vert_bar_start, vert_bar,
-                                        vert_hinge_start, vert_hinge, k_hinge, c_hinge, anchor_vertex,
-                                        anchor_stiffness, anchor_target, k_limit, strain_limit, inv_dt, floor_n,
-                                        mu_s, mu_k, slip_speed, False, x, v, delta, crease_angle, contact,
-                                        floor_force, bar_strain, hess, grad) != 0:
-                            flag = 1
-                    bad = block_max(flag)
-                    if bad != 0:
-                        break
-                    for i in range(lane, nv, bd):
-                        update_contact(world, i, im_row, inv_mass, dt, inv_dt, inv_dt2, floor_n, mu_s, mu_k,
-                                       slip_speed, x, v, x_prev, delta, floor_force, grad, contact)
-                    bad = block_max(0)  # barrier: contacts and landed positions before the rows read them
                 flag = int(0)
                 for u in range(lane, nv, bd):
                     if assemble_row(world, u, im_row, rl_row, ea_row, hr_row, hl_row, ak_row, inv_mass, edges,
                                     rest_length, bar_stiffness, bar_stop_strain, bar_stop_stiffness, hinges,
                                     hinge_rest, hinge_length, hinge_label, vert_bar_start, vert_bar,
                                     vert_hinge_start, vert_hinge, k_hinge, c_hinge, anchor_vertex, anchor_stiffness,
-                                    anchor_target, k_limit, strain_limit, inv_dt, floor_n, mu_s, mu_k, slip_speed,
-                                    True, x, v, delta, crease_angle, contact, floor_force, bar_strain, hess,
-                                    grad) != 0:
+                                    anchor_target, k_limit, strain_limit, inv_dt, True, x, delta, crease_angle,
+                                    bar_strain, hess, grad) != 0:
                         flag = 1
-                bad = block_max(flag)  # also the barrier: every row assembled before the scatter reads it
+                bad = block_max(flag)  # also the barrier: every row's gradient before the contacts read it
                 if bad != 0:
                     break
+                if it >= 1:
+                    change = int(0)
+                    for i in range(lane, nv, bd):
+                        change = wp.max(change, update_contact(world, i, im_row, inv_mass, dt, inv_dt, inv_dt2,
+                                                               floor_n, mu_s, mu_k, slip_speed, x, v, x_prev, delta,
+                                                               floor_force, grad, contact))
+                    change = block_max(change)  # barrier: contacts and landed positions before the rows read them
+                    if change == CONTACTS_LANDED:
+                        # x moved: assemble anew at it
+                        for u in range(lane, nv, bd):
+                            if assemble_row(world, u, im_row, rl_row, ea_row, hr_row, hl_row, ak_row, inv_mass,
+                                            edges, rest_length, bar_stiffness, bar_stop_strain, bar_stop_stiffness,
+                                            hinges, hinge_rest, hinge_length, hinge_label, vert_bar_start, vert_bar,
+                                            vert_hinge_start, vert_hinge, k_hinge, c_hinge, anchor_vertex,
+                                            anchor_stiffness, anchor_target, k_limit, strain_limit, inv_dt, True, x,
+                                            delta, crease_angle, bar_strain, hess, grad) != 0:
+                                flag = 1
+                        bad = block_max(flag)
+                        if bad != 0:
+                            break
+                for u in range(lane, nv, bd):
+                    finish_row(world, u, im_row, inv_mass, inv_dt, floor_n, mu_s, mu_k, slip_speed, v, delta,
+                               contact, floor_force, hess, grad)
+                bad = block_max(0)  # barrier: every row finished before the solve reads it
+                moving = int(0)
                 if wp.static(DENSE):
                     # the band into the tile: one entry per thread per round, block (u, u - d) entry (a, b); the
                     # diagonal blocks' upper entries are skipped (the factorisation reads the lower triangle only)
@@ -645,6 +677,8 @@ def make_tile_substep_kernel(num_vertices: int, bandwidth: int, dense: bool = Tr
                         dx = -wp.vec3(rhs[3 * i], rhs[3 * i + 1], rhs[3 * i + 2])
                         x[world, i] = x[world, i] + dx
                         delta[world, i] = delta[world, i] + dx
+                        if not (wp.length(dx) < newton_tol):
+                            moving = 1
                 else:
                     block_band_cholesky_factor(world, lane, bd, nv, bandwidth, hess)
                     if lane == 0:
@@ -654,7 +688,11 @@ def make_tile_substep_kernel(num_vertices: int, bandwidth: int, dense: bool = Tr
                         dx = -grad[world, i]
                         x[world, i] = x[world, i] + dx
                         delta[world, i] = delta[world, i] + dx
-                bad = block_max(0)  # barrier: the step taken before the next rows read x
+                        if not (wp.length(dx) < newton_tol):
+                            moving = 1
+                moving = block_max(moving)  # also the barrier: the step taken before the next rows read x
+                if it >= 1 and moving == 0:
+                    break  # converged (implicit_step's test: no vertex moved by newton_tol or more)
             if bad != 0:
                 if lane == 0:
                     freeze_world(world, nv, x, v, x_prev, delta, unstable)

@@ -15,7 +15,10 @@ quiet_warp()
 @pytest.mark.parametrize("gait", ["peristaltic", "omega", "inchworm"])
 def test_gait_preset_deforms_and_moves_the_worm_its_way(gait, backward):
     """5 cycles of each preset on the default (mineral-paper) worm: stable and unfolded; it moves the commanded way
-    by more than 1 mm but never outruns the EPM (at most 1.05 w per cycle overall); its creases swing by 15° or more
+    by more than 1 mm, in every cycle after the first by more than 0, and it never gets ahead of the EPM that drags
+    it: after k cycles it has gone at most k w + w / 2 (the first cycle pulls the worm in to the EPM's path: inchworm
+    26.4 mm at w = 20 mm, measured; peristalsis lags a cycle and catches up, 26.5 mm in its third); its creases swing
+    by 15° or more
     (the paper's deformation, not a rigid slide); peristaltic and inchworm rest when the EPM is far (segment ratios
     within 2 % of 1 around the far points; the omega preset, which keeps up with the EPM, does not: 5.7 %,
     docs/dynamics.md)."""
@@ -26,7 +29,11 @@ def test_gait_preset_deforms_and_moves_the_worm_its_way(gait, backward):
     assert not result["unstable"][0] and not result["crumpled"][0]
     sign = -1.0 if backward else 1.0
     w = gaits.GAIT_PRESETS[gait]["wavelength"]
-    assert 1e-3 < sign * d <= 1.05 * 5 * w, f"{gait}: net displacement {d * 1e3:+.2f} mm (w = {w * 1e3:.0f} mm)"
+    assert sign * d > 1e-3, f"{gait}: net displacement {d * 1e3:+.2f} mm"
+    cycles = sign * np.asarray(m["cycle_displacement_m"][0])
+    ahead = np.cumsum(cycles) - w * np.arange(1, len(cycles) + 1)
+    assert np.all(cycles[1:] > 0.0) and np.all(ahead <= 0.5 * w), (
+        f"{gait}: per cycle {np.round(cycles * 1e3, 2)} mm (w = {w * 1e3:.0f} mm)")
     assert m["crease_angle_range_deg"][0] >= 15.0, m["crease_angle_range_deg"]
     assert m["max_fold_violation_deg"][0] <= 5.0
     if gait != "omega":

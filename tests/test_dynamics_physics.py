@@ -196,7 +196,9 @@ def test_axial_squeeze_folds_the_creases(substeps):
     state = sim.initial_state()
     x0 = state.positions.numpy()[0].astype(np.float64)
     targets = x0[tail + head].copy()
-    squeeze = 8e-3  # 10 % of the 80 mm worm
+    # 7.5 % of the 80 mm worm: at 8 mm (10 %) the converged solve crumples the bellows at 250 µs substeps (a crease
+    # folds through past 7 mm, the snap-through; a fixed 3 Newton steps, the first default, did not see it)
+    squeeze = 6e-3
     for r in np.linspace(0.0, 1.0, 31)[1:]:  # ramp the squeeze over 0.3 s, then hold 0.3 s
         t = targets.copy()
         t[3:, 0] -= r * squeeze

@@ -68,16 +68,16 @@ GAIT_ORIENTATION = {
 }
 GAIT_PLACEMENT = {"peristaltic": 0.4, "omega": 0.0, "inchworm": 0.2}
 
-# Tuned paths per gait (docs/dynamics.md, "Gaits"): batched grid searches (warpworm search-gait, 4 cycles, the
-# default mineral-paper worm with its crease damping), the best distance per cycle among the worlds that stay stable
-# and unfolded, keep up with the EPM (<= 1.05 w per cycle) and deform, then kept only where they are robust: stable
+# Tuned paths per gait (docs/dynamics.md, "Gaits"): batched grid searches (warpworm search-gait, the default
+# mineral-paper worm with its crease damping), the best distance per cycle among the worlds that stay stable and
+# unfolded, keep up with the EPM (<= 1.05 w per cycle) and deform, then kept only where they are robust: stable
 # over 3 cycles under both magnet models, both wrench refresh intervals (2 and 4 ms) and both directions (8 runs
-# per point). The first presets (peristaltic h 15 mm, inchworm a 60 mm / h 10 mm) sat on the crumple edge: they
-# crumpled in 1 to 3 of those 8 runs (peristaltic at 15 mm in the default dataset's own setting, analytic magnets).
+# per point, benchmarks/gait_robustness.py), and searched again once the Newton solve iterated to convergence:
+# the omega and inchworm presets before that (h 23 and 11 mm) crumpled with a converged solve.
 GAIT_PRESETS = {
     "peristaltic": dict(wavelength=0.024, amplitude=0.04, closest_approach=0.017, cycle_period=1.0),
-    "omega": dict(wavelength=0.016, amplitude=0.03, closest_approach=0.023, cycle_period=1.0),
-    "inchworm": dict(wavelength=0.020, amplitude=0.05, closest_approach=0.011, cycle_period=1.0),
+    "omega": dict(wavelength=0.016, amplitude=0.03, closest_approach=0.025, cycle_period=1.0),
+    "inchworm": dict(wavelength=0.020, amplitude=0.05, closest_approach=0.015, cycle_period=1.0),
 }
 
 
