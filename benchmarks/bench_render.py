@@ -18,14 +18,16 @@ import numpy as np
 
 
 def _scene(num_worlds: int, seed: int = 0):
-    from warpworm.render import build_scene, sample_appearance
+    from warpworm.config import load_config
+    from warpworm.render import build_scene
     from warpworm.render.demo import default_pattern, posed_worm_states
+    from warpworm.sampling import sample_appearance
 
     pattern = default_pattern()
     states = posed_worm_states(seed * 100003 + np.arange(num_worlds), pattern)
     scene = build_scene(states["positions"], pattern.triangles, pattern.triangle_segment,
                         magnet_pos=states["magnet_pos"], magnet_rot=states["magnet_rot"],
-                        worm_texcoords=pattern.vertices, appearance=sample_appearance(np.arange(num_worlds)))
+                        worm_texcoords=pattern.vertices, appearance=sample_appearance(load_config("default"), np.arange(num_worlds)))
     return states, scene
 
 
