@@ -82,10 +82,10 @@ def bench_one(W: int, magnet_model: str, device: str, with_numpy: bool, min_time
     t_step = timeit(lambda: sim.step(state, 1), device, min_time)
     t_sub = timeit(lambda: sim.run_substeps(state, S), device, min_time) / S
     t_wrench = timeit(lambda: sim.update_magnets(state), device, min_time, max_reps=20)
-    sim.newton_steps_taken(reset=True)
+    sim.newton_stats(reset=True)
     sim.run_substeps(state, 10 * S)
-    steps = sim.newton_steps_taken()
-    mean_steps = float(steps.mean()) / (10 * S) if steps is not None else float(sim.newton)
+    steps = sim.newton_stats()
+    mean_steps = float(steps["steps"].mean()) / (10 * S) if steps is not None else float(sim.newton)
     row = {
         "device": str(model.device),
         "magnets": magnet_model,
@@ -243,13 +243,13 @@ def compare(device: str = "cpu", sizes=None, quick: bool = False, solvers=None) 
             # EPM is near (composite panels), so the gait's start alone (EPM far) would flatter it
             period = float(np.max(np.asarray(model.params.cycle_period)))
             n = max(1, int(round(period / sim.dt / (4 if (quick or cuda) else 1))))
-            sim.newton_steps_taken(reset=True)
+            sim.newton_stats(reset=True)
             t0 = clock()
             sim.step(state, n)
             wp.synchronize_device(device)
             t_step = (clock() - t0) / n
-            counted = sim.newton_steps_taken()
-            mean_steps = float(counted.mean()) / (n * S) if counted is not None else float("nan")
+            counted = sim.newton_stats()
+            mean_steps = float(counted["steps"].mean()) / (n * S) if counted is not None else float("nan")
             t_sub = timeit(lambda: sim.run_substeps(state, S), device, min_time) / S
             tag = "" if solver == "band" and len(solvers) == 1 else f", {solver}"
             common = {"device": str(model.device), "W": W, "substep_us": 1e6 * sim.dt_sub, "time_base": base}

@@ -117,15 +117,15 @@ def profile_run(W: int, *, duration: float, settle: float, magnet_model: str = "
     sim.settle(state, settle)
     n_steps = max(1, int(round(duration / sim.dt)))
     use_cpu = not model.device.is_cuda
-    sim.newton_steps_taken(reset=True)
+    sim.newton_stats(reset=True)
     with launch_timers() as acc:
         wp.synchronize_device(model.device)
         t0, c0 = time.perf_counter(), time.thread_time()
         sim.step(state, n_steps)
         wp.synchronize_device(model.device)
         wall, cpu = time.perf_counter() - t0, time.thread_time() - c0
-    counted = sim.newton_steps_taken()
-    mean_newton = float(counted.mean()) / (n_steps * sim.substeps) if counted is not None else float("nan")
+    counted = sim.newton_stats()
+    mean_newton = float(counted["steps"].mean()) / (n_steps * sim.substeps) if counted is not None else float("nan")
     total = cpu if use_cpu else wall
     unstable = int(state.unstable.numpy().astype(bool).sum())
     stages, timed, timed_wall = [], 0.0, 0.0

@@ -190,13 +190,15 @@ class BarHingeState:
 @wp.struct
 class NewtonScratch:
     """The solver's own scratch (:class:`warpworm.simulator.Simulator` owns it; its values mean nothing between
-    launches, except ``delta``, which is zero there, and the ``newton_steps`` counter)."""
+    launches, except ``delta``, which is zero there, and the ``newton_steps`` / ``newton_capped`` counters)."""
 
     x_prev: wp.array2d(dtype=wp.vec3)  # (W, V) positions at the start of the substep [m]
     delta: wp.array2d(dtype=wp.vec3)  # (W, V) x − x̃ [m]
     hess: wp.array3d(dtype=wp.mat33)  # (W, V, B + 1) lower block band of the Newton matrix
     grad: wp.array2d(dtype=wp.vec3)  # (W, V) right-hand side, then the Newton step
+    released: wp.array2d(dtype=wp.int32)  # (W, V) 1 once a vertex let go of the floor in this substep
     newton_steps: wp.array(dtype=wp.int32)  # (W,) Newton steps taken, summed over substeps (a diagnostic counter)
+    newton_capped: wp.array(dtype=wp.int32)  # (W,) substeps that took every step without meeting the tolerance
 
 
 @wp.struct
@@ -454,6 +456,7 @@ def predict(world: int, c: WorldCoefficients, m: BarHingeModel, slip_speed: floa
             vel = v_old * c.damp + dt * (c.gravity + f_ext[world, i] * w_inv)
         p = s.x[world, i]
         w.x_prev[world, i] = p
+        w.released[world, i] = 0
         s.v[world, i] = vel
         h0 = wp.dot(p, c.floor_n)
         vn = wp.dot(vel, c.floor_n)
@@ -484,7 +487,10 @@ def update_contacts(world: int, c: WorldCoefficients, m: BarHingeModel, slip_spe
     n · ∂Φ/∂x there (what holds the vertex against the rest of the implicit step); a contact the floor would have to
     pull lets go; a stuck vertex faster than the slip speed broke loose, a sliding one whose motion reversed (kinetic
     friction stopped it) or fell below half the slip speed sticks; a free vertex the last step put below the floor
-    lands. Returns CONTACTS_LANDED if a vertex landed (x moved), else CONTACTS_CHANGED if one changed its status
+    lands. A vertex lets go at most once per substep (``w.released``): one that landed again stays on the floor, with no
+    normal force while the floor would have to pull, so that a vertex with ~zero normal force cannot cycle land / let
+    go / land between Newton steps and keep the iteration from converging. Returns CONTACTS_LANDED if a vertex landed
+    (x moved), else CONTACTS_CHANGED if one changed its status
     (the Newton matrix's projection changed), else 0."""
     dt = c.dt
     changed = int(0)
@@ -508,10 +514,13 @@ def update_contacts(world: int, c: WorldCoefficients, m: BarHingeModel, slip_spe
             continue
         fn = wp.dot(w.grad[world, i], c.floor_n)  # friction is tangential: not in the normal balance
         if not (fn > 0.0):
-            s.contact[world, i] = CONTACT_FREE
-            s.floor_force[world, i] = wp.vec3(0.0)
-            changed = wp.max(changed, CONTACTS_CHANGED)
-            continue
+            if w.released[world, i] == 0:
+                s.contact[world, i] = CONTACT_FREE
+                s.floor_force[world, i] = wp.vec3(0.0)
+                w.released[world, i] = 1
+                changed = wp.max(changed, CONTACTS_CHANGED)
+                continue
+            fn = 0.0  # it let go once already: held on the floor, without normal force (nor friction)
         vt = vel - c.floor_n * vn
         vt_len = wp.length(vt)
         ff = s.floor_force[world, i]
@@ -549,7 +558,10 @@ def newton_update(world: int, c: WorldCoefficients, factor: bool, s: BarHingeSta
         dx = -w.grad[world, i]
         s.x[world, i] = s.x[world, i] + dx
         w.delta[world, i] = w.delta[world, i] + dx
-        step = wp.max(step, wp.length(dx))
+        length = wp.length(dx)
+        if not (length < 1.0e30):
+            length = 1.0e30  # a non-finite step is no convergence (wp.max would drop a NaN)
+        step = wp.max(step, length)
     return step
 
 
@@ -624,8 +636,12 @@ def implicit_step(
     for sub in range(opt.num_substeps):
         predict(world, c, m, opt.slip_speed, f_ext, s, w)
         bad = int(0)
+        last_step = float(1.0e30)
+        stalled = bool(False)
         for it in range(opt.newton):
-            fresh = it == 0 or opt.refactor != 0  # assemble and factor the Hessian (else: a chord step)
+            # assemble and factor the Hessian, else a chord step; a chord step that did not halve the last step
+            # (e.g. kinetic friction's stiffness mu_k F_n / |v_t| gone stale) refactors the next
+            fresh = it == 0 or opt.refactor != 0 or stalled
             if it == 0:
                 bad = assemble(world, c, m, opt, anchor_target, s, w)
             else:
@@ -645,8 +661,13 @@ def implicit_step(
             if bad != 0:
                 break
             w.newton_steps[world] = w.newton_steps[world] + 1
-            if newton_update(world, c, fresh, s, w) < opt.newton_tol and it >= 1:
+            step = newton_update(world, c, fresh, s, w)
+            if step < opt.newton_tol and it >= 1:
                 break  # converged (after one contact update at least)
+            if it == opt.newton - 1:
+                w.newton_capped[world] = w.newton_capped[world] + 1  # the cap, not the tolerance, ended it
+            stalled = not fresh and step > 0.5 * last_step
+            last_step = step
         if bad == 0:
             bad = finish_substep(world, c, m, opt, s, w)
             crumpled = update_crease_angles(world, m, opt.fold_tolerance, s)

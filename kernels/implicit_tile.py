@@ -319,6 +319,7 @@ def predict_vertex(
     delta: wp.array2d(dtype=wp.vec3),
     floor_force: wp.array2d(dtype=wp.vec3),
     contact: wp.array2d(dtype=wp.int32),
+    released: wp.array2d(dtype=wp.int32),
 ):
     """Step 1 of implicit_step for vertex ``i`` (copied from its loop, which is inline there): the prediction x̃ and
     the start of the Newton iteration, a vertex on the floor stuck or sliding on it. Touches only vertex i."""
@@ -329,6 +330,7 @@ def predict_vertex(
         vel = v_old * damp + dt * (gvec + f_ext[world, i] * w_inv)
     p = x[world, i]
     x_prev[world, i] = p
+    released[world, i] = 0
     v[world, i] = vel
     h0 = wp.dot(p, floor_n)
     vn = wp.dot(vel, floor_n)
@@ -370,6 +372,7 @@ def update_contact(
     floor_force: wp.array2d(dtype=wp.vec3),
     grad: wp.array2d(dtype=wp.vec3),
     contact: wp.array2d(dtype=wp.int32),
+    released: wp.array2d(dtype=wp.int32),
 ):
     """implicit_step's contact update before a Newton step after the first, for vertex ``i`` (copied from its loop):
     normal force from the gradient, let go / land / stick / slip. Touches only vertex i. Returns
@@ -392,9 +395,12 @@ def update_contact(
         return 0
     fn = wp.dot(grad[world, i], floor_n)
     if not (fn > 0.0):
-        contact[world, i] = CONTACT_FREE
-        floor_force[world, i] = wp.vec3(0.0)
-        return CONTACTS_CHANGED
+        if released[world, i] == 0:
+            contact[world, i] = CONTACT_FREE
+            floor_force[world, i] = wp.vec3(0.0)
+            released[world, i] = 1
+            return CONTACTS_CHANGED
+        fn = 0.0  # it let go once already: held on the floor, without normal force (nor friction)
     vt = vel - floor_n * vn
     vt_len = wp.length(vt)
     ff = floor_force[world, i]
@@ -554,6 +560,7 @@ def make_tile_substep_kernel(num_vertices: int, bandwidth: int, dense: bool = Tr
         floor_force: wp.array2d(dtype=wp.vec3),
         hess: wp.array3d(dtype=wp.mat33),
         grad: wp.array2d(dtype=wp.vec3),
+        released: wp.array2d(dtype=wp.int32),
         bar_strain: wp.array2d(dtype=float),
         crease_angle: wp.array2d(dtype=float),
         contact: wp.array2d(dtype=wp.int32),
@@ -599,7 +606,7 @@ def make_tile_substep_kernel(num_vertices: int, bandwidth: int, dense: bool = Tr
             # 1. prediction (implicit_step's step 1)
             for i in range(lane, nv, bd):
                 predict_vertex(world, i, im_row, inv_mass, gvec, damp, dt, inv_dt, inv_dt2, floor_n, slip_speed,
-                               f_ext, x, v, x_prev, delta, floor_force, contact)
+                               f_ext, x, v, x_prev, delta, floor_force, contact, released)
             bad = block_max(0)  # barrier: every x predicted before any row reads it
 
             # 2. Newton steps, the contacts updated before each after the first (implicit_step's order: one
@@ -622,7 +629,7 @@ def make_tile_substep_kernel(num_vertices: int, bandwidth: int, dense: bool = Tr
                     for i in range(lane, nv, bd):
                         change = wp.max(change, update_contact(world, i, im_row, inv_mass, dt, inv_dt, inv_dt2,
                                                                floor_n, mu_s, mu_k, slip_speed, x, v, x_prev, delta,
-                                                               floor_force, grad, contact))
+                                                               floor_force, grad, contact, released))
                     change = block_max(change)  # barrier: contacts and landed positions before the rows read them
                     if change == CONTACTS_LANDED:
                         # x moved: assemble anew at it

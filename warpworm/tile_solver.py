@@ -52,7 +52,7 @@ def vertex_incidence(pairs_or_stencils: np.ndarray, num_vertices: int) -> tuple[
 def kernel_arguments(model, simulator, state, control, scratch, incidence, num_substeps: int) -> tuple[list, list]:
     """(inputs, outputs) of :func:`~warpworm.kernels.implicit_tile.make_tile_substep_kernel`'s kernel from the
     Model, the Simulator (substep settings), the State, the Control (anchor targets) and this solver's scratch
-    (x_prev, delta, hess, grad). The only place that knows those classes' field names."""
+    (x_prev, delta, hess, grad, released). The only place that knows those classes' field names."""
     m, sim = model, simulator
     inputs = [m.inv_mass, m.gravity, m.damping, m.edges, m.rest_length, m.bar_stiffness, m.bar_stop_strain,
               m.bar_stop_stiffness, m.hinges, m.hinge_rest_angle, m.hinge_length, m.hinge_label, m.hinge_stiffness,
@@ -60,7 +60,7 @@ def kernel_arguments(model, simulator, state, control, scratch, incidence, num_s
               m.mu_static, m.mu_kinetic, *incidence, sim.dt_sub, int(num_substeps), sim.newton, sim.newton_tol * sim.dt_sub, sim.slip_speed,
               sim.bar_strain_limit, sim.speed_limit, sim.fold_tolerance, state.external_force, control.anchor_target]
     outputs = [state.positions, state.velocities, scratch["x_prev"], scratch["delta"], state.floor_force,
-               scratch["hess"], scratch["grad"], state.bar_strain, state.crease_angle, state.contact, state.unstable,
+               scratch["hess"], scratch["grad"], scratch["released"], state.bar_strain, state.crease_angle, state.contact, state.unstable,
                state.step_count]
     return inputs, outputs
 
@@ -108,9 +108,10 @@ class TileSubsteps:
             "delta": wp.zeros((W, V), dtype=wp.vec3, device=dev),
             "hess": wp.zeros((W, V, self.bandwidth + 1), dtype=wp.mat33, device=dev),
             "grad": wp.zeros((W, V), dtype=wp.vec3, device=dev),
+            "released": wp.zeros((W, V), dtype=wp.int32, device=dev),
         }
         """The solver's scratch, shared by every state it steps (nothing in it outlives a launch; delta is zero
-        between launches): x_prev, delta (W, V) vec3 [m], hess (W, V, B + 1) mat33, grad (W, V) vec3."""
+        between launches): x_prev, delta (W, V) vec3 [m], hess (W, V, B + 1) mat33, grad (W, V) vec3, released (W, V) int32."""
         self._cmds = {}
 
     @property
