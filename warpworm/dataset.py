@@ -37,7 +37,7 @@ from typing import Any, Iterable
 import h5py
 import numpy as np
 
-from . import ids
+from . import ids, signal_hold
 
 SCHEMA_VERSION = 1
 MANIFEST = "manifest.json"
@@ -305,6 +305,7 @@ class ShardWriter:
         compression, level: image filter ('lzf' | 'gzip' | 'none').
     """
 
+    @signal_hold.holds_signals  # h5py calls back into Python here (warpworm.signal_hold)
     def __init__(self, out_dir, index: int, first_id: int, count: int, root_attrs: dict,
                  compression: str = "lzf", level: int = 1):
         self.dir = Path(out_dir)
@@ -353,6 +354,7 @@ class ShardWriter:
             ds.attrs["description"] = f"randomized value of {name[7:]} per sample"
         return ds
 
+    @signal_hold.holds_signals  # h5py calls back into Python here (warpworm.signal_hold)
     def write(self, row: int, batch: dict[str, np.ndarray], step: int = 1) -> None:
         """Write ``batch`` (name -> (n, ...) arrays) to rows row, row + step, ..., row + (n-1)*step.
 
@@ -389,6 +391,7 @@ class ShardWriter:
         if sl is not None:
             self.rows_written[sl] = True
 
+    @signal_hold.holds_signals  # h5py calls back into Python here (warpworm.signal_hold)
     def commit(self) -> Path:
         """Mark complete, flush, fsync, rename to the final name; returns the final path."""
         if not self.rows_written.all():
@@ -417,6 +420,7 @@ class ShardWriter:
             raise write_error(err, self.tmp, "finishing shard") from exc
         return self.final
 
+    @signal_hold.holds_signals  # h5py calls back into Python here (warpworm.signal_hold)
     def _cleanup(self):
         try:
             if getattr(self, "f", None) is not None:

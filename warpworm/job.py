@@ -23,6 +23,7 @@ import numpy as np
 from . import dataset as ds
 from . import workers as wk
 from .config import ConfigError, DatasetConfig, check_output_dir
+from . import signal_hold
 from .shard import Interrupted, ShardStats, warp_version
 from .stages import DEFAULT_STAGES
 
@@ -113,6 +114,9 @@ class SignalGuard:
     def _handler(self, signum, frame):
         if self._depth:
             self._held = signum
+            return
+        if signal_hold.in_io():  # inside an h5py call: raised when it returns (warpworm.signal_hold)
+            signal_hold.defer(signum)
             return
         raise Interrupted(signum)
 

@@ -26,6 +26,7 @@ import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from typing import Callable
 
+from . import signal_hold
 from .shard import Interrupted, run_shard
 from .stages import load_stages
 
@@ -36,6 +37,9 @@ _in_shard = False
 def _worker_signal(signum, frame):
     """SIGTERM / SIGINT in a worker: discard the shard in flight (run_shard deletes its temporary), then exit."""
     if _in_shard:
+        if signal_hold.in_io():  # inside an h5py call: raised when it returns (warpworm.signal_hold)
+            signal_hold.defer(signum)
+            return
         raise Interrupted(signum)
     os._exit(128 + signum)
 
