@@ -62,6 +62,19 @@ def timeit(fn, device, min_time: float = 0.5, max_reps: int = 200) -> float:
             return el / reps
 
 
+def mean_newton_steps(sim, substeps_run: int) -> float:
+    """Newton steps per substep the worlds took on average since ``sim.newton_stats(reset=True)``, over
+    ``substeps_run`` substeps each; NaN for a solver that does not count (the tile solvers)."""
+    counted = sim.newton_stats()
+    return float(counted["steps"].mean()) / substeps_run if counted is not None else float("nan")
+
+
+def reference_newton_steps(sim, mean_steps: float) -> int:
+    """The NumPy reference's Newton count for "the same step": the kernel's mean, rounded up (at least 2); the
+    simulator's cap when the mean is unknown."""
+    return max(2, int(np.ceil(mean_steps - 1e-9))) if mean_steps == mean_steps else sim.newton
+
+
 def gait_sim(W: int, magnet_model: str = "analytic", device: str = "cpu", solver: str = "band"):
     """The peristaltic preset on ``W`` worlds at the gait setting, settled briefly: (model, sim, state)."""
     from warpworm import gaits
@@ -84,8 +97,7 @@ def bench_one(W: int, magnet_model: str, device: str, with_numpy: bool, min_time
     t_wrench = timeit(lambda: sim.update_magnets(state), device, min_time, max_reps=20)
     sim.newton_stats(reset=True)
     sim.run_substeps(state, 10 * S)
-    steps = sim.newton_stats()
-    mean_steps = float(steps["steps"].mean()) / (10 * S) if steps is not None else float(sim.newton)
+    mean_steps = mean_newton_steps(sim, 10 * S)
     row = {
         "device": str(model.device),
         "magnets": magnet_model,
@@ -102,8 +114,7 @@ def bench_one(W: int, magnet_model: str, device: str, with_numpy: bool, min_time
         "time_base": clock_for(device)[1],
     }
     if with_numpy:
-        # the reference takes as many Newton steps as the kernel took on average (rounded up): the same step
-        t_np = numpy_substep_time(model, sim, state, min_time, newton=max(2, int(np.ceil(mean_steps - 1e-9))))
+        t_np = numpy_substep_time(model, sim, state, min_time, newton=reference_newton_steps(sim, mean_steps))
         row["numpy_substep_rate"] = W / t_np
         row["speedup_vs_numpy"] = t_np / t_sub
     return row
@@ -248,8 +259,7 @@ def compare(device: str = "cpu", sizes=None, quick: bool = False, solvers=None) 
             sim.step(state, n)
             wp.synchronize_device(device)
             t_step = (clock() - t0) / n
-            counted = sim.newton_stats()
-            mean_steps = float(counted["steps"].mean()) / (n * S) if counted is not None else float("nan")
+            mean_steps = mean_newton_steps(sim, n * S)
             t_sub = timeit(lambda: sim.run_substeps(state, S), device, min_time) / S
             tag = "" if solver == "band" and len(solvers) == 1 else f", {solver}"
             common = {"device": str(model.device), "W": W, "substep_us": 1e6 * sim.dt_sub, "time_base": base}
@@ -261,8 +271,7 @@ def compare(device: str = "cpu", sizes=None, quick: bool = False, solvers=None) 
                          **common, "step_rate": W / t_sub, "sim_s_per_wall_s": W * sim.dt_sub / t_sub,
                          "note": "implicit substeps to the Newton tolerance"})
             if solver == solvers[0] and (not cuda or W == min(sizes)):
-                # as many Newton steps as the kernel took on average in the gait (rounded up): the same step
-                k = max(2, int(np.ceil(mean_steps - 1e-9))) if mean_steps == mean_steps else sim.newton
+                k = reference_newton_steps(sim, mean_steps)
                 t_np = numpy_substep_time(model, sim, state, min_time, newton=k)
                 rows.append({"system": "NumPy reference substep", "device": "cpu", "W": W,
                              "substep_us": 1e6 * sim.dt_sub, "time_base": "process CPU time", "step_rate": W / t_np,

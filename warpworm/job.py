@@ -21,9 +21,9 @@ from pathlib import Path
 import numpy as np
 
 from . import dataset as ds
+from . import signal_hold
 from . import workers as wk
 from .config import ConfigError, DatasetConfig, check_output_dir
-from . import signal_hold
 from .shard import Interrupted, ShardStats, warp_version
 from .stages import DEFAULT_STAGES
 

@@ -117,7 +117,11 @@ class Simulator:
         self.newton = int(newton)
         if self.newton < 2:
             raise ValueError(f"newton must be >= 2 (the contacts are updated between Newton steps), got {newton}")
+        if solver not in SOLVERS:
+            raise ValueError(f"solver: got {solver!r}; expected one of {SOLVERS}")
         self.chord = bool(chord)
+        if self.chord and solver != "band":
+            raise ValueError(f"chord: chord Newton steps are implemented by the 'band' solver only, got solver={solver!r}")
         self.newton_tol = float(newton_tol)
         if not self.newton_tol >= 0:
             raise ValueError(f"newton_tol must be >= 0 [m/s], got {newton_tol}")
@@ -152,8 +156,6 @@ class Simulator:
             setattr(self._model_arrays, f, getattr(model, f))
         self._model_arrays.hinge_rest = model.hinge_rest_angle
         W, V, dev = model.num_worlds, model.num_vertices, model.device
-        if solver not in SOLVERS:
-            raise ValueError(f"solver: got {solver!r}; expected one of {SOLVERS}")
         self.scratch = ki.NewtonScratch()
         """The solver's own scratch (:class:`warpworm.kernels.implicit_euler.NewtonScratch`), shared by every state
         this simulator steps: nothing in it outlives a launch (a tile solver owns its own: none here)."""
@@ -166,8 +168,6 @@ class Simulator:
         self.scratch.released = wp.zeros((W, Vs), dtype=wp.int32, device=dev)
         self.scratch.newton_steps = wp.zeros(W, dtype=wp.int32, device=dev)
         self.scratch.newton_capped = wp.zeros(W, dtype=wp.int32, device=dev)
-        if self.chord and solver != "band":
-            raise ValueError(f"chord: chord Newton steps are implemented by the 'band' solver only, got solver={solver!r}")
         self.solver = solver
         self._tiles = None
         if solver.startswith("tile-"):
