@@ -14,7 +14,7 @@ import numpy as np
 class NumpyImplicit:
     """The implicit-Euler substep of :mod:`warpworm.kernels.implicit_euler` in NumPy (float64), vectorized over
     worlds, for a worm off the floor (contact and friction left out: compare with no vertex touching it): predict
-    x̃, then ``newton`` Gauss–Newton steps on ½|x − x̃|²_M/dt² + E(x) with a dense batched solve
+    x̃, start from the velocity carried over (the kernel's warm start), then ``newton`` Gauss–Newton steps on ½|x − x̃|²_M/dt² + E(x) with a dense batched solve
     (``np.linalg.solve`` on (W, 3V, 3V); the kernel factors a block band), then v = v' + (x − x̃)/dt.
     E: bar springs (compressive geometric stiffness dropped), creases (spring, implicit damping, NoFoldThrough limit
     spring k_lim of ``model.fold_limit_stiffness``; curvature term dropped), anchors. The benchmark's reference and the kernel's
@@ -86,7 +86,8 @@ class NumpyImplicit:
         acc[..., 2] -= self.g
         v_pred = np.where(w[..., None] > 0, (v + dt * acc) / (1.0 + self.damping[..., None] * dt), 0.0)
         xt = x + dt * v_pred
-        X = xt.copy()
+        # the kernel's warm start (implicit_euler.newton_start): a free vertex starts from the velocity it carries
+        X = np.where(w[..., None] > 0, x + dt * v, xt)
         m_dt2 = np.where(w > 0, 1.0 / np.maximum(w, 1e-300), 0.0) / dt**2  # (W, V)
         e = self.edges
         h = self.hinges
