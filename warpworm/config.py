@@ -241,7 +241,7 @@ class SimConfig:
     """W: worlds simulated at once in one solver batch."""
     dt: Annotated[Num, Field(gt=0)] = 0.004
     """Solver time step [s] (the gait runs' warpworm.gaits.DEFAULT_DT)."""
-    substeps: Annotated[Int, Field(ge=1)] = 4
+    substeps: Annotated[Int, Field(ge=1)] = 2
     """Solver substeps per time step."""
     settle_time: Annotated[Num, Field(ge=0)] = 0.3
     """Time [s] the worm settles under gravity with the EPM parked at the path start."""

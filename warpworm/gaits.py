@@ -52,9 +52,11 @@ from .params import GAITS, WormParams, per_world
 
 DEFAULT_DT = 4.0e-3
 """Step of the gait runs [s]: the magnetic wrench and EPM pose are refreshed every step."""
-DEFAULT_SUBSTEPS = 4
-"""Implicit substeps per step in the gait runs (1 ms): the implicit solver's friction matches Coulomb's law to 0.1 %
-from 50 µs to 1 ms and the six presets give the same displacements at 250 µs (docs/dynamics.md)."""
+DEFAULT_SUBSTEPS = 2
+"""Implicit substeps per step in the gait runs (2 ms): the six presets (three gaits, forward and backward) go where
+0.5 ms substeps take them to 0.2 mm over 5 cycles, with the same deformation ratios to 0.001 (docs/dynamics.md,
+"Newton convergence"); the Newton iteration then takes 3.1–4.1 steps per substep, so 2 ms costs ~0.6× of 1 ms per
+simulated second."""
 
 SINE_FIELDS = ("start_x", "start_y", "wavelength", "amplitude", "depth", "theta", "period", "direction", "phase")
 """The sinusoidal path's per-world fields (:class:`warpworm.kernels.magnet_pose.SinePath`)."""

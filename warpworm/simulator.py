@@ -64,7 +64,7 @@ class Simulator:
     Args:
         model: the batch.
         dt: step [s]: the magnetic wrench and the EPM pose are refreshed once per step.
-        substeps: substeps per step; the substep is ``dt / substeps`` (1 ms is accurate for the gaits and friction).
+        substeps: substeps per step; the substep is ``dt / substeps`` (2 ms, the gaits' default, is accurate for them).
         magnet_every_substep: re-evaluate the magnetic wrench every substep (slower; for dt studies).
         strain_limit: a bar strained beyond this |ΔL/L0| flags its world unstable (the soft VALLEY waist bars, which
             stand for panel bending, at ``max(strain_limit, 0.9)``: only a waist that collapses or triples fails).
@@ -74,10 +74,12 @@ class Simulator:
             explosion). Default 5°.
         use_graph: capture a step as a CUDA graph (default: on CUDA devices); ignored on CPU.
         newton: Newton steps per substep at most (at least 2; contacts and friction are updated from the floor's
-            force before every step after the first).
+            force before every step after the first). Default 24: at the gaits' 2 ms a stick–slip transition can
+            take 15–25 (7 of peristalsis's 2600 substeps in 5 cycles went past 12); none reaches 24 there.
         newton_tol: a Newton step (the second or later) that changes no vertex's velocity by more than this [m/s]
-            (moves none farther than ``newton_tol · dt_sub``) ends the substep: converged. Default 1e-4 m/s (1e-7 m
-            at 1 ms substeps), 3.7–4.1 steps on average in the gaits; 0 takes every step.
+            (moves none farther than ``newton_tol · dt_sub``) ends the substep: converged. Default 1e-4 m/s (2e-7 m
+            at the gaits' 2 ms substeps), 3.1–4.1 steps on average there (the iteration is warm-started:
+            :func:`warpworm.kernels.implicit_euler.newton_start`); 0 takes every step.
             A fixed 3 steps (this solver's first default) is not converged through a snap-through: there the
             omega and inchworm gaits' outcome depended on the step count (docs/dynamics.md, "Newton convergence").
         chord: chord Newton steps: the Hessian is assembled and factored once per substep (again when a contact
@@ -104,7 +106,7 @@ class Simulator:
         fold_tolerance: float = np.radians(5.0),
         speed_limit: float = 20.0,
         use_graph: bool | None = None,
-        newton: int = 12,
+        newton: int = 24,
         chord: bool = False,
         newton_tol: float = 1.0e-4,
         slip_speed: float = 1.0e-5,

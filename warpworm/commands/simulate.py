@@ -30,7 +30,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--device", default="cpu", help="Warp device: cpu | cuda | cuda:N (default cpu)")
     parser.add_argument("--magnet-model", choices=["dipoles", "analytic"], default="dipoles")
     parser.add_argument("--dt", type=float, default=None, help="step [s] (magnet wrench refresh; default preset)")
-    parser.add_argument("--substeps", type=int, default=None, help="solver substeps per step (default preset: 4, i.e. 1 ms)")
+    parser.add_argument("--substeps", type=int, default=None, help="solver substeps per step (default preset: 2, i.e. 2 ms)")
     parser.add_argument("--settle", type=float, default=0.2, help="settling time before the gait [s] (default 0.2)")
     parser.add_argument("--json", action="store_true", help="print only a JSON summary on stdout")
     parser.add_argument("--out", default="simulate_out", help="output folder (default ./simulate_out)")
