@@ -2,8 +2,8 @@
 the ``newton`` package is importable, Newton on the same mesh.
 
 Rows of :func:`run` (one per device, magnet model and W), in the gait setting (peristaltic preset,
-``gaits.DEFAULT_DT`` = 4 ms steps of ``gaits.DEFAULT_SUBSTEPS`` = 4 substeps of 1 ms):
-- ``step_rate``: worm-substeps/s of whole steps (1 magnetic wrench + 4 substeps), timed at the gait's start (the EPM
+``gaits.DEFAULT_DT`` = 4 ms steps of ``gaits.DEFAULT_SUBSTEPS`` = 2 substeps of 2 ms):
+- ``step_rate``: worm-substeps/s of whole steps (1 magnetic wrench + the step's substeps), timed at the gait's start (the EPM
   far: the analytic wrench is cheaper there than over a cycle; :func:`compare` times a whole cycle);
 - ``substep_rate``: worm-substeps/s of the substeps alone (``Simulator.run_substeps``: the one launch of
   ``implicit_euler.implicit_step``);
@@ -266,7 +266,7 @@ def compare(device: str = "cpu", sizes=None, quick: bool = False, solvers=None) 
             rows.append({"system": f"warpworm gait step (analytic magnets{tag})", **common,
                          "step_rate": W * S / t_step, "sim_s_per_wall_s": W * sim.dt / t_step,
                          "newton_steps": mean_steps,
-                         "note": f"1 wrench + 4 substeps per 4 ms, {n} steps of the peristaltic gait"})
+                         "note": f"1 wrench + {S} substeps per {sim.dt * 1e3:g} ms, {n} steps of the peristaltic gait"})
             rows.append({"system": f"warpworm substeps alone{tag.replace(', ', ' (') + ')' if tag else ''}",
                          **common, "step_rate": W / t_sub, "sim_s_per_wall_s": W * sim.dt_sub / t_sub,
                          "note": "implicit substeps to the Newton tolerance"})

@@ -2,7 +2,7 @@
 """Profile of a gait run's dynamics: time per kernel launch of :meth:`warpworm.simulator.Simulator.step`.
 
 The run is what ``warpworm simulate --magnet-model analytic`` does (peristaltic preset, ``gaits.DEFAULT_DT`` with
-``gaits.DEFAULT_SUBSTEPS``: 4 ms steps of four 1 ms substeps): build, settle (EPM parked), then the gait, without
+``gaits.DEFAULT_SUBSTEPS``: 4 ms steps of two 2 ms substeps): build, settle (EPM parked), then the gait, without
 frame snapshots. Every ``wp.launch`` and every recorded-command launch (the substeps' one ``implicit_step``) is
 timed by the wall clock around it with a device synchronize after it (a CPU launch runs synchronously anyway), keyed
 by kernel name; whatever the step spends outside the launches (array zeroing, Python) is the ``host`` row. The

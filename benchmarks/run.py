@@ -108,7 +108,7 @@ def summary(quick: bool, device: str):
         yield rows
 
 
-SUMMARY_NOTES = ("step_rate: worm-substeps/s (1 ms substeps; Newton's: its own steps); sim_s_per_wall_s: simulated "
+SUMMARY_NOTES = ("step_rate: worm-substeps/s (of substep_us each; Newton's: its own steps); sim_s_per_wall_s: simulated "
                  "worm-seconds per second of the time base (process CPU time on the CPU = one dedicated core; wall "
                  "on CUDA); vs_numpy: warpworm's substep over the NumPy reference's at the same W")
 
