@@ -142,3 +142,21 @@ def test_search_gait_ranks_and_does_not_depend_on_the_worker_split(tmp_path):
     assert len(rows) == 2 and float(rows[1]["closest_approach"]) == pytest.approx(0.035)
     with pytest.raises(ValueError, match="cycles"):
         search_gait(params, grid, 0)
+
+
+def test_lateral_drift_is_the_centroid_offset_across_the_axis():
+    """A worm translated sideways by a known y(t) on an inclined floor (the lateral axis +y stays in its plane):
+    the net and the largest lateral offset are y(end) and max |y|, whatever it does along the axis."""
+    pat = _worm()
+    x0 = pat.vertices
+    t = np.linspace(0.0, 2.0, 41)
+    y = 0.004 * np.sin(np.pi * t) - 0.003 * t  # out to +2.1 mm, back, ending at −6 mm
+    beta = np.radians(5.0)
+    rot = np.array([[np.cos(beta), 0.0, -np.sin(beta)], [0.0, 1.0, 0.0], [np.sin(beta), 0.0, np.cos(beta)]])
+    frames = np.stack([(x0 + [0.01 * tt, yy, 0.0]) @ rot.T for tt, yy in zip(t, y)])[:, None]
+    m = gait_metrics(pat, pat.hinge_label, {"positions": frames, "magnet_pos": np.zeros((len(t), 1, 4, 3)),
+                                            "crease_angle": np.zeros((len(t), 1, pat.num_hinges)), "time": t},
+                     1.0, incline=beta)
+    assert m["lateral_displacement_m"][0] == pytest.approx(y[-1], abs=1e-12)
+    assert m["lateral_drift_max_m"][0] == pytest.approx(np.abs(y).max(), abs=1e-12)
+    assert m["tail_displacement_m"][0] == pytest.approx(0.02, abs=1e-12)  # the axis motion is unaffected

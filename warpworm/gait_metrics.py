@@ -69,7 +69,10 @@ def gait_metrics(pattern, hinge_label, frames: dict, period, incline=0.0) -> dic
         1: both ends moved together, i.e. slid); ``far_point_motion_m`` (W,) the largest centroid motion in the
         windows ±0.1 cycle around the EPM's far points (s = 0, 1, 2, …) after the first;
         ``far_point_ratio_deviation`` (W,) the largest |ratio − 1| in those windows (has the worm relaxed?);
-        ``length_ratio_min`` (W,) the smallest head–tail distance over its first value.
+        ``length_ratio_min`` (W,) the smallest head–tail distance over its first value;
+        ``lateral_displacement_m`` (W,) net motion of the vertex centroid across the axis, along +y in the floor plane
+        (the EPM path runs along the axis: a worm that crawls straight keeps it ~0); ``lateral_drift_max_m`` (W,) the
+        largest |lateral offset| of the centroid from its first frame.
     """
     x = np.asarray(frames["positions"], np.float64)
     F, W = x.shape[:2]
@@ -85,6 +88,8 @@ def gait_metrics(pattern, hinge_label, frames: dict, period, incline=0.0) -> dic
     tail = np.einsum("fwc,wc->fw", tail_c, axis)
     head = np.einsum("fwc,wc->fw", head_c, axis)
     centroid = np.einsum("fwc,wc->fw", x.mean(axis=2), axis)
+    lateral = x.mean(axis=2)[..., 1]  # +y lies in the floor plane whatever the incline (about +y)
+    lateral = lateral - lateral[:1]
     normal = np.stack([-np.sin(beta), np.zeros(W), np.cos(beta)], -1)  # the floor's normal: lift is height above it
     lift = np.einsum("fwc,wc->fw", np.asarray(frames["magnet_pos"], np.float64)[:, :, IPM_CENTRE_SLOT], normal)
 
@@ -138,4 +143,6 @@ def gait_metrics(pattern, hinge_label, frames: dict, period, incline=0.0) -> dic
         "far_point_motion_m": far,
         "far_point_ratio_deviation": far_dev,
         "length_ratio_min": (length / length[:1]).min(axis=0),
+        "lateral_displacement_m": lateral[-1],
+        "lateral_drift_max_m": np.abs(lateral).max(axis=0),
     }

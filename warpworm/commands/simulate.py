@@ -338,7 +338,8 @@ def main(args) -> int:
             print(f"  world {w:4d}: ratios min {np.round(m['deformation_ratio_min'][w], 3).tolist()}, crease swing "
                   f"{m['crease_angle_range_deg'][w]:.1f} deg, tail {1e3 * m['tail_displacement_m'][w]:+.1f} mm, head "
                   f"{1e3 * m['head_displacement_m'][w]:+.1f} mm, centre lift {1e3 * m['centre_ipm_max_lift_m'][w]:.1f} "
-                  f"mm, fold violation {m['max_fold_violation_deg'][w]:.1f} deg")
+                  f"mm, fold violation {m['max_fold_violation_deg'][w]:.1f} deg, lateral drift "
+                  f"{1e3 * m['lateral_displacement_m'][w]:+.1f} mm (max {1e3 * m['lateral_drift_max_m'][w]:.1f})")
     for p in paths:
         print(f"  wrote {p}")
     return 0
