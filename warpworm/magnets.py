@@ -194,7 +194,9 @@ def launch_world_wrenches(
 
     One kernel launch (:func:`warpworm.kernels.magnet_wrench.world_wrench_kernel`, dim (W, M), thread =
     (world, target magnet), looping over the M − 1 sources); no host round trip, any M. Capturable in a graph once
-    the model array exists (pass a ``wp.array`` for ``model`` to avoid the small allocation a string makes).
+    the model array and the quadrature arrays exist: pass a ``wp.array`` for ``model`` (a string makes a small
+    array), and launch once outside the capture (the first call creates the Gauss–Legendre arrays from host data,
+    whose copy a capture would record instead of doing).
 
     Args:
         model: ``"dipoles"`` | ``"analytic"`` for the whole batch, or per-world ids (0 dipoles, 1 analytic) as a

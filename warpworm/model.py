@@ -108,6 +108,9 @@ class Control:
         """Set the EPM path (sinusoidal or keyframed) of every world; takes effect at the next step."""
         dev, k = self.device, self._kpose
         self.path = path
+        # new device arrays: a step captured as a graph before this call reads the old ones, so the simulator
+        # recaptures when the revision moves
+        self.revision = getattr(self, "revision", -1) + 1
         if path.kind == "sine":
             sp = k.SinePath()
             for f in gaits.SINE_FIELDS:
