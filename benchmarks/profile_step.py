@@ -99,9 +99,10 @@ def _build(W: int, magnet_model: str, device: str, newton: int | None = None, ne
     return model, sim
 
 
-def profile_run(W: int, *, duration: float, settle: float, magnet_model: str = "analytic",
+def profile_run(W: int, *, duration: float, settle: float, skip: float = 1.0, magnet_model: str = "analytic",
                 device: str = "cpu") -> dict:
-    """Settle + ``duration`` [s] of the peristaltic gait on ``W`` worlds, every launch timed.
+    """Settle, ``skip`` [s] of the peristaltic gait untimed (its first cycle, where the worm is pulled in to the
+    EPM's line and the Newton iteration is at its easiest), then ``duration`` [s] with every launch timed.
 
     Returns ``{"W", "steps", "wall_s", "cpu_s", "us_per_world_step", "worm_substeps_per_s", "sim_s_per_wall_s",
     "stages": [{stage, kernel, calls_per_step, us_per_step, us_per_world_step, share, wall_us_per_step}], ...}``.
@@ -115,6 +116,7 @@ def profile_run(W: int, *, duration: float, settle: float, magnet_model: str = "
     state = sim.initial_state()
     sim.step(state, 1, epm=False)  # compile every kernel before anything is timed
     sim.settle(state, settle)
+    sim.step(state, int(round(skip / sim.dt)))
     n_steps = max(1, int(round(duration / sim.dt)))
     use_cpu = not model.device.is_cuda
     sim.newton_stats(reset=True)
@@ -208,6 +210,8 @@ def main(argv=None) -> int:
     ap.add_argument("--worlds", type=int, nargs="+", default=[1, 64], help="world counts (default 1 64)")
     ap.add_argument("--duration", type=float, default=1.0, help="gait time profiled [s] (default 1.0: one cycle)")
     ap.add_argument("--settle", type=float, default=0.2, help="settling before the gait [s] (default 0.2)")
+    ap.add_argument("--skip", type=float, default=1.0, help="gait time run untimed first [s] (default 1.0: the first "
+                    "cycle)")
     ap.add_argument("--magnet-model", choices=["analytic", "dipoles"], default="analytic")
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--no-levers", action="store_true", help="skip the Newton-count and launch-floor measurements")
@@ -216,6 +220,8 @@ def main(argv=None) -> int:
     for w in args.worlds:
         if w < 1:
             ap.error(f"--worlds: expected counts >= 1, got {w}")
+    if not args.skip >= 0:
+        ap.error(f"--skip: expected >= 0 [s], got {args.skip}")
     if not args.duration > 0:
         ap.error(f"--duration: expected > 0 [s], got {args.duration}")
     from warpworm import quiet_warp
@@ -227,7 +233,8 @@ def main(argv=None) -> int:
     device = "cuda:0" if args.device == "cuda" else args.device
     runs = []
     for W in args.worlds:
-        r = profile_run(W, duration=args.duration, settle=args.settle, magnet_model=args.magnet_model, device=device)
+        r = profile_run(W, duration=args.duration, settle=args.settle, skip=args.skip, magnet_model=args.magnet_model,
+                        device=device)
         runs.append(r)
         print(f"\n== {args.magnet_model} magnets, peristaltic, W = {W}, {r['steps']} steps of {1e3 * r['dt_s']:g} ms "
               f"({r['substeps']} substeps, <= {r['newton']} Newton, {r['newton_steps_per_substep']:.2f} on average) "

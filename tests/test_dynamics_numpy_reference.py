@@ -66,9 +66,9 @@ def test_dihedral_angle_and_gradient_against_finite_differences():
 @pytest.mark.parametrize("kw, ref_newton", [
     ({"newton_tol": 0.0}, None),  # every step, as many as the reference takes
     ({}, 20),  # the default tolerance against the reference's fixed point
-    # chord steps: their own code, the same answer. Their tolerance, 1e-5 m/s = 5e-9 m at 0.5 ms, is just above the
-    # float32 spacing of these ~5 cm coordinates (3.7e-9 m): below it (2e-6 m/s was tried) no step can meet it, all 40
-    # are taken, and x and x − x̃ drift apart by rounding (v off by 2–3e-4 m/s)
+    # chord steps: their own code, the same answer. Their tolerance, 1e-5 m/s (5e-9 m at 0.5 ms): at 2e-6 m/s (1e-9 m,
+    # under the float32 resolution of these iterates) no substep met it, all took the 40 steps, and x and x − x̃
+    # drifted apart by rounding (v off by 2–3e-4 m/s); at 1e-5 every substep converges in ~2 (asserted below)
     ({"chord": True, "newton": 40, "newton_tol": 1e-5}, 20),
 ], ids=["same-steps", "tolerance", "chord"])
 def test_warp_implicit_substeps_match_numpy_reference(kw, ref_newton):

@@ -183,9 +183,9 @@ def test_dt_halving_converges():
 
 @pytest.mark.parametrize("substeps", [2, 4, 16], ids=["2ms", "1ms", "250us"])
 def test_axial_squeeze_folds_the_creases(substeps):
-    """The worm folds: squeezing it axially (tail ring anchored, head ring pushed 8 mm toward it, no gravity) shortens
+    """The worm folds: squeezing it axially (tail ring anchored, head ring pushed toward it, no gravity) shortens
     it through crease rotation and the soft valley-ring bars, while every other bar stays rigid (EA = 1e4 N: the
-    squeeze takes ~N, where the default 20 N bars would strain by a few %), at 1 ms and 250 µs substeps."""
+    squeeze takes ~N, where the default 20 N bars would strain by a few %), at 2 ms, 1 ms and 250 µs substeps."""
     p = WormParams(gravity=0.0, damping=20.0, bar_stiffness=1.0e4, **NO_MAGNETS)
     model = Model.from_params(p, 1, "cpu")
     pat = model.pattern

@@ -81,3 +81,36 @@ print("ok")
 """
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0 and r.stdout.strip().endswith("ok"), r.stdout[-2000:] + r.stderr[-2000:]
+
+
+def test_graph_cache_is_bounded_and_a_failing_capture_falls_back(monkeypatch):
+    """Six states stepped in turn by one simulator keep at most ``MAX_GRAPHS`` graphs, and each state ends where
+    plain launches take it; a CPU capture that raises (a Warp before 1.19) turns the graphs off and the step still
+    runs, to the same positions."""
+    import warp as wp
+
+    from warpworm import simulator as sim_mod
+
+    model = Model.from_params(gaits.preset_params("inchworm"), 1, "cpu")
+    graph, plain = (Simulator(model, dt=gaits.DEFAULT_DT, substeps=gaits.DEFAULT_SUBSTEPS, use_graph=g)
+                    for g in (True, False))
+    states = [[s.initial_state() for _ in range(6)] for s in (graph, plain)]
+    for _ in range(2):
+        for sim, sts in zip((graph, plain), states):
+            for st in sts:
+                sim.step(st, 3)
+    assert len(graph._graphs) <= sim_mod.MAX_GRAPHS
+    for a, b in zip(*states):
+        np.testing.assert_array_equal(a.positions.numpy(), b.positions.numpy())
+
+    def no_capture(*args, **kwargs):
+        raise RuntimeError("Must be a CUDA device")
+
+    monkeypatch.setattr(wp, "ScopedCapture", no_capture)
+    fallback = Simulator(model, dt=gaits.DEFAULT_DT, substeps=gaits.DEFAULT_SUBSTEPS, use_graph=True)
+    st = fallback.initial_state()
+    fallback.step(st, 4)
+    assert not fallback.use_graph
+    ref = plain.initial_state()
+    plain.step(ref, 4)
+    np.testing.assert_array_equal(st.positions.numpy(), ref.positions.numpy())

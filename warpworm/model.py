@@ -102,6 +102,8 @@ class Control:
         targets = x0[:, model.anchor_vertex.numpy()] if A else np.zeros((W, 0, 3), np.float32)
         self.anchor_target = wp.array(targets.reshape(W, A, 3), dtype=wp.vec3, device=self.device)
         """Anchor target points [m], shape (W, A), vec3 (A may be 0)."""
+        self.revision = -1
+        """Bumped by every :meth:`set_path` (new device arrays): a step graph captured at an older revision is stale."""
         self.set_path(model.default_path if path is None else path)
 
     def set_path(self, path: "gaits.EpmPath") -> None:
@@ -110,7 +112,7 @@ class Control:
         self.path = path
         # new device arrays: a step captured as a graph before this call reads the old ones, so the simulator
         # recaptures when the revision moves
-        self.revision = getattr(self, "revision", -1) + 1
+        self.revision += 1
         if path.kind == "sine":
             sp = k.SinePath()
             for f in gaits.SINE_FIELDS:

@@ -54,6 +54,18 @@ def launch_world_wrenches(model: Model, state: State, moment: wp.array, *, epm_w
     )
 
 
+def cpu_graphs_supported() -> bool:
+    """Whether this Warp can capture graphs on the CPU (1.19 and later; before, ``capture_begin`` wants CUDA)."""
+    try:
+        return tuple(int(v) for v in wp.config.version.split(".")[:2]) >= (1, 19)
+    except ValueError:
+        return False
+
+
+MAX_GRAPHS = 4
+"""Step graphs a simulator keeps (one per (state, control, EPM on/off), the oldest dropped first): each pins its
+state's arrays, and a caller that makes a state per trajectory would otherwise keep them all."""
+
 SOLVERS = ("band", "tile-band", "tile-dense")
 """The ways a world's Newton system is solved (``Simulator(solver=...)``)."""
 
@@ -149,7 +161,7 @@ class Simulator:
                                          .astype(np.float32), dtype=float, device=model.device)
         """Strain beyond which a bar flags its world unstable, shape (E,), float."""
         self.speed_limit = float(speed_limit)
-        self.use_graph = True if use_graph is None else bool(use_graph)
+        self.use_graph = (model.device.is_cuda or cpu_graphs_supported()) if use_graph is None else bool(use_graph)
         self.control = model.control()
         """The default inputs (the params' EPM path, anchors at rest): ``step`` uses it unless given another."""
         ki = self._ki
@@ -274,6 +286,9 @@ class Simulator:
                       inputs=[self._model_arrays, self._substep_options(num_substeps), state.external_force,
                               control.anchor_target, s, self.scratch],
                       device=m.device, record_cmd=True)
+        self._cmds.pop(key, None)
+        if len(self._cmds) >= 2 * MAX_GRAPHS:
+            self._cmds.pop(next(iter(self._cmds)))  # the oldest; a graph holds its own
         self._cmds[key] = (state, control, c)
         return c
 
@@ -315,9 +330,20 @@ class Simulator:
                 # every later run of the process; tests/test_step_graph.py)
                 self._one_step(state, control, moment)
                 n -= 1
-                with wp.ScopedCapture(device=self.model.device) as capture:
-                    self._one_step(state, control, moment)
-                g = (state, control, capture.graph, control.revision)
+                try:
+                    with wp.ScopedCapture(device=self.model.device) as capture:
+                        self._one_step(state, control, moment)
+                except Exception:  # a Warp that cannot capture on this device: plain launches from now on
+                    if self.model.device.is_cuda:
+                        raise
+                    self.use_graph = False
+                    return self.step(state, n, control, epm=epm)
+                # the graph keeps the recorded substep command it replays alive, whatever _cmds drops
+                g = (state, control, capture.graph, control.revision,
+                     self._world_cmd(state, control, 1 if self.magnet_every_substep else self.substeps))
+                self._graphs.pop(key, None)
+                if len(self._graphs) >= MAX_GRAPHS:
+                    self._graphs.pop(next(iter(self._graphs)))  # the oldest (dicts keep insertion order)
                 self._graphs[key] = g
             for _ in range(n):
                 wp.capture_launch(g[2])
