@@ -123,6 +123,22 @@ def newton_start(status: int, vel: wp.vec3, v_old: wp.vec3, h0: float, n: wp.vec
 
 
 @wp.func
+def starting_contact(w_inv: float, was: int, vel: wp.vec3, v_old: wp.vec3, h0: float, n: wp.vec3, dt: float,
+                     slip_speed: float) -> int:
+    """A vertex's contact status at the start of a substep: FIXED for infinite mass; on the floor (touching at the
+    end of the last substep, status ``was``, or predicted below it by its inertial velocity ``vel``) and not moving
+    off it: stuck or sliding by the speed along the floor it carries (``v_old``: a contact moving along the floor is
+    sliding whatever it did in the last substep, e.g. a worm kicked at rest); else FREE. (Shared by both kernels.)"""
+    if not (w_inv > 0.0):
+        return CONTACT_FIXED
+    vn = wp.dot(vel, n)
+    if vn < 0.0 and (was != CONTACT_FREE or h0 + dt * vn < 0.0):
+        vt_old = v_old - n * wp.dot(v_old, n)
+        return wp.where(wp.length(vt_old) > slip_speed, CONTACT_SLIDING, CONTACT_STUCK)
+    return CONTACT_FREE
+
+
+@wp.func
 def friction_force(status: int, vt: wp.vec3, normal_force: float, mu_s: float, mu_k: float, slip_speed: float):
     """The floor's friction on a vertex on it moving at tangential velocity ``vt`` [m/s] under ``normal_force``
     [N]: (force [N], stiffness ∂f/∂v projected PSD [N·s/m] as a scalar on the tangent plane, and the unit direction
@@ -483,18 +499,11 @@ def predict(world: int, c: WorldCoefficients, m: BarHingeModel, slip_speed: floa
         w.released[world, i] = 0
         s.v[world, i] = vel
         h0 = wp.dot(p, c.floor_n)
-        vn = wp.dot(vel, c.floor_n)
-        st = CONTACT_FREE
-        if not (w_inv > 0.0):
-            st = CONTACT_FIXED
-        elif vn < 0.0 and (s.contact[world, i] != CONTACT_FREE or h0 + dt * vn < 0.0):
-            # on the floor (still, or landing): stuck or sliding by the speed along the floor it has (a contact
-            # moving along the floor is sliding whatever it did in the last substep, e.g. a worm kicked at rest);
-            # a stuck vertex starts where it is tangentially, a sliding one moves on; neither goes below it
-            vt_old = v_old - c.floor_n * wp.dot(v_old, c.floor_n)
-            st = wp.where(wp.length(vt_old) > slip_speed, CONTACT_SLIDING, CONTACT_STUCK)
-            if s.contact[world, i] == CONTACT_FREE:
-                s.floor_force[world, i] = c.floor_n * (-(h0 + dt * vn) * mass_over_dt2(w_inv, c.inv_dt2))
+        st = starting_contact(w_inv, s.contact[world, i], vel, v_old, h0, c.floor_n, dt, slip_speed)
+        if (st == CONTACT_STUCK or st == CONTACT_SLIDING) and s.contact[world, i] == CONTACT_FREE:
+            # landing: the floor's first estimate of its normal force, from the predicted depth
+            depth = -(h0 + dt * wp.dot(vel, c.floor_n))
+            s.floor_force[world, i] = c.floor_n * (depth * mass_over_dt2(w_inv, c.inv_dt2))
         start = newton_start(st, vel, v_old, h0, c.floor_n, c.inv_dt)
         s.contact[world, i] = st
         s.x[world, i] = p + dt * start

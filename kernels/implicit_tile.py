@@ -57,6 +57,7 @@ from .implicit_euler import (
     friction_force,
     mass_over_dt2,
     newton_start,
+    starting_contact,
 )
 
 wp.set_module_options({"enable_backward": False})
@@ -334,15 +335,9 @@ def predict_vertex(
     released[world, i] = 0
     v[world, i] = vel
     h0 = wp.dot(p, floor_n)
-    vn = wp.dot(vel, floor_n)
-    st = CONTACT_FREE
-    if not (w_inv > 0.0):
-        st = CONTACT_FIXED
-    elif vn < 0.0 and (contact[world, i] != CONTACT_FREE or h0 + dt * vn < 0.0):
-        vt_old = v_old - floor_n * wp.dot(v_old, floor_n)
-        st = wp.where(wp.length(vt_old) > slip_speed, CONTACT_SLIDING, CONTACT_STUCK)
-        if contact[world, i] == CONTACT_FREE:
-            floor_force[world, i] = floor_n * (-(h0 + dt * vn) * mass_over_dt2(w_inv, inv_dt2))
+    st = starting_contact(w_inv, contact[world, i], vel, v_old, h0, floor_n, dt, slip_speed)
+    if (st == CONTACT_STUCK or st == CONTACT_SLIDING) and contact[world, i] == CONTACT_FREE:
+        floor_force[world, i] = floor_n * (-(h0 + dt * wp.dot(vel, floor_n)) * mass_over_dt2(w_inv, inv_dt2))
     start = newton_start(st, vel, v_old, h0, floor_n, inv_dt)
     contact[world, i] = st
     x[world, i] = p + dt * start
