@@ -108,15 +108,15 @@ def newton_start(status: int, vel: wp.vec3, v_old: wp.vec3, h0: float, n: wp.vec
     velocity is what a near-quasi-static worm keeps. Measured over 5 cycles of each gait preset: 2.6–3.2 Newton steps
     per 1 ms substep instead of 3.7–4.0, 3.1–4.1 per 2 ms instead of 4.7–5.9, the same gaits to 0.01 mm
     (docs/dynamics.md, "Newton convergence"). Only the start moves: x̃ and the equations do not (the contacts'
-    statuses follow the iterates, so a different start may end on another contact set within the tolerance). A free vertex starts no lower than
-    the floor; a stuck one where it is along the floor; one that is fixed (infinite mass) keeps ``vel`` (zero)."""
+    statuses follow the iterates, so a different start may end on another contact set within the tolerance). A
+    free vertex starts no lower than the floor; a stuck one where it is along the floor; one that is fixed (infinite
+    mass) keeps ``vel`` (zero)."""
     if status == CONTACT_FIXED:
         return vel
-    vn = wp.dot(vel, n)
     if status == CONTACT_FREE:
         gn = wp.dot(v_old, n)
         return v_old + n * (wp.max(gn, -h0 * inv_dt) - gn)
-    start = n * wp.max(vn, -h0 * inv_dt)
+    start = n * wp.max(wp.dot(vel, n), -h0 * inv_dt)
     if status == CONTACT_SLIDING:
         start = start + (v_old - n * wp.dot(v_old, n))
     return start
@@ -136,6 +136,13 @@ def starting_contact(w_inv: float, was: int, vel: wp.vec3, v_old: wp.vec3, h0: f
         vt_old = v_old - n * wp.dot(v_old, n)
         return wp.where(wp.length(vt_old) > slip_speed, CONTACT_SLIDING, CONTACT_STUCK)
     return CONTACT_FREE
+
+
+@wp.func
+def landing_floor_force(h0: float, vel: wp.vec3, n: wp.vec3, dt: float, w_inv: float, inv_dt2: float) -> wp.vec3:
+    """The floor's first estimate of its normal force on a vertex that lands this substep: m/dt² times the depth
+    its inertial velocity ``vel`` would take it below the floor from height ``h0`` (shared by both kernels)."""
+    return n * (-(h0 + dt * wp.dot(vel, n)) * mass_over_dt2(w_inv, inv_dt2))
 
 
 @wp.func
@@ -501,9 +508,7 @@ def predict(world: int, c: WorldCoefficients, m: BarHingeModel, slip_speed: floa
         h0 = wp.dot(p, c.floor_n)
         st = starting_contact(w_inv, s.contact[world, i], vel, v_old, h0, c.floor_n, dt, slip_speed)
         if (st == CONTACT_STUCK or st == CONTACT_SLIDING) and s.contact[world, i] == CONTACT_FREE:
-            # landing: the floor's first estimate of its normal force, from the predicted depth
-            depth = -(h0 + dt * wp.dot(vel, c.floor_n))
-            s.floor_force[world, i] = c.floor_n * (depth * mass_over_dt2(w_inv, c.inv_dt2))
+            s.floor_force[world, i] = landing_floor_force(h0, vel, c.floor_n, dt, w_inv, c.inv_dt2)
         start = newton_start(st, vel, v_old, h0, c.floor_n, c.inv_dt)
         s.contact[world, i] = st
         s.x[world, i] = p + dt * start

@@ -56,6 +56,7 @@ from .implicit_euler import (
     floor_landing,
     friction_force,
     mass_over_dt2,
+    landing_floor_force,
     newton_start,
     starting_contact,
 )
@@ -337,7 +338,7 @@ def predict_vertex(
     h0 = wp.dot(p, floor_n)
     st = starting_contact(w_inv, contact[world, i], vel, v_old, h0, floor_n, dt, slip_speed)
     if (st == CONTACT_STUCK or st == CONTACT_SLIDING) and contact[world, i] == CONTACT_FREE:
-        floor_force[world, i] = floor_n * (-(h0 + dt * wp.dot(vel, floor_n)) * mass_over_dt2(w_inv, inv_dt2))
+        floor_force[world, i] = landing_floor_force(h0, vel, floor_n, dt, w_inv, inv_dt2)
     start = newton_start(st, vel, v_old, h0, floor_n, inv_dt)
     contact[world, i] = st
     x[world, i] = p + dt * start

@@ -87,9 +87,9 @@ def gait_metrics(pattern, hinge_label, frames: dict, period, incline=0.0) -> dic
     tail_c, head_c = end_centres(pattern, x)  # (F, W, 3)
     tail = np.einsum("fwc,wc->fw", tail_c, axis)
     head = np.einsum("fwc,wc->fw", head_c, axis)
-    centroid = np.einsum("fwc,wc->fw", x.mean(axis=2), axis)
-    lateral = x.mean(axis=2)[..., 1]  # +y lies in the floor plane whatever the incline (about +y)
-    lateral = lateral - lateral[:1]
+    centre = x.mean(axis=2)  # (F, W, 3) vertex centroid
+    centroid = np.einsum("fwc,wc->fw", centre, axis)
+    lateral = centre[..., 1] - centre[:1, :, 1]  # +y lies in the floor plane whatever the incline (about +y)
     normal = np.stack([-np.sin(beta), np.zeros(W), np.cos(beta)], -1)  # the floor's normal: lift is height above it
     lift = np.einsum("fwc,wc->fw", np.asarray(frames["magnet_pos"], np.float64)[:, :, IPM_CENTRE_SLOT], normal)
 

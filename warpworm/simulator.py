@@ -66,6 +66,14 @@ MAX_GRAPHS = 4
 """Step graphs a simulator keeps (one per (state, control, EPM on/off), the oldest dropped first): each pins its
 state's arrays, and a caller that makes a state per trajectory would otherwise keep them all."""
 
+
+def _put_bounded(cache: dict, key, value, limit: int) -> None:
+    """``cache[key] = value`` as the newest entry, dropping the oldest while more than ``limit`` would remain."""
+    cache.pop(key, None)
+    while len(cache) >= limit:
+        cache.pop(next(iter(cache)))  # dicts keep insertion order
+    cache[key] = value
+
 SOLVERS = ("band", "tile-band", "tile-dense")
 """The ways a world's Newton system is solved (``Simulator(solver=...)``)."""
 
@@ -84,7 +92,8 @@ class Simulator:
         fold_tolerance: a crease more than this [rad] outside its NoFoldThrough range (mountain [−π, 0], valley
             [0, π]) means the sheet crumpled: the world is frozen and flagged (``State.unstable`` = 2; 1 is an
             explosion). Default 5°.
-        use_graph: capture a step as a graph and replay it (default on): a CUDA graph on a GPU; on the CPU, Warp's
+        use_graph: capture a step as a graph and replay it (default: on CUDA, and on the CPU with Warp 1.19 or
+            later, where a failing capture falls back to plain launches): a CUDA graph on a GPU; on the CPU, Warp's
             recorded launches replayed in C++, which saves the per-launch Python cost (a gait step at one world
             24 % faster, 15 % at 16; the same trajectory bit for bit, tested). A graph is captured per (state,
             control, EPM on/off) and again after ``control.set_path``.
@@ -286,10 +295,7 @@ class Simulator:
                       inputs=[self._model_arrays, self._substep_options(num_substeps), state.external_force,
                               control.anchor_target, s, self.scratch],
                       device=m.device, record_cmd=True)
-        self._cmds.pop(key, None)
-        if len(self._cmds) >= 2 * MAX_GRAPHS:
-            self._cmds.pop(next(iter(self._cmds)))  # the oldest; a graph holds its own
-        self._cmds[key] = (state, control, c)
+        _put_bounded(self._cmds, key, (state, control, c), 2 * MAX_GRAPHS)  # a graph holds the command it replays
         return c
 
     def run_substeps(self, state: State, num_substeps: int, control: Control | None = None) -> State:
@@ -341,10 +347,7 @@ class Simulator:
                 # the graph keeps the recorded substep command it replays alive, whatever _cmds drops
                 g = (state, control, capture.graph, control.revision,
                      self._world_cmd(state, control, 1 if self.magnet_every_substep else self.substeps))
-                self._graphs.pop(key, None)
-                if len(self._graphs) >= MAX_GRAPHS:
-                    self._graphs.pop(next(iter(self._graphs)))  # the oldest (dicts keep insertion order)
-                self._graphs[key] = g
+                _put_bounded(self._graphs, key, g, MAX_GRAPHS)
             for _ in range(n):
                 wp.capture_launch(g[2])
             return state
