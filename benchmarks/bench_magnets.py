@@ -255,15 +255,18 @@ def _baseline_kernels(rev: str):
     return module.world_wrench_kernel, tmp
 
 
-def _launcher(kernel, model_arr, arrays, device, epm):
-    """One world-wrench launch of ``kernel`` (today's or a baseline revision's, with or without ``epm_wrench``)."""
+def _launcher(kernel, model_arr, arrays, device, epm, far=True):
+    """One world-wrench launch of ``kernel`` (today's or a baseline revision's, with or without ``epm_wrench``;
+    ``far`` = the ring rule for far cylinder pairs, where the kernel has it)."""
     from warpworm import magnets as mg
 
     gl_x, gl_w = mg._gauss_legendre(mg.DEFAULT_QUAD_ORDER, str(device))
     a = arrays
-    flag = [int(epm)] if "epm_wrench" in [arg.label for arg in kernel.adj.args] else []
-    inputs = [model_arr, a["shape"], a["size"], a["moment"], a["density"], gl_x, gl_w, mg.DEFAULT_MAX_PANELS, *flag,
-              a["pos"], a["rot"]]
+    labels = [arg.label for arg in kernel.adj.args]
+    far_flag = [int(far)] if "far_field" in labels else []
+    flag = [int(epm)] if "epm_wrench" in labels else []
+    inputs = [model_arr, a["shape"], a["size"], a["moment"], a["density"], gl_x, gl_w, mg.DEFAULT_MAX_PANELS,
+              *far_flag, *flag, a["pos"], a["rot"]]
 
     def call():
         wp.launch(kernel, dim=a["pos"].shape, inputs=inputs, outputs=[a["force_out"], a["torque_out"]], device=device)
@@ -312,18 +315,27 @@ def run(quick: bool = False) -> list[dict]:
                 )
                 repeats = 3 if W * 12 > 3000 else 10
                 base_t = None
-                for impl, kernel, epm in variants:
-                    call = _launcher(kernel, model_arr, arrays, device, epm)
+                closed_t = None
+                # 'analytic' also once with every pair in closed form (no far-field ring rule): the rule's gain
+                runs = [(impl, kernel, epm, True) for impl, kernel, epm in variants]
+                if model == "analytic":
+                    runs.insert(0, ("warpworm closed form", world_wrench_kernel, False, False))
+                for impl, kernel, epm, far in runs:
+                    call = _launcher(kernel, model_arr, arrays, device, epm, far)
                     if model == "dipoles":
                         t, t_ref = _time_interleaved(call, ref_call, max(repeats, 5))
                     else:
                         t = _time(call, repeats)
                     row = {"impl": impl, "model": model, "epm": epm, "W": W, "ms_per_call": 1e3 * t,
                            "us_per_world": 1e6 * t / W, "pair_wrenches_per_s": (12 if epm else 9) * W / t}
-                    if impl != "warpworm":
+                    if not far:
+                        closed_t = t
+                    elif impl != "warpworm":
                         base_t = t
                     elif base_t is not None:
                         row["speedup"] = base_t / t
+                    if far and not epm and closed_t is not None and impl == "warpworm":
+                        row["vs_closed_form"] = closed_t / t
                     if model == "dipoles":
                         row["pairs_per_s"] = (pairs_per_world if epm else pairs_no_epm) * W / t
                         row["vs_nbody"] = row["pairs_per_s"] / (ref_pairs / t_ref)

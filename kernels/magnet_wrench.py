@@ -14,6 +14,7 @@ import warp as wp
 
 from warpworm import ids
 
+from .magnet_far_pair import cylinder_ring_rule, far_cylinder_pair_wrench, ring_points_for_distance
 from .magnet_fields import (
     F64_0,
     SHAPE_CYLINDER,
@@ -54,11 +55,14 @@ def pair_wrench(
     gl_x: wp.array(dtype=wp.float64),
     gl_w: wp.array(dtype=wp.float64),
     max_panels: int,
+    far_field: int,
 ):
     """World-frame force [N] and torque about the target centre [N·m] on target t from source s.
 
     The pair is evaluated in the source's frame (relative pose only), which keeps the closed forms in their
     canonical orientation and removes the large common offset of world positions before any float64 work.
+    ``far_field`` = 1 lets the 'analytic' model take two cylinders at least 4 circumscribing radii apart by the
+    multipole-matched ring rule (:mod:`.magnet_far_pair`, ~1e-5 of the closed form) instead of the closed form.
     """
     rs = wp.quat_to_matrix(s_rot)
     rt = wp.quat_to_matrix(t_rot)
@@ -66,7 +70,24 @@ def pair_wrench(
     t_rel = wp.transpose(rs) * (t_pos - s_pos)
     force = wp.vec3(0.0)
     torque = wp.vec3(0.0)
-    if model == MODEL_ANALYTIC:
+    use_far = 0
+    s_rule = wp.vec4(0.0)
+    t_rule = wp.vec4(0.0)
+    nphi = 0
+    if model == MODEL_ANALYTIC and far_field != 0 and s_shape == SHAPE_CYLINDER and t_shape == SHAPE_CYLINDER:
+        s_radius = 0.5 * s_size[0]
+        t_radius = 0.5 * t_size[0]
+        reach = wp.sqrt(wp.max(s_radius * s_radius + 0.25 * s_size[2] * s_size[2],
+                               t_radius * t_radius + 0.25 * t_size[2] * t_size[2]))
+        nphi = ring_points_for_distance(wp.length(t_rel), reach)
+        if nphi > 0:
+            s_rule = cylinder_ring_rule(s_radius, s_size[2])
+            t_rule = cylinder_ring_rule(t_radius, t_size[2])
+            if s_rule[2] > 0.0 and t_rule[2] > 0.0:
+                use_far = 1
+    if use_far == 1:
+        force, torque = far_cylinder_pair_wrench(s_rule, s_m, t_rule, t_m, r_rel, t_rel, nphi)
+    elif model == MODEL_ANALYTIC:
         # J = mu0 m / V (source polarization), M = m / V (target magnetization)
         s_J = wp.vec3d(s_m) * (MU0 / wp.float64(magnet_volume(s_shape, s_size)))
         t_M = wp.vec3d(t_m) / wp.float64(magnet_volume(t_shape, t_size))
@@ -101,6 +122,7 @@ def world_wrench_kernel(
     gl_x: wp.array(dtype=wp.float64),
     gl_w: wp.array(dtype=wp.float64),
     max_panels: int,
+    far_field: int,
     epm_wrench: int,
     # Data in:
     pos: wp.array2d(dtype=wp.vec3),
@@ -153,6 +175,7 @@ def world_wrench_kernel(
                     gl_x,
                     gl_w,
                     max_panels,
+                    far_field,
                 )
                 force += f
                 torque += t
@@ -174,6 +197,7 @@ def pair_wrench_kernel(
     gl_x: wp.array(dtype=wp.float64),
     gl_w: wp.array(dtype=wp.float64),
     max_panels: int,
+    far_field: int,
     # Data in:
     s_pos: wp.array(dtype=wp.vec3),
     s_rot: wp.array(dtype=wp.quat),
@@ -204,6 +228,7 @@ def pair_wrench_kernel(
         gl_x,
         gl_w,
         max_panels,
+        far_field,
     )
     force_out[k] = f
     torque_out[k] = t
