@@ -93,6 +93,21 @@ def ring_points_for_distance(distance: float, reach: float) -> int:
 
 
 @wp.func
+def ring_start(ring: int, half: wp.vec2) -> wp.vec2:
+    """(cos, sin) of a ring's first point: 0 for ring 0; ring 1 is turned by half a step (``half``), so that its
+    |m| = nphi azimuthal moment partly cancels ring 0's."""
+    if ring == 1:
+        return half
+    return wp.vec2(1.0, 0.0)
+
+
+@wp.func
+def rotate(cs: wp.vec2, step: wp.vec2) -> wp.vec2:
+    """(cos, sin) turned by the angle of ``step`` = (cos, sin) (a complex product: no trig per point)."""
+    return wp.vec2(cs[0] * step[0] - cs[1] * step[1], cs[1] * step[0] + cs[0] * step[1])
+
+
+@wp.func
 def far_cylinder_pair_wrench(
     s_rule: wp.vec4,
     s_m: wp.vec3,
@@ -111,10 +126,8 @@ def far_cylinder_pair_wrench(
         nphi: points per ring (:func:`ring_points_for_distance`).
     """
     dphi = TWO_PI / float(nphi)
-    step_c = wp.cos(dphi)
-    step_s = wp.sin(dphi)
-    half_c = wp.cos(0.5 * dphi)
-    half_s = wp.sin(0.5 * dphi)
+    step = wp.vec2(wp.cos(dphi), wp.sin(dphi))
+    half = wp.vec2(wp.cos(0.5 * dphi), wp.sin(0.5 * dphi))
     inv_n = 1.0 / float(nphi)
     mt_dir = r_rel * t_m
     ax = wp.vec3(r_rel[0, 0], r_rel[1, 0], r_rel[2, 0])
@@ -124,38 +137,24 @@ def far_cylinder_pair_wrench(
     for tk in range(2):
         rho_t = t_rule[tk]
         mt = mt_dir * (t_rule[2 + tk] * inv_n)
-        # the second ring is turned by half a step: its |m| = nphi moment partly cancels the first's
-        ct = 1.0
-        st = 0.0
-        if tk == 1:
-            ct = half_c
-            st = half_s
+        ct = ring_start(tk, half)
         for tj in range(nphi):
-            lever = (ax * ct + ay * st) * rho_t
+            lever = (ax * ct[0] + ay * ct[1]) * rho_t
             pt = t_rel + lever
             f = wp.vec3(0.0)
             b = wp.vec3(0.0)
             for sk in range(2):
                 rho_s = s_rule[sk]
                 ms = s_m * (s_rule[2 + sk] * inv_n)
-                cs = 1.0
-                ss = 0.0
-                if sk == 1:
-                    cs = half_c
-                    ss = half_s
+                cs = ring_start(sk, half)
                 for si in range(nphi):
-                    ps = wp.vec3(rho_s * cs, rho_s * ss, 0.0)
-                    ff, bb = dipole_pair_force_field(ms, mt, pt - ps)
+                    ff, bb = dipole_pair_force_field(ms, mt, pt - wp.vec3(rho_s * cs[0], rho_s * cs[1], 0.0))
                     f += ff
                     b += bb
-                    cn = cs * step_c - ss * step_s
-                    ss = ss * step_c + cs * step_s
-                    cs = cn
+                    cs = rotate(cs, step)
             force += f
             torque += wp.cross(lever, f) + wp.cross(mt, b)
-            cn_t = ct * step_c - st * step_s
-            st = st * step_c + ct * step_s
-            ct = cn_t
+            ct = rotate(ct, step)
     return force, torque
 
 
