@@ -214,7 +214,6 @@ class SubstepOptions:
     newton: int  # Newton steps per substep at most (>= 2)
     newton_tol: float  # [m] a Newton step (the second or later) moving no vertex farther than this ends the substep
     refactor: int  # 1: assemble and factor the Hessian at every Newton step; 0: chord steps (module docstring)
-    predict: int  # 1: also stop when the contraction estimate of the remaining error is below newton_tol
     slip_speed: float  # static-friction regularisation ε [m/s]
     strain_limit: wp.array(dtype=float)  # (E,) |strain| beyond which a world explodes
     speed_limit: float  # [m/s] beyond which (or non-finite) a world explodes
@@ -575,33 +574,6 @@ def update_contacts(world: int, c: WorldCoefficients, m: BarHingeModel, slip_spe
 
 
 @wp.func
-def step_length(dx: wp.vec3) -> float:
-    """|dx| [m] of one vertex's Newton step; a non-finite step counts as 1e30, no convergence (wp.max would drop
-    a NaN)."""
-    length = wp.length(dx)
-    if not (length < 1.0e30):
-        length = 1.0e30
-    return length
-
-
-@wp.func
-def converged(step: float, last_step: float, it: int, contacts_changed: int, tol: float, predict: int) -> bool:
-    """Whether the Newton iteration may stop after step ``it`` (0-based) of length ``step`` [m] (largest vertex
-    move; ``last_step`` the one before). Never before one contact update (``it`` >= 1). Either the step itself is
-    below ``tol``, or (``predict``) the contraction estimate of what the remaining steps would still move,
-    θ/(1 − θ)·step with θ = step / last_step (Hairer & Wanner's stopping test for Newton in implicit integrators,
-    conservative for a quadratically converging iteration), is — only when no contact changed in this step (a
-    contact change alters the system, so the rate of the last two steps says nothing about the next)."""
-    if it < 1:
-        return False
-    if step < tol:
-        return True
-    if predict != 0 and contacts_changed == 0 and step < last_step:
-        return step * step < tol * (last_step - step)
-    return False
-
-
-@wp.func
 def newton_update(world: int, c: WorldCoefficients, factor: bool, s: BarHingeState, w: NewtonScratch) -> float:
     """Solve H dx = −grad restricted to the allowed directions and apply dx to x and to x − x̃; ``factor``: factor
     the freshly assembled H first, else reuse the factor left in ``w.hess`` (a chord step). Returns max |dx| [m]."""
@@ -621,7 +593,10 @@ def newton_update(world: int, c: WorldCoefficients, factor: bool, s: BarHingeSta
         dx = -w.grad[world, i]
         s.x[world, i] = s.x[world, i] + dx
         w.delta[world, i] = w.delta[world, i] + dx
-        step = wp.max(step, step_length(dx))
+        length = wp.length(dx)
+        if not (length < 1.0e30):
+            length = 1.0e30  # a non-finite step is no convergence (wp.max would drop a NaN)
+        step = wp.max(step, length)
     return step
 
 
@@ -699,7 +674,6 @@ def implicit_step(
         last_step = float(1.0e30)
         stalled = bool(False)
         for it in range(opt.newton):
-            contacts_changed = int(0)
             # assemble and factor the Hessian, else a chord step; a chord step that did not halve the last step
             # (e.g. kinetic friction's stiffness mu_k F_n / |v_t| gone stale) refactors the next
             fresh = it == 0 or opt.refactor != 0 or stalled
@@ -712,7 +686,6 @@ def implicit_step(
                 if bad != 0:
                     break
                 change = update_contacts(world, c, m, opt.slip_speed, s, w)
-                contacts_changed = change
                 if change == CONTACTS_LANDED or (change != 0 and not fresh):
                     fresh = True  # x moved, or the chord's factor has a stale projection: assemble anew
                     bad = assemble(world, c, m, opt, anchor_target, s, w)
@@ -724,7 +697,7 @@ def implicit_step(
                 break
             w.newton_steps[world] = w.newton_steps[world] + 1
             step = newton_update(world, c, fresh, s, w)
-            if converged(step, last_step, it, contacts_changed, opt.newton_tol, opt.predict):
+            if step < opt.newton_tol and it >= 1:
                 break  # converged (after one contact update at least)
             if it == opt.newton - 1:
                 w.newton_capped[world] = w.newton_capped[world] + 1  # the cap, not the tolerance, ended it

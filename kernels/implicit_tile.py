@@ -52,7 +52,6 @@ from .implicit_euler import (
     CONTACTS_CHANGED,
     CONTACTS_LANDED,
     WORLD_CRUMPLED,
-    converged,
     dof_projector,
     floor_landing,
     friction_force,
@@ -60,7 +59,6 @@ from .implicit_euler import (
     landing_floor_force,
     newton_start,
     starting_contact,
-    step_length,
 )
 
 wp.set_module_options({"enable_backward": False})
@@ -75,14 +73,6 @@ def block_max(flag: int) -> int:
     block barrier: every thread's writes before it (global memory included) are seen by every thread after it.
     Every thread of the block must call it."""
     t = wp.tile(flag)
-    m = wp.tile_max(t)
-    return m[0]
-
-
-@wp.func
-def block_max_float(value: float) -> float:
-    """:func:`block_max` of a float (also a block barrier; every thread of the block must call it)."""
-    t = wp.tile(value)
     m = wp.tile_max(t)
     return m[0]
 
@@ -549,7 +539,6 @@ def make_tile_substep_kernel(num_vertices: int, bandwidth: int, dense: bool = Tr
         num_substeps: int,
         newton: int,
         newton_tol: float,
-        newton_predict: int,
         slip_speed: float,
         strain_limit: wp.array(dtype=float),
         speed_limit: float,
@@ -616,9 +605,7 @@ def make_tile_substep_kernel(num_vertices: int, bandwidth: int, dense: bool = Tr
 
             # 2. Newton steps, the contacts updated before each after the first (implicit_step's order: one
             # assembly without friction, the contact update, then friction and the projection row by row)
-            last_step = float(1.0e30)
             for it in range(newton):
-                contacts_changed = int(0)
                 flag = int(0)
                 for u in range(lane, nv, bd):
                     if assemble_row(world, u, im_row, rl_row, ea_row, hr_row, hl_row, ak_row, inv_mass, edges,
@@ -638,7 +625,6 @@ def make_tile_substep_kernel(num_vertices: int, bandwidth: int, dense: bool = Tr
                                                                floor_n, mu_s, mu_k, slip_speed, x, v, x_prev, delta,
                                                                floor_force, grad, contact, released))
                     change = block_max(change)  # barrier: contacts and landed positions before the rows read them
-                    contacts_changed = change
                     if change == CONTACTS_LANDED:
                         # x moved: assemble anew at it
                         for u in range(lane, nv, bd):
@@ -656,7 +642,7 @@ def make_tile_substep_kernel(num_vertices: int, bandwidth: int, dense: bool = Tr
                     finish_row(world, u, im_row, inv_mass, inv_dt, floor_n, mu_s, mu_k, slip_speed, v, delta,
                                contact, floor_force, hess, grad)
                 bad = block_max(0)  # barrier: every row finished before the solve reads it
-                local_step = float(0.0)
+                moving = int(0)
                 if wp.static(DENSE):
                     # the band into the tile: one entry per thread per round, block (u, u - d) entry (a, b); the
                     # diagonal blocks' upper entries are skipped (the factorisation reads the lower triangle only)
@@ -692,7 +678,8 @@ def make_tile_substep_kernel(num_vertices: int, bandwidth: int, dense: bool = Tr
                         dx = -wp.vec3(rhs[3 * i], rhs[3 * i + 1], rhs[3 * i + 2])
                         x[world, i] = x[world, i] + dx
                         delta[world, i] = delta[world, i] + dx
-                        local_step = wp.max(local_step, step_length(dx))
+                        if not (wp.length(dx) < newton_tol):
+                            moving = 1
                 else:
                     block_band_cholesky_factor(world, lane, bd, nv, bandwidth, hess)
                     if lane == 0:
@@ -702,11 +689,11 @@ def make_tile_substep_kernel(num_vertices: int, bandwidth: int, dense: bool = Tr
                         dx = -grad[world, i]
                         x[world, i] = x[world, i] + dx
                         delta[world, i] = delta[world, i] + dx
-                        local_step = wp.max(local_step, step_length(dx))
-                step = block_max_float(local_step)  # also the barrier: the step taken before the next rows read x
-                if converged(step, last_step, it, contacts_changed, newton_tol, newton_predict):
-                    break  # implicit_step's test, on the same largest vertex move
-                last_step = step
+                        if not (wp.length(dx) < newton_tol):
+                            moving = 1
+                moving = block_max(moving)  # also the barrier: the step taken before the next rows read x
+                if it >= 1 and moving == 0:
+                    break  # converged (implicit_step's test: no vertex moved by newton_tol or more)
             if bad != 0:
                 if lane == 0:
                     freeze_world(world, nv, x, v, x_prev, delta, unstable)

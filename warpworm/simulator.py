@@ -106,11 +106,6 @@ class Simulator:
             :func:`warpworm.kernels.implicit_euler.newton_start`); 0 takes every step.
             A fixed 3 steps (this solver's first default) is not converged through a snap-through: there the
             omega and inchworm gaits' outcome depended on the step count (docs/dynamics.md, "Newton convergence").
-        newton_predict: also end the substep when the contraction estimate of the remaining Newton steps' motion,
-            θ/(1 − θ)·step with θ the ratio of the last two steps, is below the tolerance and no contact changed in
-            the last step (Hairer & Wanner's test; :func:`warpworm.kernels.implicit_euler.converged`): saves the
-            confirming step. At the gaits 8–20 % fewer Newton steps, the outcomes within 0.1 mm over 5 cycles
-            (docs/dynamics.md, "Newton convergence"). ``False``: only a step below the tolerance ends it.
         chord: chord Newton steps: the Hessian is assembled and factored once per substep (again when a contact
             changes or a chord step fails to halve the last); later steps reuse that factor with a fresh gradient.
             Cheaper per step, linear convergence, so more steps (4.1–4.5 against 3.7–4.1 per substep in the
@@ -138,7 +133,6 @@ class Simulator:
         newton: int = 24,
         chord: bool = False,
         newton_tol: float = 1.0e-4,
-        newton_predict: bool = True,
         slip_speed: float = 1.0e-5,
         solver: str = "band",
     ):
@@ -157,7 +151,6 @@ class Simulator:
         self.newton_tol = float(newton_tol)
         if not self.newton_tol >= 0:
             raise ValueError(f"newton_tol must be >= 0 [m/s], got {newton_tol}")
-        self.newton_predict = bool(newton_predict)
         self.slip_speed = float(slip_speed)
         if not self.slip_speed > 0:
             raise ValueError(f"slip_speed must be > 0 [m/s], got {slip_speed}")
@@ -279,7 +272,6 @@ class Simulator:
         o.dt, o.num_substeps, o.newton = self.dt_sub, int(num_substeps), self.newton
         o.refactor = 0 if self.chord else 1
         o.newton_tol = self.newton_tol * self.dt_sub
-        o.predict = int(self.newton_predict)
         o.slip_speed, o.strain_limit = self.slip_speed, self.bar_strain_limit
         o.speed_limit, o.fold_tolerance = self.speed_limit, self.fold_tolerance
         return o
