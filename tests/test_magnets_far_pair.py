@@ -157,3 +157,32 @@ def test_far_rule_newtons_third_law():
     # angular momentum: torques about the two centres plus the lever of the force balance out
     total = t_on_t + t_on_s + np.cross(pos, f_on_t)
     np.testing.assert_allclose(total, 0.0, atol=1e-5 * np.linalg.norm(t_on_t, axis=1).max())
+
+
+def test_world_wrench_of_a_worm_with_the_rule_matches_the_closed_form():
+    """The three IPMs of a worm (10 x 1 mm disks on the axis, moments tail -x, centre +x, head -x) in 16 random
+    deformed poses (spacings 20-48 mm, tilts up to 30 degrees): the world wrench kernel's net IPM forces and torques
+    with the ring rule (4-12 radii: all three point counts) agree with the closed form's (measured 4.7e-7 / 1.4e-6 of the
+    largest force / torque)."""
+    rng = np.random.default_rng(11)
+    ipm = mg.Cylinder(0.010, 0.001, moment=0.0707)
+    W = 16
+    spacing = rng.uniform(0.020, 0.048, size=(W, 2))
+    x = np.concatenate([np.zeros((W, 1)), np.cumsum(spacing, axis=1)], axis=1)
+    pos = np.stack([x, rng.uniform(-3e-3, 3e-3, (W, 3)), rng.uniform(0.0, 0.01, (W, 3))], axis=-1)
+    base = np.array([[0, 0, 1], [0, 1, 0], [-1, 0, 0]], dtype=np.float64)  # own +z (the moment) along world +x
+    rot = np.empty((W, 3, 3, 3))
+    for w in range(W):
+        for i, sign in enumerate((-1, 1, -1)):
+            axis = rng.normal(size=3)
+            axis /= np.linalg.norm(axis)
+            ang = np.radians(rng.uniform(0, 30))
+            k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+            tilt = np.eye(3) + np.sin(ang) * k + (1 - np.cos(ang)) * k @ k
+            flip = np.diag([1.0, 1.0, 1.0]) if sign > 0 else np.diag([-1.0, 1.0, -1.0])  # turn the moment to -x
+            rot[w, i] = tilt @ base @ flip
+    f_far, t_far = mg.world_wrenches([ipm] * 3, pos, rot, far_field=True)
+    f_cf, t_cf = mg.world_wrenches([ipm] * 3, pos, rot, far_field=False)
+    assert not np.array_equal(f_far, f_cf)
+    assert np.abs(f_far - f_cf).max() <= 2e-5 * np.linalg.norm(f_cf, axis=-1).max()
+    assert np.abs(t_far - t_cf).max() <= 2e-5 * np.linalg.norm(t_cf, axis=-1).max()

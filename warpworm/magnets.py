@@ -388,7 +388,7 @@ def field(magnet: Magnet, pose, points, model: str = "analytic", density: float 
 
 def world_wrenches(magnets, positions, rotations, model: str = "analytic", density=DEFAULT_DENSITY, *,
                    quad_order: int = DEFAULT_QUAD_ORDER, max_panels: int = DEFAULT_MAX_PANELS, epm_wrench: bool = True,
-                   device=None):
+                   far_field: bool = True, device=None):
     """NumPy convenience around :func:`launch_world_wrenches`.
 
     Args:
@@ -396,6 +396,7 @@ def world_wrenches(magnets, positions, rotations, model: str = "analytic", densi
         positions: (W, M, 3) [m]; rotations: (W, M, 3, 3) magnet -> world.
         model: model name, or per-world names / ids (W,). density: scalar or (W,) [1/m³].
         epm_wrench: ``False``: magnet 0's wrench is not computed (returned as zero).
+        far_field: the ring rule for far cylinder pairs (see :func:`launch_world_wrenches`).
 
     Returns:
         (F, T), each (W, M, 3): net force [N] and torque about each magnet's centre [N·m].
@@ -423,6 +424,7 @@ def world_wrenches(magnets, positions, rotations, model: str = "analytic", densi
         quad_order=quad_order,
         max_panels=max_panels,
         epm_wrench=epm_wrench,
+        far_field=far_field,
     )
     return F.numpy().astype(np.float64), T.numpy().astype(np.float64)
 
