@@ -84,3 +84,22 @@ def dihedral_angle_and_gradient(xi: wp.vec3, xj: wp.vec3, xk: wp.vec3, xl: wp.ve
     gj = gi * (pi_ - 1.0) - gl * pl_
     gk = gl * (pl_ - 1.0) - gi * pi_
     return psi, gi, gj, gk, gl
+
+
+SLIVER_ALTITUDE = wp.constant(0.005)
+"""A hinge wing whose altitude over the hinge is below this fraction of the hinge's length has collapsed: the
+sheet crumpled. The worm's wings rest at 0.17 or more and the gait presets keep them above 0.16 of their rest
+altitude (≥ 0.028); a collapsing wing makes the crease gradient (∝ 1 / altitude) and so the Newton matrix
+singular, which otherwise shows as an explosion one step later."""
+
+
+@wp.func
+def wing_collapsed(xi: wp.vec3, xj: wp.vec3, xk: wp.vec3, xl: wp.vec3) -> bool:
+    """Whether either wing (i, j, k) or (l, k, j) of the hinge stencil (i, j, k, l), shared edge j–k, has an altitude
+    over that edge below :data:`SLIVER_ALTITUDE` times its length (|n| / L² with n the wing's normal of
+    :func:`dihedral_angle_and_gradient`)."""
+    r_kj = xk - xj
+    len2 = wp.dot(r_kj, r_kj)
+    n1 = wp.length(wp.cross(xj - xi, xk - xi))
+    n2 = wp.length(wp.cross(xk - xl, xj - xl))
+    return wp.min(n1, n2) < SLIVER_ALTITUDE * len2

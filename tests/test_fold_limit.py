@@ -57,3 +57,36 @@ def test_hard_squeeze_crumples_and_is_flagged_not_written():
     assert np.all(flags != 0) and flags[0] == 2, flags
     assert np.isfinite(x).all()
     assert np.all(worst <= 5.0), worst  # nothing beyond the tolerance was ever reported as a live world
+
+
+def _wing_altitude_ratio(x, hinges):
+    """Smaller wing altitude over the hinge length of every hinge stencil (i, j, k, l), shared edge j-k (NumPy)."""
+    xi, xj, xk, xl = (x[..., hinges[:, c], :] for c in range(4))
+    length2 = np.sum((xk - xj) ** 2, axis=-1)
+    n1 = np.linalg.norm(np.cross(xj - xi, xk - xi), axis=-1)
+    n2 = np.linalg.norm(np.cross(xk - xl, xj - xl), axis=-1)
+    return np.minimum(n1, n2) / length2
+
+
+def test_collapsing_wing_is_flagged_crumpled_not_exploded():
+    """A sheet triangle that collapses (its altitude over a crease going to zero) makes the Newton matrix singular:
+    before the collapse check such a world was flagged 'exploded' a step later, with every crease still in its range
+    and no bar near its strain limit. The case: the inchworm preset with its tail section held (the force plate,
+    experiments.force_plate) at 0.5 ms steps, which stands the worm up under the EPM's first approach until a waist
+    triangle collapses (t = 0.44 s). It must be flagged crumpled (2), and its last state must show the collapse the
+    check names (a wing below 1 % of its hinge's length; at rest every wing is at 17 % or more)."""
+    from warpworm import experiments
+
+    model, _ = experiments._gait_model(["inchworm"], anchors=section_vertices(6, 0), anchor_stiffness=1e4, base=None,
+                                       device="cpu")
+    hinges = model.pattern.hinges
+    assert _wing_altitude_ratio(model.rest_positions_host[0], hinges).min() > 0.17
+    sim = Simulator(model, dt=5e-4, substeps=1)
+    state = sim.initial_state()
+    sim.settle(state, 0.2)
+    for _ in range(12):  # 0.48 s
+        sim.step(state, 80)
+        if state.unstable.numpy()[0] != 0:
+            break
+    assert state.unstable.numpy()[0] == 2
+    assert _wing_altitude_ratio(state.positions.numpy()[0], hinges).min() < 0.01
