@@ -103,3 +103,16 @@ def wing_collapsed(xi: wp.vec3, xj: wp.vec3, xk: wp.vec3, xl: wp.vec3) -> bool:
     n1 = wp.length(wp.cross(xj - xi, xk - xi))
     n2 = wp.length(wp.cross(xk - xl, xj - xl))
     return wp.min(n1, n2) < SLIVER_ALTITUDE * len2
+
+
+@wp.func
+def crease_at_substep_end(prev: float, xi: wp.vec3, xj: wp.vec3, xk: wp.vec3, xl: wp.vec3, label: int,
+                          fold_tolerance: float):
+    """A crease's angle at the end of a substep, unwrapped from its angle ``prev`` [rad] at the start, and whether
+    the sheet crumpled there: the angle more than ``fold_tolerance`` [rad] outside the crease's NoFoldThrough range,
+    or a wing collapsed (:func:`wing_collapsed`). Returns (phi, crumpled); shared by the band and tile kernels."""
+    psi, g0, g1, g2, g3 = dihedral_angle_and_gradient(xi, xj, xk, xl)
+    phi = prev + wrap_angle(psi - prev)
+    lo, hi = fold_range(label)
+    crumpled = phi < lo - fold_tolerance or phi > hi + fold_tolerance or wing_collapsed(xi, xj, xk, xl)
+    return phi, crumpled

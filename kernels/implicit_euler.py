@@ -49,7 +49,7 @@ import warp as wp
 from warpworm import ids
 
 from .band_cholesky import band_add_block, band_cholesky_factor, band_cholesky_solve
-from .common import dihedral_angle_and_gradient, fold_range, freeze_world, pw, wing_collapsed, wrap_angle
+from .common import crease_at_substep_end, dihedral_angle_and_gradient, fold_range, freeze_world, pw, wrap_angle
 
 wp.set_module_options({"enable_backward": False})
 
@@ -638,20 +638,15 @@ def finish_substep(world: int, c: WorldCoefficients, m: BarHingeModel, opt: Subs
 @wp.func
 def update_crease_angles(world: int, m: BarHingeModel, fold_tolerance: float, s: BarHingeState) -> int:
     """Unwrap every crease's angle to the end of the substep. Returns 1 if one left its NoFoldThrough range by more
-    than ``fold_tolerance``, or one of its wings collapsed (:func:`~.common.wing_collapsed`): the sheet crumpled;
-    else 0."""
+    than ``fold_tolerance``, or one of its wings collapsed (:func:`~.common.crease_at_substep_end`): the sheet
+    crumpled; else 0."""
     crumpled = int(0)
     for h in range(m.hinges.shape[0]):
-        xi = s.x[world, m.hinges[h, 0]]
-        xj = s.x[world, m.hinges[h, 1]]
-        xk = s.x[world, m.hinges[h, 2]]
-        xl = s.x[world, m.hinges[h, 3]]
-        psi, g0, g1, g2, g3 = dihedral_angle_and_gradient(xi, xj, xk, xl)
-        prev = s.crease_angle[world, h]
-        phi = prev + wrap_angle(psi - prev)
+        phi, flagged = crease_at_substep_end(s.crease_angle[world, h], s.x[world, m.hinges[h, 0]],
+                                             s.x[world, m.hinges[h, 1]], s.x[world, m.hinges[h, 2]],
+                                             s.x[world, m.hinges[h, 3]], m.hinge_label[h], fold_tolerance)
         s.crease_angle[world, h] = phi
-        lo, hi = fold_range(m.hinge_label[h])
-        if phi < lo - fold_tolerance or phi > hi + fold_tolerance or wing_collapsed(xi, xj, xk, xl):
+        if flagged:
             crumpled = 1
     return crumpled
 

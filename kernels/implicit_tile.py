@@ -43,7 +43,7 @@ import functools
 import warp as wp
 
 from .band_cholesky import band_add_block, band_cholesky_solve, inverse_lower_cholesky3
-from .common import dihedral_angle_and_gradient, fold_range, freeze_world, pw, wing_collapsed, wrap_angle
+from .common import crease_at_substep_end, dihedral_angle_and_gradient, fold_range, freeze_world, pw, wrap_angle
 from .implicit_euler import (
     CONTACT_FIXED,
     CONTACT_FREE,
@@ -707,16 +707,11 @@ def make_tile_substep_kernel(num_vertices: int, bandwidth: int, dense: bool = Tr
                     flag = FLAG_EXPLODED
             bad = block_max(flag)  # barrier: every final x before the crease angles read them
             for h in range(lane, nh, bd):
-                xi = x[world, hinges[h, 0]]
-                xj = x[world, hinges[h, 1]]
-                xk = x[world, hinges[h, 2]]
-                xl = x[world, hinges[h, 3]]
-                psi, g0, g1, g2, g3 = dihedral_angle_and_gradient(xi, xj, xk, xl)
-                prev = crease_angle[world, h]
-                phi = prev + wrap_angle(psi - prev)
+                phi, crumpled = crease_at_substep_end(crease_angle[world, h], x[world, hinges[h, 0]],
+                                                      x[world, hinges[h, 1]], x[world, hinges[h, 2]],
+                                                      x[world, hinges[h, 3]], hinge_label[h], fold_tolerance)
                 crease_angle[world, h] = phi
-                lo, hi = fold_range(hinge_label[h])
-                if phi < lo - fold_tolerance or phi > hi + fold_tolerance or wing_collapsed(xi, xj, xk, xl):
+                if crumpled:
                     flag = wp.max(flag, FLAG_CRUMPLED)
             worst = block_max(flag)  # barrier: angles and flags before the next substep moves any vertex
             if worst != 0:

@@ -24,11 +24,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from .magnet_fields import dipole_pair_force_field
-
-F64_0 = wp.constant(wp.float64(0.0))
-F64_1 = wp.constant(wp.float64(1.0))
-TWO_PI = wp.constant(6.283185307179586)
+from .magnet_fields import CYL_PI, F64_0, F64_1, SHAPE_CYLINDER, dipole_pair_force_field
 
 NEAR_LIMIT = wp.constant(4.0)
 """Below this many circumscribing radii (of the larger magnet) the closed form is used."""
@@ -96,17 +92,36 @@ def ring_points_for_distance(distance: float, reach: float) -> int:
 
 
 @wp.func
-def ring_start(ring: int, half: wp.vec2) -> wp.vec2:
-    """(cos, sin) of a ring's first point: 0 for ring 0; ring 1 is turned by half a step (``half``), so that its
-    |m| = nphi azimuthal moment partly cancels ring 0's."""
-    if ring == 1:
-        return half
-    return wp.vec2(1.0, 0.0)
+def far_pair_rules(s_shape: int, s_size: wp.vec3, t_shape: int, t_size: wp.vec3, distance: float):
+    """Whether a pair takes the ring rule: (nphi, source rule, target rule), nphi = 0 when it does not (not two
+    cylinders, closer than :data:`NEAR_LIMIT` circumscribing radii of the larger, or a cylinder with no rule).
+    Sizes are (d, d, h) [m]; ``distance`` between the centres [m]."""
+    none = wp.vec4(0.0)
+    if s_shape != SHAPE_CYLINDER or t_shape != SHAPE_CYLINDER:
+        return 0, none, none
+    s_radius = 0.5 * s_size[0]
+    t_radius = 0.5 * t_size[0]
+    reach = wp.sqrt(wp.max(s_radius * s_radius + 0.25 * s_size[2] * s_size[2],
+                           t_radius * t_radius + 0.25 * t_size[2] * t_size[2]))
+    nphi = ring_points_for_distance(distance, reach)
+    if nphi == 0:
+        return 0, none, none
+    s_rule = cylinder_ring_rule(s_radius, s_size[2])
+    t_rule = cylinder_ring_rule(t_radius, t_size[2])
+    if s_rule[2] <= 0.0 or t_rule[2] <= 0.0:
+        return 0, none, none
+    return nphi, s_rule, t_rule
 
 
 @wp.func
-def rotate(cs: wp.vec2, step: wp.vec2) -> wp.vec2:
-    """(cos, sin) turned by the angle of ``step`` = (cos, sin) (a complex product: no trig per point)."""
+def ring_point(p: int, nphi: int, cs: wp.vec2, step: wp.vec2, half: wp.vec2) -> wp.vec2:
+    """(cos, sin) of point ``p`` (0 … 2·nphi − 1; ring p // nphi) of the two rings, from ``cs``, that of point p − 1:
+    ring 0 starts at angle 0, ring 1 half a step (``half``) on, so that its |m| = nphi azimuthal moment partly cancels
+    ring 0's; along a ring each point is the last turned by ``step`` (a complex product: no trig per point)."""
+    if p == 0:
+        return wp.vec2(1.0, 0.0)
+    if p == nphi:
+        return half
     return wp.vec2(cs[0] * step[0] - cs[1] * step[1], cs[1] * step[0] + cs[0] * step[1])
 
 
@@ -128,7 +143,7 @@ def far_cylinder_pair_wrench(
         r_rel: target frame -> source frame; t_rel: target centre in the source frame [m].
         nphi: points per ring (:func:`ring_points_for_distance`).
     """
-    dphi = TWO_PI / float(nphi)
+    dphi = 2.0 * CYL_PI / float(nphi)
     step = wp.vec2(wp.cos(dphi), wp.sin(dphi))
     half = wp.vec2(wp.cos(0.5 * dphi), wp.sin(0.5 * dphi))
     inv_n = 1.0 / float(nphi)
@@ -137,28 +152,26 @@ def far_cylinder_pair_wrench(
     ay = wp.vec3(r_rel[0, 1], r_rel[1, 1], r_rel[2, 1])
     force = wp.vec3(0.0)
     torque = wp.vec3(0.0)
-    for tk in range(2):
-        rho_t = t_rule[tk]
+    ct = wp.vec2(1.0, 0.0)
+    for tp in range(2 * nphi):
+        ct = ring_point(tp, nphi, ct, step, half)
+        tk = tp // nphi
+        lever = (ax * ct[0] + ay * ct[1]) * t_rule[tk]
         mt = mt_dir * (t_rule[2 + tk] * inv_n)
-        ct = ring_start(tk, half)
-        for tj in range(nphi):
-            lever = (ax * ct[0] + ay * ct[1]) * rho_t
-            pt = t_rel + lever
-            f = wp.vec3(0.0)
-            b = wp.vec3(0.0)
-            for sk in range(2):
-                rho_s = s_rule[sk]
-                ms = s_m * (s_rule[2 + sk] * inv_n)
-                cs = ring_start(sk, half)
-                for si in range(nphi):
-                    ff, bb = dipole_pair_force_field(ms, mt, pt - wp.vec3(rho_s * cs[0], rho_s * cs[1], 0.0))
-                    f += ff
-                    b += bb
-                    cs = rotate(cs, step)
-            force += f
-            torque += wp.cross(lever, f) + wp.cross(mt, b)
-            ct = rotate(ct, step)
+        pt = t_rel + lever
+        f = wp.vec3(0.0)
+        b = wp.vec3(0.0)
+        cs = wp.vec2(1.0, 0.0)
+        for sp in range(2 * nphi):
+            cs = ring_point(sp, nphi, cs, step, half)
+            sk = sp // nphi
+            ff, bb = dipole_pair_force_field(s_m * (s_rule[2 + sk] * inv_n), mt,
+                                             pt - wp.vec3(s_rule[sk] * cs[0], s_rule[sk] * cs[1], 0.0))
+            f += ff
+            b += bb
+        force += f
+        torque += wp.cross(lever, f) + wp.cross(mt, b)
     return force, torque
 
 
-__all__ = ["NEAR_LIMIT", "cylinder_ring_rule", "far_cylinder_pair_wrench", "ring_points_for_distance"]
+__all__ = ["NEAR_LIMIT", "cylinder_ring_rule", "far_cylinder_pair_wrench", "far_pair_rules", "ring_points_for_distance"]

@@ -14,7 +14,7 @@ import warp as wp
 
 from warpworm import ids
 
-from .magnet_far_pair import cylinder_ring_rule, far_cylinder_pair_wrench, ring_points_for_distance
+from .magnet_far_pair import far_cylinder_pair_wrench, far_pair_rules
 from .magnet_fields import (
     F64_0,
     SHAPE_CYLINDER,
@@ -70,22 +70,12 @@ def pair_wrench(
     t_rel = wp.transpose(rs) * (t_pos - s_pos)
     force = wp.vec3(0.0)
     torque = wp.vec3(0.0)
-    use_far = 0
+    nphi = int(0)
     s_rule = wp.vec4(0.0)
     t_rule = wp.vec4(0.0)
-    nphi = 0
-    if model == MODEL_ANALYTIC and far_field != 0 and s_shape == SHAPE_CYLINDER and t_shape == SHAPE_CYLINDER:
-        s_radius = 0.5 * s_size[0]
-        t_radius = 0.5 * t_size[0]
-        reach = wp.sqrt(wp.max(s_radius * s_radius + 0.25 * s_size[2] * s_size[2],
-                               t_radius * t_radius + 0.25 * t_size[2] * t_size[2]))
-        nphi = ring_points_for_distance(wp.length(t_rel), reach)
-        if nphi > 0:
-            s_rule = cylinder_ring_rule(s_radius, s_size[2])
-            t_rule = cylinder_ring_rule(t_radius, t_size[2])
-            if s_rule[2] > 0.0 and t_rule[2] > 0.0:
-                use_far = 1
-    if use_far == 1:
+    if model == MODEL_ANALYTIC and far_field != 0:
+        nphi, s_rule, t_rule = far_pair_rules(s_shape, s_size, t_shape, t_size, wp.length(t_rel))
+    if nphi > 0:
         force, torque = far_cylinder_pair_wrench(s_rule, s_m, t_rule, t_m, r_rel, t_rel, nphi)
     elif model == MODEL_ANALYTIC:
         # J = mu0 m / V (source polarization), M = m / V (target magnetization)

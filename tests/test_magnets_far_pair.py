@@ -184,5 +184,6 @@ def test_world_wrench_of_a_worm_with_the_rule_matches_the_closed_form():
     f_far, t_far = mg.world_wrenches([ipm] * 3, pos, rot, far_field=True)
     f_cf, t_cf = mg.world_wrenches([ipm] * 3, pos, rot, far_field=False)
     assert not np.array_equal(f_far, f_cf)
-    assert np.abs(f_far - f_cf).max() <= 2e-5 * np.linalg.norm(f_cf, axis=-1).max()
-    assert np.abs(t_far - t_cf).max() <= 2e-5 * np.linalg.norm(t_cf, axis=-1).max()
+    # a few times what this set measures (4.7e-7 / 1.4e-6); the single-pair bound above (2e-5) covers every orientation
+    assert np.abs(f_far - f_cf).max() <= 5e-6 * np.linalg.norm(f_cf, axis=-1).max()
+    assert np.abs(t_far - t_cf).max() <= 5e-6 * np.linalg.norm(t_cf, axis=-1).max()
