@@ -24,7 +24,7 @@ banded per-world scratch and factors it (:mod:`warpworm.kernels.band_cholesky`).
 steps) only the first step of a substep, and a step after a contact changed, assembles and factors the Hessian; the
 others solve with that factor against a fresh gradient.
 
-Floor: a vertex on the floor (touching at the end of the last substep, or predicted below it) moves only along it
+Floor: a vertex on the floor (touching at the end of the last substep, or carried below it) moves only along it
 (its rows of the Newton step are projected, P H P). Before every Newton step after the first, the floor's force at
 each contact is read from the gradient, F = ∂Φ/∂x (what holds the vertex against the rest of the implicit step): a
 contact the floor would have to pull lets go, a free vertex the last step put below the floor lands. Friction
@@ -125,14 +125,23 @@ def newton_start(status: int, vel: wp.vec3, v_old: wp.vec3, h0: float, n: wp.vec
 @wp.func
 def starting_contact(w_inv: float, was: int, vel: wp.vec3, v_old: wp.vec3, h0: float, n: wp.vec3, dt: float,
                      slip_speed: float) -> int:
-    """A vertex's contact status at the start of a substep: FIXED for infinite mass; on the floor (touching at the
-    end of the last substep, status ``was``, or predicted below it by its inertial velocity ``vel``) and not moving
-    off it: stuck or sliding by the speed along the floor it carries (``v_old``: a contact moving along the floor is
-    sliding whatever it did in the last substep, e.g. a worm kicked at rest); else FREE. (Shared by both kernels.)"""
+    """A vertex's contact status at the start of a substep: FIXED for infinite mass; on the floor and not pulled
+    off it (touching at the end of the last substep, status ``was``, with its inertial velocity ``vel`` into the
+    floor), or landing on it (free, and the velocity it carries, ``v_old``, takes it below the floor within ``dt``):
+    stuck or sliding by the speed along the floor it carries (a contact moving along the floor is sliding whatever it
+    did in the last substep, e.g. a worm kicked at rest); else FREE. (Shared by both kernels.)
+
+    Why ``v_old`` and not ``vel`` for a free vertex: the Newton iteration starts from ``v_old``
+    (:func:`newton_start`), and ``vel`` lacks the elastic forces. A vertex hovering 25 µm above the floor, held up
+    by the sheet while gravity and the EPM pull it down, has ``vel`` ~0.06 m/s into the floor: predicted a contact,
+    it was let go at the first contact update (the floor would have had to pull with ~6 mN), and releasing it
+    shifted the load so that two neighbours let go and landed again: 4.4 Newton steps per substep in the
+    peristaltic gait instead of 2.5 (docs/dynamics.md, "Newton convergence"). A free vertex that does reach the
+    floor in the first Newton step lands at the first contact update."""
     if not (w_inv > 0.0):
         return CONTACT_FIXED
     vn = wp.dot(vel, n)
-    if vn < 0.0 and (was != CONTACT_FREE or h0 + dt * vn < 0.0):
+    if (was != CONTACT_FREE and vn < 0.0) or (was == CONTACT_FREE and h0 + dt * wp.dot(v_old, n) < 0.0):
         vt_old = v_old - n * wp.dot(v_old, n)
         return wp.where(wp.length(vt_old) > slip_speed, CONTACT_SLIDING, CONTACT_STUCK)
     return CONTACT_FREE
@@ -490,7 +499,7 @@ def assemble(world: int, c: WorldCoefficients, m: BarHingeModel, opt: SubstepOpt
 def predict(world: int, c: WorldCoefficients, m: BarHingeModel, slip_speed: float,
             f_ext: wp.array2d(dtype=wp.vec3), s: BarHingeState, w: NewtonScratch):
     """Predict x̃ and start the Newton iteration at :func:`newton_start`: a vertex on the floor (touching at the end of
-    the last substep, or predicted below it) starts stuck on it, unless it is moving off it: every substep first
+    the last substep, or carried below it: :func:`starting_contact`) starts stuck on it, unless it is moving off it: every substep first
     tries static friction, the Coulomb test of :func:`update_contacts` lets go where it cannot hold."""
     dt = c.dt
     for i in range(s.x.shape[1]):
