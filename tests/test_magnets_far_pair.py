@@ -187,3 +187,67 @@ def test_world_wrench_of_a_worm_with_the_rule_matches_the_closed_form():
     # a few times what this set measures (4.7e-7 / 1.4e-6); the single-pair bound above (2e-5) covers every orientation
     assert np.abs(f_far - f_cf).max() <= 5e-6 * np.linalg.norm(f_cf, axis=-1).max()
     assert np.abs(t_far - t_cf).max() <= 5e-6 * np.linalg.norm(t_cf, axis=-1).max()
+
+
+# ----------------------------------------------------------------------------------------------------------------------
+# A cuboid (the EPM) and a far cylinder (an IPM): the cuboid's face charges in the cylinder's ring field
+# ----------------------------------------------------------------------------------------------------------------------
+
+def _ipm_near_cuboid(n, size, gap, seed):
+    """n random poses of a cylinder whose centre is ``gap`` [m] off a random point of a random face of a cuboid of
+    ``size`` at the origin (turned at random): (cuboid rotations, cylinder positions, cylinder rotations)."""
+    rng = np.random.default_rng(seed)
+    half = np.asarray(size) / 2
+    local = rng.uniform(-1.0, 1.0, (n, 3)) * half
+    axis, sign = rng.integers(0, 3, n), rng.choice([-1.0, 1.0], n)
+    local[np.arange(n), axis] = sign * (half[axis] + gap)
+    q, _ = np.linalg.qr(rng.normal(size=(2 * n, 3, 3)))
+    q *= np.sign(np.linalg.det(q))[:, None, None]
+    return q[:n], np.einsum("nij,nj->ni", q[:n], local), q[n:]
+
+
+@pytest.mark.parametrize("ipm_moment", [(0.0, 0.0, 0.0707), (0.04, -0.02, 0.05)], ids=["axial", "oblique"])
+@pytest.mark.parametrize("gap_mm", [12.6, 15.0, 20.1, 30.0, 40.0, 60.0])
+def test_cuboid_cylinder_rule_agrees_with_closed_form(gap_mm, ipm_moment):
+    """The paper's EPM (10 x 10 x 40 mm, 3.6 A m^2) and an IPM (10 x 1 mm; axial, and oblique: the rule's points stand
+    for the shape, whatever the magnetization) from 2.5 to 12 of the IPM's circumscribing radii: both directions of
+    the pair (the EPM's wrench on the IPM by reciprocity, and the IPM's on the EPM) agree with the closed form
+    (measured over 400 poses at each gap, both moments: <= 2.3e-6 of the largest force and <= 5.1e-6 of the largest
+    torque, the latter the IPM's on the EPM at 4 radii). The bound leaves 2x."""
+    epm = mg.Cuboid((0.01, 0.01, 0.04), (0.0, 0.0, 3.6))
+    ipm = mg.Cylinder(0.010, 0.001, moment=ipm_moment)
+    re, pos, ri = _ipm_near_cuboid(150, (0.01, 0.01, 0.04), gap_mm * 1e-3, seed=int(gap_mm * 10))
+    zero = np.zeros_like(pos)
+    for src, tgt, sp, tp in ((epm, ipm, (zero, re), (pos, ri)), (ipm, epm, (pos, ri), (zero, re))):
+        f_far, t_far = mg.wrench(src, tgt, sp, tp, far_field=True)
+        f_cf, t_cf = mg.wrench(src, tgt, sp, tp, far_field=False)
+        assert not np.array_equal(f_far, f_cf)  # the rule is in use at this gap
+        assert np.abs(f_far - f_cf).max() <= 1e-5 * np.linalg.norm(f_cf, axis=1).max()
+        assert np.abs(t_far - t_cf).max() <= 1e-5 * np.linalg.norm(t_cf, axis=1).max()
+
+
+def test_cuboid_cylinder_rule_inside_its_limit_is_closed_form():
+    """Closer than 2.5 circumscribing radii of the cylinder (12.56 mm for the IPM), the closed form, bit for bit."""
+    epm = mg.Cuboid((0.01, 0.01, 0.04), (0.0, 0.0, 3.6))
+    ipm = mg.Cylinder(0.010, 0.001, moment=0.0707)
+    re, pos, ri = _ipm_near_cuboid(40, (0.01, 0.01, 0.04), 0.0124, seed=3)
+    zero = np.zeros_like(pos)
+    a = mg.wrench(epm, ipm, (zero, re), (pos, ri), far_field=True)
+    b = mg.wrench(epm, ipm, (zero, re), (pos, ri), far_field=False)
+    np.testing.assert_array_equal(a[0], b[0])
+    np.testing.assert_array_equal(a[1], b[1])
+
+
+def test_cuboid_cylinder_rule_newtons_third_law():
+    """The EPM's wrench on the IPM (by reciprocity) and the IPM's on the EPM (directly) are two evaluations of the same
+    face integral: their forces cancel and the pair's angular momentum balances, to float32 rounding."""
+    epm = mg.Cuboid((0.012, 0.01, 0.03), (0.5, 0.0, 2.0))
+    ipm = mg.Cylinder(0.008, 0.0015, moment=(0.01, 0.0, 0.05))
+    re, pos, ri = _ipm_near_cuboid(60, (0.012, 0.01, 0.03), 0.025, seed=5)
+    zero = np.zeros_like(pos)
+    f_on_i, t_on_i = mg.wrench(epm, ipm, (zero, re), (pos, ri))
+    f_on_e, t_on_e = mg.wrench(ipm, epm, (pos, ri), (zero, re))
+    scale = np.linalg.norm(f_on_i, axis=1).max()
+    np.testing.assert_allclose(f_on_i, -f_on_e, atol=1e-6 * scale)
+    total = t_on_i + t_on_e + np.cross(pos, f_on_i)
+    np.testing.assert_allclose(total, 0.0, atol=1e-6 * np.linalg.norm(t_on_i, axis=1).max())

@@ -219,8 +219,10 @@ def launch_world_wrenches(
             'dipoles' work and a sixth of the 'analytic' one are the EPM's).
         far_field: ``True`` ('analytic' only) takes two cylinders at least 4 circumscribing radii apart (the IPM
             pairs of a worm) by a multipole-matched ring rule of point dipoles (:mod:`warpworm.kernels.magnet_far_pair`,
-            within 8e-6 of the closed form's largest force and torque, ~3x cheaper per pair); ``False`` always
-            uses the closed form.
+            within 8e-6 of the closed form's largest force and torque, ~3x cheaper per pair), and a cuboid and a
+            cylinder at least 2.5 of the cylinder's circumscribing radii apart (the EPM and an IPM) by the same rule
+            for the cylinder, the cuboid's face charges in its field (the cylinder's wrench by reciprocity; within
+            5.1e-6, ~2.4x cheaper); ``False`` always uses the closed form.
 
     Magnets must not overlap. Cost per world ('dipoles') ~ Σ_pairs N_source · N_target point-dipole pairs
     (paper's worm at 64/cm³: 256·12·6 + 12·12·6 = 19,296 pair interactions; 256·12·3 + 12·12·6 = 10,080 without the
@@ -289,7 +291,8 @@ def wrench(
         model: ``"analytic"`` (exact fields, surface-charge quadrature) or ``"dipoles"`` (dipole grids).
         density: dipoles per m³ for ``"dipoles"`` (scalar or (N,)).
         quad_order, max_panels: 'analytic' quadrature (see :func:`launch_world_wrenches`).
-        far_field: ring rule for far cylinder pairs ('analytic'; see :func:`launch_world_wrenches`); ``False``
+        far_field: ring rule for far cylinder pairs and far cuboid–cylinder pairs ('analytic'; see
+            :func:`launch_world_wrenches`); ``False``
             gives the closed form at every distance.
         device: Warp device (default CPU). One kernel launch for the whole batch.
 
@@ -396,7 +399,7 @@ def world_wrenches(magnets, positions, rotations, model: str = "analytic", densi
         positions: (W, M, 3) [m]; rotations: (W, M, 3, 3) magnet -> world.
         model: model name, or per-world names / ids (W,). density: scalar or (W,) [1/m³].
         epm_wrench: ``False``: magnet 0's wrench is not computed (returned as zero).
-        far_field: the ring rule for far cylinder pairs (see :func:`launch_world_wrenches`).
+        far_field: the ring rule for far cylinder and cuboid–cylinder pairs (see :func:`launch_world_wrenches`).
 
     Returns:
         (F, T), each (W, M, 3): net force [N] and torque about each magnet's centre [N·m].
