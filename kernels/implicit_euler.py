@@ -21,8 +21,11 @@ Gauss–Newton steps (bar and crease Hessians kept positive semi-definite: the c
 the crease curvature terms dropped) solve it, at most ``newton`` of them, until a step (the second or later) moves no
 vertex farther than ``newton_tol``; each assembles the gradient and the 3V × 3V Hessian as 3×3 vertex blocks in a
 banded per-world scratch and factors it (:mod:`warpworm.kernels.band_cholesky`). With ``refactor`` = 0 (chord
-steps) only the first step of a substep, and a step after a contact changed, assembles and factors the Hessian; the
-others solve with that factor against a fresh gradient.
+steps, the band default) only the first step of a substep, and a step after a contact changed, assembles and factors
+the Hessian; the others solve with that factor against a fresh gradient, and one that would not halve the last step
+is not taken (the next assembles and factors at the same x): a stale factor (near-rigid bars turned, kinetic
+friction's stiffness changed) never moves a world, where taking such a step first and refactoring after could
+throw one past its strain limit (an axial squeeze at 2 ms did).
 
 Floor: a vertex on the floor (touching at the end of the last substep, or carried below it) moves only along it
 (its rows of the Newton step are projected, P H P). Before every Newton step after the first, the floor's force at
@@ -59,7 +62,8 @@ CONTACT_STUCK = wp.constant(2)  # on the floor, static friction (regularised: a 
 CONTACT_FIXED = wp.constant(3)  # a vertex of infinite mass (never moves; reported as free)
 CONTACTS_CHANGED = wp.constant(1)  # update_contacts: a vertex changed its contact status
 CONTACTS_LANDED = wp.constant(2)  # update_contacts: a free vertex landed (its position moved)
-WORLD_CRUMPLED = wp.constant(ids.WORLD_CRUMPLED)  # ``unstable`` flag of a crumpled world (ids: the statuses)
+WORLD_CRUMPLED = wp.constant(ids.WORLD_CRUMPLED)
+CHORD_CONTRACTION = wp.constant(0.5)  # a chord step is taken only if it is shorter than this times the last step  # ``unstable`` flag of a crumpled world (ids: the statuses)
 
 
 @wp.func
@@ -583,9 +587,10 @@ def update_contacts(world: int, c: WorldCoefficients, m: BarHingeModel, slip_spe
 
 
 @wp.func
-def newton_update(world: int, c: WorldCoefficients, factor: bool, s: BarHingeState, w: NewtonScratch) -> float:
-    """Solve H dx = −grad restricted to the allowed directions and apply dx to x and to x − x̃; ``factor``: factor
-    the freshly assembled H first, else reuse the factor left in ``w.hess`` (a chord step). Returns max |dx| [m]."""
+def newton_solve(world: int, c: WorldCoefficients, factor: bool, s: BarHingeState, w: NewtonScratch) -> float:
+    """Solve H dx = −grad restricted to the allowed directions, leaving −dx in ``w.grad``; ``factor``: factor the
+    freshly assembled H first, else reuse the factor left in ``w.hess`` (a chord step). Returns max |dx| [m] (1e30
+    for a non-finite step). :func:`newton_apply` applies it."""
     nv = s.x.shape[1]
     bw = w.hess.shape[2] - 1
     for i in range(nv):
@@ -599,14 +604,20 @@ def newton_update(world: int, c: WorldCoefficients, factor: bool, s: BarHingeSta
     band_cholesky_solve(world, nv, bw, w.hess, w.grad)
     step = float(0.0)
     for i in range(nv):
-        dx = -w.grad[world, i]
-        s.x[world, i] = s.x[world, i] + dx
-        w.delta[world, i] = w.delta[world, i] + dx
-        length = wp.length(dx)
+        length = wp.length(w.grad[world, i])
         if not (length < 1.0e30):
             length = 1.0e30  # a non-finite step is no convergence (wp.max would drop a NaN)
         step = wp.max(step, length)
     return step
+
+
+@wp.func
+def newton_apply(world: int, s: BarHingeState, w: NewtonScratch):
+    """x += dx and (x − x̃) += dx for the step :func:`newton_solve` left in ``w.grad`` (as −dx)."""
+    for i in range(s.x.shape[1]):
+        dx = -w.grad[world, i]
+        s.x[world, i] = s.x[world, i] + dx
+        w.delta[world, i] = w.delta[world, i] + dx
 
 
 @wp.func
@@ -704,12 +715,20 @@ def implicit_step(
             if bad != 0:
                 break
             w.newton_steps[world] = w.newton_steps[world] + 1
-            step = newton_update(world, c, fresh, s, w)
+            step = newton_solve(world, c, fresh, s, w)
+            if not fresh and not (step < CHORD_CONTRACTION * last_step):
+                # a chord step that would not contract (its factor gone stale: kinetic friction's stiffness, or
+                # near-rigid bars turned) is not taken: the next step assembles and factors at this same x
+                stalled = True
+                if it == opt.newton - 1:
+                    w.newton_capped[world] = w.newton_capped[world] + 1
+                continue
+            newton_apply(world, s, w)
             if step < opt.newton_tol and it >= 1:
                 break  # converged (after one contact update at least)
             if it == opt.newton - 1:
                 w.newton_capped[world] = w.newton_capped[world] + 1  # the cap, not the tolerance, ended it
-            stalled = not fresh and step > 0.5 * last_step
+            stalled = False
             last_step = step
         if bad == 0:
             bad = finish_substep(world, c, m, opt, s, w)

@@ -273,7 +273,7 @@ def finish_row(
 ):
     """Row ``u`` after :func:`assemble_row` and the contact update: the floor friction (implicit_euler's
     ``friction_terms``), the row restricted to the allowed directions (``project_on_contacts``) and the projected
-    right-hand side (``newton_update``). Touches only row u; reads every vertex's contact."""
+    right-hand side (``newton_solve``). Touches only row u; reads every vertex's contact."""
     bw = hess.shape[2] - 1
     eye = wp.identity(n=3, dtype=float)
     m_dt2 = mass_over_dt2(inv_mass[im_row, u], inv_dt * inv_dt)

@@ -1,6 +1,7 @@
 """The block-per-world implicit substeps (:mod:`warpworm.tile_solver`, the GPU path) against the band path.
 
-The truth is the band path (``Simulator.run_substeps``: one thread per world, block-band Cholesky). The tile path
+The truth is the band path with full Newton steps (``Simulator(chord=False).run_substeps``: one thread per world,
+block-band Cholesky; the tile kernels take no chord steps, the band default does). The tile path
 assembles the same Newton systems bit for bit (row by row instead of element by element). With
 ``factorization="band"`` it also factors them with the same arithmetic, column-parallel, so the runs must be
 identical to the last bit in every scenario here: falling, landing, sticking and sliding on inclines, anchors, worlds
@@ -63,7 +64,7 @@ def landing(**sim_kwargs):
     angle atan(0.268) = 0.26 rad: it slides), 1 ms substeps. Returns (sim, band state, tile state)."""
     incline = np.array([0.0, 0.15, 0.35])
     model = Model.from_params(WormParams(floor_incline=incline), 3, "cpu")
-    sim = Simulator(model, dt=1.0e-3, substeps=1, **sim_kwargs)
+    sim = Simulator(model, dt=1.0e-3, substeps=1, **{"chord": False, **sim_kwargs})
     band, tile = sim.initial_state(), sim.initial_state()
     _lift(sim, (band, tile), [1.0e-3, 2.0e-3, 3.0e-3], incline)
     return sim, band, tile
@@ -72,7 +73,7 @@ def landing(**sim_kwargs):
 def settling_flat():
     """Three worlds dropped 1, 2 and 3 mm onto a flat floor, 1 ms substeps."""
     model = Model.from_params(WormParams(), 3, "cpu")
-    sim = Simulator(model, dt=1.0e-3, substeps=1)
+    sim = Simulator(model, dt=1.0e-3, substeps=1, chord=False)
     band, tile = sim.initial_state(), sim.initial_state()
     _lift(sim, (band, tile), [1.0e-3, 2.0e-3, 3.0e-3], np.zeros(3))
     return sim, band, tile
@@ -82,7 +83,7 @@ def anchored():
     """Two worlds hanging from three anchored tail vertices (force plate springs) 2 mm above a flat floor."""
     model = Model.from_params(WormParams(), 2, "cpu", anchors=[0, 1, 2], anchor_stiffness=[[50.0, 50.0, 50.0],
                                                                                           [200.0, 100.0, 50.0]])
-    sim = Simulator(model, dt=1.0e-3, substeps=1)
+    sim = Simulator(model, dt=1.0e-3, substeps=1, chord=False)
     band, tile = sim.initial_state(), sim.initial_state()
     _lift(sim, (band, tile), [2.0e-3, 2.0e-3], np.zeros(2))
     sim.control.set_anchor_targets(sim.control.anchor_target.numpy() + np.float32([0.0, 0.0, 2.0e-3]))
@@ -106,7 +107,7 @@ def _gait_steps(sim, band, tile, tiles, steps: int) -> None:
 def gait():
     """The peristaltic preset on two worlds: settled 0.1 s by the band path, then steps of 2 ms (2 substeps)."""
     model = Model.from_params(gaits.preset_params("peristaltic"), 2, "cpu")
-    sim = Simulator(model, dt=2.0e-3, substeps=2)
+    sim = Simulator(model, dt=2.0e-3, substeps=2, chord=False)
     band = sim.initial_state()
     sim.settle(band, 0.1)
     tile = model.state()
@@ -120,7 +121,7 @@ def gait_off_floor():
     stick/slip or landing decision near its threshold amplifies them: the band path itself moves 1.3e-5 m at a
     landing when its start moves by 4e-9 m; there the band factorization is compared bit for bit instead)."""
     model = Model.from_params(gaits.preset_params("peristaltic", gravity=0.0), 2, "cpu")
-    sim = Simulator(model, dt=2.0e-3, substeps=2)
+    sim = Simulator(model, dt=2.0e-3, substeps=2, chord=False)
     band = sim.initial_state()
     band.positions.assign(band.positions.numpy() + np.array([0.0, 0.0, 0.03], np.float32))
     tile = model.state()
@@ -298,11 +299,12 @@ def test_tile_kernel_compiles_for_sm90(factorization, use_ptx):
 
 def test_simulator_solver_option_runs_the_tile_path_bit_for_bit():
     """``Simulator(solver="tile-band")``: the whole gait step (poses, wrench, substeps) through the tile kernel gives
-    the band solver's trajectory bit for bit; an unknown solver is refused by name."""
+    the band solver's trajectory with full Newton steps (``chord=False``; the tile kernels take no chord steps) bit
+    for bit; an unknown solver is refused by name."""
     p = gaits.preset_params("inchworm", magnet_model="analytic")
     out = {}
     for solver in ("band", "tile-band"):
-        sim = Simulator(Model.from_params(p, 2, "cpu"), dt=4e-3, substeps=4, solver=solver)
+        sim = Simulator(Model.from_params(p, 2, "cpu"), dt=4e-3, substeps=4, solver=solver, chord=False)
         state = sim.initial_state()
         sim.settle(state, 0.02)
         out[solver] = sim.run(state, [0.04], keys=("positions", "crease_angle"))[0]

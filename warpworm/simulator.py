@@ -102,14 +102,18 @@ class Simulator:
             take 15–25 (7 of peristalsis's 2600 substeps in 5 cycles went past 12); none reaches 24 there.
         newton_tol: a Newton step (the second or later) that changes no vertex's velocity by more than this [m/s]
             (moves none farther than ``newton_tol · dt_sub``) ends the substep: converged. Default 1e-4 m/s (2e-7 m
-            at the gaits' 2 ms substeps), 3.1–4.1 steps on average there (the iteration is warm-started:
+            at the gaits' 2 ms substeps), 2.5–4.0 steps on average there (the iteration is warm-started:
             :func:`warpworm.kernels.implicit_euler.newton_start`); 0 takes every step.
             A fixed 3 steps (this solver's first default) is not converged through a snap-through: there the
             omega and inchworm gaits' outcome depended on the step count (docs/dynamics.md, "Newton convergence").
-        chord: chord Newton steps: the Hessian is assembled and factored once per substep (again when a contact
-            changes or a chord step fails to halve the last); later steps reuse that factor with a fresh gradient.
-            Cheaper per step, linear convergence, so more steps (4.1–4.5 against 3.7–4.1 per substep in the
-            gaits): the same answer to within the tolerance. Band solver only.
+        chord: chord Newton steps: the Hessian is assembled and factored at a substep's first step (again after
+            a contact changed); later steps reuse that factor with a fresh gradient, and a chord step that would not
+            halve the last step is not taken (the next step refactors at the same x), so a stale factor never moves
+            a world. About half the cost of a full step (no Hessian assembly, no factorization), linear convergence:
+            2.6 / 4.0 / 2.7 steps per substep in the peristaltic / omega / inchworm gaits against 2.5 / 3.6 / 2.6
+            full ones, 1.2–1.4x the worm-seconds per CPU-second, the same gaits to 0.02 mm over 5 cycles
+            (docs/dynamics.md, "Newton convergence"). Default (None): on for the band solver, which alone has
+            them; the tile solvers take full steps.
         slip_speed: regularisation speed ε of static friction [m/s]: below it friction is a stiff
             viscous force reaching mu_s F_n at ε, so a worm held by friction creeps at most ~ε (1e-5 m/s: < 0.02 mm
             in 2 s).
@@ -131,7 +135,7 @@ class Simulator:
         speed_limit: float = 20.0,
         use_graph: bool | None = None,
         newton: int = 24,
-        chord: bool = False,
+        chord: bool | None = None,
         newton_tol: float = 1.0e-4,
         slip_speed: float = 1.0e-5,
         solver: str = "band",
@@ -145,7 +149,7 @@ class Simulator:
             raise ValueError(f"newton must be >= 2 (the contacts are updated between Newton steps), got {newton}")
         if solver not in SOLVERS:
             raise ValueError(f"solver: got {solver!r}; expected one of {SOLVERS}")
-        self.chord = bool(chord)
+        self.chord = solver == "band" if chord is None else bool(chord)
         if self.chord and solver != "band":
             raise ValueError(f"chord: chord Newton steps are implemented by the 'band' solver only, got solver={solver!r}")
         self.newton_tol = float(newton_tol)
