@@ -2,16 +2,18 @@
 
 Each world: EPM 10×10×40 mm cuboid (3.6 A·m²) above three 10 mm × 1 mm axial disks (0.0707 A·m²), the worm's
 layout with small random perturbations; the net force and torque on all four magnets from the other three
-(12 ordered pair wrenches per world), by one ``launch_world_wrenches`` call; ``epm`` = False rows skip the wrench
-on the EPM (``epm_wrench=False``, what the dynamics uses: 9 ordered pairs).
+(12 ordered pair wrenches per world), by one ``launch_world_wrenches`` call (6 unordered pair evaluations, each
+pair's reaction the other magnet's share); ``epm`` = False rows write the EPM's wrench as zero (``epm_wrench=False``,
+what the dynamics uses; the same work today, 9 ordered pairs in a baseline revision's kernel).
 
 Columns: ``ms_per_call`` (process CPU time, best of repeats, after a warm-up that includes compilation: Warp runs a
 CPU launch on the calling thread, and on a shared machine CPU time leaves out the time the scheduler gave to other
 processes, which wall time would count; the best repeat is the least disturbed one), ``us_per_world``,
-``pairs_per_s`` (point-dipole pair interactions per second, 'dipoles' model: 19,296 per world at 64/cm³, 10,080
-without the EPM's wrench), ``vs_nbody`` (that rate over the plain inverse-square n-body kernel's, timed in launches
+``pairs_per_s`` (point-dipole pair interactions evaluated per second, 'dipoles' model: 9,648 per world at 64/cm³
+today, each serving both magnets; 19,296 per world, 10,080 without the EPM's wrench, in a baseline revision's
+per-target kernel), ``vs_nbody`` (that rate over the plain inverse-square n-body kernel's, timed in launches
 interleaved with the row's repeats; ``vs_dipole_nbody``: over the plain point-dipole force+field n-body row of the
-same run), ``field_evals_per_s`` ('analytic': closed-form source-field evaluations at quadrature points).
+same run), ``field_evals_per_s`` ('analytic', the closed-form row: source-field evaluations at quadrature points).
 magpylib rows run ``getFT`` for the same 12 pair wrenches per world (meshing 1000 cells per target, ~1e-4
 agreement) for small W only; ``magpylib_est`` rows extrapolate that per-world cost linearly to larger W and are
 labelled as estimates.
@@ -39,11 +41,12 @@ import warp as wp
 from warpworm import quiet_warp
 
 NBODY_BODIES = 2048
-NOTES = ("pairs_per_s: point-dipole pair interactions/s ('dipoles', 19,296 per world at 64/cm³ with the wrench on the "
-         "EPM, 10,080 without; epm=False is what the dynamics runs); vs_nbody: that rate over the inverse-square "
-         "n-body "
-         "kernel's, timed interleaved with the row (vs_dipole_nbody: over the point-dipole force+field n-body row). "
-         "speedup: the warpworm@<rev> row's time over this one's (WARPWORM_BENCH_BASELINE). magpylib_est rows are "
+NOTES = ("pairs_per_s: point-dipole pair interactions evaluated per second ('dipoles'; today 9,648 per world at "
+         "64/cm³, each unordered magnet pair once, its reaction the other magnet's share, so epm=False costs the same; "
+         "a baseline revision's per-target kernel: 19,296, 10,080 without the EPM's wrench); vs_nbody: that rate over "
+         "the inverse-square n-body kernel's, timed interleaved with the row (vs_dipole_nbody: over the point-dipole "
+         "force+field n-body row). speedup: the warpworm@<rev> row's time over this one's (WARPWORM_BENCH_BASELINE). "
+         "magpylib_est rows are "
          "linear extrapolations of the measured magpylib per-world cost, not measurements.")
 
 
@@ -174,20 +177,29 @@ def _time(fn, repeats):
 
 
 def _dipole_pairs_per_world(magnets, density, targets=range(4)):
-    """Point-dipole pairs of the wrench on ``targets`` from all the other magnets."""
+    """Point-dipole pairs of the wrench on ``targets`` from all the other magnets (each magnet's own sum over its
+    sources, as a baseline revision's kernel computes them)."""
     from warpworm import magnets as mg
 
     n = [len(mg.dipole_grid(m, density)) for m in magnets]
     return sum(n[i] * n[j] for i in targets for j in range(4) if i != j)
 
 
-def _analytic_evals_per_world(pos, rot, magnets, quad_order, max_panels, epm=True):
-    """Field evaluations the 'analytic' kernel makes in world 0 (mirrors the panel rule of magnet_fields.py)."""
+def _dipole_pairs_evaluated(magnets, density):
+    """Point-dipole pairs today's kernel evaluates per world: each unordered magnet pair once (the other magnet's
+    wrench is the reaction), 9,648 for the worm at 64/cm³."""
+    from warpworm import magnets as mg
+
+    n = [len(mg.dipole_grid(m, density)) for m in magnets]
+    return sum(n[a] * n[b] for b in range(4) for a in range(b))
+
+
+def _analytic_evals_per_world(pos, rot, magnets, quad_order, max_panels):
+    """Closed-form field evaluations of today's kernel with every pair in closed form (``far_field=False``) in world
+    0: each unordered pair once, the lower index the source (mirrors the panel rule of magnet_fields.py)."""
     total = 0
-    for i in range(0 if epm else 1, 4):
-        for j in range(4):
-            if i == j:
-                continue
+    for i in range(4):
+        for j in range(i):
             s, t = magnets[j], magnets[i]
             Rrel = rot[0, j].T @ rot[0, i]
             trel = rot[0, j].T @ (pos[0, i] - pos[0, j])
@@ -256,12 +268,20 @@ def _baseline_kernels(rev: str):
 
 
 def _launcher(kernel, model_arr, arrays, device, epm, far=True):
-    """One world-wrench launch of ``kernel`` (today's or a baseline revision's, with or without ``epm_wrench``;
-    ``far`` = the ring rule for far cylinder pairs, where the kernel has it)."""
+    """One world-wrench call: today's (``kernel`` None: :func:`warpworm.magnets.launch_world_wrenches`, the pair
+    kernels) or a baseline revision's ``world_wrench_kernel``, with or without ``epm_wrench``; ``far`` = the ring
+    rules, where the kernel has them."""
     from warpworm import magnets as mg
 
-    gl_x, gl_w = mg._gauss_legendre(mg.DEFAULT_QUAD_ORDER, str(device))
     a = arrays
+    if kernel is None:
+        def today():
+            mg.launch_world_wrenches(model_arr, a["shape"], a["size"], a["moment"], a["pos"], a["rot"], a["force_out"],
+                                     a["torque_out"], a["density"], device, epm_wrench=epm, far_field=far)
+            wp.synchronize_device(device)
+
+        return today
+    gl_x, gl_w = mg._gauss_legendre(mg.DEFAULT_QUAD_ORDER, str(device))
     labels = [arg.label for arg in kernel.adj.args]
     far_flag = [int(far)] if "far_field" in labels else []
     flag = [int(epm)] if "epm_wrench" in labels else []
@@ -277,7 +297,6 @@ def _launcher(kernel, model_arr, arrays, device, epm, far=True):
 
 def run(quick: bool = False) -> list[dict]:
     from warpworm import magnets as mg
-    from warpworm.kernels.magnet_wrench import world_wrench_kernel
     from warpworm.transforms import matrix_to_quat_wxyz, quat_wxyz_to_xyzw
 
     quiet_warp()
@@ -288,8 +307,9 @@ def run(quick: bool = False) -> list[dict]:
     density = 64e6
     pairs_per_world = _dipole_pairs_per_world(magnets, density)
     pairs_no_epm = pairs_per_world - _dipole_pairs_per_world(magnets, density, targets=[0])
+    pairs_today = _dipole_pairs_evaluated(magnets, density)
     baseline_rev = os.environ.get("WARPWORM_BENCH_BASELINE", "").strip()
-    variants = [("warpworm", world_wrench_kernel, True), ("warpworm", world_wrench_kernel, False)]
+    variants = [("warpworm", None, True), ("warpworm", None, False)]
     tmp = None
     if baseline_rev:
         base_kernel, tmp = _baseline_kernels(baseline_rev)
@@ -319,7 +339,7 @@ def run(quick: bool = False) -> list[dict]:
                 # 'analytic' also once with every pair in closed form (no far-field ring rule): the rule's gain
                 runs = [(impl, kernel, epm, True) for impl, kernel, epm in variants]
                 if model == "analytic":
-                    runs.insert(0, ("warpworm closed form", world_wrench_kernel, False, False))
+                    runs.insert(0, ("warpworm closed form", None, False, False))
                 for impl, kernel, epm, far in runs:
                     call = _launcher(kernel, model_arr, arrays, device, epm, far)
                     if model == "dipoles":
@@ -337,11 +357,12 @@ def run(quick: bool = False) -> list[dict]:
                     if far and not epm and closed_t is not None and impl == "warpworm":
                         row["vs_closed_form"] = closed_t / t
                     if model == "dipoles":
-                        row["pairs_per_s"] = (pairs_per_world if epm else pairs_no_epm) * W / t
+                        evaluated = pairs_today if kernel is None else (pairs_per_world if epm else pairs_no_epm)
+                        row["pairs_per_s"] = evaluated * W / t
                         row["vs_nbody"] = row["pairs_per_s"] / (ref_pairs / t_ref)
-                    else:
+                    elif not far:
                         row["field_evals_per_s"] = _analytic_evals_per_world(
-                            pos, rot, magnets, mg.DEFAULT_QUAD_ORDER, mg.DEFAULT_MAX_PANELS, epm) * W / t
+                            pos, rot, magnets, mg.DEFAULT_QUAD_ORDER, mg.DEFAULT_MAX_PANELS) * W / t
                     rows.append(row)
     finally:
         if tmp is not None:

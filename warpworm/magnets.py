@@ -193,11 +193,12 @@ def launch_world_wrenches(
 ) -> None:
     """Net magnetic force and torque on every magnet of every world from all the other magnets of its world.
 
-    One kernel launch (:func:`warpworm.kernels.magnet_wrench.world_wrench_kernel`, dim (W, M), thread =
-    (world, target magnet), looping over the M − 1 sources); no host round trip, any M. Capturable in a graph once
-    the model array and the quadrature arrays exist: pass a ``wp.array`` for ``model`` (a string makes a small
-    array), and launch once outside the capture (the first call creates the Gauss–Legendre arrays from host data,
-    whose copy a capture would record instead of doing).
+    Two kernel launches: each unordered pair once (:func:`warpworm.kernels.magnet_wrench.world_pair_wrench_kernel`,
+    dim (W, M (M − 1) / 2): the wrench on one magnet of the pair, the other's by reaction), then each magnet's sum
+    over its pairs (``sum_pair_wrenches_kernel``, dim (W, M)); no host round trip, any M. Capturable in a graph once
+    the model array, the quadrature arrays and the pair scratch exist: pass a ``wp.array`` for ``model`` (a string
+    makes a small array), and launch once outside the capture (the first call creates the Gauss–Legendre arrays from
+    host data, whose copy a capture would record instead of doing, and the scratch).
 
     Args:
         model: ``"dipoles"`` | ``"analytic"`` for the whole batch, or per-world ids (0 dipoles, 1 analytic) as a
@@ -213,10 +214,9 @@ def launch_world_wrenches(
         device: Warp device (default: that of ``pos``).
         quad_order: Gauss-Legendre points per panel side ('analytic').
         max_panels: most composite panels per face side ('analytic'; used only for faces close to a source).
-        epm_wrench: ``False`` skips the wrench on magnet 0 (the EPM, whose motion is prescribed): its force and
-            torque are written as zero and cost nothing; every other magnet's wrench (including the part from
-            magnet 0) is the same as with ``True``. The dynamics needs only the IPMs' wrenches (about half the
-            'dipoles' work and a sixth of the 'analytic' one are the EPM's).
+        epm_wrench: ``False`` writes magnet 0's (the EPM's, whose motion is prescribed) force and torque as zero;
+            every other magnet's wrench is the same as with ``True``. The EPM's costs nothing either way: each
+            pair is evaluated once and its reaction is the other magnet's share.
         far_field: ``True`` ('analytic' only) takes two cylinders at least 4 circumscribing radii apart (the IPM
             pairs of a worm) by a multipole-matched ring rule of point dipoles (:mod:`warpworm.kernels.magnet_far_pair`,
             within 8e-6 of the closed form's largest force and torque, ~3x cheaper per pair), and a cuboid and a
@@ -228,19 +228,38 @@ def launch_world_wrenches(
     (paper's worm at 64/cm³: 256·12·6 + 12·12·6 = 19,296 pair interactions; 256·12·3 + 12·12·6 = 10,080 without the
     EPM's wrench).
     """
-    from warpworm.kernels.magnet_wrench import world_wrench_kernel
+    from warpworm.kernels.magnet_wrench import sum_pair_wrenches_kernel, world_pair_wrench_kernel
 
     device = device or pos.device
     gl_x, gl_w = _gauss_legendre(quad_order, str(device))
     W, M = pos.shape
-    wp.launch(
-        world_wrench_kernel,
-        dim=(W, M),
-        inputs=[_model_array(model, device), shape, size, moment, density, gl_x, gl_w, int(max_panels),
-                int(bool(far_field)), int(bool(epm_wrench)), pos, rot],
-        outputs=[force_out, torque_out],
-        device=device,
-    )
+    pair_force, pair_torque = _pair_scratch(W, M, str(device))
+    if M > 1:
+        wp.launch(
+            world_pair_wrench_kernel,
+            dim=(W, M * (M - 1) // 2),
+            inputs=[_model_array(model, device), shape, size, moment, density, gl_x, gl_w, int(max_panels),
+                    int(bool(far_field)), pos, rot],
+            outputs=[pair_force, pair_torque],
+            device=device,
+        )
+    wp.launch(sum_pair_wrenches_kernel, dim=(W, M), inputs=[int(bool(epm_wrench)), pair_force, pair_torque],
+              outputs=[force_out, torque_out], device=device)
+
+
+_PAIR_SCRATCH: dict = {}
+
+
+def _pair_scratch(W: int, M: int, device: str):
+    """The (W, max(1, M (M − 1) / 2), 2) pair-wrench scratch of :func:`launch_world_wrenches`, one per (W, M,
+    device), made at the first call (outside any graph capture, like the quadrature arrays) and reused: its values
+    live only between the two launches of one call."""
+    key = (W, M, device)
+    if key not in _PAIR_SCRATCH:
+        P = max(1, M * (M - 1) // 2)
+        _PAIR_SCRATCH[key] = (wp.zeros((W, P, 2), dtype=wp.vec3, device=device),
+                              wp.zeros((W, P, 2), dtype=wp.vec3, device=device))
+    return _PAIR_SCRATCH[key]
 
 
 # ----------------------------------------------------------------------------------------------------------------------
