@@ -89,6 +89,21 @@ def atan2_f32(y: float, x: float) -> float:
 
 
 @wp.func
+def dihedral_angle_and_normals(xi: wp.vec3, xj: wp.vec3, xk: wp.vec3, xl: wp.vec3):
+    """The signed fold angle psi [rad] of the hinge stencil (i, j, k, l) (:func:`dihedral_angle_and_gradient`) with
+    what it is made of: (n1, n2, r_kj, |r_kj|², |r_kj|, psi), n1, n2 the wings' normals (their lengths twice the
+    wings' areas), r_kj = x_k − x_j the hinge."""
+    n1 = wp.cross(xj - xi, xk - xi)
+    n2 = wp.cross(xk - xl, xj - xl)
+    r_kj = xk - xj
+    len2 = wp.dot(r_kj, r_kj)
+    length = wp.sqrt(len2)
+    # (n1 x n2) . e with e = (x_j - x_k) / |x_j - x_k| = -r_kj / length; atan2 is scale-free, so the length is left out
+    psi = atan2_f32(-wp.dot(wp.cross(n1, n2), r_kj), wp.dot(n1, n2) * length)
+    return n1, n2, r_kj, len2, length, psi
+
+
+@wp.func
 def dihedral_angle_and_gradient(xi: wp.vec3, xj: wp.vec3, xk: wp.vec3, xl: wp.vec3):
     """Signed fold angle psi [rad] of the hinge stencil (i, j, k, l) (shared edge j-k; 0 flat, > 0 valley) and its
     exact gradient w.r.t. (x_i, x_j, x_k, x_l) [rad/m], sharing their cross products.
@@ -99,14 +114,8 @@ def dihedral_angle_and_gradient(xi: wp.vec3, xj: wp.vec3, xk: wp.vec3, xl: wp.ve
     d psi/d x_l = L n2/|n2|², x_j and x_k by the wings' projections on the hinge axis (free of translation and
     rotation). Returns (psi, g_i, g_j, g_k, g_l).
     """
-    n1 = wp.cross(xj - xi, xk - xi)
-    n2 = wp.cross(xk - xl, xj - xl)
-    r_kj = xk - xj
-    len2 = wp.dot(r_kj, r_kj)
-    length = wp.sqrt(len2)
+    n1, n2, r_kj, len2, length, psi = dihedral_angle_and_normals(xi, xj, xk, xl)
     inv_len2 = 1.0 / len2
-    # (n1 x n2) . e with e = (x_j - x_k) / |x_j - x_k| = -r_kj / length; atan2 is scale-free, so the length is left out
-    psi = atan2_f32(-wp.dot(wp.cross(n1, n2), r_kj), wp.dot(n1, n2) * length)
     # guard degenerate wings (zero area): no gradient rather than inf
     gi = n1 * (length / wp.max(wp.dot(n1, n1), 1.0e-30))
     gl = n2 * (length / wp.max(wp.dot(n2, n2), 1.0e-30))
@@ -125,15 +134,11 @@ singular, which otherwise shows as an explosion one step later."""
 
 
 @wp.func
-def wing_collapsed(xi: wp.vec3, xj: wp.vec3, xk: wp.vec3, xl: wp.vec3) -> bool:
-    """Whether either wing (i, j, k) or (l, k, j) of the hinge stencil (i, j, k, l), shared edge j–k, has an altitude
-    over that edge below :data:`SLIVER_ALTITUDE` times its length (|n| / L² with n the wing's normal of
-    :func:`dihedral_angle_and_gradient`)."""
-    r_kj = xk - xj
-    len2 = wp.dot(r_kj, r_kj)
-    n1 = wp.length(wp.cross(xj - xi, xk - xi))
-    n2 = wp.length(wp.cross(xk - xl, xj - xl))
-    return wp.min(n1, n2) < SLIVER_ALTITUDE * len2
+def wings_collapsed(n1: wp.vec3, n2: wp.vec3, len2: float) -> bool:
+    """Whether either wing of a hinge stencil has an altitude over the hinge below :data:`SLIVER_ALTITUDE` times the
+    hinge's length: |n| / L < SLIVER_ALTITUDE · L, with ``n1``, ``n2`` the wings' normals of
+    :func:`dihedral_angle_and_normals` (|n| = twice the wing's area = altitude · L) and ``len2`` = L²."""
+    return wp.min(wp.length(n1), wp.length(n2)) < SLIVER_ALTITUDE * len2
 
 
 @wp.func
@@ -141,9 +146,9 @@ def crease_at_substep_end(prev: float, xi: wp.vec3, xj: wp.vec3, xk: wp.vec3, xl
                           fold_tolerance: float):
     """A crease's angle at the end of a substep, unwrapped from its angle ``prev`` [rad] at the start, and whether
     the sheet crumpled there: the angle more than ``fold_tolerance`` [rad] outside the crease's NoFoldThrough range,
-    or a wing collapsed (:func:`wing_collapsed`). Returns (phi, crumpled); shared by the band and tile kernels."""
-    psi, g0, g1, g2, g3 = dihedral_angle_and_gradient(xi, xj, xk, xl)
+    or a wing collapsed (:func:`wings_collapsed`). Returns (phi, crumpled); shared by the band and tile kernels."""
+    n1, n2, r_kj, len2, length, psi = dihedral_angle_and_normals(xi, xj, xk, xl)
     phi = prev + wrap_angle(psi - prev)
     lo, hi = fold_range(label)
-    crumpled = phi < lo - fold_tolerance or phi > hi + fold_tolerance or wing_collapsed(xi, xj, xk, xl)
+    crumpled = phi < lo - fold_tolerance or phi > hi + fold_tolerance or wings_collapsed(n1, n2, len2)
     return phi, crumpled
