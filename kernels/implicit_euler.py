@@ -271,6 +271,8 @@ class WorldCoefficients:
     hr_row: int
     hl_row: int
     ak_row: int
+    ss_row: int  # bar_stop_strain's
+    sk_row: int  # bar_stop_stiffness's
     gravity: wp.vec3  # [m/s²]
     damp: float  # 1 / (1 + c dt)
     k_hinge: float
@@ -293,6 +295,9 @@ def world_coefficients(m: BarHingeModel, world: int, dt: float) -> WorldCoeffici
     c.hr_row = world % m.hinge_rest.shape[0]
     c.hl_row = world % m.hinge_length.shape[0]
     c.ak_row = world % m.anchor_stiffness.shape[0]
+    # the rows once per launch: an integer division per bar and Newton step cost ~1 µs per step
+    c.ss_row = world % m.bar_stop_strain.shape[0]
+    c.sk_row = world % m.bar_stop_stiffness.shape[0]
     c.gravity = wp.vec3(0.0, 0.0, -pw(m.gravity, world))
     c.damp = 1.0 / (1.0 + pw(m.damping, world) * dt)
     c.k_hinge = pw(m.hinge_stiffness, world)
@@ -376,12 +381,12 @@ def bar_terms(world: int, c: WorldCoefficients, m: BarHingeModel, strain_limit: 
         # a soft waist bar strained past its stops (−ε_c shortened, +ε_t stretched) turns rigid: the sheet's panels,
         # which the soft bar stands for, bend only so far (without them a hard squeeze flattens the waist triangles
         # into slivers, whose crease gradients blow up, or pinches the waist through the axis)
-        stops = m.bar_stop_strain[world % m.bar_stop_strain.shape[0], e]
+        stops = m.bar_stop_strain[c.ss_row, e]
         stop = wp.where(strain < 0.0, -stops[0], stops[1])
         l_stop = l0 * (1.0 + stop)
         k_trans = ka * wp.max(0.0, 1.0 - l0 / length)
         if wp.where(strain < 0.0, strain < stop, strain > stop):
-            ks = m.bar_stop_stiffness[c.ea_row % m.bar_stop_stiffness.shape[0], e] / l0
+            ks = m.bar_stop_stiffness[c.sk_row, e] / l0
             f = f + n * (ks * (length - l_stop))
             k_axial = k_axial + ks
             k_trans = k_trans + ks * wp.max(0.0, 1.0 - l_stop / length)  # the stop's tension, as the bar's
