@@ -19,7 +19,8 @@ agreement) for small W only; ``magpylib_est`` rows extrapolate that per-world co
 labelled as estimates.
 
 Before/after in one run: with ``WARPWORM_BENCH_BASELINE=<git revision>`` in the environment, the kernel modules of
-that revision (``kernels/magnet_fields.py``, ``kernels/magnet_wrench.py``, read with ``git show``) are loaded under
+that revision (``kernels/magnet_fields.py``, ``kernels/magnet_wrench.py`` and, where it has one,
+``kernels/magnet_far_pair.py``, read with ``git show``) are loaded under
 another module name and timed on the same worlds in the same run (rows ``warpworm@<rev>``; ``speedup`` = their
 time over today's at the same model and W).
 """
@@ -254,9 +255,11 @@ def _baseline_kernels(rev: str):
     pkg = tmp / name
     pkg.mkdir()
     (pkg / "__init__.py").write_text("")
-    for f in ("magnet_fields", "magnet_wrench"):
+    for f in ("magnet_fields", "magnet_wrench", "magnet_far_pair"):
         src = subprocess.run(["git", "show", f"{rev}:kernels/{f}.py"], cwd=root, capture_output=True, text=True)
         if src.returncode != 0:
+            if f == "magnet_far_pair":  # revisions before the far-field ring rule have no such module
+                continue
             raise ValueError(f"WARPWORM_BENCH_BASELINE={rev!r}: git show failed: {src.stderr.strip()}")
         (pkg / f"{f}.py").write_text(src.stdout)
     sys.path.insert(0, str(tmp))
