@@ -111,7 +111,8 @@ def newton_start(status: int, vel: wp.vec3, v_old: wp.vec3, h0: float, n: wp.vec
     is ~40 µm at 2 ms for a worm that gravity and the floor hold at rest, 200× the tolerance; the carried-over
     velocity is what a near-quasi-static worm keeps. Measured over 5 cycles of each gait preset: 2.6–3.2 Newton steps
     per 1 ms substep instead of 3.7–4.0, 3.1–4.1 per 2 ms instead of 4.7–5.9, the same gaits to 0.01 mm
-    (docs/dynamics.md, "Newton convergence"). Only the start moves: x̃ and the equations do not (the contacts'
+    (docs/dynamics.md, "Newton convergence"; since the contacts start where this velocity takes the vertices,
+    :func:`starting_contact`, 2.5–3.6 full steps per 2 ms). Only the start moves: x̃ and the equations do not (the contacts'
     statuses follow the iterates, so a different start may end on another contact set within the tolerance). A
     free vertex starts no lower than the floor; a stuck one where it is along the floor; one that is fixed (infinite
     mass) keeps ``vel`` (zero)."""
