@@ -111,7 +111,7 @@ def pair_members(p: int, num_magnets: int) -> wp.vec2i:
     """Magnets (a, b), a < b, of unordered pair ``p`` of a world of ``num_magnets``: (0, 1), (0, 2), …, (1, 2), …"""
     a = int(0)
     rest = p
-    while rest >= num_magnets - 1 - a:
+    while a < num_magnets - 1 and rest >= num_magnets - 1 - a:
         rest -= num_magnets - 1 - a
         a += 1
     return wp.vec2i(a, a + 1 + rest)
@@ -200,7 +200,7 @@ def sum_pair_wrenches_kernel(
     torque = wp.vec3(0.0)
     if epm_wrench != 0 or i != 0:
         num_magnets = force_out.shape[1]
-        for p in range(pair_force.shape[1]):
+        for p in range(num_magnets * (num_magnets - 1) / 2):  # the scratch has one unused pair when M = 1
             ab = pair_members(p, num_magnets)
             if ab[0] == i:
                 force += pair_force[world, p, 0]

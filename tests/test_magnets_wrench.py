@@ -233,6 +233,33 @@ def test_world_kernel_equals_sum_of_pair_wrenches():
         assert np.linalg.norm(net_t) < 1e-4 * (np.abs(T[w]).max() + 0.05 * np.abs(F[w]).max())
 
 
+@pytest.mark.parametrize("num_magnets", [1, 2, 5])
+def test_world_kernel_any_magnet_count(num_magnets):
+    """The pair kernels for M = 1 (no pair: zero wrench), 2 and 5 magnets (an EPM bar and disks in a row, some closer
+    than the ring rules' limits): each magnet's wrench is the sum of the pair wrenches on it, each evaluated directly
+    in its own order (so the reactions the kernel uses are checked against direct evaluations)."""
+    rng = np.random.default_rng(num_magnets)
+    magnets = [EPM] + [IPM.with_moment(IPM.moment[2] * (-1) ** k) for k in range(num_magnets - 1)]
+    pos = np.zeros((2, num_magnets, 3))
+    pos[:, 0] = [0.0, 0.0, -0.03]
+    pos[:, 1:, 0] = 0.022 * np.arange(num_magnets - 1) + rng.normal(scale=1e-3, size=(2, num_magnets - 1))
+    rot = np.stack([[Rotation.from_euler("xyz", rng.normal(size=3) * 0.3).as_matrix() for _ in range(num_magnets)]
+                    for _ in range(2)])
+    F, T = mg.world_wrenches(magnets, pos, rot)
+    for w in range(2):
+        for i in range(num_magnets):
+            Fs, Ts = np.zeros(3), np.zeros(3)
+            for j in range(num_magnets):
+                if j != i:
+                    f, t = mg.wrench(magnets[j], magnets[i], (pos[w, j], rot[w, j]), (pos[w, i], rot[w, i]))
+                    Fs += f
+                    Ts += t
+            np.testing.assert_allclose(F[w, i], Fs, rtol=1e-5, atol=1e-5 * np.abs(F[w]).max() + 1e-12)
+            np.testing.assert_allclose(T[w, i], Ts, rtol=1e-5, atol=1e-5 * np.abs(T[w]).max() + 1e-15)
+    if num_magnets == 1:
+        assert np.all(F == 0) and np.all(T == 0)
+
+
 def test_world_kernel_zero_moment_is_absent_and_string_model():
     magnets, pos, rot = _worm_worlds(2, seed=1)
     F4, _ = mg.world_wrenches(magnets, pos, rot, model="analytic")
