@@ -133,6 +133,19 @@ def ring_point(p: int, nphi: int, cs: wp.vec2, step: wp.vec2, half: wp.vec2) -> 
 
 
 @wp.func
+def ring_setup(nphi: int, rot: wp.mat33, m: wp.vec3):
+    """What both ring-rule integrals start from, for ``nphi`` points per ring of a cylinder turned by ``rot`` (its
+    frame -> the frame of the computation) with moment ``m`` (its frame): (one step and half a step of the azimuth as
+    (cos, sin), 1 / nphi, the moment and the cylinder's x and y axes in the computation's frame)."""
+    dphi = 2.0 * CYL_PI / float(nphi)
+    step = wp.vec2(wp.cos(dphi), wp.sin(dphi))
+    half = wp.vec2(wp.cos(0.5 * dphi), wp.sin(0.5 * dphi))
+    ax = wp.vec3(rot[0, 0], rot[1, 0], rot[2, 0])
+    ay = wp.vec3(rot[0, 1], rot[1, 1], rot[2, 1])
+    return step, half, 1.0 / float(nphi), rot * m, ax, ay
+
+
+@wp.func
 def far_cylinder_pair_wrench(
     s_rule: wp.vec4,
     s_m: wp.vec3,
@@ -150,13 +163,7 @@ def far_cylinder_pair_wrench(
         r_rel: target frame -> source frame; t_rel: target centre in the source frame [m].
         nphi: points per ring (:func:`ring_points_for_distance`).
     """
-    dphi = 2.0 * CYL_PI / float(nphi)
-    step = wp.vec2(wp.cos(dphi), wp.sin(dphi))
-    half = wp.vec2(wp.cos(0.5 * dphi), wp.sin(0.5 * dphi))
-    inv_n = 1.0 / float(nphi)
-    mt_dir = r_rel * t_m
-    ax = wp.vec3(r_rel[0, 0], r_rel[1, 0], r_rel[2, 0])
-    ay = wp.vec3(r_rel[0, 1], r_rel[1, 1], r_rel[2, 1])
+    step, half, inv_n, mt_dir, ax, ay = ring_setup(nphi, r_rel, t_m)
     force = wp.vec3(0.0)
     torque = wp.vec3(0.0)
     ct = wp.vec2(1.0, 0.0)
@@ -267,13 +274,7 @@ def cuboid_faces_in_ring_field(
     The ring dipoles all point along one moment, so their field at a point is (μ0/4π)(3 Σ w a r / r⁵ − m Σ w / r³)
     with a = r·m̂: two scalar sums and a vector one per ring point, no per-point vectors.
     """
-    dphi = 2.0 * CYL_PI / float(nphi)
-    step = wp.vec2(wp.cos(dphi), wp.sin(dphi))
-    half = wp.vec2(wp.cos(0.5 * dphi), wp.sin(0.5 * dphi))
-    inv_n = 1.0 / float(nphi)
-    m_dir = y_rot * y_m
-    ax = wp.vec3(y_rot[0, 0], y_rot[1, 0], y_rot[2, 0])
-    ay = wp.vec3(y_rot[0, 1], y_rot[1, 1], y_rot[2, 1])
+    step, half, inv_n, m_dir, ax, ay = ring_setup(nphi, y_rot, y_m)
     mag = c_m / (c_size[0] * c_size[1] * c_size[2])
     pts = RingPoints()  # (position, weight) of every ring point
     cs = wp.vec2(1.0, 0.0)
