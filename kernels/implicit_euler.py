@@ -62,8 +62,8 @@ CONTACT_STUCK = wp.constant(2)  # on the floor, static friction (regularised: a 
 CONTACT_FIXED = wp.constant(3)  # a vertex of infinite mass (never moves; reported as free)
 CONTACTS_CHANGED = wp.constant(1)  # update_contacts: a vertex changed its contact status
 CONTACTS_LANDED = wp.constant(2)  # update_contacts: a free vertex landed (its position moved)
-WORLD_CRUMPLED = wp.constant(ids.WORLD_CRUMPLED)
-CHORD_CONTRACTION = wp.constant(0.5)  # a chord step is taken only if it is shorter than this times the last step  # ``unstable`` flag of a crumpled world (ids: the statuses)
+WORLD_CRUMPLED = wp.constant(ids.WORLD_CRUMPLED)  # ``unstable`` flag of a crumpled world (ids: the statuses)
+CHORD_CONTRACTION = wp.constant(0.5)  # a chord step is taken only if it is shorter than this times the last step
 
 
 @wp.func
@@ -112,8 +112,9 @@ def newton_start(status: int, vel: wp.vec3, v_old: wp.vec3, h0: float, n: wp.vec
     velocity is what a near-quasi-static worm keeps. Measured over 5 cycles of each gait preset: 2.6–3.2 Newton steps
     per 1 ms substep instead of 3.7–4.0, 3.1–4.1 per 2 ms instead of 4.7–5.9, the same gaits to 0.01 mm
     (docs/dynamics.md, "Newton convergence"; since the contacts start where this velocity takes the vertices,
-    :func:`starting_contact`, 2.5–3.6 full steps per 2 ms). Only the start moves: x̃ and the equations do not (the contacts'
-    statuses follow the iterates, so a different start may end on another contact set within the tolerance). A
+    :func:`starting_contact`, 2.5–3.6 full steps per 2 ms). Only the start moves: x̃ and the equations do not (the
+    contacts' statuses follow the iterates, so a different start may end on another contact set within the
+    tolerance). A
     free vertex starts no lower than the floor; a stuck one where it is along the floor; one that is fixed (infinite
     mass) keeps ``vel`` (zero)."""
     if status == CONTACT_FIXED:
@@ -509,8 +510,9 @@ def assemble(world: int, c: WorldCoefficients, m: BarHingeModel, opt: SubstepOpt
 def predict(world: int, c: WorldCoefficients, m: BarHingeModel, slip_speed: float,
             f_ext: wp.array2d(dtype=wp.vec3), s: BarHingeState, w: NewtonScratch):
     """Predict x̃ and start the Newton iteration at :func:`newton_start`: a vertex on the floor (touching at the end of
-    the last substep, or carried below it: :func:`starting_contact`) starts stuck on it, unless it is moving off it: every substep first
-    tries static friction, the Coulomb test of :func:`update_contacts` lets go where it cannot hold."""
+    the last substep, or carried below it: :func:`starting_contact`) starts stuck on it, unless it is moving off it:
+    every substep first tries static friction, the Coulomb test of :func:`update_contacts` lets go where it cannot
+    hold."""
     dt = c.dt
     for i in range(s.x.shape[1]):
         w_inv = m.inv_mass[c.im_row, i]
