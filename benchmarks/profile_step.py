@@ -39,7 +39,6 @@ STAGES = {
     "epm_sine_pose": "EPM pose",
     "epm_keyframe_pose": "EPM pose",
     "ipm_poses": "IPM poses",
-    "world_wrench_kernel": "wrench (magnets)",  # before the pair kernels
     "world_pair_wrench_kernel": "wrench (magnet pairs)",
     "sum_pair_wrenches_kernel": "wrench (sums)",
     "distribute_wrench": "distribute wrench",

@@ -700,6 +700,7 @@ def implicit_step(
         bad = int(0)
         last_step = float(1.0e30)
         stalled = bool(False)
+        converged = bool(False)
         for it in range(opt.newton):
             # assemble and factor the Hessian, else a chord step; a chord step that did not halve the last step
             # (e.g. kinetic friction's stiffness mu_k F_n / |v_t| gone stale) refactors the next
@@ -728,16 +729,15 @@ def implicit_step(
                 # a chord step that would not contract (its factor gone stale: kinetic friction's stiffness, or
                 # near-rigid bars turned) is not taken: the next step assembles and factors at this same x
                 stalled = True
-                if it == opt.newton - 1:
-                    w.newton_capped[world] = w.newton_capped[world] + 1
                 continue
             newton_apply(world, s, w)
             if step < opt.newton_tol and it >= 1:
+                converged = True
                 break  # converged (after one contact update at least)
-            if it == opt.newton - 1:
-                w.newton_capped[world] = w.newton_capped[world] + 1  # the cap, not the tolerance, ended it
             stalled = False
             last_step = step
+        if bad == 0 and not converged:
+            w.newton_capped[world] = w.newton_capped[world] + 1  # the cap, not the tolerance, ended it
         if bad == 0:
             bad = finish_substep(world, c, m, opt, s, w)
             crumpled = update_crease_angles(world, m, opt.fold_tolerance, s)

@@ -31,7 +31,17 @@ from __future__ import annotations
 
 import warp as wp
 
-from .magnet_fields import CYL_PI, F64_0, F64_1, MU0_OVER_4PI, SHAPE_CUBOID, SHAPE_CYLINDER, dipole_pair_force_field
+from .magnet_fields import (
+    CYL_PI,
+    F64_0,
+    F64_1,
+    MU0_OVER_4PI,
+    SHAPE_CUBOID,
+    SHAPE_CYLINDER,
+    box_gap,
+    dipole_pair_force_field,
+    panel_count,
+)
 
 NEAR_LIMIT = wp.constant(4.0)
 """Below this many circumscribing radii (of the larger magnet) the closed form is used."""
@@ -227,9 +237,7 @@ def cuboid_ring_rule(c_size: wp.vec3, y_size: wp.vec3, y_in_c: wp.vec3):
     and 8 points or order 4 below 4a lose ~1e-4 there (a NumPy prototype)."""
     radius = 0.5 * y_size[0]
     reach = wp.sqrt(radius * radius + 0.25 * y_size[2] * y_size[2])
-    d = wp.vec3(wp.max(wp.abs(y_in_c[0]) - 0.5 * c_size[0], 0.0), wp.max(wp.abs(y_in_c[1]) - 0.5 * c_size[1], 0.0),
-                wp.max(wp.abs(y_in_c[2]) - 0.5 * c_size[2], 0.0))
-    q = wp.length(d) / reach
+    q = float(box_gap(wp.vec3d(0.5 * c_size), wp.vec3d(y_in_c))) / reach
     rule = cylinder_ring_rule(radius, y_size[2])
     if q < CUBOID_RING_NEAR or rule[2] <= 0.0:
         return 0, 0, rule
@@ -240,13 +248,6 @@ def cuboid_ring_rule(c_size: wp.vec3, y_size: wp.vec3, y_in_c: wp.vec3):
 
 RingPoints = wp.types.matrix(shape=(32, 4), dtype=float)
 """Up to 2 × 16 ring points: (x, y, z, weight) rows."""
-
-
-@wp.func
-def face_panels(extent: float, gap: float, max_panels: int) -> int:
-    """Composite panels along a face side of ``extent`` [m] at ``gap`` [m] from the field's sources' centre: panel
-    size ≤ gap, as :func:`~.magnet_fields.panel_count` does for the closed form."""
-    return wp.min(max_panels, wp.max(1, int(wp.ceil(extent / wp.max(gap, 1.0e-9)))))
 
 
 @wp.func
@@ -263,7 +264,8 @@ def cuboid_faces_in_ring_field(
 ):
     """Force [N] on a uniformly magnetized cuboid and torque [N·m] about its centre, in its own frame, in the field
     of a cylinder's ring rule: F = ∮ σ B dA over the cuboid's faces (σ = M·n, M = ``c_m`` / volume), Gauss–Legendre
-    of ``order`` on panels no larger than their distance to the cylinder's centre (:func:`face_panels`).
+    of ``order`` on panels no larger than their distance to the cylinder's centre (the closed form's
+    :func:`~.magnet_fields.panel_count`).
 
     Args:
         c_size, c_m: the cuboid's extents [m] and moment [A·m²] (its frame).
@@ -300,13 +302,12 @@ def cuboid_faces_in_ring_field(
                 sigma = sign * mk
                 centre = wp.vec3(0.0)
                 centre[k] = sign * 0.5 * c_size[k]
-                # distance from the cylinder's centre to this face (a rectangle)
-                rel = y_pos - centre
-                du_out = wp.max(wp.abs(rel[u]) - 0.5 * lu, 0.0)
-                dv_out = wp.max(wp.abs(rel[v]) - 0.5 * lv, 0.0)
-                gap = wp.sqrt(rel[k] * rel[k] + du_out * du_out + dv_out * dv_out)
-                nu = face_panels(lu, gap, max_panels)
-                nv = face_panels(lv, gap, max_panels)
+                # distance from the cylinder's centre to this face: a box of zero thickness along k
+                face_half = 0.5 * c_size
+                face_half[k] = 0.0
+                gap = box_gap(wp.vec3d(face_half), wp.vec3d(y_pos - centre))
+                nu = panel_count(wp.float64(lu), gap, max_panels)
+                nv = panel_count(wp.float64(lv), gap, max_panels)
                 du = lu / float(nu)
                 dv = lv / float(nv)
                 for iu in range(nu * order):
@@ -374,6 +375,28 @@ def far_cuboid_cylinder_pair_wrench(
     return False, zero, zero
 
 
+@wp.func
+def far_pair_wrench(
+    s_shape: int,
+    s_size: wp.vec3,
+    s_m: wp.vec3,
+    t_shape: int,
+    t_size: wp.vec3,
+    t_m: wp.vec3,
+    r_rel: wp.mat33,
+    t_rel: wp.vec3,
+    max_panels: int,
+):
+    """The one place that decides whether a pair takes a ring rule: (taken, force [N] on the target, torque [N·m]
+    about its centre) in the source's frame, two far cylinders by :func:`far_cylinder_pair_wrench`, a cuboid and a far
+    cylinder by :func:`far_cuboid_cylinder_pair_wrench`; taken = False (zeros): the caller's closed form."""
+    nphi, s_rule, t_rule = far_pair_rules(s_shape, s_size, t_shape, t_size, wp.length(t_rel))
+    if nphi > 0:
+        force, torque = far_cylinder_pair_wrench(s_rule, s_m, t_rule, t_m, r_rel, t_rel, nphi)
+        return True, force, torque
+    return far_cuboid_cylinder_pair_wrench(s_shape, s_size, s_m, t_shape, t_size, t_m, r_rel, t_rel, max_panels)
+
+
 __all__ = ["CUBOID_RING_NEAR", "NEAR_LIMIT", "cuboid_faces_in_ring_field", "cuboid_ring_rule", "cylinder_ring_rule",
-           "far_cuboid_cylinder_pair_wrench", "far_cylinder_pair_wrench", "far_pair_rules", "gauss_legendre_node",
-           "ring_points_for_distance"]
+           "far_cuboid_cylinder_pair_wrench", "far_cylinder_pair_wrench", "far_pair_rules", "far_pair_wrench",
+           "gauss_legendre_node", "ring_points_for_distance"]

@@ -14,7 +14,7 @@ import warp as wp
 
 from warpworm import ids
 
-from .magnet_far_pair import far_cuboid_cylinder_pair_wrench, far_cylinder_pair_wrench, far_pair_rules
+from .magnet_far_pair import far_pair_wrench
 from .magnet_fields import (
     F64_0,
     SHAPE_CYLINDER,
@@ -62,8 +62,8 @@ def pair_wrench(
     The pair is evaluated in the source's frame (relative pose only), which keeps the closed forms in their
     canonical orientation and removes the large common offset of world positions before any float64 work.
     ``far_field`` = 1 lets the 'analytic' model take two cylinders at least 4 circumscribing radii apart, and a
-    cuboid and a cylinder at least 2 of the cylinder's, by the multipole-matched ring rule (:mod:`.magnet_far_pair`,
-    ~1e-5 of the closed form) instead of the closed form.
+    cuboid and a cylinder at least 2.5 of the cylinder's, by the multipole-matched ring rule
+    (:func:`.magnet_far_pair.far_pair_wrench`, within ~1e-5 of the closed form) instead of the closed form.
     """
     rs = wp.quat_to_matrix(s_rot)
     rt = wp.quat_to_matrix(t_rot)
@@ -71,18 +71,12 @@ def pair_wrench(
     t_rel = wp.transpose(rs) * (t_pos - s_pos)
     force = wp.vec3(0.0)
     torque = wp.vec3(0.0)
-    nphi = int(0)
-    s_rule = wp.vec4(0.0)
-    t_rule = wp.vec4(0.0)
     taken = False
     if model == MODEL_ANALYTIC and far_field != 0:
-        nphi, s_rule, t_rule = far_pair_rules(s_shape, s_size, t_shape, t_size, wp.length(t_rel))
-        if nphi == 0:
-            taken, force, torque = far_cuboid_cylinder_pair_wrench(s_shape, s_size, s_m, t_shape, t_size, t_m, r_rel,
-                                                                   t_rel, max_panels)
-    if nphi > 0:
-        force, torque = far_cylinder_pair_wrench(s_rule, s_m, t_rule, t_m, r_rel, t_rel, nphi)
-    elif model == MODEL_ANALYTIC and not taken:
+        taken, force, torque = far_pair_wrench(s_shape, s_size, s_m, t_shape, t_size, t_m, r_rel, t_rel, max_panels)
+    if model != MODEL_ANALYTIC:
+        force, torque = dipoles_pair_wrench(s_shape, s_size, s_m, t_shape, t_size, t_m, r_rel, t_rel, density)
+    elif not taken:
         # J = mu0 m / V (source polarization), M = m / V (target magnetization)
         s_J = wp.vec3d(s_m) * (MU0 / wp.float64(magnet_volume(s_shape, s_size)))
         t_M = wp.vec3d(t_m) / wp.float64(magnet_volume(t_shape, t_size))
@@ -101,8 +95,6 @@ def pair_wrench(
         )
         force = wp.vec3(f64)
         torque = wp.vec3(tq64)
-    elif model != MODEL_ANALYTIC:
-        force, torque = dipoles_pair_wrench(s_shape, s_size, s_m, t_shape, t_size, t_m, r_rel, t_rel, density)
     return rs * force, rs * torque
 
 

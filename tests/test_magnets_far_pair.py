@@ -108,12 +108,17 @@ def test_tall_cylinder_has_no_rule_and_falls_back_to_closed_form():
     np.testing.assert_array_equal(a[1], b[1])
 
 
+def _random_rotations(rng, n):
+    """n random proper rotations (QR of Gaussian matrices, the determinant's sign folded in)."""
+    q, _ = np.linalg.qr(rng.normal(size=(n, 3, 3)))
+    return q * np.sign(np.linalg.det(q))[:, None, None]
+
+
 def _random_pairs(n, distance, seed):
     rng = np.random.default_rng(seed)
     dirs = rng.normal(size=(n, 3))
     dirs /= np.linalg.norm(dirs, axis=1)[:, None]
-    q, _ = np.linalg.qr(rng.normal(size=(2 * n, 3, 3)))
-    q *= np.sign(np.linalg.det(q))[:, None, None]
+    q = _random_rotations(rng, 2 * n)
     return dirs * distance, q[:n], q[n:]
 
 
@@ -201,8 +206,7 @@ def _ipm_near_cuboid(n, size, gap, seed):
     local = rng.uniform(-1.0, 1.0, (n, 3)) * half
     axis, sign = rng.integers(0, 3, n), rng.choice([-1.0, 1.0], n)
     local[np.arange(n), axis] = sign * (half[axis] + gap)
-    q, _ = np.linalg.qr(rng.normal(size=(2 * n, 3, 3)))
-    q *= np.sign(np.linalg.det(q))[:, None, None]
+    q = _random_rotations(rng, 2 * n)
     return q[:n], np.einsum("nij,nj->ni", q[:n], local), q[n:]
 
 

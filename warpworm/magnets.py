@@ -224,9 +224,8 @@ def launch_world_wrenches(
             for the cylinder, the cuboid's face charges in its field (the cylinder's wrench by reciprocity; within
             5.1e-6, ~2.4x cheaper); ``False`` always uses the closed form.
 
-    Magnets must not overlap. Cost per world ('dipoles') ~ Σ_pairs N_source · N_target point-dipole pairs
-    (paper's worm at 64/cm³: 256·12·6 + 12·12·6 = 19,296 pair interactions; 256·12·3 + 12·12·6 = 10,080 without the
-    EPM's wrench).
+    Magnets must not overlap. Cost per world ('dipoles') ~ Σ over unordered pairs of N_a · N_b point-dipole pairs
+    (paper's worm at 64/cm³: 256·12·3 + 12·12·3 = 9,648 pair interactions, with or without the EPM's wrench).
     """
     from warpworm.kernels.magnet_wrench import sum_pair_wrenches_kernel, world_pair_wrench_kernel
 
@@ -417,7 +416,7 @@ def world_wrenches(magnets, positions, rotations, model: str = "analytic", densi
         magnets: list of M :class:`Magnet` (shared by all worlds).
         positions: (W, M, 3) [m]; rotations: (W, M, 3, 3) magnet -> world.
         model: model name, or per-world names / ids (W,). density: scalar or (W,) [1/m³].
-        epm_wrench: ``False``: magnet 0's wrench is not computed (returned as zero).
+        epm_wrench: ``False``: magnet 0's wrench is returned as zero (the others' are the same).
         far_field: the ring rule for far cylinder and cuboid–cylinder pairs (see :func:`launch_world_wrenches`).
 
     Returns:
