@@ -21,11 +21,15 @@ Gauss–Newton steps (bar and crease Hessians kept positive semi-definite: the c
 the crease curvature terms dropped) solve it, at most ``newton`` of them, until a step (the second or later) moves no
 vertex farther than ``newton_tol``; each assembles the gradient and the 3V × 3V Hessian as 3×3 vertex blocks in a
 banded per-world scratch and factors it (:mod:`warpworm.kernels.band_cholesky`). With ``refactor`` = 0 (chord
-steps, the band default) only the first step of a substep, and a step after a contact changed, assembles and factors
-the Hessian; the others solve with that factor against a fresh gradient, and one that would not halve the last step
-is not taken (the next assembles and factors at the same x): a stale factor (near-rigid bars turned, kinetic
-friction's stiffness changed) never moves a world, where taking such a step first and refactoring after could
-throw one past its strain limit (an axial squeeze at 2 ms did).
+steps, the band default) only the first step of every other substep, and a step after a contact changed, assembles
+and factors the Hessian; the others solve with the last factor against a fresh gradient (the first step of the
+substep after a factored one in the same launch too, if no contact changed status in between: ``FACTOR_CARRY``; one
+whose substep then had to refactor leaves the next substep a fresh factor), and one that would not halve the last step is not taken
+(the next assembles and factors at the same x): a stale factor (near-rigid bars turned, kinetic friction's
+stiffness changed) never moves a world, where taking such a step first and refactoring after could throw one past
+its strain limit (an axial squeeze at 2 ms did). Chord steps contract more slowly than fresh ones, so their
+substep ends only when the error estimate θ/(1 − θ)·step (θ the last contraction) is also below ``STOP_ERROR``
+times the tolerance (measured against 12 fresh steps per substep: as close as fresh factors every substep came).
 
 Floor: a vertex on the floor (touching at the end of the last substep, or carried below it) moves only along it
 (its rows of the Newton step are projected, P H P). Before every Newton step after the first, the floor's force at
@@ -64,6 +68,8 @@ CONTACTS_CHANGED = wp.constant(1)  # update_contacts: a vertex changed its conta
 CONTACTS_LANDED = wp.constant(2)  # update_contacts: a free vertex landed (its position moved)
 WORLD_CRUMPLED = wp.constant(ids.WORLD_CRUMPLED)  # ``unstable`` flag of a crumpled world (ids: the statuses)
 CHORD_CONTRACTION = wp.constant(0.5)  # a chord step is taken only if it is shorter than this times the last step
+FACTOR_CARRY = wp.constant(1)  # a substep's factor serves the first step of at most this many next substeps
+STOP_ERROR = wp.constant(0.1)  # a substep ends only when the error left, θ/(1 − θ)·step, is below this times the tolerance
 
 
 @wp.func
@@ -252,7 +258,7 @@ class BarHingeState:
 @wp.struct
 class NewtonScratch:
     """The solver's own scratch (:class:`warpworm.simulator.Simulator` owns it; its values mean nothing between
-    launches, except ``delta``, which is zero there, and the ``newton_steps`` / ``newton_capped`` counters)."""
+    launches, except ``delta``, which is zero there, and the counters)."""
 
     x_prev: wp.array2d(dtype=wp.vec3)  # (W, V) positions at the start of the substep [m]
     delta: wp.array2d(dtype=wp.vec3)  # (W, V) x − x̃ [m]
@@ -261,6 +267,7 @@ class NewtonScratch:
     released: wp.array2d(dtype=wp.int32)  # (W, V) 1 once a vertex let go of the floor in this substep
     newton_steps: wp.array(dtype=wp.int32)  # (W,) Newton steps taken, summed over substeps (a diagnostic counter)
     newton_capped: wp.array(dtype=wp.int32)  # (W,) substeps that took every step without meeting the tolerance
+    newton_factors: wp.array(dtype=wp.int32)  # (W,) Newton steps that assembled and factored the Hessian
 
 
 @wp.struct
@@ -508,12 +515,13 @@ def assemble(world: int, c: WorldCoefficients, m: BarHingeModel, opt: SubstepOpt
 
 @wp.func
 def predict(world: int, c: WorldCoefficients, m: BarHingeModel, slip_speed: float,
-            f_ext: wp.array2d(dtype=wp.vec3), s: BarHingeState, w: NewtonScratch):
+            f_ext: wp.array2d(dtype=wp.vec3), s: BarHingeState, w: NewtonScratch) -> int:
     """Predict x̃ and start the Newton iteration at :func:`newton_start`: a vertex on the floor (touching at the end of
     the last substep, or carried below it: :func:`starting_contact`) starts stuck on it, unless it is moving off it:
     every substep first tries static friction, the Coulomb test of :func:`update_contacts` lets go where it cannot
     hold."""
     dt = c.dt
+    changed = int(0)
     for i in range(s.x.shape[1]):
         w_inv = m.inv_mass[c.im_row, i]
         vel = wp.vec3(0.0)
@@ -531,9 +539,12 @@ def predict(world: int, c: WorldCoefficients, m: BarHingeModel, slip_speed: floa
         if (st == CONTACT_STUCK or st == CONTACT_SLIDING) and s.contact[world, i] == CONTACT_FREE:
             s.floor_force[world, i] = landing_floor_force(h0, vel, c.floor_n, dt, w_inv, c.inv_dt2)
         start = newton_start(st, vel, v_old, h0, c.floor_n, c.inv_dt)
+        if st != s.contact[world, i]:
+            changed = 1
         s.contact[world, i] = st
         s.x[world, i] = p + dt * start
         w.delta[world, i] = (start - vel) * dt
+    return changed
 
 
 @wp.func
@@ -630,11 +641,13 @@ def newton_apply(world: int, s: BarHingeState, w: NewtonScratch):
 
 @wp.func
 def finish_substep(world: int, c: WorldCoefficients, m: BarHingeModel, opt: SubstepOptions, s: BarHingeState,
-                   w: NewtonScratch) -> int:
+                   w: NewtonScratch):
     """The floor once more (vertices that reached it in the last step) and v = v' + (x − x̃) / dt.
-    Returns 1 if a vertex is faster than ``speed_limit`` (or non-finite), else 0."""
+    Returns (1 if a vertex is faster than ``speed_limit`` (or non-finite), else 0; 1 if a vertex changed its contact
+    status, else 0)."""
     dt = c.dt
     bad = int(0)
+    changed = int(0)
     for i in range(s.x.shape[1]):
         # v = v' + (x − x̃) / dt with x − x̃ summed at its own precision (see floor_landing)
         vel = s.v[world, i] + w.delta[world, i] * c.inv_dt
@@ -659,8 +672,10 @@ def finish_substep(world: int, c: WorldCoefficients, m: BarHingeModel, opt: Subs
             bad = 1
         s.x[world, i] = p0 + vel * dt
         s.v[world, i] = vel
+        if st != s.contact[world, i]:
+            changed = 1
         s.contact[world, i] = st
-    return bad
+    return bad, changed
 
 
 @wp.func
@@ -695,18 +710,30 @@ def implicit_step(
     if s.unstable[world] != 0:
         return
     c = world_coefficients(m, world, opt.dt)
+    # the factor the last substep of this launch made serves this substep's first step as a chord step if no contact
+    # changed status since: that saves the assembly of the Hessian and its factorization in every other substep
+    # (module docstring). Only within a launch: a launch's result never depends on what ran before it.
+    have_factor = bool(False)
+    age = int(0)
     for sub in range(opt.num_substeps):
-        predict(world, c, m, opt.slip_speed, f_ext, s, w)
+        if predict(world, c, m, opt.slip_speed, f_ext, s, w) != 0 or age > FACTOR_CARRY:
+            have_factor = False
         bad = int(0)
         last_step = float(1.0e30)
         stalled = bool(False)
         converged = bool(False)
+        started_stale = bool(False)
         for it in range(opt.newton):
             # assemble and factor the Hessian, else a chord step; a chord step that did not halve the last step
             # (e.g. kinetic friction's stiffness mu_k F_n / |v_t| gone stale) refactors the next
-            fresh = it == 0 or opt.refactor != 0 or stalled
+            fresh = (it == 0 and not have_factor) or opt.refactor != 0 or stalled
             if it == 0:
-                bad = assemble(world, c, m, opt, anchor_target, s, w)
+                started_stale = not fresh
+                bad = elastic_terms(world, c, m, opt, anchor_target, fresh, s, w)
+                if bad == 0:
+                    friction_terms(world, c, opt.slip_speed, fresh, s, w)
+                    if fresh:
+                        project_on_contacts(world, c, m, s, w)
             else:
                 # one assembly serves both the floor's normal forces and the Newton step: friction, the one term
                 # that depends on the contacts, is added after they are updated
@@ -724,22 +751,36 @@ def implicit_step(
             if bad != 0:
                 break
             w.newton_steps[world] = w.newton_steps[world] + 1
+            if fresh:
+                age = 0
+                w.newton_factors[world] = w.newton_factors[world] + 1
             step = newton_solve(world, c, fresh, s, w)
+            if fresh:
+                # a substep begun on a carried factor that had to refactor begins the next with a fresh one
+                have_factor = opt.refactor == 0 and (it == 0 or not started_stale)
             if not fresh and not (step < CHORD_CONTRACTION * last_step):
                 # a chord step that would not contract (its factor gone stale: kinetic friction's stiffness, or
                 # near-rigid bars turned) is not taken: the next step assembles and factors at this same x
                 stalled = True
                 continue
             newton_apply(world, s, w)
-            if step < opt.newton_tol and it >= 1:
+            # converged: after one contact update at least, and after a chord step only with the iterate's error
+            # left (θ/(1 − θ) times the step, θ < ½ its contraction) below STOP_ERROR times the tolerance: what the
+            # steps of a fresh factor (θ ~ 0.07) met anyway, and what keeps a carried factor's slower contraction
+            # from ending substeps as inaccurately as a 10x looser tolerance would
+            theta = step / last_step
+            if it >= 1 and step < opt.newton_tol and (
+                    fresh or step * theta < STOP_ERROR * opt.newton_tol * (1.0 - theta)):
                 converged = True
-                break  # converged (after one contact update at least)
+                break
             stalled = False
             last_step = step
         if bad == 0 and not converged:
             w.newton_capped[world] = w.newton_capped[world] + 1  # the cap, not the tolerance, ended it
         if bad == 0:
-            bad = finish_substep(world, c, m, opt, s, w)
+            bad, contact_changed = finish_substep(world, c, m, opt, s, w)
+            if contact_changed != 0:
+                have_factor = False  # the factor's projection is another contact set's
             crumpled = update_crease_angles(world, m, opt.fold_tolerance, s)
             if bad == 0 and crumpled != 0:
                 # a crease folded through its range by more than the tolerance: the sheet crumpled (flag 2)
@@ -750,3 +791,4 @@ def implicit_step(
             freeze_world(world, s.x.shape[1], s.x, s.v, w.x_prev, w.delta, s.unstable)
             return
         s.step_count[world] = s.step_count[world] + 1
+        age += 1

@@ -198,6 +198,7 @@ class Simulator:
         self.scratch.released = wp.zeros((W, Vs), dtype=wp.int32, device=dev)
         self.scratch.newton_steps = wp.zeros(W, dtype=wp.int32, device=dev)
         self.scratch.newton_capped = wp.zeros(W, dtype=wp.int32, device=dev)
+        self.scratch.newton_factors = wp.zeros(W, dtype=wp.int32, device=dev)
         self.solver = solver
         self._tiles = None
         if solver.startswith("tile-"):
@@ -212,15 +213,17 @@ class Simulator:
 
     def newton_stats(self, reset: bool = False) -> dict | None:
         """Per world since the simulator was built (or last reset), shape (W,) int each: ``steps``, the Newton steps
-        its substeps took (divided by the substeps run: the mean the tolerance left), and ``capped``, the substeps
-        that took all ``newton`` steps without meeting the tolerance. ``None`` for the tile solvers (they do not
-        count)."""
+        its substeps took (divided by the substeps run: the mean the tolerance left), ``factors``, those of them that
+        assembled and factored the Hessian (the rest were chord steps), and ``capped``, the substeps that took all
+        ``newton`` steps without meeting the tolerance. ``None`` for the tile solvers (they do not count)."""
         if self._tiles is not None:
             return None
         out = {"steps": self.scratch.newton_steps.numpy().astype(np.int64),
+               "factors": self.scratch.newton_factors.numpy().astype(np.int64),
                "capped": self.scratch.newton_capped.numpy().astype(np.int64)}
         if reset:
             self.scratch.newton_steps.zero_()
+            self.scratch.newton_factors.zero_()
             self.scratch.newton_capped.zero_()
         return out
 
