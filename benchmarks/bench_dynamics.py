@@ -62,11 +62,12 @@ def timeit(fn, device, min_time: float = 0.5, max_reps: int = 200) -> float:
             return el / reps
 
 
-def mean_newton_steps(sim, substeps_run: int) -> float:
-    """Newton steps per substep the worlds took on average since ``sim.newton_stats(reset=True)``, over
-    ``substeps_run`` substeps each; NaN for a solver that does not count (the tile solvers)."""
+def mean_newton_steps(sim, substeps_run: int, key: str = "steps") -> float:
+    """Newton steps (``key="factors"``: of them, those that factored the Hessian) per substep the worlds took on
+    average since ``sim.newton_stats(reset=True)``, over ``substeps_run`` substeps each; NaN for a solver that does
+    not count (the tile solvers)."""
     counted = sim.newton_stats()
-    return float(counted["steps"].mean()) / substeps_run if counted is not None else float("nan")
+    return float(counted[key].mean()) / substeps_run if counted is not None else float("nan")
 
 
 def reference_newton_steps(sim, mean_steps: float) -> int:

@@ -131,6 +131,7 @@ def profile_run(W: int, *, duration: float, settle: float, skip: float = 1.0, ma
     from bench_dynamics import mean_newton_steps  # one definition for the benchmarks
 
     mean_newton = mean_newton_steps(sim, n_steps * sim.substeps)
+    mean_factors = mean_newton_steps(sim, n_steps * sim.substeps, "factors")
     total = cpu if use_cpu else wall
     unstable = int(state.unstable.numpy().astype(bool).sum())
     stages, timed, timed_wall = [], 0.0, 0.0
@@ -146,6 +147,7 @@ def profile_run(W: int, *, duration: float, settle: float, skip: float = 1.0, ma
                    "share": host / total, "wall_us_per_step": 1e6 * max(0.0, wall - timed_wall) / n_steps})
     return {"W": W, "magnets": magnet_model, "device": str(model.device), "steps": n_steps, "dt_s": sim.dt,
             "substeps": sim.substeps, "newton": sim.newton, "newton_steps_per_substep": mean_newton,
+            "newton_factors_per_substep": mean_factors,
             "wall_s": wall, "cpu_s": cpu,
             "time_base": "thread CPU time" if use_cpu else "wall",
             "us_per_world_step": 1e6 * total / n_steps / W,
@@ -238,7 +240,8 @@ def main(argv=None) -> int:
                         device=device)
         runs.append(r)
         print(f"\n== {args.magnet_model} magnets, peristaltic, W = {W}, {r['steps']} steps of {1e3 * r['dt_s']:g} ms "
-              f"({r['substeps']} substeps, <= {r['newton']} Newton, {r['newton_steps_per_substep']:.2f} on average) "
+              f"({r['substeps']} substeps, <= {r['newton']} Newton, {r['newton_steps_per_substep']:.2f} on average, "
+              f"{r['newton_factors_per_substep']:.2f} of them factored) "
               f"on {device}: {r['wall_s']:.2f} s wall, "
               f"{r['cpu_s']:.2f} s CPU; per {r['time_base']}: {r['us_per_world_step']:.0f} µs per world-step, "
               f"{r['worm_substeps_per_s']:.3g} worm-substeps/s, {r['sim_s_per_wall_s']:.3g} worm-s per s; "
