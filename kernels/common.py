@@ -133,6 +133,43 @@ altitude (≥ 0.028); a collapsing wing makes the crease gradient (∝ 1 / altit
 singular, which otherwise shows as an explosion one step later."""
 
 
+PANEL_CONTACT_ALTITUDE = wp.constant(0.02)
+"""A hinge wing whose altitude over the hinge falls below this fraction of the hinge's length meets the panel
+contact barrier (:func:`wing_contact`). The worm's wings rest at 0.17 or more and the gait presets of the first
+model kept them above 0.028; below 0.02 the soft waist bars had let a wing fold flat under a magnet pulling
+~150 mN at its mount (docs/dynamics.md, "The sheet's material")."""
+
+PANEL_CONTACT_EA = wp.constant(20.0)
+"""[N] the barrier's stiffness, as a panel bar's EA: a wing pressed δ below the contact altitude (as a fraction of
+the hinge length L) pushes back with ~EA δ, like a bar of the panel strained by δ."""
+
+
+@wp.func
+def wing_contact(p0: wp.vec3, p1: wp.vec3, p2: wp.vec3, lh: float):
+    """The panel contact barrier of one hinge wing: a sheet's panel does not fold flat onto itself (without the
+    barrier the bar model lets a wing collapse onto its hinge through the soft waist bars, which stand for the
+    panels' bending, not for a panel that can vanish).
+
+    ``p0`` the wing's tip, ``p1``–``p2`` the hinge, ``lh`` the hinge's rest length [m]. With n = (p1 − p0) × (p2 −
+    p0) (|n| = altitude × hinge length) and q = |n| − A |p1 − p2|² (A = :data:`PANEL_CONTACT_ALTITUDE`), the energy is
+    ½ κ q² while q < 0, κ = :data:`PANEL_CONTACT_EA` / lh³ [N/m³]. Returns (κ q [N/m], ∂q/∂p0, ∂q/∂p1, ∂q/∂p2 [m],
+    κ): the force on p_a is −κ q ∂q/∂p_a, the Gauss–Newton stiffness κ ∂q/∂p_a ∂q/∂p_bᵀ; κ = 0 while the wing is
+    clear (q ≥ 0). Shared by the band and tile kernels."""
+    n = wp.cross(p1 - p0, p2 - p0)
+    n_len = wp.length(n)
+    e = p1 - p2
+    q = n_len - PANEL_CONTACT_ALTITUDE * wp.dot(e, e)
+    if q >= 0.0:
+        return 0.0, wp.vec3(0.0), wp.vec3(0.0), wp.vec3(0.0), 0.0
+    nh = n / wp.max(n_len, 1.0e-30)
+    # ∂|n|/∂p_a = n̂ × (the opposite edge, in the triangle's order): the area gradient
+    g0 = wp.cross(nh, p2 - p1)
+    g1 = wp.cross(nh, p0 - p2) - e * (2.0 * PANEL_CONTACT_ALTITUDE)
+    g2 = wp.cross(nh, p1 - p0) + e * (2.0 * PANEL_CONTACT_ALTITUDE)
+    kappa = PANEL_CONTACT_EA / (lh * lh * lh)
+    return kappa * q, g0, g1, g2, kappa
+
+
 @wp.func
 def wings_collapsed(n1: wp.vec3, n2: wp.vec3, len2: float) -> bool:
     """Whether either wing of a hinge stencil has an altitude over the hinge below :data:`SLIVER_ALTITUDE` times the

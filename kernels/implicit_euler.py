@@ -15,6 +15,8 @@ energy of the worm:
   NoFoldThrough limits as a one-sided spring k_lim L beyond the bound (0 for mountain/valley creases), with k_lim
   (``fold_limit_stiffness``) its own material constant: a barrier that scaled with k_α would soften with the crease
   and let a soft worm fold through;
+- every hinge wing a panel contact barrier ½ κ q² once its altitude over the hinge falls below 0.02 of the hinge's
+  length (:func:`~.common.wing_contact`): a panel does not fold flat onto itself;
 - every anchor ½ k |x − target|² (so the force plate reads k (x − target), the force it applies).
 
 Gauss–Newton steps (bar and crease Hessians kept positive semi-definite: the compressive geometric stiffness and
@@ -56,7 +58,8 @@ import warp as wp
 from warpworm import ids
 
 from .band_cholesky import band_add_block, band_cholesky_factor, band_cholesky_solve
-from .common import crease_at_substep_end, dihedral_angle_and_gradient, fold_range, freeze_world, pw, wrap_angle
+from .common import (crease_at_substep_end, dihedral_angle_and_gradient, fold_range, freeze_world, pw, wing_contact,
+                     wrap_angle)
 
 wp.set_module_options({"enable_backward": False})
 
@@ -412,9 +415,29 @@ def bar_terms(world: int, c: WorldCoefficients, m: BarHingeModel, strain_limit: 
 
 
 @wp.func
+def wing_contact_terms(world: int, p0: wp.vec3, p1: wp.vec3, p2: wp.vec3, a: int, b: int, c: int, lh: float,
+                       with_hessian: bool, w: NewtonScratch):
+    """Add a hinge wing's panel contact barrier (:func:`~.common.wing_contact`; tip ``a`` at ``p0``, hinge ``b``–``c``)
+    to ``grad`` / the Hessian."""
+    f, ga, gb, gc, kappa = wing_contact(p0, p1, p2, lh)
+    if kappa > 0.0:
+        w.grad[world, a] = w.grad[world, a] + ga * f
+        w.grad[world, b] = w.grad[world, b] + gb * f
+        w.grad[world, c] = w.grad[world, c] + gc * f
+        if with_hessian:
+            band_add_block(world, w.hess, a, a, kappa * wp.outer(ga, ga))
+            band_add_block(world, w.hess, b, b, kappa * wp.outer(gb, gb))
+            band_add_block(world, w.hess, c, c, kappa * wp.outer(gc, gc))
+            band_add_block(world, w.hess, b, a, kappa * wp.outer(gb, ga))
+            band_add_block(world, w.hess, c, a, kappa * wp.outer(gc, ga))
+            band_add_block(world, w.hess, c, b, kappa * wp.outer(gc, gb))
+
+
+@wp.func
 def crease_terms(world: int, c: WorldCoefficients, m: BarHingeModel, with_hessian: bool, s: BarHingeState,
                  w: NewtonScratch):
-    """Add every crease's spring, its damping and its NoFoldThrough barrier to ``grad`` / the Hessian
+    """Add every crease's spring, its damping, its NoFoldThrough barrier and its wings' panel contact barrier to
+    ``grad`` / the Hessian
     (``crease_angle`` holds the angles at the start of the substep: damping, unwrapping)."""
     for h in range(m.hinges.shape[0]):
         i0 = m.hinges[h, 0]
@@ -448,6 +471,8 @@ def crease_terms(world: int, c: WorldCoefficients, m: BarHingeModel, with_hessia
             band_add_block(world, w.hess, i2, i1, stiff * wp.outer(g2, g1))
             band_add_block(world, w.hess, i3, i1, stiff * wp.outer(g3, g1))
             band_add_block(world, w.hess, i3, i2, stiff * wp.outer(g3, g2))
+        wing_contact_terms(world, s.x[world, i0], s.x[world, i1], s.x[world, i2], i0, i1, i2, lh, with_hessian, w)
+        wing_contact_terms(world, s.x[world, i3], s.x[world, i2], s.x[world, i1], i3, i2, i1, lh, with_hessian, w)
 
 
 @wp.func

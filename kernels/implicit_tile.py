@@ -43,7 +43,8 @@ import functools
 import warp as wp
 
 from .band_cholesky import band_add_block, band_cholesky_solve, inverse_lower_cholesky3
-from .common import crease_at_substep_end, dihedral_angle_and_gradient, fold_range, freeze_world, pw, wrap_angle
+from .common import (crease_at_substep_end, dihedral_angle_and_gradient, fold_range, freeze_world, pw, wing_contact,
+                     wrap_angle)
 from .implicit_euler import (
     CONTACT_FIXED,
     CONTACT_FREE,
@@ -122,6 +123,37 @@ def hinge_terms(phi: float, prev: float, rest: float, lh: float, label: int, k_h
         torque += k_limit * lh * (phi - wp.where(phi < lo, lo, hi))
         stiff += k_limit * lh
     return torque, stiff
+
+
+@wp.func
+def wing_contact_row(world: int, u: int, p0: wp.vec3, p1: wp.vec3, p2: wp.vec3, a: int, b: int, c: int, lh: float,
+                     with_hessian: bool, hess: wp.array3d(dtype=wp.mat33)) -> wp.vec3:
+    """Row ``u``'s part of a hinge wing's panel contact barrier (tip ``a``, hinge ``b``–``c``;
+    :func:`implicit_euler.wing_contact_terms`, its blocks in its order): adds the blocks stored in row u and returns
+    u's gradient term (zero if u is not in the wing or the wing is clear)."""
+    f, ga, gb, gc, kappa = wing_contact(p0, p1, p2, lh)
+    g = wp.vec3(0.0)
+    if kappa > 0.0:
+        if a == u:
+            g = ga * f
+        elif b == u:
+            g = gb * f
+        elif c == u:
+            g = gc * f
+        if with_hessian:
+            if a == u:
+                band_add_block(world, hess, a, a, kappa * wp.outer(ga, ga))
+            if b == u:
+                band_add_block(world, hess, b, b, kappa * wp.outer(gb, gb))
+            if c == u:
+                band_add_block(world, hess, c, c, kappa * wp.outer(gc, gc))
+            if wp.max(b, a) == u:
+                band_add_block(world, hess, b, a, kappa * wp.outer(gb, ga))
+            if wp.max(c, a) == u:
+                band_add_block(world, hess, c, a, kappa * wp.outer(gc, ga))
+            if wp.max(c, b) == u:
+                band_add_block(world, hess, c, b, kappa * wp.outer(gc, gb))
+    return g
 
 
 @wp.func
@@ -242,6 +274,10 @@ def assemble_row(
                 band_add_block(world, hess, i3, i1, stiff * wp.outer(g3, g1))
             if wp.max(i3, i2) == u:
                 band_add_block(world, hess, i3, i2, stiff * wp.outer(g3, g2))
+        g = g + wing_contact_row(world, u, x[world, i0], x[world, i1], x[world, i2], i0, i1, i2,
+                                 hinge_length[hl_row, h], with_hessian, hess)
+        g = g + wing_contact_row(world, u, x[world, i3], x[world, i2], x[world, i1], i3, i2, i1,
+                                 hinge_length[hl_row, h], with_hessian, hess)
     for an in range(anchor_vertex.shape[0]):
         if anchor_vertex[an] == u:
             ka = anchor_stiffness[ak_row, an]

@@ -50,12 +50,17 @@ def test_moderate_squeeze_keeps_every_crease_in_range():
 
 
 def test_hard_squeeze_crumples_and_is_flagged_not_written():
-    """30 mm (37 %) is past what the bellows can fold (its waists close at about 17 % shortening, docs/crease.md):
-    the sheet crumples; every world is flagged (the soft one crumpled, 2; the stiffer one may first exceed a strain
-    or speed limit, 1) and frozen finite, so no data is made from it."""
-    worst, flags, x = squeeze([0.005, 0.05], 0.030)
+    """The anchors driven 50 mm (62 % of the worm) together are past what the sheet can fold: its waists close at
+    about 17 % shortening (docs/crease.md), the soft waist bars then stretch to their stops and the panels' contact
+    barrier (common.wing_contact) holds the wings off their hinges until, at ~40 % shortening (measured: 30 and
+    40 mm are held, wings at 0.8–1.2 % of the hinge length), it is overwhelmed and a wing collapses. Every world is
+    flagged (the soft one crumpled, 2; the stiffer one may first exceed a strain or speed limit, 1) and frozen
+    finite, so no data is made from it. (Before the contact barrier a wing folded flat at 30 mm already.)"""
+    worst, flags, x = squeeze([0.005, 0.05], 0.050)
     assert np.all(flags != 0) and flags[0] == 2, flags
     assert np.isfinite(x).all()
+    hinges = Model.from_params(WormParams(), 1, "cpu").pattern.hinges
+    assert _wing_altitude_ratio(x[0], hinges).min() < 0.01  # the collapse the flag names (rest: 17 % or more)
     assert np.all(worst <= 5.0), worst  # nothing beyond the tolerance was ever reported as a live world
 
 
@@ -68,13 +73,12 @@ def _wing_altitude_ratio(x, hinges):
     return np.minimum(n1, n2) / length2
 
 
-def test_collapsing_wing_is_flagged_crumpled_not_exploded():
-    """A sheet triangle that collapses (its altitude over a crease going to zero) makes the Newton matrix singular:
-    before the collapse check such a world was flagged 'exploded' a step later, with every crease still in its range
-    and no bar near its strain limit. The case: the inchworm preset with its tail section held (the force plate,
-    experiments.force_plate) at 0.5 ms steps, which stands the worm up under the EPM's first approach until a waist
-    triangle collapses (t = 0.44 s). It must be flagged crumpled (2), and its last state must show the collapse the
-    check names (a wing below 1 % of its hinge's length; at rest every wing is at 17 % or more)."""
+def test_panel_contact_holds_the_wing_that_used_to_collapse():
+    """The inchworm preset with its tail section held (the force plate, experiments.force_plate) at 0.5 ms steps
+    stands the worm up under the EPM's first approach. Before the panels' contact barrier a waist triangle collapsed
+    there (t = 0.44 s; its wing's altitude over the crease went to zero, the Newton matrix singular: flagged
+    'exploded' a step later until the collapse check flagged it crumpled). With the barrier (common.wing_contact,
+    from 2 % of the hinge length) the same 0.48 s run stays live, and no wing goes below 1 % (measured: 1.76 %)."""
     from warpworm import experiments
 
     model, _ = experiments._gait_model(["inchworm"], anchors=section_vertices(6, 0), anchor_stiffness=1e4, base=None,
@@ -84,9 +88,9 @@ def test_collapsing_wing_is_flagged_crumpled_not_exploded():
     sim = Simulator(model, dt=5e-4, substeps=1)
     state = sim.initial_state()
     sim.settle(state, 0.2)
+    lowest = 1.0
     for _ in range(12):  # 0.48 s
         sim.step(state, 80)
-        if state.unstable.numpy()[0] != 0:
-            break
-    assert state.unstable.numpy()[0] == 2
-    assert _wing_altitude_ratio(state.positions.numpy()[0], hinges).min() < 0.01
+        lowest = min(lowest, _wing_altitude_ratio(state.positions.numpy()[0], hinges).min())
+    assert state.unstable.numpy()[0] == 0
+    assert lowest > 0.01, lowest

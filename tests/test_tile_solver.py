@@ -193,6 +193,31 @@ def test_band_factorization_is_bit_for_bit_the_band_path_under_the_gait_magnets(
     _assert_identical(band, tile)
 
 
+def test_band_factorization_is_bit_for_bit_the_band_path_at_the_panel_contact():
+    """The inchworm's EPM 7 mm under the plate presses wings against the panels' contact barrier (common.wing_contact,
+    altitude below 2 % of the hinge length) at its second closest approach: the barrier's terms, assembled row by
+    row in the tile kernel, are the band path's bit for bit."""
+    model = Model.from_params(gaits.preset_params("inchworm", closest_approach=0.007), 2, "cpu")
+    sim = Simulator(model, dt=2.0e-3, substeps=2, chord=False)
+    band = sim.initial_state()
+    sim.settle(band, 0.05)
+    sim.step(band, 700)  # the band path alone to t = 1.4 s, before the second closest approach (t = 1.5 s)
+    tile = model.state()
+    _copy_state(band, tile)
+    tiles = TileSubsteps(sim.model, sim, "band")
+    hinges = model.hinges.numpy()
+    lowest = 1.0
+    for _ in range(10):  # to t = 1.6 s
+        _gait_steps(sim, band, tile, tiles, 10)
+        x = band.positions.numpy()
+        xi, xj, xk, xl = (x[:, hinges[:, c]] for c in range(4))
+        wing = np.minimum(np.linalg.norm(np.cross(xj - xi, xk - xi), axis=-1),
+                          np.linalg.norm(np.cross(xk - xl, xj - xl), axis=-1)) / np.sum((xk - xj) ** 2, axis=-1)
+        lowest = min(lowest, float(wing.min()))
+    assert lowest < 0.02, lowest  # the barrier was pressed
+    _assert_identical(band, tile)
+
+
 @pytest.mark.parametrize("scenario", ["settling_flat", "gait_off_floor"])
 def test_dense_tile_factorization_matches_the_band_path_to_rounding(scenario):
     sim, band, tile = globals()[scenario]()
