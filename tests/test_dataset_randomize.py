@@ -1,6 +1,7 @@
 """Counter-based randomization: a sample's values depend only on (seed, index, attempt), never on batching."""
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -108,3 +109,19 @@ def test_different_seeds_draw_different_samples():
     u0 = rnd.uniform01(rnd.sample_keys(0, idx), "worm.hinge_stiffness")
     u1 = rnd.uniform01(rnd.sample_keys(1, idx), "worm.hinge_stiffness")
     assert not np.any(np.isclose(u0[1:], u1[:-1]))
+
+
+@pytest.mark.parametrize("name", sorted(p.stem for p in
+                                        (Path(__file__).resolve().parents[1] / "dataset_configs").glob("*.yaml")))
+def test_packaged_configs_keep_the_epm_beneath_the_plate(name):
+    """Every draw of every packaged config puts the EPM's closest approach h (the gait preset's, times its scale)
+    at or below the plate's underside (h >= support_thickness): a draw that did not would stop the job."""
+    from warpworm.config import load_config
+    from warpworm.sampling import randomized_params
+
+    W = 4096
+    # one magnet model per solver batch (production draws it per batch): fixed here, it does not move h
+    p = randomized_params(load_config(name, ["randomize.worm.magnet_model=analytic"]), W, seed=5)
+    h = np.broadcast_to(p.closest_approach, (W,)) * np.broadcast_to(p.closest_approach_scale, (W,))
+    plate = np.broadcast_to(p.support_thickness, (W,))
+    assert (h >= plate).all(), (name, float(h.min()), float(plate.max()))
