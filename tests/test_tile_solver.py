@@ -194,10 +194,11 @@ def test_band_factorization_is_bit_for_bit_the_band_path_under_the_gait_magnets(
 
 
 def test_band_factorization_is_bit_for_bit_the_band_path_at_the_panel_contact():
-    """The inchworm's EPM 7 mm under the plate presses wings against the panels' contact barrier (common.wing_contact,
-    altitude below 2 % of the hinge length) at its second closest approach: the barrier's terms, assembled row by
-    row in the tile kernel, are the band path's bit for bit."""
-    model = Model.from_params(gaits.preset_params("inchworm", closest_approach=0.007), 2, "cpu")
+    """The inchworm's EPM 7 mm under the plate (w 20, a 50 mm) presses wings against the panels' contact barrier
+    (common.wing_contact, altitude below 2 % of the hinge length) at its second closest approach: the barrier's
+    terms, assembled row by row in the tile kernel, are the band path's bit for bit."""
+    model = Model.from_params(gaits.preset_params("inchworm", wavelength=0.020, amplitude=0.05, closest_approach=0.007),
+                              2, "cpu")
     sim = Simulator(model, dt=2.0e-3, substeps=2, chord=False)
     band = sim.initial_state()
     sim.settle(band, 0.05)
