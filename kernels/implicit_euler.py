@@ -25,13 +25,14 @@ vertex farther than ``newton_tol``; each assembles the gradient and the 3V × 3V
 banded per-world scratch and factors it (:mod:`warpworm.kernels.band_cholesky`). With ``refactor`` = 0 (chord
 steps, the band default) only the first step of every other substep, and a step after a contact changed, assembles
 and factors the Hessian; the others solve with the last factor against a fresh gradient (the first step of the
-substep after a factored one in the same launch too, if no contact changed status in between: ``FACTOR_CARRY``; one
-whose substep then had to refactor leaves the next substep a fresh factor), and one that would not halve the last step is not taken
-(the next assembles and factors at the same x): a stale factor (near-rigid bars turned, kinetic friction's
-stiffness changed) never moves a world, where taking such a step first and refactoring after could throw one past
-its strain limit (an axial squeeze at 2 ms did). Chord steps contract more slowly than fresh ones, so their
-substep ends only when the error estimate θ/(1 − θ)·step (θ the last contraction) is also below ``STOP_ERROR``
-times the tolerance (measured against 12 fresh steps per substep: as close as fresh factors every substep came).
+substep after a factored one in the same launch too, if no contact changed status in between: ``FACTOR_CARRY``;
+one whose substep then had to refactor leaves the next substep a fresh factor), and one that would not halve the
+last step is not taken (the next assembles and factors at the same x): a stale factor (near-rigid bars turned,
+kinetic friction's stiffness changed) never moves a world, where taking such a step first and refactoring after
+could throw one past its strain limit (an axial squeeze at 2 ms did). Chord steps contract more slowly than fresh
+ones, so their substep ends only when the error estimate θ/(1 − θ)·step (θ the last contraction) is also below
+``STOP_ERROR`` times the tolerance (measured against 12 fresh steps per substep: as close as fresh factors every
+substep came).
 
 Floor: a vertex on the floor (touching at the end of the last substep, or carried below it) moves only along it
 (its rows of the Newton step are projected, P H P). Before every Newton step after the first, the floor's force at
@@ -72,7 +73,7 @@ CONTACTS_LANDED = wp.constant(2)  # update_contacts: a free vertex landed (its p
 WORLD_CRUMPLED = wp.constant(ids.WORLD_CRUMPLED)  # ``unstable`` flag of a crumpled world (ids: the statuses)
 CHORD_CONTRACTION = wp.constant(0.5)  # a chord step is taken only if it is shorter than this times the last step
 FACTOR_CARRY = wp.constant(1)  # a substep's factor serves the first step of at most this many next substeps
-STOP_ERROR = wp.constant(0.1)  # a substep ends only when the error left, θ/(1 − θ)·step, is below this times the tolerance
+STOP_ERROR = wp.constant(0.1)  # a chord step ends a substep only if θ/(1 − θ)·step is below this times the tolerance
 
 
 @wp.func
@@ -437,8 +438,7 @@ def wing_contact_terms(world: int, p0: wp.vec3, p1: wp.vec3, p2: wp.vec3, a: int
 def crease_terms(world: int, c: WorldCoefficients, m: BarHingeModel, with_hessian: bool, s: BarHingeState,
                  w: NewtonScratch):
     """Add every crease's spring, its damping, its NoFoldThrough barrier and its wings' panel contact barrier to
-    ``grad`` / the Hessian
-    (``crease_angle`` holds the angles at the start of the substep: damping, unwrapping)."""
+    ``grad`` / the Hessian (``crease_angle`` holds the angles at the start of the substep: damping, unwrapping)."""
     for h in range(m.hinges.shape[0]):
         i0 = m.hinges[h, 0]
         i1 = m.hinges[h, 1]
@@ -754,11 +754,12 @@ def implicit_step(
             fresh = (it == 0 and not have_factor) or opt.refactor != 0 or stalled
             if it == 0:
                 started_stale = not fresh
-                bad = elastic_terms(world, c, m, opt, anchor_target, fresh, s, w)
-                if bad == 0:
-                    friction_terms(world, c, opt.slip_speed, fresh, s, w)
-                    if fresh:
-                        project_on_contacts(world, c, m, s, w)
+                if fresh:
+                    bad = assemble(world, c, m, opt, anchor_target, s, w)
+                else:
+                    bad = elastic_terms(world, c, m, opt, anchor_target, False, s, w)
+                    if bad == 0:
+                        friction_terms(world, c, opt.slip_speed, False, s, w)
             else:
                 # one assembly serves both the floor's normal forces and the Newton step: friction, the one term
                 # that depends on the contacts, is added after they are updated
