@@ -17,8 +17,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--gait", choices=["peristaltic", "omega", "inchworm"], default="peristaltic")
     parser.add_argument("--backward", action="store_true", help="drive the worm toward -x")
     parser.add_argument("--grid", default="w=0.008:0.032:10,a=0.03:0.06:4,h=0.006:0.03:25",
-                        help="KEY=lo:hi:n or KEY=v1,v2 for w, a, h [m] (and T [s]); default 10 x 4 x 25 = 1000 "
-                             "points")
+                        help="KEY=lo:hi:n or KEY=v1,v2 for w, a, h [m] (the period is one per run: --set "
+                             "cycle_period=T); default 10 x 4 x 25 = 1000 points")
     parser.add_argument("--cycles", type=int, default=3, help="EPM cycles per world (default 3)")
     parser.add_argument("--material", default=None, help="sheet material (warpworm.materials; default the worm's)")
     parser.add_argument("--magnet-model", choices=["dipoles", "analytic"], default="dipoles")
