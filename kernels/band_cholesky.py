@@ -79,3 +79,12 @@ def band_add_block(world: int, mat: wp.array3d(dtype=wp.mat33), u: int, v: int, 
     else:
         mat[world, v, v - u] = mat[world, v, v - u] + wp.transpose(k)
     return 0
+
+
+@wp.func
+def band_add_outer(world: int, mat: wp.array3d(dtype=wp.mat33), u: int, v: int, scale: float, gu: wp.vec3,
+                   gv: wp.vec3):
+    """:func:`band_add_block` of ``scale`` · gu gvᵀ at (u, v): the Gauss–Newton block of a scalar energy term
+    whose gradients at vertices u and v are ``gu`` and ``gv`` (``scale`` its second derivative)."""
+    band_add_block(world, mat, u, v, scale * wp.outer(gu, gv))
+    return 0

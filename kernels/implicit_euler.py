@@ -25,8 +25,8 @@ vertex farther than ``newton_tol``; each assembles the gradient and the 3V × 3V
 banded per-world scratch and factors it (:mod:`warpworm.kernels.band_cholesky`). With ``refactor`` = 0 (chord
 steps, the band default) only the first step of every other substep, and a step after a contact changed, assembles
 and factors the Hessian; the others solve with the last factor against a fresh gradient (the first step of the
-substep after a factored one in the same launch too, if no contact changed status in between: ``FACTOR_CARRY``;
-one whose substep then had to refactor leaves the next substep a fresh factor), and one that would not halve the
+substep after a factored one in the same launch too, if no contact changed status in between; one whose substep
+then had to refactor leaves the next substep a fresh factor), and one that would not halve the
 last step is not taken (the next assembles and factors at the same x): a stale factor (near-rigid bars turned,
 kinetic friction's stiffness changed) never moves a world, where taking such a step first and refactoring after
 could throw one past its strain limit (an axial squeeze at 2 ms did). Chord steps contract more slowly than fresh
@@ -58,7 +58,7 @@ import warp as wp
 
 from warpworm import ids
 
-from .band_cholesky import band_add_block, band_cholesky_factor, band_cholesky_solve
+from .band_cholesky import band_add_block, band_add_outer, band_cholesky_factor, band_cholesky_solve
 from .common import (crease_at_substep_end, dihedral_angle_and_gradient, fold_range, freeze_world, pw, wing_contact,
                      wrap_angle)
 
@@ -72,7 +72,6 @@ CONTACTS_CHANGED = wp.constant(1)  # update_contacts: a vertex changed its conta
 CONTACTS_LANDED = wp.constant(2)  # update_contacts: a free vertex landed (its position moved)
 WORLD_CRUMPLED = wp.constant(ids.WORLD_CRUMPLED)  # ``unstable`` flag of a crumpled world (ids: the statuses)
 CHORD_CONTRACTION = wp.constant(0.5)  # a chord step is taken only if it is shorter than this times the last step
-FACTOR_CARRY = wp.constant(1)  # a substep's factor serves the first step of at most this many next substeps
 STOP_ERROR = wp.constant(0.1)  # a chord step ends a substep only if θ/(1 − θ)·step is below this times the tolerance
 
 
@@ -426,12 +425,12 @@ def wing_contact_terms(world: int, p0: wp.vec3, p1: wp.vec3, p2: wp.vec3, a: int
         w.grad[world, b] = w.grad[world, b] + gb * f
         w.grad[world, c] = w.grad[world, c] + gc * f
         if with_hessian:
-            band_add_block(world, w.hess, a, a, kappa * wp.outer(ga, ga))
-            band_add_block(world, w.hess, b, b, kappa * wp.outer(gb, gb))
-            band_add_block(world, w.hess, c, c, kappa * wp.outer(gc, gc))
-            band_add_block(world, w.hess, b, a, kappa * wp.outer(gb, ga))
-            band_add_block(world, w.hess, c, a, kappa * wp.outer(gc, ga))
-            band_add_block(world, w.hess, c, b, kappa * wp.outer(gc, gb))
+            band_add_outer(world, w.hess, a, a, kappa, ga, ga)
+            band_add_outer(world, w.hess, b, b, kappa, gb, gb)
+            band_add_outer(world, w.hess, c, c, kappa, gc, gc)
+            band_add_outer(world, w.hess, b, a, kappa, gb, ga)
+            band_add_outer(world, w.hess, c, a, kappa, gc, ga)
+            band_add_outer(world, w.hess, c, b, kappa, gc, gb)
 
 
 @wp.func
@@ -461,16 +460,16 @@ def crease_terms(world: int, c: WorldCoefficients, m: BarHingeModel, with_hessia
         w.grad[world, i3] = w.grad[world, i3] + g3 * torque
         if with_hessian:
             # Gauss–Newton: the angle's curvature term (torque ∇²φ) is dropped
-            band_add_block(world, w.hess, i0, i0, stiff * wp.outer(g0, g0))
-            band_add_block(world, w.hess, i1, i1, stiff * wp.outer(g1, g1))
-            band_add_block(world, w.hess, i2, i2, stiff * wp.outer(g2, g2))
-            band_add_block(world, w.hess, i3, i3, stiff * wp.outer(g3, g3))
-            band_add_block(world, w.hess, i1, i0, stiff * wp.outer(g1, g0))
-            band_add_block(world, w.hess, i2, i0, stiff * wp.outer(g2, g0))
-            band_add_block(world, w.hess, i3, i0, stiff * wp.outer(g3, g0))
-            band_add_block(world, w.hess, i2, i1, stiff * wp.outer(g2, g1))
-            band_add_block(world, w.hess, i3, i1, stiff * wp.outer(g3, g1))
-            band_add_block(world, w.hess, i3, i2, stiff * wp.outer(g3, g2))
+            band_add_outer(world, w.hess, i0, i0, stiff, g0, g0)
+            band_add_outer(world, w.hess, i1, i1, stiff, g1, g1)
+            band_add_outer(world, w.hess, i2, i2, stiff, g2, g2)
+            band_add_outer(world, w.hess, i3, i3, stiff, g3, g3)
+            band_add_outer(world, w.hess, i1, i0, stiff, g1, g0)
+            band_add_outer(world, w.hess, i2, i0, stiff, g2, g0)
+            band_add_outer(world, w.hess, i3, i0, stiff, g3, g0)
+            band_add_outer(world, w.hess, i2, i1, stiff, g2, g1)
+            band_add_outer(world, w.hess, i3, i1, stiff, g3, g1)
+            band_add_outer(world, w.hess, i3, i2, stiff, g3, g2)
         wing_contact_terms(world, s.x[world, i0], s.x[world, i1], s.x[world, i2], i0, i1, i2, lh, with_hessian, w)
         wing_contact_terms(world, s.x[world, i3], s.x[world, i2], s.x[world, i1], i3, i2, i1, lh, with_hessian, w)
 
@@ -738,22 +737,21 @@ def implicit_step(
     # the factor the last substep of this launch made serves this substep's first step as a chord step if no contact
     # changed status since: that saves the assembly of the Hessian and its factorization in every other substep
     # (module docstring). Only within a launch: a launch's result never depends on what ran before it.
-    have_factor = bool(False)
-    age = int(0)
+    carried = bool(False)  # the last substep of this launch made a factor of the contact set it ended with
+    have_factor = bool(False)  # this substep starts on it
     for sub in range(opt.num_substeps):
-        if predict(world, c, m, opt.slip_speed, f_ext, s, w) != 0 or age > FACTOR_CARRY:
-            have_factor = False
+        statuses_changed = predict(world, c, m, opt.slip_speed, f_ext, s, w)
+        have_factor = carried and statuses_changed == 0
+        carried = bool(False)
         bad = int(0)
         last_step = float(1.0e30)
         stalled = bool(False)
         converged = bool(False)
-        started_stale = bool(False)
         for it in range(opt.newton):
             # assemble and factor the Hessian, else a chord step; a chord step that did not halve the last step
             # (e.g. kinetic friction's stiffness mu_k F_n / |v_t| gone stale) refactors the next
             fresh = (it == 0 and not have_factor) or opt.refactor != 0 or stalled
             if it == 0:
-                started_stale = not fresh
                 if fresh:
                     bad = assemble(world, c, m, opt, anchor_target, s, w)
                 else:
@@ -778,12 +776,11 @@ def implicit_step(
                 break
             w.newton_steps[world] = w.newton_steps[world] + 1
             if fresh:
-                age = 0
                 w.newton_factors[world] = w.newton_factors[world] + 1
             step = newton_solve(world, c, fresh, s, w)
             if fresh:
                 # a substep begun on a carried factor that had to refactor begins the next with a fresh one
-                have_factor = opt.refactor == 0 and (it == 0 or not started_stale)
+                carried = opt.refactor == 0 and not have_factor
             if not fresh and not (step < CHORD_CONTRACTION * last_step):
                 # a chord step that would not contract (its factor gone stale: kinetic friction's stiffness, or
                 # near-rigid bars turned) is not taken: the next step assembles and factors at this same x
@@ -804,9 +801,9 @@ def implicit_step(
         if bad == 0 and not converged:
             w.newton_capped[world] = w.newton_capped[world] + 1  # the cap, not the tolerance, ended it
         if bad == 0:
-            bad, contact_changed = finish_substep(world, c, m, opt, s, w)
-            if contact_changed != 0:
-                have_factor = False  # the factor's projection is another contact set's
+            bad, statuses_changed = finish_substep(world, c, m, opt, s, w)
+            if statuses_changed != 0:
+                carried = False  # the factor's projection is another contact set's
             crumpled = update_crease_angles(world, m, opt.fold_tolerance, s)
             if bad == 0 and crumpled != 0:
                 # a crease folded through its range by more than the tolerance: the sheet crumpled (flag 2)
@@ -817,4 +814,3 @@ def implicit_step(
             freeze_world(world, s.x.shape[1], s.x, s.v, w.x_prev, w.delta, s.unstable)
             return
         s.step_count[world] = s.step_count[world] + 1
-        age += 1

@@ -42,7 +42,7 @@ import functools
 
 import warp as wp
 
-from .band_cholesky import band_add_block, band_cholesky_solve, inverse_lower_cholesky3
+from .band_cholesky import band_add_block, band_add_outer, band_cholesky_solve, inverse_lower_cholesky3
 from .common import (crease_at_substep_end, dihedral_angle_and_gradient, fold_range, freeze_world, pw, wing_contact,
                      wrap_angle)
 from .implicit_euler import (
@@ -126,6 +126,16 @@ def hinge_terms(phi: float, prev: float, rest: float, lh: float, label: int, k_h
 
 
 @wp.func
+def row_add_outer(world: int, hess: wp.array3d(dtype=wp.mat33), row: int, p: int, q: int, scale: float,
+                  gp: wp.vec3, gq: wp.vec3):
+    """:func:`~.band_cholesky.band_add_outer` of block (p, q) if it is stored in ``row`` (row max(p, q); a diagonal
+    block (p, p) in row p): a row's share of an element the band path adds whole, the same arithmetic."""
+    if wp.max(p, q) == row:
+        band_add_outer(world, hess, p, q, scale, gp, gq)
+    return 0
+
+
+@wp.func
 def wing_contact_row(world: int, u: int, p0: wp.vec3, p1: wp.vec3, p2: wp.vec3, a: int, b: int, c: int, lh: float,
                      with_hessian: bool, hess: wp.array3d(dtype=wp.mat33)) -> wp.vec3:
     """Row ``u``'s part of a hinge wing's panel contact barrier (tip ``a``, hinge ``b``–``c``;
@@ -141,18 +151,12 @@ def wing_contact_row(world: int, u: int, p0: wp.vec3, p1: wp.vec3, p2: wp.vec3, 
         elif c == u:
             g = gc * f
         if with_hessian:
-            if a == u:
-                band_add_block(world, hess, a, a, kappa * wp.outer(ga, ga))
-            if b == u:
-                band_add_block(world, hess, b, b, kappa * wp.outer(gb, gb))
-            if c == u:
-                band_add_block(world, hess, c, c, kappa * wp.outer(gc, gc))
-            if wp.max(b, a) == u:
-                band_add_block(world, hess, b, a, kappa * wp.outer(gb, ga))
-            if wp.max(c, a) == u:
-                band_add_block(world, hess, c, a, kappa * wp.outer(gc, ga))
-            if wp.max(c, b) == u:
-                band_add_block(world, hess, c, b, kappa * wp.outer(gc, gb))
+            row_add_outer(world, hess, u, a, a, kappa, ga, ga)
+            row_add_outer(world, hess, u, b, b, kappa, gb, gb)
+            row_add_outer(world, hess, u, c, c, kappa, gc, gc)
+            row_add_outer(world, hess, u, b, a, kappa, gb, ga)
+            row_add_outer(world, hess, u, c, a, kappa, gc, ga)
+            row_add_outer(world, hess, u, c, b, kappa, gc, gb)
     return g
 
 
@@ -254,26 +258,16 @@ def assemble_row(
         if with_hessian:
             # Gauss–Newton (the angle's curvature term dropped); the blocks of implicit_euler.assemble, in its order,
             # those that land in row u (a block (p, q) is stored in row max(p, q))
-            if i0 == u:
-                band_add_block(world, hess, i0, i0, stiff * wp.outer(g0, g0))
-            if i1 == u:
-                band_add_block(world, hess, i1, i1, stiff * wp.outer(g1, g1))
-            if i2 == u:
-                band_add_block(world, hess, i2, i2, stiff * wp.outer(g2, g2))
-            if i3 == u:
-                band_add_block(world, hess, i3, i3, stiff * wp.outer(g3, g3))
-            if wp.max(i1, i0) == u:
-                band_add_block(world, hess, i1, i0, stiff * wp.outer(g1, g0))
-            if wp.max(i2, i0) == u:
-                band_add_block(world, hess, i2, i0, stiff * wp.outer(g2, g0))
-            if wp.max(i3, i0) == u:
-                band_add_block(world, hess, i3, i0, stiff * wp.outer(g3, g0))
-            if wp.max(i2, i1) == u:
-                band_add_block(world, hess, i2, i1, stiff * wp.outer(g2, g1))
-            if wp.max(i3, i1) == u:
-                band_add_block(world, hess, i3, i1, stiff * wp.outer(g3, g1))
-            if wp.max(i3, i2) == u:
-                band_add_block(world, hess, i3, i2, stiff * wp.outer(g3, g2))
+            row_add_outer(world, hess, u, i0, i0, stiff, g0, g0)
+            row_add_outer(world, hess, u, i1, i1, stiff, g1, g1)
+            row_add_outer(world, hess, u, i2, i2, stiff, g2, g2)
+            row_add_outer(world, hess, u, i3, i3, stiff, g3, g3)
+            row_add_outer(world, hess, u, i1, i0, stiff, g1, g0)
+            row_add_outer(world, hess, u, i2, i0, stiff, g2, g0)
+            row_add_outer(world, hess, u, i3, i0, stiff, g3, g0)
+            row_add_outer(world, hess, u, i2, i1, stiff, g2, g1)
+            row_add_outer(world, hess, u, i3, i1, stiff, g3, g1)
+            row_add_outer(world, hess, u, i3, i2, stiff, g3, g2)
         g = g + wing_contact_row(world, u, x[world, i0], x[world, i1], x[world, i2], i0, i1, i2,
                                  hinge_length[hl_row, h], with_hessian, hess)
         g = g + wing_contact_row(world, u, x[world, i3], x[world, i2], x[world, i1], i3, i2, i1,

@@ -337,7 +337,7 @@ def cuboid_faces_in_ring_field(
 
 
 @wp.func
-def far_cuboid_cylinder_pair_wrench(
+def far_pair_wrench(
     s_shape: int,
     s_size: wp.vec3,
     s_m: wp.vec3,
@@ -348,15 +348,20 @@ def far_cuboid_cylinder_pair_wrench(
     t_rel: wp.vec3,
     max_panels: int,
 ):
-    """A cuboid and a far cylinder (either the source): (taken, force [N] on the target, torque [N·m] about its
-    centre), in the source's frame (``r_rel`` target -> source frame, ``t_rel`` the target's centre there [m]), by
-    :func:`cuboid_faces_in_ring_field`; taken = False (and zeros) where :func:`cuboid_ring_rule` says closed form.
+    """The one place that decides whether a pair takes a ring rule: (taken, force [N] on the target, torque [N·m]
+    about its centre) in the source's frame (``r_rel`` target -> source frame, ``t_rel`` the target's centre there
+    [m]); taken = False (zeros): the caller's closed form.
 
-    A cylinder target (the EPM's wrench on an IPM) by reciprocity: the cuboid's force and torque F_c, τ_c in the
-    cylinder's ring field, then F = −F_c and τ = −τ_c + t_rel × F_c (momentum and angular momentum of the pair
-    conserved). The cuboid's ~32 face points against ~24 ring dipoles replace ~96 closed-form cuboid fields over the
-    cylinder's caps: docs/magnets.md."""
+    Two far cylinders by :func:`far_cylinder_pair_wrench`. A cuboid and a far cylinder (either the source) by
+    :func:`cuboid_faces_in_ring_field`, where :func:`cuboid_ring_rule` allows: a cylinder target (the EPM's wrench
+    on an IPM) by reciprocity, the cuboid's force and torque F_c, τ_c in the cylinder's ring field, then F = −F_c and
+    τ = −τ_c + t_rel × F_c (momentum and angular momentum of the pair conserved). The cuboid's ~32 face points
+    against ~24 ring dipoles replace ~96 closed-form cuboid fields over the cylinder's caps: docs/magnets.md."""
     zero = wp.vec3(0.0)
+    nphi, s_rule, t_rule = far_pair_rules(s_shape, s_size, t_shape, t_size, wp.length(t_rel))
+    if nphi > 0:
+        force, torque = far_cylinder_pair_wrench(s_rule, s_m, t_rule, t_m, r_rel, t_rel, nphi)
+        return True, force, torque
     if s_shape == SHAPE_CUBOID and t_shape == SHAPE_CYLINDER:
         nphi, order, rule = cuboid_ring_rule(s_size, t_size, t_rel)
         if nphi == 0:
@@ -375,28 +380,6 @@ def far_cuboid_cylinder_pair_wrench(
     return False, zero, zero
 
 
-@wp.func
-def far_pair_wrench(
-    s_shape: int,
-    s_size: wp.vec3,
-    s_m: wp.vec3,
-    t_shape: int,
-    t_size: wp.vec3,
-    t_m: wp.vec3,
-    r_rel: wp.mat33,
-    t_rel: wp.vec3,
-    max_panels: int,
-):
-    """The one place that decides whether a pair takes a ring rule: (taken, force [N] on the target, torque [N·m]
-    about its centre) in the source's frame, two far cylinders by :func:`far_cylinder_pair_wrench`, a cuboid and a far
-    cylinder by :func:`far_cuboid_cylinder_pair_wrench`; taken = False (zeros): the caller's closed form."""
-    nphi, s_rule, t_rule = far_pair_rules(s_shape, s_size, t_shape, t_size, wp.length(t_rel))
-    if nphi > 0:
-        force, torque = far_cylinder_pair_wrench(s_rule, s_m, t_rule, t_m, r_rel, t_rel, nphi)
-        return True, force, torque
-    return far_cuboid_cylinder_pair_wrench(s_shape, s_size, s_m, t_shape, t_size, t_m, r_rel, t_rel, max_panels)
-
-
 __all__ = ["CUBOID_RING_NEAR", "NEAR_LIMIT", "cuboid_faces_in_ring_field", "cuboid_ring_rule", "cylinder_ring_rule",
-           "far_cuboid_cylinder_pair_wrench", "far_cylinder_pair_wrench", "far_pair_rules", "far_pair_wrench",
+           "far_cylinder_pair_wrench", "far_pair_rules", "far_pair_wrench",
            "gauss_legendre_node", "ring_points_for_distance"]

@@ -7,7 +7,7 @@ import numpy as np
 
 from warpworm import quiet_warp
 from warpworm.experiments import section_vertices
-from warpworm.gait_metrics import fold_violation
+from warpworm.gait_metrics import fold_violation, wing_altitude_ratio
 from warpworm.model import Model
 from warpworm.params import WormParams
 from warpworm.simulator import Simulator
@@ -60,17 +60,8 @@ def test_hard_squeeze_crumples_and_is_flagged_not_written():
     assert np.all(flags != 0) and flags[0] == 2, flags
     assert np.isfinite(x).all()
     hinges = Model.from_params(WormParams(), 1, "cpu").pattern.hinges
-    assert _wing_altitude_ratio(x[0], hinges).min() < 0.01  # the collapse the flag names (rest: 17 % or more)
+    assert wing_altitude_ratio(hinges, x[0]).min() < 0.01  # the collapse the flag names (rest: 17 % or more)
     assert np.all(worst <= 5.0), worst  # nothing beyond the tolerance was ever reported as a live world
-
-
-def _wing_altitude_ratio(x, hinges):
-    """Smaller wing altitude over the hinge length of every hinge stencil (i, j, k, l), shared edge j-k (NumPy)."""
-    xi, xj, xk, xl = (x[..., hinges[:, c], :] for c in range(4))
-    length2 = np.sum((xk - xj) ** 2, axis=-1)
-    n1 = np.linalg.norm(np.cross(xj - xi, xk - xi), axis=-1)
-    n2 = np.linalg.norm(np.cross(xk - xl, xj - xl), axis=-1)
-    return np.minimum(n1, n2) / length2
 
 
 def test_panel_contact_holds_the_wing_that_used_to_collapse():
@@ -84,13 +75,13 @@ def test_panel_contact_holds_the_wing_that_used_to_collapse():
     model, _ = experiments._gait_model(["inchworm"], anchors=section_vertices(6, 0), anchor_stiffness=1e4, base=None,
                                        device="cpu")
     hinges = model.pattern.hinges
-    assert _wing_altitude_ratio(model.rest_positions_host[0], hinges).min() > 0.17
+    assert wing_altitude_ratio(hinges, model.rest_positions_host[0]).min() > 0.17
     sim = Simulator(model, dt=5e-4, substeps=1)
     state = sim.initial_state()
     sim.settle(state, 0.2)
     lowest = 1.0
     for _ in range(12):  # 0.48 s
         sim.step(state, 80)
-        lowest = min(lowest, _wing_altitude_ratio(state.positions.numpy()[0], hinges).min())
+        lowest = min(lowest, wing_altitude_ratio(hinges, state.positions.numpy()[0]).min())
     assert state.unstable.numpy()[0] == 0
     assert lowest > 0.01, lowest

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from warpworm import crease
-from warpworm.gait_metrics import fold_violation, gait_metrics, segment_ratios
+from warpworm.gait_metrics import fold_violation, gait_metrics, segment_ratios, wing_altitude_ratio
 from warpworm.gait_search import grid_points, parse_grid
 
 
@@ -26,6 +26,16 @@ def test_fold_violation_is_the_distance_outside_the_range():
     lab = np.array([crease.MOUNTAIN, crease.MOUNTAIN, crease.VALLEY, crease.VALLEY, crease.FLAT])
     ang = np.array([-1.0, 0.2, 0.5, -0.3, 3.0])
     np.testing.assert_allclose(fold_violation(lab, ang), [0.0, 0.2, 0.0, 0.3, 0.0])
+
+
+def test_wing_altitude_ratio_is_the_lower_wing_over_the_hinge_length():
+    """A stencil with its hinge j–k 10 mm along x and wing tips 3 mm and √(2² + 1²) mm from the hinge line: 0.3
+    and 0.2236 of the hinge length, the smaller reported; the same scale-free at 1 m, and for two frames at once."""
+    x = np.array([[5.0, 3.0, 0.0], [0.0, 0.0, 0.0], [10.0, 0.0, 0.0], [4.0, -2.0, 1.0]]) * 1e-3
+    hinges = np.array([[0, 1, 2, 3], [3, 2, 1, 0]])
+    np.testing.assert_allclose(wing_altitude_ratio(hinges, x), [np.sqrt(5.0) / 10.0] * 2, rtol=1e-12)
+    both = wing_altitude_ratio(hinges, np.stack([x, x * 100.0]))
+    np.testing.assert_allclose(both, np.full((2, 2), np.sqrt(5.0) / 10.0), rtol=1e-12)
 
 
 def test_inchworm_like_trajectory_measures():

@@ -150,18 +150,24 @@ def test_far_rule_inside_limit_is_closed_form():
     np.testing.assert_array_equal(a[0], b[0])
 
 
+def _assert_pair_balances(on_second, on_first, pos, rtol):
+    """Newton's third law and the pair's angular momentum, to ``rtol`` of the largest force / torque: (F, T) on the
+    second magnet of a pair (at ``pos``, the first at the origin) and on the first, torques about each centre."""
+    f_on_t, t_on_t = on_second
+    f_on_s, t_on_s = on_first
+    np.testing.assert_allclose(f_on_t, -f_on_s, atol=rtol * np.linalg.norm(f_on_t, axis=1).max())
+    # angular momentum: torques about the two centres plus the lever of the force balance out
+    total = t_on_t + t_on_s + np.cross(pos, f_on_t)
+    np.testing.assert_allclose(total, 0.0, atol=rtol * np.linalg.norm(t_on_t, axis=1).max())
+
+
 def test_far_rule_newtons_third_law():
     src = mg.Cylinder(0.010, 0.001, moment=0.07)
     tgt = mg.Cylinder(0.008, 0.0015, moment=0.03)
     pos, rs, rt = _random_pairs(50, 0.045, seed=7)
     zero = np.zeros_like(pos)
-    f_on_t, t_on_t = mg.wrench(src, tgt, (zero, rs), (pos, rt))
-    f_on_s, t_on_s = mg.wrench(tgt, src, (pos, rt), (zero, rs))
-    scale = np.linalg.norm(f_on_t, axis=1).max()
-    np.testing.assert_allclose(f_on_t, -f_on_s, atol=1e-5 * scale)
-    # angular momentum: torques about the two centres plus the lever of the force balance out
-    total = t_on_t + t_on_s + np.cross(pos, f_on_t)
-    np.testing.assert_allclose(total, 0.0, atol=1e-5 * np.linalg.norm(t_on_t, axis=1).max())
+    _assert_pair_balances(mg.wrench(src, tgt, (zero, rs), (pos, rt)), mg.wrench(tgt, src, (pos, rt), (zero, rs)),
+                          pos, 1e-5)
 
 
 def test_world_wrench_of_a_worm_with_the_rule_matches_the_closed_form():
@@ -249,9 +255,5 @@ def test_cuboid_cylinder_rule_newtons_third_law():
     ipm = mg.Cylinder(0.008, 0.0015, moment=(0.01, 0.0, 0.05))
     re, pos, ri = _ipm_near_cuboid(60, (0.012, 0.01, 0.03), 0.025, seed=5)
     zero = np.zeros_like(pos)
-    f_on_i, t_on_i = mg.wrench(epm, ipm, (zero, re), (pos, ri))
-    f_on_e, t_on_e = mg.wrench(ipm, epm, (pos, ri), (zero, re))
-    scale = np.linalg.norm(f_on_i, axis=1).max()
-    np.testing.assert_allclose(f_on_i, -f_on_e, atol=1e-6 * scale)
-    total = t_on_i + t_on_e + np.cross(pos, f_on_i)
-    np.testing.assert_allclose(total, 0.0, atol=1e-6 * np.linalg.norm(t_on_i, axis=1).max())
+    _assert_pair_balances(mg.wrench(epm, ipm, (zero, re), (pos, ri)), mg.wrench(ipm, epm, (pos, ri), (zero, re)),
+                          pos, 1e-6)

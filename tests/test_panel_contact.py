@@ -77,5 +77,6 @@ def test_wing_contact_gradient_is_the_energy_derivative():
                 numeric = (_energy(p[i] + dp, lh[i]) - _energy(p[i] - dp, lh[i])) / (2 * h)
                 analytic = f[i] * g[i, a, c]  # ∂E/∂p = κ q ∂q/∂p
                 scale = np.abs(f[i]) * np.abs(g[i]).max()
-                assert abs(analytic - numeric) < 2e-3 * scale, (i, a, c, analytic, numeric)
+                # float32 through q, a difference that cancels near the threshold: 7.4e-5 measured
+                assert abs(analytic - numeric) < 3e-4 * scale, (i, a, c, analytic, numeric)
     assert 16 <= active <= n - 16  # both sides of the threshold were drawn

@@ -38,6 +38,18 @@ def fold_violation(hinge_label: np.ndarray, crease_angle: np.ndarray) -> np.ndar
     return np.maximum(lo - a, 0.0) + np.maximum(a - hi, 0.0)
 
 
+def wing_altitude_ratio(hinges: np.ndarray, positions: np.ndarray) -> np.ndarray:
+    """The smaller wing altitude over the hinge length of every hinge stencil (i, j, k, l) (shared edge j–k), shape
+    ``positions.shape[:-2] + (H,)``: what the kernels' panel contact (``kernels.common.wing_contact``, below 0.02)
+    and collapse check (``SLIVER_ALTITUDE``, below 0.005) read; the worm's wings rest at 0.17 or more."""
+    x = np.asarray(positions, np.float64)
+    xi, xj, xk, xl = (x[..., np.asarray(hinges)[:, c], :] for c in range(4))
+    length2 = np.sum((xk - xj) ** 2, axis=-1)
+    n1 = np.linalg.norm(np.cross(xj - xi, xk - xi), axis=-1)
+    n2 = np.linalg.norm(np.cross(xk - xl, xj - xl), axis=-1)
+    return np.minimum(n1, n2) / length2
+
+
 def end_centres(pattern: crease.CreasePattern, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Centres of the tail and head mount rings [m] (the end sections the tail and head IPMs ride on:
     ``pattern.mount_vertices`` rows 0 and 2), each shape ``positions.shape[:-2] + (3,)``."""

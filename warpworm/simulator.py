@@ -106,14 +106,15 @@ class Simulator:
             :func:`warpworm.kernels.implicit_euler.newton_start`); 0 takes every step.
             A fixed 3 steps (this solver's first default) is not converged through a snap-through: there the
             omega and inchworm gaits' outcome depended on the step count (docs/dynamics.md, "Newton convergence").
-        chord: chord Newton steps: the Hessian is assembled and factored at a substep's first step (again after
-            a contact changed); later steps reuse that factor with a fresh gradient, and a chord step that would not
-            halve the last step is not taken (the next step refactors at the same x), so a stale factor never moves
-            a world. About half the cost of a full step (no Hessian assembly, no factorization), linear convergence:
-            2.6 / 4.0 / 2.7 steps per substep in the peristaltic / omega / inchworm gaits against 2.5 / 3.6 / 2.6
-            full ones, 1.2–1.4x the worm-seconds per CPU-second, the same gaits to 0.02 mm over 5 cycles
-            (docs/dynamics.md, "Newton convergence"). Default (None): on for the band solver, which alone has
-            them; the tile solvers take full steps.
+        chord: chord Newton steps: the Hessian is assembled and factored at the first step of every other
+            substep of a launch (the substep after a factored one starts on its factor if no contact changed status
+            in between) and again after a contact changed; the other steps reuse the last factor with a fresh
+            gradient. A chord step that would not halve the last step is not taken (the next step refactors at the
+            same x), so a stale factor never moves a world, and one ends a substep only with its error estimate
+            θ/(1 − θ)·step below 0.1 of the tolerance. About half the cost of a full step (no Hessian assembly, no
+            factorization), linear convergence: at the old presets 2.7 / 4.7 / 2.9 steps per substep (peristaltic /
+            omega / inchworm), 0.7 / 1.5 / 0.8 of them factored (docs/dynamics.md, "Newton convergence"). Default
+            (None): on for the band solver, which alone has them; the tile solvers take full steps.
         slip_speed: regularisation speed ε of static friction [m/s]: below it friction is a stiff
             viscous force reaching mu_s F_n at ε, so a worm held by friction creeps at most ~ε (1e-5 m/s: < 0.02 mm
             in 2 s).
