@@ -59,8 +59,8 @@ import warp as wp
 from warpworm import ids
 
 from .band_cholesky import band_add_block, band_add_outer, band_cholesky_factor, band_cholesky_solve
-from .common import (crease_at_substep_end, dihedral_angle_and_gradient, fold_range, freeze_world, pw, wing_contact,
-                     wrap_angle)
+from .common import (crease_at_substep_end, dihedral_angle_gradient_and_normals, fold_range, freeze_world, pw,
+                     wing_contact_of_normal, wrap_angle)
 
 wp.set_module_options({"enable_backward": False})
 
@@ -415,11 +415,11 @@ def bar_terms(world: int, c: WorldCoefficients, m: BarHingeModel, strain_limit: 
 
 
 @wp.func
-def wing_contact_terms(world: int, p0: wp.vec3, p1: wp.vec3, p2: wp.vec3, a: int, b: int, c: int, lh: float,
-                       with_hessian: bool, w: NewtonScratch):
-    """Add a hinge wing's panel contact barrier (:func:`~.common.wing_contact`; tip ``a`` at ``p0``, hinge ``b``–``c``)
-    to ``grad`` / the Hessian."""
-    f, ga, gb, gc, kappa = wing_contact(p0, p1, p2, lh)
+def wing_contact_terms(world: int, n: wp.vec3, len2: float, p0: wp.vec3, p1: wp.vec3, p2: wp.vec3, a: int, b: int,
+                       c: int, lh: float, with_hessian: bool, w: NewtonScratch):
+    """Add a hinge wing's panel contact barrier (:func:`~.common.wing_contact_of_normal`; tip ``a`` at ``p0``, hinge
+    ``b``–``c``, ``n`` the wing's normal, ``len2`` the hinge's squared length) to ``grad`` / the Hessian."""
+    f, ga, gb, gc, kappa = wing_contact_of_normal(n, len2, p0, p1, p2, lh)
     if kappa > 0.0:
         w.grad[world, a] = w.grad[world, a] + ga * f
         w.grad[world, b] = w.grad[world, b] + gb * f
@@ -443,8 +443,11 @@ def crease_terms(world: int, c: WorldCoefficients, m: BarHingeModel, with_hessia
         i1 = m.hinges[h, 1]
         i2 = m.hinges[h, 2]
         i3 = m.hinges[h, 3]
-        psi, g0, g1, g2, g3 = dihedral_angle_and_gradient(s.x[world, i0], s.x[world, i1], s.x[world, i2],
-                                                          s.x[world, i3])
+        x0 = s.x[world, i0]
+        x1 = s.x[world, i1]
+        x2 = s.x[world, i2]
+        x3 = s.x[world, i3]
+        psi, g0, g1, g2, g3, n1, n2, len2 = dihedral_angle_gradient_and_normals(x0, x1, x2, x3)
         prev = s.crease_angle[world, h]
         phi = prev + wrap_angle(psi - prev)
         lh = m.hinge_length[c.hl_row, h]
@@ -470,8 +473,9 @@ def crease_terms(world: int, c: WorldCoefficients, m: BarHingeModel, with_hessia
             band_add_outer(world, w.hess, i2, i1, stiff, g2, g1)
             band_add_outer(world, w.hess, i3, i1, stiff, g3, g1)
             band_add_outer(world, w.hess, i3, i2, stiff, g3, g2)
-        wing_contact_terms(world, s.x[world, i0], s.x[world, i1], s.x[world, i2], i0, i1, i2, lh, with_hessian, w)
-        wing_contact_terms(world, s.x[world, i3], s.x[world, i2], s.x[world, i1], i3, i2, i1, lh, with_hessian, w)
+        # the wings' normals are the dihedral's own: n1 = (x1 − x0) × (x2 − x0), n2 = (x2 − x3) × (x1 − x3)
+        wing_contact_terms(world, n1, len2, x0, x1, x2, i0, i1, i2, lh, with_hessian, w)
+        wing_contact_terms(world, n2, len2, x3, x2, x1, i3, i2, i1, lh, with_hessian, w)
 
 
 @wp.func

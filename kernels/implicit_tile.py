@@ -43,8 +43,8 @@ import functools
 import warp as wp
 
 from .band_cholesky import band_add_block, band_add_outer, band_cholesky_solve, inverse_lower_cholesky3
-from .common import (crease_at_substep_end, dihedral_angle_and_gradient, fold_range, freeze_world, pw, wing_contact,
-                     wrap_angle)
+from .common import (crease_at_substep_end, dihedral_angle_gradient_and_normals, fold_range, freeze_world, pw,
+                     wing_contact_of_normal, wrap_angle)
 from .implicit_euler import (
     CONTACT_FIXED,
     CONTACT_FREE,
@@ -136,12 +136,13 @@ def row_add_outer(world: int, hess: wp.array3d(dtype=wp.mat33), row: int, p: int
 
 
 @wp.func
-def wing_contact_row(world: int, u: int, p0: wp.vec3, p1: wp.vec3, p2: wp.vec3, a: int, b: int, c: int, lh: float,
-                     with_hessian: bool, hess: wp.array3d(dtype=wp.mat33)) -> wp.vec3:
+def wing_contact_row(world: int, u: int, n: wp.vec3, len2: float, p0: wp.vec3, p1: wp.vec3, p2: wp.vec3, a: int,
+                     b: int, c: int, lh: float, with_hessian: bool, hess: wp.array3d(dtype=wp.mat33)) -> wp.vec3:
     """Row ``u``'s part of a hinge wing's panel contact barrier (tip ``a``, hinge ``b``–``c``;
     :func:`implicit_euler.wing_contact_terms`, its blocks in its order): adds the blocks stored in row u and returns
-    u's gradient term (zero if u is not in the wing or the wing is clear)."""
-    f, ga, gb, gc, kappa = wing_contact(p0, p1, p2, lh)
+    u's gradient term (zero if u is not in the wing or the wing is clear); ``n`` the wing's normal, ``len2`` the
+    hinge's squared length (:func:`~.common.wing_contact_of_normal`)."""
+    f, ga, gb, gc, kappa = wing_contact_of_normal(n, len2, p0, p1, p2, lh)
     g = wp.vec3(0.0)
     if kappa > 0.0:
         if a == u:
@@ -242,7 +243,11 @@ def assemble_row(
         i1 = hinges[h, 1]
         i2 = hinges[h, 2]
         i3 = hinges[h, 3]
-        psi, g0, g1, g2, g3 = dihedral_angle_and_gradient(x[world, i0], x[world, i1], x[world, i2], x[world, i3])
+        x0 = x[world, i0]
+        x1 = x[world, i1]
+        x2 = x[world, i2]
+        x3 = x[world, i3]
+        psi, g0, g1, g2, g3, n1, n2, len2 = dihedral_angle_gradient_and_normals(x0, x1, x2, x3)
         prev = crease_angle[world, h]
         phi = prev + wrap_angle(psi - prev)
         torque, stiff = hinge_terms(phi, prev, hinge_rest[hr_row, h], hinge_length[hl_row, h], hinge_label[h],
@@ -268,10 +273,10 @@ def assemble_row(
             row_add_outer(world, hess, u, i2, i1, stiff, g2, g1)
             row_add_outer(world, hess, u, i3, i1, stiff, g3, g1)
             row_add_outer(world, hess, u, i3, i2, stiff, g3, g2)
-        g = g + wing_contact_row(world, u, x[world, i0], x[world, i1], x[world, i2], i0, i1, i2,
-                                 hinge_length[hl_row, h], with_hessian, hess)
-        g = g + wing_contact_row(world, u, x[world, i3], x[world, i2], x[world, i1], i3, i2, i1,
-                                 hinge_length[hl_row, h], with_hessian, hess)
+        g = g + wing_contact_row(world, u, n1, len2, x0, x1, x2, i0, i1, i2, hinge_length[hl_row, h], with_hessian,
+                                 hess)
+        g = g + wing_contact_row(world, u, n2, len2, x3, x2, x1, i3, i2, i1, hinge_length[hl_row, h], with_hessian,
+                                 hess)
     for an in range(anchor_vertex.shape[0]):
         if anchor_vertex[an] == u:
             ka = anchor_stiffness[ak_row, an]
