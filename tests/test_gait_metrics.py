@@ -59,6 +59,11 @@ def test_inchworm_like_trajectory_measures():
         frames[f, 0] = np.stack([xa + shift, x0[:, 1], x0[:, 2]], -1)
     mag = np.zeros((len(t), 1, 4, 3))
     mag[:, 0, 2, 2] = 0.003 * np.sin(np.pi * t) ** 2
+    # the IPMs ride on the worm (centre 40 mm, head 80 mm behind the advance); the EPM 16 mm ahead of the centre IPM
+    # at the first closest approach (t = 0.5 s) and 30 mm ahead at the second (t = 1.5 s)
+    mag[:, 0, 2, 0] = 0.040 + 0.010 * t
+    mag[:, 0, 3, 0] = 0.080 + 0.010 * t
+    mag[:, 0, 0, 0] = mag[:, 0, 2, 0] + np.interp(t, [0.5, 1.5], [0.016, 0.030])
     ang = np.zeros((len(t), 1, 2))
     ang[:, 0, 0] = -1.0 + 0.3 * np.sin(np.pi * t)
     ang[:, 0, 1] = 1.0
@@ -75,6 +80,8 @@ def test_inchworm_like_trajectory_measures():
     np.testing.assert_allclose(m["deformation_ratio_max"][0], 1.0 + 0.010 / xa.max(), rtol=1e-9)
     # the contraction phase of each cycle (longest -> shortest): the head held (0) while the tail moved
     np.testing.assert_allclose(m["end_hold_ratio"][0], [0.0, 0.0], atol=1e-9)
+    # 16 and 30 mm ahead of the centre IPM over its 40 mm to the head IPM
+    np.testing.assert_allclose(m["approach_placement"][0], [0.4, 0.75], atol=1e-9)
     # nothing moves at the far points (s = 1, 2)
     assert m["far_point_motion_m"][0] == pytest.approx(0.0, abs=1e-12)
     assert m["far_point_ratio_deviation"][0] == pytest.approx(0.0, abs=1e-12)  # relaxed at the far points

@@ -12,7 +12,9 @@ import numpy as np
 
 from . import crease
 
+from .params import EPM as EPM_SLOT
 from .params import IPM_CENTRE as IPM_CENTRE_SLOT
+from .params import IPM_HEAD as IPM_HEAD_SLOT
 
 
 def segment_ratios(pattern: crease.CreasePattern, positions: np.ndarray) -> np.ndarray:
@@ -81,6 +83,10 @@ def gait_metrics(pattern, hinge_label, frames: dict, period, incline=0.0) -> dic
         1: both ends moved together, i.e. slid); ``far_point_motion_m`` (W,) the largest centroid motion in the
         windows ±0.1 cycle around the EPM's far points (s = 0, 1, 2, …) after the first;
         ``far_point_ratio_deviation`` (W,) the largest |ratio − 1| in those windows (has the worm relaxed?);
+        ``approach_placement`` (W, C) where the EPM passes at each closest approach (s = c + ½, the frame nearest
+        it): its position along the axis from the centre IPM over the centre-to-head IPM spacing (0 under the
+        centre IPM, 1 under the head IPM, < 0 toward the tail; the presets start at ``gaits.GAIT_PLACEMENT``, which
+        the worm's own motion then shifts);
         ``length_ratio_min`` (W,) the smallest head–tail distance over its first value;
         ``lateral_displacement_m`` (W,) net motion of the vertex centroid across the axis, along +y in the floor plane
         (the EPM path runs along the axis: a worm that crawls straight keeps it ~0); ``lateral_drift_max_m`` (W,) the
@@ -103,13 +109,16 @@ def gait_metrics(pattern, hinge_label, frames: dict, period, incline=0.0) -> dic
     centroid = np.einsum("fwc,wc->fw", centre, axis)
     lateral = centre[..., 1] - centre[:1, :, 1]  # +y lies in the floor plane whatever the incline (about +y)
     normal = np.stack([-np.sin(beta), np.zeros(W), np.cos(beta)], -1)  # the floor's normal: lift is height above it
-    lift = np.einsum("fwc,wc->fw", np.asarray(frames["magnet_pos"], np.float64)[:, :, IPM_CENTRE_SLOT], normal)
+    mag = np.asarray(frames["magnet_pos"], np.float64)
+    lift = np.einsum("fwc,wc->fw", mag[:, :, IPM_CENTRE_SLOT], normal)
+    mag_x = np.einsum("fwmc,wc->fwm", mag, axis)  # (F, W, 4) along the worm's axis
 
     s = t[:, None] / T[None, :]  # (F, W) cycles since the gait started
     C = int(np.floor(s[-1].min() + 1e-9))
     cyc_disp = np.zeros((W, C))
     cyc_rmin = np.ones((W, C, 4))
     hold = np.full((W, C), np.nan)
+    placement = np.full((W, C), np.nan)
     length = np.linalg.norm(head_c - tail_c, axis=-1)  # head–tail distance (a worm that turns is not shorter)
     wi = np.arange(W)
     for c in range(C):  # a few cycles: the loop is over cycles, every operation is over all worlds
@@ -128,6 +137,10 @@ def gait_metrics(pattern, hinge_label, frames: dict, period, incline=0.0) -> dic
         big = np.maximum(dt_, dh)
         contracted = (shortest != start) & (big > 0)  # a cycle in which the worm never got shorter has no value
         hold[:, c] = np.where(contracted, np.minimum(dt_, dh) / np.where(big > 0, big, 1.0), np.nan)
+        near = np.argmin(np.abs(s - (c + 0.5)), axis=0)  # (W,) the frame nearest the closest approach
+        mx = mag_x[near, wi]  # (W, 4)
+        spacing = mx[:, IPM_HEAD_SLOT] - mx[:, IPM_CENTRE_SLOT]
+        placement[:, c] = (mx[:, EPM_SLOT] - mx[:, IPM_CENTRE_SLOT]) / np.where(spacing != 0, spacing, np.nan)
 
     far = np.zeros(W)
     far_dev = np.zeros(W)
@@ -152,6 +165,7 @@ def gait_metrics(pattern, hinge_label, frames: dict, period, incline=0.0) -> dic
         "cycle_displacement_m": cyc_disp,
         "cycle_ratio_min": cyc_rmin,
         "end_hold_ratio": hold,
+        "approach_placement": placement,
         "far_point_motion_m": far,
         "far_point_ratio_deviation": far_dev,
         "length_ratio_min": (length / length[:1]).min(axis=0),
