@@ -9,7 +9,8 @@ each runs ``--cycles`` EPM cycles and is measured per cycle (``warpworm.gait_met
 - ``hold``: the end-hold ratio of its contraction (0 one end held, 1 both ends slid together);
 - ``disp``: the distance it moved [mm];
 - ``place``: where the EPM passed at its closest approach, from the centre IPM over the centre-to-head spacing
-  (the presets start at ``gaits.GAIT_PLACEMENT``).
+  (the presets start at ``gaits.GAIT_PLACEMENT``; with ``--backward`` its sign is flipped, so that +0.4 is 0.4 of
+  the way toward the tail, the backward gaits' side).
 
 It prints one row per stable point (best later-cycle ratio first), then the ranges over the grid: the first cycle
 (placed by the path's origin) against the later ones (placed by where the worm's own motion left it). This is the
