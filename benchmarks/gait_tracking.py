@@ -7,14 +7,15 @@ experiment: a tracking path. At each far point (s = c) it reads every world's IP
 the advance w_c = 2 (x_target − x_EPM), so that the EPM (on the same gap profile h + a (1 + cos 2πs) / 2, its x
 continuous) passes under ``x_centre + P (x_head − x_centre)`` at s = c + ½ if the worm stood still. It is a
 controller reading the state once per cycle (the worm still moves during the approach), not the paper's open-loop
-path; one batch of W identical worlds (the per-world arithmetic is vectorized).
+path. Every placement P of ``--place`` is one world of one batch.
 
 Usage::
 
     python benchmarks/gait_tracking.py peristaltic --place 0.4 [--a 45 --h 5] [--cycles 6]
+    python benchmarks/gait_tracking.py peristaltic --place=-0.4,-0.2,0,0.2,0.4,0.6,0.8,1.0
 
-Prints, per cycle: the EPM's advance [mm], the smallest segment ratios (tail → head), the tail's and head's
-motion [mm].
+Prints, per world and cycle: the EPM's advance [mm], the smallest segment ratios (tail → head), the tail's and
+head's motion [mm]; then per placement the net tail and head motion.
 """
 
 from __future__ import annotations
@@ -35,13 +36,20 @@ def main(argv=None) -> int:
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("gait", choices=gaits.GAITS)
-    ap.add_argument("--place", type=float, required=True, help="target placement (0 centre IPM, 1 head IPM)")
+    ap.add_argument("--place", required=True,
+                    help="target placements, comma-separated (0 centre IPM, 1 head IPM): one world each")
     ap.add_argument("--a", type=float, default=None, help="amplitude [mm] (default the preset's)")
     ap.add_argument("--h", type=float, default=None, help="closest approach [mm] (default the preset's)")
     ap.add_argument("--cycles", type=int, default=6)
     args = ap.parse_args(argv)
     if args.cycles < 1:
         raise SystemExit(f"--cycles: {args.cycles}; expected at least 1")
+    try:
+        place = np.array([float(v) for v in args.place.split(",") if v.strip()])
+    except ValueError:
+        raise SystemExit(f"--place: {args.place!r} is not a comma-separated list of numbers") from None
+    if len(place) == 0 or not np.all(np.isfinite(place)):
+        raise SystemExit(f"--place: {args.place!r}: expected one or more finite numbers")
     quiet_warp()
     over = {}
     if args.a is not None:
@@ -50,7 +58,8 @@ def main(argv=None) -> int:
         over["closest_approach"] = args.h * 1e-3
     params = gaits.preset_params(args.gait, magnet_model="analytic", **over)
     params.support_thickness = min(float(params.support_thickness), float(np.min(params.closest_approach)))
-    model = Model.from_params(params, 1, "cpu")
+    W = len(place)
+    model = Model.from_params(params, W, "cpu")
     sim = Simulator(model, dt=gaits.DEFAULT_DT, substeps=gaits.DEFAULT_SUBSTEPS)
     state = sim.initial_state()
     sim.settle(state, 0.2)
@@ -61,16 +70,19 @@ def main(argv=None) -> int:
     chunk = 5
     pattern = model.pattern
     x_first = state.positions.numpy().astype(np.float64)
-    print(f"{args.gait}: tracking path, placement {args.place:+.2f}; per cycle: EPM advance | smallest segment "
-          f"ratios (tail -> head) | tail, head motion [mm]")
+    print(f"{args.gait}: tracking path; per world and cycle: EPM advance | smallest segment ratios (tail -> head) | "
+          f"tail, head motion [mm]")
+    net = np.zeros((W, 2))
     for c in range(args.cycles):
         mags = state.magnet_pos.numpy().astype(np.float64)  # (W, 4, 3)
         x_epm = mags[:, EPM, 0]
-        target = mags[:, IPM_CENTRE, 0] + args.place * (mags[:, IPM_HEAD, 0] - mags[:, IPM_CENTRE, 0])
+        target = mags[:, IPM_CENTRE, 0] + place * (mags[:, IPM_HEAD, 0] - mags[:, IPM_CENTRE, 0])
         w_c = 2.0 * (target - x_epm)  # this cycle's advance: under the target at s = c + 1/2
         path.wavelength = w_c
         path.start_x = x_epm - w_c * (c + phase)  # x(s = c) = x_epm: the path stays continuous
         path.direction = np.ones_like(w_c)
+        for f in ("amplitude", "depth", "theta", "period", "phase", "start_y"):  # every field per world
+            setattr(path, f, np.broadcast_to(np.asarray(getattr(path, f), np.float64).reshape(-1), (W,)).copy())
         sim.control.set_path(path)
         tail0, head0 = end_centres(pattern, state.positions.numpy()[None].astype(np.float64))
         rmin = np.ones((len(w_c), 4))
@@ -79,10 +91,15 @@ def main(argv=None) -> int:
             x = state.positions.numpy().astype(np.float64)
             rmin = np.minimum(rmin, segment_ratios(pattern, np.stack([x_first, x]))[1])
         tail1, head1 = end_centres(pattern, state.positions.numpy()[None].astype(np.float64))
-        bad = int(np.count_nonzero(state.unstable.numpy()))
-        print(f"  cycle {c}: {1e3 * w_c[0]:+6.1f} mm | {' '.join(f'{v:.3f}' for v in rmin[0])} | "
-              f"{1e3 * (tail1[0, 0, 0] - tail0[0, 0, 0]):+6.2f} {1e3 * (head1[0, 0, 0] - head0[0, 0, 0]):+6.2f}"
-              f"{'  UNSTABLE' if bad else ''}", flush=True)
+        d_tail = 1e3 * (tail1[0, :, 0] - tail0[0, :, 0])
+        d_head = 1e3 * (head1[0, :, 0] - head0[0, :, 0])
+        net += np.stack([d_tail, d_head], -1)
+        bad = state.unstable.numpy() != 0
+        for i in range(W):  # printing only
+            print(f"  P {place[i]:+.2f} cycle {c}: {1e3 * w_c[i]:+6.1f} mm | {' '.join(f'{v:.3f}' for v in rmin[i])} | "
+                  f"{d_tail[i]:+6.2f} {d_head[i]:+6.2f}{'  UNSTABLE' if bad[i] else ''}", flush=True)
+    for i in range(W):
+        print(f"P {place[i]:+.2f}: net tail {net[i, 0]:+.1f} mm, head {net[i, 1]:+.1f} mm over {args.cycles} cycles")
     return 0
 
 
