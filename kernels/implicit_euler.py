@@ -143,8 +143,8 @@ def starting_contact(w_inv: float, was: int, vel: wp.vec3, v_old: wp.vec3, h0: f
                      slip_speed: float) -> int:
     """A vertex's contact status at the start of a substep: FIXED for infinite mass; on the floor and not pulled
     off it (touching at the end of the last substep, status ``was``, with its inertial velocity ``vel`` into the
-    floor or the velocity it carries, ``v_old``, not lifting it off: v_old · n ≤ ``slip_speed``), or landing on it (free, and the velocity it carries, ``v_old``, takes it below the floor within ``dt``):
-    stuck or sliding by the speed along the floor it carries (a contact moving along the floor is sliding whatever it
+    floor or the velocity it carries, ``v_old``, not lifting it off: v_old · n ≤ ``slip_speed``), or landing on it
+    (free, and ``v_old`` takes it below the floor within ``dt``): stuck or sliding by the speed along the floor it carries (a contact moving along the floor is sliding whatever it
     did in the last substep, e.g. a worm kicked at rest); else FREE. (Shared by both kernels.)
 
     Why ``v_old`` and not ``vel`` for a free vertex: the Newton iteration starts from ``v_old``
