@@ -340,6 +340,11 @@ def main(args) -> int:
                   f"{1e3 * m['head_displacement_m'][w]:+.1f} mm, centre lift {1e3 * m['centre_ipm_max_lift_m'][w]:.1f} "
                   f"mm, fold violation {m['max_fold_violation_deg'][w]:.1f} deg, lateral drift "
                   f"{1e3 * m['lateral_displacement_m'][w]:+.1f} mm (max {1e3 * m['lateral_drift_max_m'][w]:.1f})")
+            if m["approach_placement"].shape[1]:
+                print(f"  world {w:4d}: per cycle: smallest ratio "
+                      f"{np.round(m['cycle_ratio_min'][w].min(axis=-1), 3).tolist()}, end hold "
+                      f"{np.round(m['end_hold_ratio'][w], 2).tolist()}, EPM placement at closest approach (0 centre "
+                      f"IPM, 1 head IPM) {np.round(m['approach_placement'][w], 2).tolist()}")
     for p in paths:
         print(f"  wrote {p}")
     return 0
