@@ -269,9 +269,12 @@ def _launcher(kernel, model_arr, arrays, device, epm, far=True):
 
     a = arrays
     if kernel is None:
+        scratch = mg.pair_wrench_scratch(*a["pos"].shape, device)
+
         def today():
             mg.launch_world_wrenches(model_arr, a["shape"], a["size"], a["moment"], a["pos"], a["rot"], a["force_out"],
-                                     a["torque_out"], a["density"], device, epm_wrench=epm, far_field=far)
+                                     a["torque_out"], a["density"], device, epm_wrench=epm, far_field=far,
+                                     pair_scratch=scratch)
             wp.synchronize_device(device)
 
         return today

@@ -33,26 +33,15 @@ from pathlib import Path
 import numpy as np
 
 
-def _mm_list(text: str, flag: str) -> np.ndarray:
-    try:
-        vals = np.array([float(v) for v in text.split(",") if v.strip()]) * 1e-3
-    except ValueError:
-        raise SystemExit(f"{flag}: {text!r} is not a comma-separated list of millimetres") from None
-    if len(vals) == 0 or not np.all(vals >= 0):
-        raise SystemExit(f"{flag}: {text!r}: expected one or more values >= 0 [mm]")
-    return vals
-
-
 def main(argv=None) -> int:
+    from gait_grid import add_grid_arguments, grid_from_arguments
     from warpworm import gaits, quiet_warp
-    from warpworm.params import parse_overrides
     from warpworm.gait_search import search_gait
+    from warpworm.params import parse_overrides
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("gait", choices=gaits.GAITS)
-    ap.add_argument("--w", required=True, help="wavelengths [mm], comma-separated")
-    ap.add_argument("--a", required=True, help="amplitudes [mm], comma-separated")
-    ap.add_argument("--h", required=True, help="closest approaches [mm], comma-separated")
+    add_grid_arguments(ap)
     ap.add_argument("--cycles", type=int, default=5)
     ap.add_argument("--backward", action="store_true")
     ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
@@ -65,8 +54,7 @@ def main(argv=None) -> int:
         raise SystemExit(f"--cycles: {args.cycles}; expected at least 2 (the first cycle against the later ones)")
     quiet_warp()
 
-    grid = {"wavelength": _mm_list(args.w, "--w"), "amplitude": _mm_list(args.a, "--a"),
-            "closest_approach": _mm_list(args.h, "--h")}
+    grid = grid_from_arguments(args)
     params = gaits.preset_params(args.gait, backward=args.backward, magnet_model="analytic")
     params = replace(params, **parse_overrides(args.set))
     # the plate must not be thicker than the closest approach the grid asks for (h is measured from the worm's base)

@@ -31,24 +31,23 @@ SETTINGS = [(mm, back, dt, sub) for mm in ("analytic", "dipoles") for back in (F
 
 
 def main(argv=None) -> int:
+    from gait_grid import add_grid_arguments, grid_from_arguments
     from warpworm import gaits, quiet_warp
     from warpworm.commands.simulate import run_gait
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("gait", choices=gaits.GAITS)
-    ap.add_argument("--w", required=True, help="wavelengths [mm], comma-separated")
-    ap.add_argument("--a", required=True, help="amplitudes [mm], comma-separated")
-    ap.add_argument("--h", required=True, help="closest approaches [mm], comma-separated")
+    add_grid_arguments(ap)
     ap.add_argument("--cycles", type=int, default=3)
     ap.add_argument("--out", default=None)
     args = ap.parse_args(argv)
     quiet_warp()
-    grid = [[float(v) for v in s.split(",")] for s in (args.w, args.a, args.h)]
-    pts = np.array(list(itertools.product(*grid)))
+    pts_m = np.array(list(itertools.product(*grid_from_arguments(args).values())))  # rows (w, a, h) [m]
+    pts = np.round(pts_m * 1e3, 9)  # the same rows in mm, for the table and the JSON
     rows = []
     for mm, back, dt, sub in SETTINGS:
-        p = replace(gaits.preset_params(args.gait, back), magnet_model=mm, wavelength=pts[:, 0] * 1e-3,
-                    amplitude=pts[:, 1] * 1e-3, closest_approach=pts[:, 2] * 1e-3)
+        p = replace(gaits.preset_params(args.gait, back), magnet_model=mm, wavelength=pts_m[:, 0],
+                    amplitude=pts_m[:, 1], closest_approach=pts_m[:, 2])
         r = run_gait(p, len(pts), args.cycles, dt=dt, substeps=sub, fps=50, save_worlds=0)
         rows.append(dict(magnet_model=mm, backward=back, dt=dt, substeps=sub, unstable=r["unstable"].tolist(),
                          displacement_mm=(np.abs(r["displacement_m"]) * 1e3).tolist(),

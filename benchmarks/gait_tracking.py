@@ -67,9 +67,12 @@ def main(argv=None) -> int:
     period = float(np.asarray(path.period).reshape(-1)[0])
     phase = np.asarray(path.phase, np.float64)
     steps_per_cycle = int(round(period / sim.dt))
-    chunk = 5
+    frame_times = sim.dt * np.arange(5, steps_per_cycle + 1, 5)  # a cycle's frames, every 5 steps (20 ms)
     pattern = model.pattern
     x_first = state.positions.numpy().astype(np.float64)
+    for f in ("amplitude", "depth", "theta", "period", "phase", "start_y"):  # every field per world
+        setattr(path, f, np.broadcast_to(np.asarray(getattr(path, f), np.float64).reshape(-1), (W,)).copy())
+    path.direction = np.ones(W)
     print(f"{args.gait}: tracking path; per world and cycle: EPM advance | smallest segment ratios (tail -> head) | "
           f"tail, head motion [mm]")
     net = np.zeros((W, 2))
@@ -80,19 +83,13 @@ def main(argv=None) -> int:
         w_c = 2.0 * (target - x_epm)  # this cycle's advance: under the target at s = c + 1/2
         path.wavelength = w_c
         path.start_x = x_epm - w_c * (c + phase)  # x(s = c) = x_epm: the path stays continuous
-        path.direction = np.ones_like(w_c)
-        for f in ("amplitude", "depth", "theta", "period", "phase", "start_y"):  # every field per world
-            setattr(path, f, np.broadcast_to(np.asarray(getattr(path, f), np.float64).reshape(-1), (W,)).copy())
         sim.control.set_path(path)
-        tail0, head0 = end_centres(pattern, state.positions.numpy()[None].astype(np.float64))
-        rmin = np.ones((len(w_c), 4))
-        for _ in range(steps_per_cycle // chunk):
-            sim.step(state, chunk)
-            x = state.positions.numpy().astype(np.float64)
-            rmin = np.minimum(rmin, segment_ratios(pattern, np.stack([x_first, x]))[1])
-        tail1, head1 = end_centres(pattern, state.positions.numpy()[None].astype(np.float64))
-        d_tail = 1e3 * (tail1[0, :, 0] - tail0[0, :, 0])
-        d_head = 1e3 * (head1[0, :, 0] - head0[0, :, 0])
+        x_start = state.positions.numpy().astype(np.float64)
+        x = sim.run(state, frame_times, keys=("positions",), stack=True)["positions"].astype(np.float64)  # (F, W, V, 3)
+        rmin = segment_ratios(pattern, np.concatenate([x_first[None], x]))[1:].min(axis=0)  # (W, 4)
+        tail, head = end_centres(pattern, np.stack([x_start, x[-1]]))  # (2, W, 3)
+        d_tail = 1e3 * (tail[1, :, 0] - tail[0, :, 0])
+        d_head = 1e3 * (head[1, :, 0] - head[0, :, 0])
         net += np.stack([d_tail, d_head], -1)
         bad = state.unstable.numpy() != 0
         for i in range(W):  # printing only

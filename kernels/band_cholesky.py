@@ -81,10 +81,45 @@ def band_add_block(world: int, mat: wp.array3d(dtype=wp.mat33), u: int, v: int, 
     return 0
 
 
+ALL_ROWS = wp.constant(-1)
+"""``row`` of the Gauss–Newton adders: every block (the band kernel, one thread per world, adds an element whole);
+a row index instead adds only the blocks stored in that row (the tile kernel, one thread per row)."""
+
+
 @wp.func
-def band_add_outer(world: int, mat: wp.array3d(dtype=wp.mat33), u: int, v: int, scale: float, gu: wp.vec3,
-                   gv: wp.vec3):
+def band_add_outer(world: int, mat: wp.array3d(dtype=wp.mat33), row: int, u: int, v: int, scale: float,
+                   gu: wp.vec3, gv: wp.vec3):
     """:func:`band_add_block` of ``scale`` · gu gvᵀ at (u, v): the Gauss–Newton block of a scalar energy term
-    whose gradients at vertices u and v are ``gu`` and ``gv`` (``scale`` its second derivative)."""
-    band_add_block(world, mat, u, v, scale * wp.outer(gu, gv))
+    whose gradients at vertices u and v are ``gu`` and ``gv`` (``scale`` its second derivative). Only if the block
+    is stored in ``row`` (row max(u, v)), or always with :data:`ALL_ROWS`: the same arithmetic either way."""
+    if row == ALL_ROWS or wp.max(u, v) == row:
+        band_add_block(world, mat, u, v, scale * wp.outer(gu, gv))
+    return 0
+
+
+@wp.func
+def band_add_gauss_newton3(world: int, mat: wp.array3d(dtype=wp.mat33), row: int, scale: float, a: int, b: int,
+                           c: int, ga: wp.vec3, gb: wp.vec3, gc: wp.vec3):
+    """The Gauss–Newton blocks ``scale`` · ∇q ∇qᵀ of a scalar term q of three distinct vertices (a panel's contact),
+    with ∂q/∂x_a = ``ga`` etc. (:func:`band_add_outer`: in ``row`` only, or :data:`ALL_ROWS`). Each block has its
+    own slot, so their order does not change the sum."""
+    band_add_outer(world, mat, row, a, a, scale, ga, ga)
+    band_add_outer(world, mat, row, b, b, scale, gb, gb)
+    band_add_outer(world, mat, row, c, c, scale, gc, gc)
+    band_add_outer(world, mat, row, b, a, scale, gb, ga)
+    band_add_outer(world, mat, row, c, a, scale, gc, ga)
+    band_add_outer(world, mat, row, c, b, scale, gc, gb)
+    return 0
+
+
+@wp.func
+def band_add_gauss_newton4(world: int, mat: wp.array3d(dtype=wp.mat33), row: int, scale: float, a: int, b: int,
+                           c: int, d: int, ga: wp.vec3, gb: wp.vec3, gc: wp.vec3, gd: wp.vec3):
+    """:func:`band_add_gauss_newton3` for a term of four distinct vertices (a crease's angle): the three's blocks and
+    those of d."""
+    band_add_gauss_newton3(world, mat, row, scale, a, b, c, ga, gb, gc)
+    band_add_outer(world, mat, row, d, d, scale, gd, gd)
+    band_add_outer(world, mat, row, d, a, scale, gd, ga)
+    band_add_outer(world, mat, row, d, b, scale, gd, gb)
+    band_add_outer(world, mat, row, d, c, scale, gd, gc)
     return 0

@@ -90,7 +90,7 @@ def atan2_f32(y: float, x: float) -> float:
 
 @wp.func
 def dihedral_angle_and_normals(xi: wp.vec3, xj: wp.vec3, xk: wp.vec3, xl: wp.vec3):
-    """The signed fold angle psi [rad] of the hinge stencil (i, j, k, l) (:func:`dihedral_angle_and_gradient`) with
+    """The signed fold angle psi [rad] of the hinge stencil (i, j, k, l) (:func:`dihedral_angle_gradient_and_normals`) with
     what it is made of: (n1, n2, r_kj, |r_kj|², |r_kj|, psi), n1, n2 the wings' normals (their lengths twice the
     wings' areas), r_kj = x_k − x_j the hinge."""
     n1 = wp.cross(xj - xi, xk - xi)
@@ -125,13 +125,6 @@ def dihedral_angle_gradient_and_normals(xi: wp.vec3, xj: wp.vec3, xk: wp.vec3, x
     gj = gi * (pi_ - 1.0) - gl * pl_
     gk = gl * (pl_ - 1.0) - gi * pi_
     return psi, gi, gj, gk, gl, n1, n2, len2
-
-
-@wp.func
-def dihedral_angle_and_gradient(xi: wp.vec3, xj: wp.vec3, xk: wp.vec3, xl: wp.vec3):
-    """(psi, g_i, g_j, g_k, g_l) of :func:`dihedral_angle_gradient_and_normals`."""
-    psi, gi, gj, gk, gl, n1, n2, len2 = dihedral_angle_gradient_and_normals(xi, xj, xk, xl)
-    return psi, gi, gj, gk, gl
 
 
 SLIVER_ALTITUDE = wp.constant(0.005)

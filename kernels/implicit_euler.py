@@ -58,7 +58,8 @@ import warp as wp
 
 from warpworm import ids
 
-from .band_cholesky import band_add_block, band_add_outer, band_cholesky_factor, band_cholesky_solve
+from .band_cholesky import (ALL_ROWS, band_add_block, band_add_gauss_newton3, band_add_gauss_newton4,
+                            band_cholesky_factor, band_cholesky_solve)
 from .common import (crease_at_substep_end, dihedral_angle_gradient_and_normals, fold_range, freeze_world, pw,
                      wing_contact_of_normal, wrap_angle)
 
@@ -144,8 +145,9 @@ def starting_contact(w_inv: float, was: int, vel: wp.vec3, v_old: wp.vec3, h0: f
     """A vertex's contact status at the start of a substep: FIXED for infinite mass; on the floor and not pulled
     off it (touching at the end of the last substep, status ``was``, with its inertial velocity ``vel`` into the
     floor or the velocity it carries, ``v_old``, not lifting it off: v_old · n ≤ ``slip_speed``), or landing on it
-    (free, and ``v_old`` takes it below the floor within ``dt``): stuck or sliding by the speed along the floor it carries (a contact moving along the floor is sliding whatever it
-    did in the last substep, e.g. a worm kicked at rest); else FREE. (Shared by both kernels.)
+    (free, and ``v_old`` takes it below the floor within ``dt``): stuck or sliding by the speed along the floor it
+    carries (a contact moving along the floor is sliding whatever it did in the last substep, e.g. a worm kicked at
+    rest); else FREE. (Shared by both kernels.)
 
     Why ``v_old`` and not ``vel`` for a free vertex: the Newton iteration starts from ``v_old``
     (:func:`newton_start`), and ``vel`` lacks the elastic forces. A vertex hovering 25 µm above the floor, held up
@@ -433,12 +435,7 @@ def wing_contact_terms(world: int, n: wp.vec3, len2: float, p0: wp.vec3, p1: wp.
         w.grad[world, b] = w.grad[world, b] + gb * f
         w.grad[world, c] = w.grad[world, c] + gc * f
         if with_hessian:
-            band_add_outer(world, w.hess, a, a, kappa, ga, ga)
-            band_add_outer(world, w.hess, b, b, kappa, gb, gb)
-            band_add_outer(world, w.hess, c, c, kappa, gc, gc)
-            band_add_outer(world, w.hess, b, a, kappa, gb, ga)
-            band_add_outer(world, w.hess, c, a, kappa, gc, ga)
-            band_add_outer(world, w.hess, c, b, kappa, gc, gb)
+            band_add_gauss_newton3(world, w.hess, ALL_ROWS, kappa, a, b, c, ga, gb, gc)
 
 
 @wp.func
@@ -471,16 +468,7 @@ def crease_terms(world: int, c: WorldCoefficients, m: BarHingeModel, with_hessia
         w.grad[world, i3] = w.grad[world, i3] + g3 * torque
         if with_hessian:
             # Gauss–Newton: the angle's curvature term (torque ∇²φ) is dropped
-            band_add_outer(world, w.hess, i0, i0, stiff, g0, g0)
-            band_add_outer(world, w.hess, i1, i1, stiff, g1, g1)
-            band_add_outer(world, w.hess, i2, i2, stiff, g2, g2)
-            band_add_outer(world, w.hess, i3, i3, stiff, g3, g3)
-            band_add_outer(world, w.hess, i1, i0, stiff, g1, g0)
-            band_add_outer(world, w.hess, i2, i0, stiff, g2, g0)
-            band_add_outer(world, w.hess, i3, i0, stiff, g3, g0)
-            band_add_outer(world, w.hess, i2, i1, stiff, g2, g1)
-            band_add_outer(world, w.hess, i3, i1, stiff, g3, g1)
-            band_add_outer(world, w.hess, i3, i2, stiff, g3, g2)
+            band_add_gauss_newton4(world, w.hess, ALL_ROWS, stiff, i0, i1, i2, i3, g0, g1, g2, g3)
         # the wings' normals are the dihedral's own: n1 = (x1 − x0) × (x2 − x0), n2 = (x2 − x3) × (x1 − x3)
         wing_contact_terms(world, n1, len2, x0, x1, x2, i0, i1, i2, lh, with_hessian, w)
         wing_contact_terms(world, n2, len2, x3, x2, x1, i3, i2, i1, lh, with_hessian, w)

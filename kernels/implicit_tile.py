@@ -42,7 +42,8 @@ import functools
 
 import warp as wp
 
-from .band_cholesky import band_add_block, band_add_outer, band_cholesky_solve, inverse_lower_cholesky3
+from .band_cholesky import (band_add_block, band_add_gauss_newton3, band_add_gauss_newton4, band_cholesky_solve,
+                            inverse_lower_cholesky3)
 from .common import (crease_at_substep_end, dihedral_angle_gradient_and_normals, fold_range, freeze_world, pw,
                      wing_contact_of_normal, wrap_angle)
 from .implicit_euler import (
@@ -126,20 +127,10 @@ def hinge_terms(phi: float, prev: float, rest: float, lh: float, label: int, k_h
 
 
 @wp.func
-def row_add_outer(world: int, hess: wp.array3d(dtype=wp.mat33), row: int, p: int, q: int, scale: float,
-                  gp: wp.vec3, gq: wp.vec3):
-    """:func:`~.band_cholesky.band_add_outer` of block (p, q) if it is stored in ``row`` (row max(p, q); a diagonal
-    block (p, p) in row p): a row's share of an element the band path adds whole, the same arithmetic."""
-    if wp.max(p, q) == row:
-        band_add_outer(world, hess, p, q, scale, gp, gq)
-    return 0
-
-
-@wp.func
 def wing_contact_row(world: int, u: int, n: wp.vec3, len2: float, p0: wp.vec3, p1: wp.vec3, p2: wp.vec3, a: int,
                      b: int, c: int, lh: float, with_hessian: bool, hess: wp.array3d(dtype=wp.mat33)) -> wp.vec3:
     """Row ``u``'s part of a hinge wing's panel contact barrier (tip ``a``, hinge ``b``–``c``;
-    :func:`implicit_euler.wing_contact_terms`, its blocks in its order): adds the blocks stored in row u and returns
+    :func:`implicit_euler.wing_contact_terms`): adds the blocks stored in row u and returns
     u's gradient term (zero if u is not in the wing or the wing is clear); ``n`` the wing's normal, ``len2`` the
     hinge's squared length (:func:`~.common.wing_contact_of_normal`)."""
     f, ga, gb, gc, kappa = wing_contact_of_normal(n, len2, p0, p1, p2, lh)
@@ -152,12 +143,7 @@ def wing_contact_row(world: int, u: int, n: wp.vec3, len2: float, p0: wp.vec3, p
         elif c == u:
             g = gc * f
         if with_hessian:
-            row_add_outer(world, hess, u, a, a, kappa, ga, ga)
-            row_add_outer(world, hess, u, b, b, kappa, gb, gb)
-            row_add_outer(world, hess, u, c, c, kappa, gc, gc)
-            row_add_outer(world, hess, u, b, a, kappa, gb, ga)
-            row_add_outer(world, hess, u, c, a, kappa, gc, ga)
-            row_add_outer(world, hess, u, c, b, kappa, gc, gb)
+            band_add_gauss_newton3(world, hess, u, kappa, a, b, c, ga, gb, gc)
     return g
 
 
@@ -261,18 +247,9 @@ def assemble_row(
         else:
             g = g + g3 * torque
         if with_hessian:
-            # Gauss–Newton (the angle's curvature term dropped); the blocks of implicit_euler.assemble, in its order,
-            # those that land in row u (a block (p, q) is stored in row max(p, q))
-            row_add_outer(world, hess, u, i0, i0, stiff, g0, g0)
-            row_add_outer(world, hess, u, i1, i1, stiff, g1, g1)
-            row_add_outer(world, hess, u, i2, i2, stiff, g2, g2)
-            row_add_outer(world, hess, u, i3, i3, stiff, g3, g3)
-            row_add_outer(world, hess, u, i1, i0, stiff, g1, g0)
-            row_add_outer(world, hess, u, i2, i0, stiff, g2, g0)
-            row_add_outer(world, hess, u, i3, i0, stiff, g3, g0)
-            row_add_outer(world, hess, u, i2, i1, stiff, g2, g1)
-            row_add_outer(world, hess, u, i3, i1, stiff, g3, g1)
-            row_add_outer(world, hess, u, i3, i2, stiff, g3, g2)
+            # Gauss–Newton (the angle's curvature term dropped): implicit_euler.crease_terms' blocks, those stored in
+            # row u (a block (p, q) lives in row max(p, q))
+            band_add_gauss_newton4(world, hess, u, stiff, i0, i1, i2, i3, g0, g1, g2, g3)
         g = g + wing_contact_row(world, u, n1, len2, x0, x1, x2, i0, i1, i2, hinge_length[hl_row, h], with_hessian,
                                  hess)
         g = g + wing_contact_row(world, u, n2, len2, x3, x2, x1, i3, i2, i1, hinge_length[hl_row, h], with_hessian,

@@ -25,7 +25,7 @@ def _dihedral_kernel(x: wp.array(dtype=wp.vec3), h: wp.array2d(dtype=wp.int32), 
                      grad: wp.array2d(dtype=wp.vec3)):
     i = wp.tid()
     a, b, c, d = x[h[i, 0]], x[h[i, 1]], x[h[i, 2]], x[h[i, 3]]
-    psi, g0, g1, g2, g3 = common.dihedral_angle_and_gradient(a, b, c, d)
+    psi, g0, g1, g2, g3, n1, n2, len2 = common.dihedral_angle_gradient_and_normals(a, b, c, d)
     ang[i] = psi
     grad[i, 0] = g0
     grad[i, 1] = g1

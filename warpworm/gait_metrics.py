@@ -12,9 +12,7 @@ import numpy as np
 
 from . import crease
 
-from .params import EPM as EPM_SLOT
-from .params import IPM_CENTRE as IPM_CENTRE_SLOT
-from .params import IPM_HEAD as IPM_HEAD_SLOT
+from .params import EPM as EPM_SLOT, IPM_CENTRE as IPM_CENTRE_SLOT, IPM_HEAD as IPM_HEAD_SLOT
 
 
 def segment_ratios(pattern: crease.CreasePattern, positions: np.ndarray) -> np.ndarray:

@@ -190,6 +190,7 @@ def launch_world_wrenches(
     max_panels: int = DEFAULT_MAX_PANELS,
     epm_wrench: bool = True,
     far_field: bool = True,
+    pair_scratch: tuple[wp.array, wp.array] | None = None,
 ) -> None:
     """Net magnetic force and torque on every magnet of every world from all the other magnets of its world.
 
@@ -197,8 +198,8 @@ def launch_world_wrenches(
     dim (W, M (M − 1) / 2): the wrench on one magnet of the pair, the other's by reaction), then each magnet's sum
     over its pairs (``sum_pair_wrenches_kernel``, dim (W, M)); no host round trip, any M. Capturable in a graph once
     the model array, the quadrature arrays and the pair scratch exist: pass a ``wp.array`` for ``model`` (a string
-    makes a small array), and launch once outside the capture (the first call creates the Gauss–Legendre arrays from
-    host data, whose copy a capture would record instead of doing, and the scratch).
+    makes a small array) and a ``pair_scratch``, and launch once outside the capture (the first call creates the
+    Gauss–Legendre arrays from host data, whose copy a capture would record instead of doing).
 
     Args:
         model: ``"dipoles"`` | ``"analytic"`` for the whole batch, or per-world ids (0 dipoles, 1 analytic) as a
@@ -223,6 +224,9 @@ def launch_world_wrenches(
             cylinder at least 2.5 of the cylinder's circumscribing radii apart (the EPM and an IPM) by the same rule
             for the cylinder, the cuboid's face charges in its field (the cylinder's wrench by reciprocity; within
             5.1e-6, ~2.4x cheaper); ``False`` always uses the closed form.
+        pair_scratch: the pairs' wrenches between the two launches, from :func:`pair_wrench_scratch` for these W
+            and M (a caller that steps repeatedly, e.g. the simulator, owns one); ``None`` allocates one for this
+            call.
 
     Magnets must not overlap. Cost per world ('dipoles') ~ Σ over unordered pairs of N_a · N_b point-dipole pairs
     (paper's worm at 64/cm³: 256·12·3 + 12·12·3 = 9,648 pair interactions, with or without the EPM's wrench).
@@ -232,7 +236,7 @@ def launch_world_wrenches(
     device = device or pos.device
     gl_x, gl_w = _gauss_legendre(quad_order, str(device))
     W, M = pos.shape
-    pair_force, pair_torque = _pair_scratch(W, M, str(device))
+    pair_force, pair_torque = pair_scratch if pair_scratch is not None else pair_wrench_scratch(W, M, device)
     if M > 1:
         wp.launch(
             world_pair_wrench_kernel,
@@ -246,19 +250,13 @@ def launch_world_wrenches(
               outputs=[force_out, torque_out], device=device)
 
 
-_PAIR_SCRATCH: dict = {}
-
-
-def _pair_scratch(W: int, M: int, device: str):
-    """The (W, max(1, M (M − 1) / 2), 2) pair-wrench scratch of :func:`launch_world_wrenches`, one per (W, M,
-    device), made at the first call (outside any graph capture, like the quadrature arrays) and reused: its values
-    live only between the two launches of one call."""
-    key = (W, M, device)
-    if key not in _PAIR_SCRATCH:
-        P = max(1, M * (M - 1) // 2)
-        _PAIR_SCRATCH[key] = (wp.zeros((W, P, 2), dtype=wp.vec3, device=device),
-                              wp.zeros((W, P, 2), dtype=wp.vec3, device=device))
-    return _PAIR_SCRATCH[key]
+def pair_wrench_scratch(num_worlds: int, num_magnets: int, device=None) -> tuple[wp.array, wp.array]:
+    """The (W, max(1, M (M − 1) / 2), 2) force and torque scratch of :func:`launch_world_wrenches` (each unordered
+    pair's wrench on its two magnets; its values live only between that call's two launches)."""
+    P = max(1, num_magnets * (num_magnets - 1) // 2)
+    dev = _device(device)
+    return (wp.zeros((num_worlds, P, 2), dtype=wp.vec3, device=dev),
+            wp.zeros((num_worlds, P, 2), dtype=wp.vec3, device=dev))
 
 
 # ----------------------------------------------------------------------------------------------------------------------
@@ -458,6 +456,7 @@ __all__ = [
     "Magnet",
     "field",
     "launch_world_wrenches",
+    "pair_wrench_scratch",
     "world_wrenches",
     "wrench",
 ]

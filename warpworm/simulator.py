@@ -33,10 +33,12 @@ from .transforms import quat_wxyz_to_matrix, quat_xyzw_to_wxyz
 
 
 def launch_world_wrenches(model: Model, state: State, moment: wp.array, *, epm_wrench: bool = True,
-                          force_out: wp.array | None = None, torque_out: wp.array | None = None) -> None:
+                          force_out: wp.array | None = None, torque_out: wp.array | None = None,
+                          pair_scratch: tuple[wp.array, wp.array] | None = None) -> None:
     """Net magnetic force and torque on every magnet of every world (the one place the magnet API is called), into
     ``state.magnet_force`` / ``magnet_torque`` unless other outputs are given. ``epm_wrench=False`` leaves the EPM's
-    own wrench (slot 0) zero and spends nothing on it: the dynamics needs only the IPMs'."""
+    own wrench (slot 0) zero and spends nothing on it: the dynamics needs only the IPMs'. ``pair_scratch``: the
+    caller's (:func:`warpworm.magnets.pair_wrench_scratch`), else one per call."""
     from .magnets import launch_world_wrenches as _launch
 
     _launch(
@@ -51,6 +53,7 @@ def launch_world_wrenches(model: Model, state: State, moment: wp.array, *, epm_w
         model.dipole_density,
         model.device,
         epm_wrench=epm_wrench,
+        pair_scratch=pair_scratch,
     )
 
 
@@ -206,8 +209,13 @@ class Simulator:
             from .tile_solver import TileSubsteps
 
             self._tiles = TileSubsteps(model, self, factorization=solver[len("tile-"):])
-        self._snapshot_wrench = (wp.zeros((W, 4), dtype=wp.vec3, device=dev),
-                                 wp.zeros((W, 4), dtype=wp.vec3, device=dev))
+        from .magnets import pair_wrench_scratch
+
+        # the magnet pairs' wrenches between the wrench's two launches: allocated here, before any graph capture
+        M = model.magnet_shape.shape[1]  # EPM and the three IPMs
+        self._pair_scratch = pair_wrench_scratch(W, M, dev)
+        self._snapshot_wrench = (wp.zeros((W, M), dtype=wp.vec3, device=dev),
+                                 wp.zeros((W, M), dtype=wp.vec3, device=dev))
         self._last_moment = model.magnet_moment
         self._cmds = {}
         self._graphs = {}
@@ -268,7 +276,7 @@ class Simulator:
     def _wrench(self, state: State, control: Control, moment: wp.array) -> None:
         m = self.model
         self._magnet_poses(state, control)
-        launch_world_wrenches(m, state, moment, epm_wrench=False)
+        launch_world_wrenches(m, state, moment, epm_wrench=False, pair_scratch=self._pair_scratch)
         state.external_force.zero_()
         wp.launch(self._kpose.distribute_wrench, dim=(m.num_worlds, 3),
                   inputs=[m.mount_vertices, state.positions, state.magnet_pos, state.magnet_force,
@@ -427,7 +435,8 @@ class Simulator:
         # the whole wrench at these poses, the EPM's included (the dynamics skips it), with the magnets of the last
         # step (the EPM parked after settle)
         f_snap, t_snap = self._snapshot_wrench
-        launch_world_wrenches(m, state, self._last_moment, force_out=f_snap, torque_out=t_snap)
+        launch_world_wrenches(m, state, self._last_moment, force_out=f_snap, torque_out=t_snap,
+                              pair_scratch=self._pair_scratch)
         # .numpy() aliases device memory on the CPU: copy, so a snapshot never changes after it is taken
         x = state.positions.numpy().copy()
         q = state.magnet_rot.numpy()
