@@ -41,7 +41,8 @@ def mount_frame(
 class SinePath:
     """The paper's sinusoidal EPM path (§IV-C) of every world, fields as :data:`warpworm.gaits.SINE_FIELDS`, each
     shape (1,) shared or (W,): start x, y [m], wavelength w [m], amplitude a [m], depth of the centre at closest
-    approach [m], theta [rad], period [s], direction ±1, phase [cycles]."""
+    approach [m], theta [rad], period [s], direction ±1, phase [cycles], rewind 0 / 1 (1: the pass repeats in
+    place, a tethered worm's path: x returns to x0 at each far point)."""
 
     start_x: wp.array(dtype=float)
     start_y: wp.array(dtype=float)
@@ -52,6 +53,7 @@ class SinePath:
     period: wp.array(dtype=float)
     direction: wp.array(dtype=float)
     phase: wp.array(dtype=float)
+    rewind: wp.array(dtype=float)
 
 
 @wp.struct
@@ -77,13 +79,16 @@ def epm_sine_pose(
 
     s = t / period + phase (cycles); x = x0 + direction * w * s; z = -(depth + a (1 + cos 2 pi s) / 2): the EPM
     moves beneath the floor, starts far (a below its closest approach), comes closest (its centre ``depth`` below
-    z = 0, i.e. its top face h below the origami base) at half a cycle, and advances w per cycle.
+    z = 0, i.e. its top face h below the origami base) at half a cycle, and advances w per cycle. With
+    ``rewind`` 1 the advance restarts at each far point (x = x0 + direction * w * (s - floor(s))): every cycle
+    repeats the first cycle's pass, for a worm tied in place (the force plate), which cannot follow the EPM.
     Orientation: the EPM's own +z (its magnetization) at angle theta from +x toward +z in the x-z plane.
     """
     world = wp.tid()
     t = float(step_count[world]) * dt_sub
     s = t / pw(path.period, world) + pw(path.phase, world)
-    px = pw(path.start_x, world) + pw(path.direction, world) * pw(path.wavelength, world) * s
+    s_adv = s - pw(path.rewind, world) * wp.floor(s)  # the far point (s integer) is where a rewound pass restarts
+    px = pw(path.start_x, world) + pw(path.direction, world) * pw(path.wavelength, world) * s_adv
     pz = -(pw(path.depth, world) + pw(path.amplitude, world) * 0.5 * (1.0 + wp.cos(TWO_PI * s)))
     magnet_pos[world, 0] = wp.vec3(px, pw(path.start_y, world), pz)
     # rotation about +y by (pi/2 - theta) takes +z to (cos theta, 0, sin theta)

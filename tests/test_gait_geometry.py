@@ -103,3 +103,40 @@ def test_backward_is_the_mirror_image_of_forward(gait):
         np.testing.assert_allclose(Fb[m], Ff[s] * [-1, 1, 1], atol=2e-3 * scale)
         np.testing.assert_allclose(Tb[m, 1], -Tf[s, 1], atol=2e-3 * np.abs(Tf).max())
     assert pb[0] == pytest.approx(l0 - pf[0], abs=1e-4) and pb[2] == pytest.approx(pf[2], abs=1e-6)
+
+
+def epm_positions(path, p, num_worlds: int, cycles):
+    """The EPM centre [m] of each world at the given times (in cycles), shape (len(cycles), W, 3), from the kernel."""
+    model = Model.from_params(p, num_worlds, "cpu")
+    sim = Simulator(model, dt=4e-3, substeps=2)
+    sim.set_path(path)
+    state = sim.initial_state()
+    out = []
+    for s in cycles:  # a handful of poses read back one by one (kinematics only, no stepping)
+        state.step_count.fill_(round(s * float(p.cycle_period) / sim.dt_sub))
+        sim.update_magnets(state)
+        out.append(state.magnet_pos.numpy()[:, 0].astype(np.float64))
+    return np.stack(out), model
+
+
+def test_rewound_path_repeats_the_first_pass_in_place():
+    """``rewind`` = 1 (a worm tied in place, the force plate): at every phase of every cycle the EPM is where the
+    advancing path puts it in the first cycle, x = x0 + direction · w · (s − ⌊s⌋), with the same gap; forward and
+    backward worlds in one batch; a rewind of 0 is the advancing path itself."""
+    from dataclasses import replace
+
+    p = replace(gaits.preset_params("peristaltic"), backward=np.array([False, True]))
+    model = Model.from_params(p, 2, "cpu")
+    path = model.default_path
+    cycles = [0.1, 0.5, 0.9, 1.1, 1.5, 2.5, 3.9]
+    adv, _ = epm_positions(path, p, 2, cycles)
+    rew, _ = epm_positions(replace(path, rewind=np.ones(1)), p, 2, cycles)
+    w, d = np.asarray(path.wavelength), np.asarray(path.direction)
+    for i, s in enumerate(cycles):
+        shift = d * w * np.floor(s)  # (W,): how far the advancing path has gone beyond the first cycle's pass
+        np.testing.assert_allclose(rew[i, :, 0], adv[i, :, 0] - shift, atol=2e-6)
+        np.testing.assert_allclose(rew[i, :, 1:], adv[i, :, 1:], atol=1e-7)
+    for later, first in ((3, 0), (4, 1), (5, 1), (6, 2)):  # the same phase in a later cycle: the same pose
+        np.testing.assert_allclose(rew[later], rew[first], atol=2e-6)
+    assert np.all(np.abs(adv[5, :, 0] - adv[1, :, 0]) > 0.04)  # (the advancing path has moved on 2 w = 48 mm)
+    assert d.tolist() == [1.0, -1.0]

@@ -207,11 +207,14 @@ GAIT_RECORD = ("positions", "bar_strain", "anchor_force", "magnet_pos", "time", 
 """Snapshot keys a gait record keeps (``time`` per world, (S, W))."""
 
 
-def _gait_core(model, params, *, duration, sample_every, settle, dt, substeps) -> dict:
-    """Settle, then record the keys of :data:`GAIT_RECORD` every ``sample_every`` steps for ``duration`` [s]."""
+def _gait_core(model, params, *, duration, sample_every, settle, dt, substeps, rewind=False) -> dict:
+    """Settle, then record the keys of :data:`GAIT_RECORD` every ``sample_every`` steps for ``duration`` [s]
+    (``rewind``: each world's sinusoidal path repeats its first pass in place, :class:`warpworm.gaits.EpmPath`)."""
     from .simulator import Simulator
 
     sim = Simulator(model, dt=dt, substeps=substeps)
+    if rewind:
+        sim.set_path(replace(model.default_path, rewind=np.ones(1)))
     state = sim.initial_state()
     if settle > 0:
         sim.settle(state, settle)
@@ -223,12 +226,13 @@ def _gait_core(model, params, *, duration, sample_every, settle, dt, substeps) -
 
 def run_gaits(gait_list=GAITS, duration: float = 2.0, *, sample_every: int = 2, settle: float = 0.2, anchors=None,
               anchor_stiffness: float = 1.0e4, dt=None, substeps=None, device="cpu", base=None, workers: int | None = 1,
-              **overrides) -> dict:
+              rewind: bool = False, **overrides) -> dict:
     """Run each gait preset as one world of a batch for ``duration`` [s]; record a trajectory.
 
     Returns ``gaits`` (list), ``time (S,)``, ``positions (S, W, V, 3)``, ``bar_strain (S, W, E)``,
     ``anchor_force (S, W, A, 3)``, ``magnet_pos (S, W, 4, 3)``, ``unstable (W,)``, ``rest_positions (W, V, 3)``
-    (the settled shape at t = 0), and ``model``. ``workers`` processes share the worlds (:func:`split_run`).
+    (the settled shape at t = 0), ``rewind`` and ``model``. ``workers`` processes share the worlds
+    (:func:`split_run`). ``rewind``: every cycle repeats the EPM's first pass in place (a worm tied down).
     """
     quiet_warp()
     gait_list = list(gait_list)
@@ -238,12 +242,13 @@ def run_gaits(gait_list=GAITS, duration: float = 2.0, *, sample_every: int = 2, 
     axis = {"positions": 1, "bar_strain": 1, "anchor_force": 1, "magnet_pos": 1, "time": 1, "unstable": 1}
     frames = split_run(_gait_core, p, len(gait_list), axis, workers=workers, device=device,
                        model_kw=dict(anchors=anchors, anchor_stiffness=anchor_stiffness), duration=duration,
-                       sample_every=sample_every, settle=settle, dt=dt, substeps=substeps)
+                       sample_every=sample_every, settle=settle, dt=dt, substeps=substeps, rewind=rewind)
     rec = {k: frames[k] for k in ("positions", "bar_strain", "anchor_force", "magnet_pos")}
     rec["time"] = frames["time"].max(axis=1)  # an unstable world's clock stops: take the max
     rec["unstable"] = frames["unstable"][-1]
     rec["rest_positions"] = frames["positions"][0]
     rec["gaits"] = gait_list
+    rec["rewind"] = bool(rewind)
     rec["model"] = model
     rec["params"] = p
     return rec
@@ -597,37 +602,45 @@ def rise_fall_times(t, y, period: float, *, t0: float = 0.0, lo: float = 0.1, hi
 
 
 def force_plate(gait_list=GAITS, duration: float = 2.0, *, anchor_stiffness: float = 1.0e4, sample_every: int = 2,
-                settle: float = 0.2, record: dict | None = None, **kw) -> dict:
+                settle: float = 0.2, rewind: bool = True, record: dict | None = None, **kw) -> dict:
     """Force plate (§IV-D): the tail section's 3 vertices tied by anchors (strength ``anchor_stiffness`` [N/m]) to
     their settled rest points while each gait runs. ``force (S, W, 3)`` [N] is the summed anchor force (the worm's
-    pull on the plate; +x = forward pull), ``pull (S, W)`` its x component.
+    pull on the plate; +x = forward pull), ``pull (S, W)`` its x component, ``force_magnitude (S, W)`` its length
+    (the paper's reading: the Anchor's strength times the displacement vector of the tied point).
+
+    ``rewind`` (default): the EPM repeats its first pass in place every cycle (:class:`warpworm.gaits.EpmPath`), so
+    the tied worm is driven the same way in every cycle and the pulses settle to a periodic train. Without it the
+    EPM advances w per cycle as in locomotion and leaves the tied worm behind: after two or three cycles it passes
+    ahead of the head and the pulses fade, so the per-cycle shapes would describe where the magnet has gone, not the
+    gait.
 
     Pulse shape (Fig. 10: the paper's inchworm rises steeply and falls smoothly, omega the reverse): per gait the
     10 %→90 % rise time and 90 %→10 % fall time of the pull in each EPM cycle (:func:`rise_fall_times`),
     ``rise_time (C, W)`` / ``fall_time (C, W)`` [s] with levels at 10 % / 90 % of the cycle's peak (zero baseline;
     NaN in a cycle whose peak pull is not > 0), ``rise_time_trough`` / ``fall_time_trough`` with each edge measured
-    from its own trough (robust to a drifting offset), and in the summary their means over the cycles after the
-    first (NaN / null with fewer than two whole cycles: ``duration`` ≥ 2 periods)."""
+    from its own trough (robust to a drifting offset), ``rise_time_magnitude`` / ``fall_time_magnitude`` of
+    ``force_magnitude`` (zero baseline), and in the summary their means over the cycles after the first (NaN / null
+    with fewer than two whole cycles: ``duration`` ≥ 2 periods)."""
     if record is None:
         n = int((kw.get("base") or WormParams()).n_units)
         record = run_gaits(gait_list, duration, sample_every=sample_every, settle=settle,
-                           anchors=section_vertices(n, 0), anchor_stiffness=anchor_stiffness, **kw)
+                           anchors=section_vertices(n, 0), anchor_stiffness=anchor_stiffness, rewind=rewind, **kw)
     F = record["anchor_force"].sum(axis=2).astype(np.float64)  # (S, W, 3)
     t = record["time"]
-    pull = F[..., 0]
-    summary = {"gaits": list(record["gaits"]), "duration_s": float(t[-1]),
+    pull, magnitude = F[..., 0], np.linalg.norm(F, axis=-1)
+    summary = {"gaits": list(record["gaits"]), "duration_s": float(t[-1]), "rewind": bool(record.get("rewind", False)),
                "anchor_stiffness_N_per_m": float(anchor_stiffness),
                "max_pull_mN": (1e3 * pull.max(axis=0)).tolist(), "mean_pull_mN": (1e3 * pull.mean(axis=0)).tolist(),
                "min_pull_mN": (1e3 * pull.min(axis=0)).tolist(),
-               "max_abs_force_mN": (1e3 * np.linalg.norm(F, axis=-1).max(axis=0)).tolist(),
+               "max_abs_force_mN": (1e3 * magnitude.max(axis=0)).tolist(),
                "unstable": record["unstable"].tolist()}
     W = pull.shape[1]
     params = record.get("params")
     periods = (np.broadcast_to(np.asarray(params.cycle_period, np.float64), (W,)) if params is not None
                else np.ones(W))
     res = {}
-    for tag, bl in (("", 0.0), ("_trough", "trough")):
-        shapes = [rise_fall_times(t, pull[:, w], periods[w], baseline=bl) for w in range(W)]  # host analysis
+    for tag, signal, bl in (("", pull, 0.0), ("_trough", pull, "trough"), ("_magnitude", magnitude, 0.0)):
+        shapes = [rise_fall_times(t, signal[:, w], periods[w], baseline=bl) for w in range(W)]  # host analysis
         C = min(len(s["rise"]) for s in shapes)
         res["rise_time" + tag] = np.stack([s["rise"][:C] for s in shapes], axis=1) if C else np.zeros((0, W))
         res["fall_time" + tag] = np.stack([s["fall"][:C] for s in shapes], axis=1) if C else np.zeros((0, W))
@@ -638,8 +651,8 @@ def force_plate(gait_list=GAITS, duration: float = 2.0, *, anchor_stiffness: flo
             f"rise_over_fall{tag}": np.where(fm > 0, rm / np.where(fm > 0, fm, 1.0), np.nan).tolist(),
         })
     summary.update(cycle_period_s=periods.tolist(), whole_cycles=int(res["rise_time"].shape[0]))
-    return {"time": t, "force": F, "pull": pull, "gaits": list(record["gaits"]), "unstable": record["unstable"],
-            **res, "summary": summary}
+    return {"time": t, "force": F, "pull": pull, "force_magnitude": magnitude, "gaits": list(record["gaits"]),
+            "unstable": record["unstable"], **res, "summary": summary}
 
 
 def strain(gait_list=GAITS, duration: float = 2.0, *, sample_every: int = 2, settle: float = 0.2,

@@ -7,7 +7,8 @@ step (:func:`warpworm.kernels.magnet_pose.epm_sine_pose` / ``epm_keyframe_pose``
 
 Sinusoidal path (per world; s = t / period + phase, in cycles)::
 
-    x(t) = x0 + direction · w · s                        advances one wavelength w per cycle
+    x(t) = x0 + direction · w · s                        advances one wavelength w per cycle (``rewind``:
+                                                         w · (s − ⌊s⌋), the pass repeated in place)
     gap(t) = h + a · (1 + cos 2πs) / 2                   far (h + a) at s = 0, closest approach h at s = 1/2
     z(t) = −(gap(t) + e(θ))                              the EPM's top face ``gap`` below the origami base z = 0
     moment direction = (cos θ, 0, sin θ)                 θ from +x toward +z (up), in the x–z plane
@@ -59,7 +60,8 @@ DEFAULT_SUBSTEPS = 2
 2.5–3.6 full ones), ~0.6–0.8× the Newton work of 1 ms substeps per simulated second (the wrench, once per step, is
 the same)."""
 
-SINE_FIELDS = ("start_x", "start_y", "wavelength", "amplitude", "depth", "theta", "period", "direction", "phase")
+SINE_FIELDS = ("start_x", "start_y", "wavelength", "amplitude", "depth", "theta", "period", "direction", "phase",
+               "rewind")
 """The sinusoidal path's per-world fields (:class:`warpworm.kernels.magnet_pose.SinePath`)."""
 
 # theta (forward, backward) and where the first closest approach is, as a fraction of the way from the centre IPM
@@ -94,7 +96,8 @@ class EpmPath:
     """A kinematic EPM path for W worlds.
 
     ``kind == "sine"``: the fields of :data:`SINE_FIELDS`, each shape (1,) or (W,) [m, rad, s; direction ±1;
-    phase in cycles]; ``depth`` is how far below the origami base (z = 0) the EPM's *centre* is at closest approach
+    phase in cycles; rewind 0 / 1: 1 restarts the advance at each far point, x = x0 + direction · w · (s − ⌊s⌋),
+    so every cycle repeats the first pass, for a worm tied in place]; ``depth`` is how far below the origami base (z = 0) the EPM's *centre* is at closest approach
     (h + the half-height e(θ) of the tilted cuboid). ``kind == "keyframes"``: ``key_time (K,)`` [s] ascending, ``key_pos (K, 3)`` or (W, K, 3) [m],
     ``key_rot (K, 3, 3)`` or (W, K, 3, 3) (magnet -> world); linear / slerp between keys, held outside.
     """
@@ -109,6 +112,7 @@ class EpmPath:
     period: np.ndarray = field(default_factory=lambda: np.ones(1))
     direction: np.ndarray = field(default_factory=lambda: np.ones(1))
     phase: np.ndarray = field(default_factory=lambda: np.zeros(1))
+    rewind: np.ndarray = field(default_factory=lambda: np.zeros(1))
     key_time: np.ndarray | None = None
     key_pos: np.ndarray | None = None
     key_rot: np.ndarray | None = None

@@ -104,14 +104,18 @@ def plot_slope(r: dict, path) -> Path:
 
 def plot_force_plate(r: dict, path) -> Path:
     plt = _plt()
-    fig, ax = plt.subplots(figsize=(8, 4.2))
+    fig, ax = plt.subplots(figsize=(8, 5))
     for w, g in enumerate(r["gaits"]):
         lab = g + (" (unstable)" if r["unstable"][w] else "")
-        ax.plot(r["time"], 1e3 * r["pull"][:, w], color=GAIT_COLORS.get(g), label=lab)
+        ax.plot(r["time"], 1e3 * r["pull"][:, w], color=GAIT_COLORS.get(g), label=lab + ": along +x")
+        if "force_magnitude" in r:
+            ax.plot(r["time"], 1e3 * r["force_magnitude"][:, w], color=GAIT_COLORS.get(g), ls="--", lw=1,
+                    label=lab + ": |F|")
     ax.axhline(0.0, color="k", lw=0.5)
-    ax.set_xlabel("time [s]"), ax.set_ylabel("anchor force along +x [mN]")
-    ax.set_title("Force plate: tail tied to a fixed point (pull of the worm on the anchor)")
-    ax.legend(), ax.grid(alpha=0.3)
+    ax.set_xlabel("time [s]"), ax.set_ylabel("anchor force [mN]")
+    how = "the EPM's pass repeated in place" if r["summary"].get("rewind") else "the EPM advancing"
+    ax.set_title(f"Force plate: tail tied to a fixed point (the worm's pull on the anchor; {how})", fontsize=10)
+    ax.legend(fontsize=8, ncol=3, loc="upper center", bbox_to_anchor=(0.5, -0.13)), ax.grid(alpha=0.3)
     return _save(fig, path)
 
 

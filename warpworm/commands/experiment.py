@@ -30,6 +30,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--workers", type=int, default=None,
                         help="processes to split the worlds over (default: every core; results equal one "
                              "process's; each worker pays ~2-4 s of start-up)")
+    parser.add_argument("--advance", action="store_true",
+                        help="force-plate only: let the EPM advance w per cycle as in locomotion (it then leaves the "
+                             "tied worm behind) instead of repeating its first pass in place every cycle")
     parser.add_argument("--k-range", nargs=2, type=float, metavar=("LO", "HI"), default=(5.0e-4, 0.1),
                         help="--fit search range for k_α [N/rad] (default 5e-4 0.1)")
 
@@ -60,7 +63,8 @@ def _run(name: str, args, cache: dict, base=None):
         offs = np.array([-2.0, 2.0]) if n == 2 else np.linspace(-4.0, 4.0, n)
         return ex.slope(offs, duration=0.2 if q else 0.5, settle=0.1 if q else 0.2, base=base, workers=workers)
     if name == "force-plate":
-        return ex.force_plate(duration=dur, settle=0.1 if q else 0.2, base=base, workers=workers)
+        return ex.force_plate(duration=dur, settle=0.1 if q else 0.2, base=base, workers=workers,
+                              rewind=not args.advance)
     if "free" not in cache:  # strain and deformation share one free-worm run
         cache["free"] = ex.run_gaits(duration=dur, settle=0.1 if q else 0.2, base=base, workers=workers)
     fn = ex.strain if name == "strain" else ex.deformation
