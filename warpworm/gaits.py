@@ -97,8 +97,9 @@ class EpmPath:
 
     ``kind == "sine"``: the fields of :data:`SINE_FIELDS`, each shape (1,) or (W,) [m, rad, s; direction ±1;
     phase in cycles; rewind 0 / 1: 1 restarts the advance at each far point, x = x0 + direction · w · (s − ⌊s⌋),
-    so every cycle repeats the first pass, for a worm tied in place]; ``depth`` is how far below the origami base (z = 0) the EPM's *centre* is at closest approach
-    (h + the half-height e(θ) of the tilted cuboid). ``kind == "keyframes"``: ``key_time (K,)`` [s] ascending, ``key_pos (K, 3)`` or (W, K, 3) [m],
+    so every cycle repeats the first pass, for a worm tied in place]; ``depth`` is how far below the origami base
+    (z = 0) the EPM's *centre* is at closest approach (h + the half-height e(θ) of the tilted cuboid).
+    ``kind == "keyframes"``: ``key_time (K,)`` [s] ascending, ``key_pos (K, 3)`` or (W, K, 3) [m],
     ``key_rot (K, 3, 3)`` or (W, K, 3, 3) (magnet -> world); linear / slerp between keys, held outside.
     """
 
