@@ -177,3 +177,20 @@ def test_lateral_drift_is_the_centroid_offset_across_the_axis():
     assert m["lateral_displacement_m"][0] == pytest.approx(y[-1], abs=1e-12)
     assert m["lateral_drift_max_m"][0] == pytest.approx(np.abs(y).max(), abs=1e-12)
     assert m["tail_displacement_m"][0] == pytest.approx(0.02, abs=1e-12)  # the axis motion is unaffected
+
+
+@pytest.mark.parametrize("fps", [25.0, 30.0, 50.0, 7.0])
+def test_far_point_motion_of_a_steady_slide_is_its_speed_times_the_window(fps):
+    """A rigid slide at constant speed v over 3 cycles of T = 1 s moves v · 0.2 T within each ±0.1-cycle window
+    around a far point, whatever the frame rate: the window's ends are interpolated, not left to where frames fall
+    (at 25 fps the frames nearest s = 1 are 0.92 and 1.08, which alone would give v · 0.16 T). A rigid slide keeps
+    every ratio at 1."""
+    pat = _worm()
+    v = 0.004  # m/s
+    t = np.arange(0.0, 3.0 + 1e-9, 1.0 / fps)
+    frames = (pat.vertices[None] + v * t[:, None, None] * np.array([1.0, 0.0, 0.0]))[:, None]  # (F, 1, V, 3)
+    F = len(t)
+    m = gait_metrics(pat, pat.hinge_label, {"positions": frames, "magnet_pos": np.zeros((F, 1, 4, 3)),
+                                            "crease_angle": np.zeros((F, 1, len(pat.hinges))), "time": t}, 1.0)
+    assert m["far_point_motion_m"][0] == pytest.approx(v * 0.2, rel=1e-9)
+    assert m["far_point_ratio_deviation"][0] == pytest.approx(0.0, abs=1e-12)

@@ -58,6 +58,20 @@ def end_centres(pattern: crease.CreasePattern, positions: np.ndarray) -> tuple[n
     return x[..., mv[0], :].mean(axis=-2), x[..., mv[-1], :].mean(axis=-2)
 
 
+def _at_time(t, values, when):
+    """``values (F, W, ...)`` sampled at times ``t (F,)``, linearly interpolated per world at ``when (W,)`` [s];
+    NaN where ``when`` lies outside [t[0], t[-1]]. Vectorized over worlds (one searchsorted)."""
+    F, W = values.shape[:2]
+    j = np.clip(np.searchsorted(t, when, side="right"), 1, F - 1)  # (W,) t[j-1] <= when < t[j]
+    t0, t1 = t[j - 1], t[j]
+    a = np.where(t1 > t0, (when - t0) / np.where(t1 > t0, t1 - t0, 1.0), 0.0)
+    wi = np.arange(W)
+    a = a.reshape((W,) + (1,) * (values.ndim - 2))
+    out = (1.0 - a) * values[j - 1, wi] + a * values[j, wi]
+    inside = (when >= t[0] - 1e-12) & (when <= t[-1] + 1e-12)
+    return np.where(inside.reshape((W,) + (1,) * (values.ndim - 2)), out, np.nan)
+
+
 def gait_metrics(pattern, hinge_label, frames: dict, period, incline=0.0) -> dict:
     """Per-world measures of one gait run.
 
@@ -79,7 +93,8 @@ def gait_metrics(pattern, hinge_label, frames: dict, period, incline=0.0) -> dic
         ``end_hold_ratio`` (W, C): in each cycle's contraction (from its longest head–tail length to the shortest
         after it; from the cycle start when the shortest comes first), the motion of the end that moved less over that of the end that moved more (0: one end held,
         1: both ends moved together, i.e. slid); ``far_point_motion_m`` (W,) the largest centroid motion in the
-        windows ±0.1 cycle around the EPM's far points (s = 0, 1, 2, …) after the first;
+        windows ±0.1 cycle around the EPM's far points (s = 0, 1, 2, …) after the first (the frames within and
+        the centroid interpolated at the window's ends, so the frame rate does not move the window);
         ``far_point_ratio_deviation`` (W,) the largest |ratio − 1| in those windows (has the worm relaxed?);
         ``approach_placement`` (W, C) where the EPM passes at each closest approach (s = c + ½, the frame nearest
         it): its position along the axis from the centre IPM over the centre-to-head IPM spacing (0 under the
@@ -143,13 +158,17 @@ def gait_metrics(pattern, hinge_label, frames: dict, period, incline=0.0) -> dic
     far = np.zeros(W)
     far_dev = np.zeros(W)
     for k in range(1, C + 1):
-        win = np.abs(s - k) <= 0.1
-        if not win.any():
-            continue
-        hi = np.where(win, centroid, -np.inf).max(axis=0)
-        lo = np.where(win, centroid, np.inf).min(axis=0)
+        # the window [k − 0.1, k + 0.1] cycles: its frames plus the values interpolated at its two ends, so that the
+        # measure does not depend on whether a frame happens to fall on an end (fps 50 puts one there, fps 25 not)
+        win = np.abs(s - k) <= 0.1 + 1e-9
+        ends = [_at_time(t, v, (k + e) * T) for e in (-0.1, 0.1) for v in (centroid, ratios)]
+        c_lo, r_lo, c_hi, r_hi = ends
+        hi = np.maximum(np.where(win, centroid, -np.inf).max(axis=0), np.fmax(c_lo, c_hi))
+        lo = np.minimum(np.where(win, centroid, np.inf).min(axis=0), np.fmin(c_lo, c_hi))
         far = np.maximum(far, np.where(np.isfinite(hi - lo), hi - lo, 0.0))
         dev = np.where(win[..., None], np.abs(ratios - 1.0), 0.0).max(axis=(0, 2))
+        dev_ends = np.fmax(np.abs(r_lo - 1.0), np.abs(r_hi - 1.0)).max(axis=-1)
+        far_dev = np.maximum(far_dev, np.where(np.isfinite(dev_ends), dev_ends, 0.0))
         far_dev = np.maximum(far_dev, dev)
 
     return {
