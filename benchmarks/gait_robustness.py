@@ -59,7 +59,7 @@ def main(argv=None) -> int:
     for i, pt in enumerate(pts):
         d = " ".join(f"{r['displacement_mm'][i]:5.1f}" for r in rows)
         q = " ".join(f"{r['ratio_min'][i]:.3f}" for r in rows)
-        print(f"{pt[0]:5.0f}{pt[1]:5.0f}{pt[2]:5.0f}  {'yes' if robust[i] else 'NO ':6s}  {d}  /  {q}")
+        print(f"{pt[0]:5g}{pt[1]:5g}{pt[2]:5g}  {'yes' if robust[i] else 'NO ':6s}  {d}  /  {q}")  # 5.5 stays 5.5
     out = Path(args.out or Path(__file__).parent / "results" / f"gait_robustness_{args.gait}.json")
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"gait": args.gait, "cycles": args.cycles, "points_mm": pts.tolist(),
