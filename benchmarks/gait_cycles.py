@@ -24,7 +24,6 @@ Usage::
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from dataclasses import replace
@@ -34,21 +33,15 @@ import numpy as np
 
 
 def main(argv=None) -> int:
-    from gait_grid import add_grid_arguments, grid_from_arguments
+    from gait_grid import gait_grid_parser, grid_from_arguments
     from warpworm import gaits, quiet_warp
     from warpworm.gait_search import search_gait
     from warpworm.params import parse_overrides
 
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("gait", choices=gaits.GAITS)
-    add_grid_arguments(ap)
-    ap.add_argument("--cycles", type=int, default=5)
-    ap.add_argument("--backward", action="store_true")
+    ap = gait_grid_parser(__doc__, cycles_default=5, name="gait_cycles")
     ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                     help="override a WormParams field, e.g. --set hinge_stiffness=0.0025")
-    ap.add_argument("--workers", type=int, default=None)
     ap.add_argument("--top", type=int, default=12)
-    ap.add_argument("--out", default=None, help="JSON path (default benchmarks/results/gait_cycles_<gait>.json)")
     args = ap.parse_args(argv)
     if args.cycles < 2:
         raise SystemExit(f"--cycles: {args.cycles}; expected at least 2 (the first cycle against the later ones)")

@@ -20,7 +20,6 @@ Usage::
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from dataclasses import replace
@@ -30,21 +29,15 @@ import numpy as np
 
 
 def main(argv=None) -> int:
-    from gait_grid import add_grid_arguments, grid_from_arguments
+    from gait_grid import gait_grid_parser, grid_from_arguments
     from warpworm import gaits, quiet_warp
     from warpworm.commands.simulate import run_gait_split
     from warpworm.gait_search import grid_points
 
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("gait", choices=gaits.GAITS)
-    add_grid_arguments(ap)
-    ap.add_argument("--cycles", type=float, default=5.0)
-    ap.add_argument("--backward", action="store_true")
+    ap = gait_grid_parser(__doc__, cycles_default=5.0, cycles_type=float, name="gait_dt_error")
     ap.add_argument("--substeps", default="2,4,8", help="substeps per 4 ms step of the runs compared (default 2,4,8)")
     ap.add_argument("--reference", type=int, default=16, help="substeps of the reference run (default 16: 0.25 ms)")
     ap.add_argument("--fps", type=float, default=50.0, help="trajectory frames per second compared (default 50)")
-    ap.add_argument("--workers", type=int, default=None)
-    ap.add_argument("--out", default=None, help="JSON path (default benchmarks/results/gait_dt_error_<gait>.json)")
     args = ap.parse_args(argv)
     try:
         runs = [int(v) for v in args.substeps.split(",") if v.strip()]

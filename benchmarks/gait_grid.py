@@ -1,4 +1,5 @@
-"""The (w, a, h) grid arguments the gait benchmarks share (``gait_robustness.py``, ``gait_cycles.py``)."""
+"""The (w, a, h) grid arguments the gait benchmarks share (``gait_robustness.py``, ``gait_cycles.py``,
+``gait_dt_error.py``)."""
 
 from __future__ import annotations
 
@@ -28,3 +29,20 @@ def grid_from_arguments(args) -> dict[str, np.ndarray]:
             raise SystemExit(f"--{flag}: {text!r}: expected one or more finite values >= 0 [mm]")
         out[field] = vals
     return out
+
+
+def gait_grid_parser(doc: str, *, cycles_default, cycles_type=int, name: str = ""):
+    """The parser the grid benchmarks start from: the gait, ``--w/--a/--h``, ``--cycles``, ``--backward``,
+    ``--workers`` and ``--out`` (default ``benchmarks/results/<name>_<gait>.json``); each adds its own flags."""
+    import argparse
+
+    from warpworm import gaits
+
+    ap = argparse.ArgumentParser(description=doc.splitlines()[0])
+    ap.add_argument("gait", choices=gaits.GAITS)
+    add_grid_arguments(ap)
+    ap.add_argument("--cycles", type=cycles_type, default=cycles_default)
+    ap.add_argument("--backward", action="store_true")
+    ap.add_argument("--workers", type=int, default=None)
+    ap.add_argument("--out", default=None, help=f"JSON path (default benchmarks/results/{name}_<gait>.json)")
+    return ap
