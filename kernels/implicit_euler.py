@@ -180,7 +180,21 @@ def landing_floor_force(h0: float, vel: wp.vec3, n: wp.vec3, dt: float, w_inv: f
 
 
 @wp.func
-def friction_force(status: int, vt: wp.vec3, normal_force: float, mu_s: float, mu_k: float, slip_speed: float):
+def backward_friction_scale(vt: wp.vec3, fwd: wp.vec3, mu_back: float, slip_speed: float) -> float:
+    """The factor on the friction coefficients of a vertex moving at tangential velocity ``vt`` [m/s]: 1 head-ward
+    (along ``fwd``, the floor's tangent along the worm's rest axis, +x), ``mu_back`` tail-ward (a skin whose
+    friction differs by direction), blended by a smoothstep over tail-ward speeds in [−ε, ε] (ε = ``slip_speed``):
+    a vertex held by static friction creeps at ~ε either way, and its viscous force must not jump as the creep turns.
+    Exactly 1 when ``mu_back`` is 1 (isotropic friction, the paper's)."""
+    if mu_back == 1.0:
+        return 1.0
+    u = wp.clamp(0.5 - 0.5 * wp.dot(vt, fwd) / slip_speed, 0.0, 1.0)
+    return 1.0 + (mu_back - 1.0) * u * u * (3.0 - 2.0 * u)
+
+
+@wp.func
+def friction_force(status: int, vt: wp.vec3, normal_force: float, mu_s: float, mu_k: float, mu_back: float,
+                   fwd: wp.vec3, slip_speed: float):
     """The floor's friction on a vertex on it moving at tangential velocity ``vt`` [m/s] under ``normal_force``
     [N]: (force [N], stiffness ∂f/∂v projected PSD [N·s/m] as a scalar on the tangent plane, and the unit direction
     the stiffness excludes (the sliding direction; zero when stuck)).
@@ -188,9 +202,14 @@ def friction_force(status: int, vt: wp.vec3, normal_force: float, mu_s: float, m
     Stuck (static, ``status`` CONTACT_STUCK): f = −(mu_s F_n / ε) v_t, a stiff viscous force that reaches mu_s F_n
     at ε = ``slip_speed``, so a vertex held by friction creeps at most ~ε; one moving faster than ε has broken loose.
     Sliding (kinetic): f = −mu_k F_n v_t / |v_t|, whose derivative is (mu_k F_n / |v_t|)(I − t tᵀ) on the plane.
+    Both coefficients are scaled by :func:`backward_friction_scale` (``mu_back`` tail-ward, ``fwd`` head-ward); its
+    own derivative is left out of the stiffness (the Newton matrix stays symmetric; the residual is exact).
     """
     if not (normal_force > 0.0):
         return wp.vec3(0.0), 0.0, wp.vec3(0.0)
+    k_dir = backward_friction_scale(vt, fwd, mu_back, slip_speed)
+    mu_s = mu_s * k_dir
+    mu_k = mu_k * k_dir
     if status == CONTACT_STUCK:
         c = mu_s * normal_force / slip_speed
         return vt * (-c), c, wp.vec3(0.0)
@@ -237,6 +256,7 @@ class BarHingeModel:
     floor_incline: wp.array(dtype=float)  # (R,) [rad] about +y
     mu_static: wp.array(dtype=float)  # (R,)
     mu_kinetic: wp.array(dtype=float)  # (R,)
+    friction_backward_ratio: wp.array(dtype=float)  # (R,) μ tail-ward over μ head-ward (1: isotropic)
 
 
 @wp.struct
@@ -303,6 +323,8 @@ class WorldCoefficients:
     floor_n: wp.vec3  # the floor's unit normal
     mu_s: float
     mu_k: float
+    mu_back: float  # friction_backward_ratio
+    floor_fwd: wp.vec3  # the floor's tangent along the worm's rest axis (+x tilted with the floor): head-ward
     dt: float
     inv_dt: float
     inv_dt2: float
@@ -329,6 +351,8 @@ def world_coefficients(m: BarHingeModel, world: int, dt: float) -> WorldCoeffici
     c.floor_n = wp.vec3(-wp.sin(beta), 0.0, wp.cos(beta))
     c.mu_s = pw(m.mu_static, world)
     c.mu_k = pw(m.mu_kinetic, world)
+    c.mu_back = pw(m.friction_backward_ratio, world)
+    c.floor_fwd = wp.vec3(wp.cos(beta), 0.0, wp.sin(beta))
     c.dt = dt
     c.inv_dt = 1.0 / dt
     c.inv_dt2 = c.inv_dt * c.inv_dt
@@ -377,7 +401,7 @@ def vertex_friction(world: int, i: int, c: WorldCoefficients, slip_speed: float,
     vel = s.v[world, i] + w.delta[world, i] * c.inv_dt
     vt = vel - c.floor_n * wp.dot(vel, c.floor_n)
     return friction_force(s.contact[world, i], vt, wp.dot(s.floor_force[world, i], c.floor_n), c.mu_s, c.mu_k,
-                          slip_speed)
+                          c.mu_back, c.floor_fwd, slip_speed)
 
 
 @wp.func
@@ -624,7 +648,7 @@ def update_contacts(world: int, c: WorldCoefficients, m: BarHingeModel, slip_spe
             s.contact[world, i] = CONTACT_STUCK
         if s.contact[world, i] != st:
             changed = wp.max(changed, CONTACTS_CHANGED)
-        f, kf, t = friction_force(s.contact[world, i], vt, fn, c.mu_s, c.mu_k, slip_speed)
+        f, kf, t = friction_force(s.contact[world, i], vt, fn, c.mu_s, c.mu_k, c.mu_back, c.floor_fwd, slip_speed)
         s.floor_force[world, i] = c.floor_n * fn + f
     return changed
 
@@ -680,14 +704,15 @@ def finish_substep(world: int, c: WorldCoefficients, m: BarHingeModel, opt: Subs
         st = s.contact[world, i]
         if st == CONTACT_FREE:
             # a vertex that reaches the floor only in the last step: position-level contact and friction
-            p, vel, st, depth = floor_landing(p0, vel, c.floor_n, c.mu_s, c.mu_k, dt)
+            k_dir = backward_friction_scale(vel, c.floor_fwd, c.mu_back, opt.slip_speed)  # fwd is tangential
+            p, vel, st, depth = floor_landing(p0, vel, c.floor_n, c.mu_s * k_dir, c.mu_k * k_dir, dt)
             s.floor_force[world, i] = c.floor_n * (depth * mass_over_dt2(m.inv_mass[c.im_row, i], c.inv_dt2))
         elif st == CONTACT_STUCK or st == CONTACT_SLIDING:
             vn = wp.dot(vel, c.floor_n)
             vel = vel + c.floor_n * (wp.max(vn, -wp.dot(p0, c.floor_n) * c.inv_dt) - vn)
             vt = vel - c.floor_n * wp.dot(vel, c.floor_n)
             fn = wp.dot(s.floor_force[world, i], c.floor_n)
-            f, kf, t = friction_force(st, vt, fn, c.mu_s, c.mu_k, opt.slip_speed)
+            f, kf, t = friction_force(st, vt, fn, c.mu_s, c.mu_k, c.mu_back, c.floor_fwd, opt.slip_speed)
             s.floor_force[world, i] = c.floor_n * fn + f
         else:
             vel = wp.vec3(0.0)  # infinite mass

@@ -54,6 +54,7 @@ from .implicit_euler import (
     CONTACTS_CHANGED,
     CONTACTS_LANDED,
     WORLD_CRUMPLED,
+    backward_friction_scale,
     dof_projector,
     floor_landing,
     friction_force,
@@ -275,6 +276,8 @@ def finish_row(
     floor_n: wp.vec3,
     mu_s: float,
     mu_k: float,
+    mu_back: float,
+    floor_fwd: wp.vec3,
     slip_speed: float,
     v: wp.array2d(dtype=wp.vec3),
     delta: wp.array2d(dtype=wp.vec3),
@@ -294,7 +297,8 @@ def finish_row(
     if su == CONTACT_SLIDING or su == CONTACT_STUCK:
         vel = v[world, u] + delta[world, u] * inv_dt
         vt = vel - floor_n * wp.dot(vel, floor_n)
-        f, c, t = friction_force(su, vt, wp.dot(floor_force[world, u], floor_n), mu_s, mu_k, slip_speed)
+        f, c, t = friction_force(su, vt, wp.dot(floor_force[world, u], floor_n), mu_s, mu_k, mu_back, floor_fwd,
+                                 slip_speed)
         g = g - f
         hess[world, u, 0] = hess[world, u, 0] + (eye - wp.outer(floor_n, floor_n) - wp.outer(t, t)) * (c * inv_dt)
     for band in range(bw + 1):
@@ -370,6 +374,8 @@ def update_contact(
     floor_n: wp.vec3,
     mu_s: float,
     mu_k: float,
+    mu_back: float,
+    floor_fwd: wp.vec3,
     slip_speed: float,
     x: wp.array2d(dtype=wp.vec3),
     v: wp.array2d(dtype=wp.vec3),
@@ -415,7 +421,7 @@ def update_contact(
         contact[world, i] = CONTACT_SLIDING
     elif st == CONTACT_SLIDING and (wp.dot(vt, ff) > 0.0 or vt_len < 0.5 * slip_speed):
         contact[world, i] = CONTACT_STUCK
-    f, c, t = friction_force(contact[world, i], vt, fn, mu_s, mu_k, slip_speed)
+    f, c, t = friction_force(contact[world, i], vt, fn, mu_s, mu_k, mu_back, floor_fwd, slip_speed)
     floor_force[world, i] = floor_n * fn + f
     if contact[world, i] != st:
         return CONTACTS_CHANGED
@@ -434,6 +440,8 @@ def finish_vertex(
     floor_n: wp.vec3,
     mu_s: float,
     mu_k: float,
+    mu_back: float,
+    floor_fwd: wp.vec3,
     slip_speed: float,
     speed_limit: float,
     x: wp.array2d(dtype=wp.vec3),
@@ -451,7 +459,8 @@ def finish_vertex(
     p0 = x_prev[world, i]
     st = contact[world, i]
     if st == CONTACT_FREE:
-        p, vel2, st2, depth = floor_landing(p0, vel, floor_n, mu_s, mu_k, dt)
+        k_dir = backward_friction_scale(vel, floor_fwd, mu_back, slip_speed)  # floor_fwd is tangential
+        p, vel2, st2, depth = floor_landing(p0, vel, floor_n, mu_s * k_dir, mu_k * k_dir, dt)
         vel = vel2
         st = st2
         floor_force[world, i] = floor_n * (depth * mass_over_dt2(inv_mass[im_row, i], inv_dt2))
@@ -460,7 +469,7 @@ def finish_vertex(
         vel = vel + floor_n * (wp.max(vn, -wp.dot(p0, floor_n) * inv_dt) - vn)
         vt = vel - floor_n * wp.dot(vel, floor_n)
         fn = wp.dot(floor_force[world, i], floor_n)
-        f, c, t = friction_force(st, vt, fn, mu_s, mu_k, slip_speed)
+        f, c, t = friction_force(st, vt, fn, mu_s, mu_k, mu_back, floor_fwd, slip_speed)
         floor_force[world, i] = floor_n * fn + f
     else:
         vel = wp.vec3(0.0)  # infinite mass
@@ -543,6 +552,7 @@ def make_tile_substep_kernel(num_vertices: int, bandwidth: int, dense: bool = Tr
         floor_incline: wp.array(dtype=float),
         mu_static: wp.array(dtype=float),
         mu_kinetic: wp.array(dtype=float),
+        friction_backward_ratio: wp.array(dtype=float),
         vert_bar_start: wp.array(dtype=wp.int32),
         vert_bar: wp.array(dtype=wp.int32),
         vert_hinge_start: wp.array(dtype=wp.int32),
@@ -598,6 +608,8 @@ def make_tile_substep_kernel(num_vertices: int, bandwidth: int, dense: bool = Tr
         floor_n = wp.vec3(-wp.sin(beta), 0.0, wp.cos(beta))
         mu_s = pw(mu_static, world)
         mu_k = pw(mu_kinetic, world)
+        mu_back = pw(friction_backward_ratio, world)
+        floor_fwd = wp.vec3(wp.cos(beta), 0.0, wp.sin(beta))
         inv_dt = 1.0 / dt
         inv_dt2 = inv_dt * inv_dt
         slot_rounds = (SLOTS + bd - 1) // bd
@@ -634,8 +646,9 @@ def make_tile_substep_kernel(num_vertices: int, bandwidth: int, dense: bool = Tr
                     change = int(0)
                     for i in range(lane, nv, bd):
                         change = wp.max(change, update_contact(world, i, im_row, inv_mass, dt, inv_dt, inv_dt2,
-                                                               floor_n, mu_s, mu_k, slip_speed, x, v, x_prev, delta,
-                                                               floor_force, grad, contact, released))
+                                                               floor_n, mu_s, mu_k, mu_back, floor_fwd, slip_speed,
+                                                               x, v, x_prev, delta, floor_force, grad, contact,
+                                                               released))
                     change = block_max(change)  # barrier: contacts and landed positions before the rows read them
                     if change == CONTACTS_LANDED:
                         # x moved: assemble anew at it
@@ -651,7 +664,8 @@ def make_tile_substep_kernel(num_vertices: int, bandwidth: int, dense: bool = Tr
                         if bad != 0:
                             break
                 for u in range(lane, nv, bd):
-                    finish_row(world, u, im_row, inv_mass, inv_dt, floor_n, mu_s, mu_k, slip_speed, v, delta,
+                    finish_row(world, u, im_row, inv_mass, inv_dt, floor_n, mu_s, mu_k, mu_back, floor_fwd, slip_speed,
+                               v, delta,
                                contact, floor_force, hess, grad)
                 bad = block_max(0)  # barrier: every row finished before the solve reads it
                 moving = int(0)
@@ -714,7 +728,8 @@ def make_tile_substep_kernel(num_vertices: int, bandwidth: int, dense: bool = Tr
             # 3. floor once more, velocities, crease angles, stability
             flag = int(0)
             for i in range(lane, nv, bd):
-                if finish_vertex(world, i, im_row, inv_mass, dt, inv_dt, inv_dt2, floor_n, mu_s, mu_k, slip_speed,
+                if finish_vertex(world, i, im_row, inv_mass, dt, inv_dt, inv_dt2, floor_n, mu_s, mu_k, mu_back,
+                                 floor_fwd, slip_speed,
                                  speed_limit, x, v, x_prev, delta, floor_force, contact) != 0:
                     flag = FLAG_EXPLODED
             bad = block_max(flag)  # barrier: every final x before the crease angles read them

@@ -96,6 +96,57 @@ def test_incline_above_friction_angle_slides_with_coulomb_acceleration(mu_s, mu_
     assert abs(acc - expected) < 0.05 * expected, f"a = {acc:.4f} m/s², expected {expected:.4f}"
 
 
+def _slide_acceleration(p, substeps: int = 2, seconds: float = 0.4) -> float:
+    """Acceleration [m/s²] of the worm's centroid down the floor's slope, fitted after the contact transient."""
+    beta = float(p.floor_incline)
+    model = Model.from_params(p, 1, "cpu")
+    sim = Simulator(model, dt=2e-3, substeps=substeps)
+    state = sim.initial_state()
+    axis = np.array([np.cos(beta), 0.0, np.sin(beta)])  # up the slope when beta > 0
+    ts, s = [], []
+    for _ in range(int(round(seconds / 0.01))):
+        sim.step(state, 5, epm=False)
+        snap = sim.snapshot(state)
+        ts.append(snap["time"][0])
+        s.append(float(_com(snap["positions"][0]) @ axis))
+    ts, s = np.array(ts), np.array(s)
+    keep = ts > 0.05
+    return -2.0 * np.sign(beta) * np.polyfit(ts[keep], s[keep], 2)[0]
+
+
+def test_backward_friction_ratio_holds_a_worm_head_up_and_not_head_down():
+    """A skin that grips twice as hard tail-ward (``friction_backward_ratio`` 2): on a 20° slope, steeper than
+    atan μs = 15.0° but not than atan 2μs = 28.2°, the worm facing uphill (sliding down would be tail-ward) holds,
+    and facing downhill (head-ward) slides with Coulomb's g (sin β − μk cos β) of the head-ward μk, to 5 %."""
+    mu_s, mu_k, ratio = 0.268, 0.24, 2.0
+    beta = np.deg2rad(20.0)
+    kw = dict(mu_static=mu_s, mu_kinetic=mu_k, friction_backward_ratio=ratio, damping=0.0, **NO_MAGNETS,
+              **RIGID_SHEET)
+    model = Model.from_params(WormParams(floor_incline=beta, **kw), 1, "cpu")
+    sim = Simulator(model, dt=4e-3, substeps=2)
+    state = sim.initial_state()
+    sim.step(state, 50, epm=False)
+    x0 = sim.snapshot(state)["positions"]
+    sim.step(state, 500, epm=False)  # 2 s
+    slide = np.linalg.norm(_com(sim.snapshot(state)["positions"]) - _com(x0), axis=-1).max()
+    assert slide < 1e-4, f"head-up worm crept {slide * 1e3:.4f} mm over 2 s at 20 deg with a 2x tail-ward grip"
+    acc = _slide_acceleration(WormParams(floor_incline=-beta, **kw))
+    expected = 9.81 * (np.sin(beta) - mu_k * np.cos(beta))
+    assert abs(acc - expected) < 0.05 * expected, f"head-down a = {acc:.4f} m/s², expected {expected:.4f}"
+
+
+def test_backward_friction_ratio_scales_the_tailward_kinetic_friction():
+    """Past atan(2 μs) (30° here) the head-up worm slides tail-ward against twice the kinetic friction:
+    g (sin β − 2 μk cos β), to 5 % (with the isotropic μk it would be 2.2× that)."""
+    mu_s, mu_k, ratio = 0.268, 0.24, 2.0
+    beta = np.deg2rad(30.0)
+    p = WormParams(mu_static=mu_s, mu_kinetic=mu_k, friction_backward_ratio=ratio, floor_incline=beta, damping=0.0,
+                   **NO_MAGNETS, **RIGID_SHEET)
+    acc = _slide_acceleration(p)
+    expected = 9.81 * (np.sin(beta) - ratio * mu_k * np.cos(beta))
+    assert abs(acc - expected) < 0.05 * expected, f"a = {acc:.4f} m/s², expected {expected:.4f}"
+
+
 def test_free_fall_matches_g():
     g = 9.81
     p = WormParams(damping=0.0, gravity=g, **NO_MAGNETS)

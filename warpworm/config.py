@@ -76,6 +76,8 @@ def _worm_specs() -> dict[str, ParamSpec]:
         "mu_static": ParamSpec(_WP.mu_static, "1", low=0.0, doc="static friction coefficient"),
         "mu_kinetic": ParamSpec(_WP.mu_kinetic, "1", low=0.0,
                                 doc="kinetic friction coefficient (clipped to <= mu_static per sample)"),
+        "friction_backward_ratio": ParamSpec(_WP.friction_backward_ratio, "1", positive=True,
+                                             doc="friction tail-ward over head-ward (1: isotropic, the paper's)"),
         "floor_incline": ParamSpec(_WP.floor_incline, "rad", low=-_PI / 2, high=_PI / 2, doc="floor slope about +y"),
         "gravity": ParamSpec(_WP.gravity, "m/s^2", low=0.0, doc="gravitational acceleration"),
         "dipole_density": ParamSpec(_WP.dipole_density, "1/m^3", positive=True, doc="dipoles per m^3 ('dipoles')"),

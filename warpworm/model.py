@@ -163,6 +163,11 @@ class ModelBuilder:
             raise ValueError("num_worlds must be >= 1")
         if p.magnet_model not in MAGNET_MODELS:
             raise ValueError(f"magnet_model must be one of {MAGNET_MODELS}, got {p.magnet_model!r}")
+        ratio = np.asarray(p.friction_backward_ratio, np.float64)
+        if not np.all(np.isfinite(ratio) & (ratio > 0.0)):
+            bad = ratio.reshape(-1)[~(np.isfinite(ratio) & (ratio > 0.0)).reshape(-1)][0]
+            raise ValueError(f"worm.friction_backward_ratio: got {bad}; expected a finite ratio > 0 (tail-ward over "
+                             "head-ward friction; 1 is isotropic)")
         self.params, self.num_worlds = p, W
         self.anchors = np.zeros(0, np.int32) if anchors is None else np.asarray(anchors, np.int32).reshape(-1)
         self.anchor_stiffness = anchor_stiffness
@@ -282,7 +287,7 @@ class ModelBuilder:
         self._put("bar_stop_stiffness", np.where(is_valley[None, :], ea_rigid[:, None], 0.0).astype(np.float32),
                   float)
         for name in ("hinge_stiffness", "hinge_damping", "fold_limit_stiffness", "damping", "mu_static",
-                     "mu_kinetic", "floor_incline", "gravity", "dipole_density"):
+                     "mu_kinetic", "friction_backward_ratio", "floor_incline", "gravity", "dipole_density"):
             self._scalar(name)
 
     def add_magnets(self) -> None:
@@ -346,7 +351,8 @@ class Model:
     ``bar_stop_strain (R, E)`` vec2 (shortened, stretched) stop strains of the waist bars (1e3: none),
     ``bar_stop_stiffness (R, E)`` [N]; ``hinge_stiffness`` k_alpha per metre of crease [N·m/rad/m],
     ``hinge_damping`` [N·m·s/rad/m], ``fold_limit_stiffness`` [N·m/rad/m] (independent of k_alpha), ``damping``
-    [1/s], ``mu_static``, ``mu_kinetic``, ``floor_incline`` [rad] about +y, ``gravity`` [m/s²] along −z,
+    [1/s], ``mu_static``, ``mu_kinetic``, ``friction_backward_ratio`` (tail-ward over head-ward friction),
+    ``floor_incline`` [rad] about +y, ``gravity`` [m/s²] along −z,
     ``dipole_density`` [1/m³].
     Magnets: ``magnet_model (1,)`` (0 dipoles, 1 analytic), ``magnet_shape (1, 4)`` (0 cuboid, 1 cylinder),
     ``magnet_size (W, 4)`` vec3 [m] (cuboid extents or cylinder (d, d, h)), ``magnet_moment (W, 4)`` vec3 [A·m²]

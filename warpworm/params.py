@@ -81,6 +81,11 @@ class WormParams:
     """Static friction coefficient (paper's slope test), shape () or (W,)."""
     mu_kinetic: float | np.ndarray = 0.24
     """Kinetic friction coefficient, <= mu_static, shape () or (W,)."""
+    friction_backward_ratio: float | np.ndarray = 1.0
+    """Both friction coefficients tail-ward over head-ward (along −x / +x of the worm's rest axis, in the floor's
+    plane), shape () or (W,): 1 (default) is the paper's isotropic friction; > 1 a skin that grips against sliding
+    backward (setae, scales, a sheet's cut edges), < 1 against sliding forward. Blended smoothly within the static
+    friction's slip speed of sideways motion (``kernels.implicit_euler.backward_friction_scale``)."""
     floor_incline: float | np.ndarray = 0.0
     """Floor slope about world +y [rad]; positive raises the floor toward +x (the worm climbs going forward)."""
     support_thickness: float | np.ndarray = 0.003

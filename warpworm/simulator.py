@@ -186,7 +186,7 @@ class Simulator:
         for f in ("inv_mass", "gravity", "damping", "edges", "rest_length", "bar_stiffness", "bar_stop_strain",
                   "bar_stop_stiffness", "hinges", "hinge_length", "hinge_label", "hinge_stiffness", "hinge_damping",
                   "fold_limit_stiffness", "anchor_vertex", "anchor_stiffness", "floor_incline", "mu_static",
-                  "mu_kinetic"):
+                  "mu_kinetic", "friction_backward_ratio"):
             setattr(self._model_arrays, f, getattr(model, f))
         self._model_arrays.hinge_rest = model.hinge_rest_angle
         W, V, dev = model.num_worlds, model.num_vertices, model.device

@@ -57,7 +57,7 @@ def kernel_arguments(model, simulator, state, control, scratch, incidence, num_s
     inputs = [m.inv_mass, m.gravity, m.damping, m.edges, m.rest_length, m.bar_stiffness, m.bar_stop_strain,
               m.bar_stop_stiffness, m.hinges, m.hinge_rest_angle, m.hinge_length, m.hinge_label, m.hinge_stiffness,
               m.hinge_damping, m.fold_limit_stiffness, m.anchor_vertex, m.anchor_stiffness, m.floor_incline,
-              m.mu_static, m.mu_kinetic, *incidence, sim.dt_sub, int(num_substeps), sim.newton, sim.newton_tol * sim.dt_sub, sim.slip_speed,
+              m.mu_static, m.mu_kinetic, m.friction_backward_ratio, *incidence, sim.dt_sub, int(num_substeps), sim.newton, sim.newton_tol * sim.dt_sub, sim.slip_speed,
               sim.bar_strain_limit, sim.speed_limit, sim.fold_tolerance, state.external_force, control.anchor_target]
     outputs = [state.positions, state.velocities, scratch["x_prev"], scratch["delta"], state.floor_force,
                scratch["hess"], scratch["grad"], scratch["released"], state.bar_strain, state.crease_angle, state.contact, state.unstable,
