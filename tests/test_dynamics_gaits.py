@@ -84,6 +84,29 @@ def test_omega_preset_lifts_the_middle_and_shortens_the_worm():
     assert m["length_ratio_min"][0] <= 0.9, m["length_ratio_min"]
 
 
+def test_simulate_set_reaches_the_worlds_and_refuses_bad_values(tmp_path, capsys):
+    """``simulate --set``: a bad field or value is refused before any work (exit 2, the item named, no output
+    folder); a good one reaches every world: the EPM moved half a metre below the plate exerts nothing, so over one
+    cycle the worm stays where it settled (< 0.05 mm), where the preset moves it by millimetres."""
+    import json
+
+    from warpworm.cli import main
+
+    out = tmp_path / "bad"
+    assert main(["simulate", "--set", "friction_backward_ratio=-1", "--out", str(out)]) == 2
+    assert main(["simulate", "--set", "no_such_field=1", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "friction_backward_ratio" in err and "-1" in err and "no_such_field" in err
+    assert not out.exists()
+    runs = {}
+    for tag, extra in (("far", ["--set", "closest_approach=0.5", "--set", "amplitude=0.001"]), ("preset", [])):
+        assert main(["simulate", "--gait", "inchworm", "--cycles", "1", "--worlds", "2", "--json", "--no-output",
+                     "--magnet-model", "analytic", *extra]) == 0
+        runs[tag] = np.asarray(json.loads(capsys.readouterr().out)["displacement_m"])
+    assert np.all(np.abs(runs["far"]) < 5e-5), runs["far"]
+    assert np.all(np.abs(runs["preset"]) > 1e-3), runs["preset"]
+
+
 def test_simulate_cli_json_and_files(tmp_path, capsys):
     import json
 

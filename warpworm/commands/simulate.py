@@ -40,6 +40,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="seed of --randomize")
     parser.add_argument("--workers", type=int, default=None,
                         help="processes to split the worlds over (default: every core; results equal one process's)")
+    parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
+                        help="override a WormParams field of every world (after --randomize), e.g. --set "
+                             "friction_backward_ratio=2 --set wavelength=0.006")
     parser.add_argument("--randomize", nargs="?", const="default", default=None, metavar="CONFIG",
                         help="draw every world's parameters as a dataset job of CONFIG (default: default) with --seed "
                              "draws its trajectories (the config's distributions around the gait preset), gait, "
@@ -296,9 +299,20 @@ def main(args) -> int:
     quiet_warp()
     from warpworm import gaits
 
-    params = gaits.preset_params(args.gait, args.backward, magnet_model=args.magnet_model)
-    if args.randomize:
-        params = randomized_params(args.randomize, args.gait, args.backward, args.magnet_model, args.worlds, args.seed)
+    from warpworm.model import Model
+    from warpworm.params import parse_overrides
+
+    try:
+        overrides = parse_overrides(getattr(args, "set", []))
+        params = gaits.preset_params(args.gait, args.backward, magnet_model=args.magnet_model)
+        if args.randomize:
+            params = randomized_params(args.randomize, args.gait, args.backward, args.magnet_model, args.worlds,
+                                       args.seed)
+        params = replace(params, **overrides)
+        Model.from_params(slice_worlds(params, args.worlds, 0, 1), 1, "cpu")  # refuse bad values before any work
+    except ValueError as e:
+        print(f"warpworm simulate: {e}", file=sys.stderr)
+        return 2
     device = "cuda:0" if args.device == "cuda" else args.device
     want_files = not args.no_output
     if args.workers is not None and args.workers < 1:
