@@ -10,7 +10,7 @@ crumple edge, where a change of float rounding decides the outcome.
 Usage::
 
     python benchmarks/gait_robustness.py peristaltic --w 20,24,28 --a 30,40,50 --h 16,17,18,20 [--cycles 3]
-        [--out benchmarks/results/gait_robustness_peristaltic.json]
+        [--set FIELD=VALUE ...] [--out benchmarks/results/gait_robustness_peristaltic.json]
 
 Prints one row per point (robust, |displacement| [mm] and the smallest segment ratio in each setting) and writes
 the JSON.
@@ -34,20 +34,33 @@ def main(argv=None) -> int:
     from gait_grid import add_grid_arguments, grid_from_arguments
     from warpworm import gaits, quiet_warp
     from warpworm.commands.simulate import run_gait
+    from warpworm.params import parse_overrides
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("gait", choices=gaits.GAITS)
     add_grid_arguments(ap)
     ap.add_argument("--cycles", type=int, default=3)
+    ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
+                    help="override a WormParams field in every setting; a friction_backward_ratio r is mirrored in "
+                         "the backward settings (ratio 1/r on r times mu_static and mu_kinetic: the same skin "
+                         "facing the other way)")
     ap.add_argument("--out", default=None)
     args = ap.parse_args(argv)
+    try:
+        overrides = parse_overrides(args.set)
+    except ValueError as e:
+        raise SystemExit(str(e)) from None
     quiet_warp()
     pts_m = np.array(list(itertools.product(*grid_from_arguments(args).values())))  # rows (w, a, h) [m]
     pts = np.round(pts_m * 1e3, 9)  # the same rows in mm, for the table and the JSON
     rows = []
     for mm, back, dt, sub in SETTINGS:
-        p = replace(gaits.preset_params(args.gait, back), magnet_model=mm, wavelength=pts_m[:, 0],
+        p = replace(gaits.preset_params(args.gait, back, **overrides), magnet_model=mm, wavelength=pts_m[:, 0],
                     amplitude=pts_m[:, 1], closest_approach=pts_m[:, 2])
+        r_skin = float(overrides.get("friction_backward_ratio", 1.0))
+        if back and r_skin != 1.0:  # the mirror image of the forward worm's skin
+            p = replace(p, friction_backward_ratio=1.0 / r_skin, mu_static=r_skin * float(p.mu_static),
+                        mu_kinetic=r_skin * float(p.mu_kinetic))
         r = run_gait(p, len(pts), args.cycles, dt=dt, substeps=sub, fps=50, save_worlds=0)
         rows.append(dict(magnet_model=mm, backward=back, dt=dt, substeps=sub, unstable=r["unstable"].tolist(),
                          displacement_mm=(np.abs(r["displacement_m"]) * 1e3).tolist(),
