@@ -60,11 +60,12 @@ def _lift(sim, states, lift, incline) -> None:
         s.positions.assign(x)
 
 
-def landing(**sim_kwargs):
+def landing(incline=(0.0, 0.15, 0.35), friction_backward_ratio=1.0, **sim_kwargs):
     """Three worlds dropped 1, 2, 3 mm onto floors inclined 0, 0.15 and 0.35 rad (the last above the friction
     angle atan(0.268) = 0.26 rad: it slides), 1 ms substeps. Returns (sim, band state, tile state)."""
-    incline = np.array([0.0, 0.15, 0.35])
-    model = Model.from_params(WormParams(floor_incline=incline), 3, "cpu")
+    incline = np.asarray(incline, np.float64)
+    model = Model.from_params(WormParams(floor_incline=incline, friction_backward_ratio=friction_backward_ratio),
+                              3, "cpu")
     sim = Simulator(model, dt=1.0e-3, substeps=1, **{"chord": False, **sim_kwargs})
     band, tile = sim.initial_state(), sim.initial_state()
     _lift(sim, (band, tile), [1.0e-3, 2.0e-3, 3.0e-3], incline)
@@ -166,6 +167,19 @@ def test_band_factorization_is_bit_for_bit_the_band_path_landing_and_sliding():
     assert band.contact.numpy().any(axis=1).all()
     slide = np.abs(band.positions.numpy()[2, :, 0] - x0[2, :, 0]).mean()
     assert slide > 1.0e-3, f"the worm on the 0.35 rad floor slid only {slide * 1e3:.3f} mm"
+    _assert_identical(band, tile)
+
+
+def test_band_factorization_is_bit_for_bit_the_band_path_with_a_one_way_skin():
+    """Friction that differs by direction (``friction_backward_ratio`` per world 2, ½, 2) on floors of 0, +0.35 and
+    −0.35 rad: the head-up worm slides tail-ward on half the friction, the head-down one head-ward; the tile path's
+    friction, contact updates and landings scale μ as the band path's, bit for bit."""
+    sim, band, tile = landing(incline=(0.0, 0.35, -0.35), friction_backward_ratio=np.array([2.0, 0.5, 2.0]))
+    x0 = band.positions.numpy().copy()
+    _run_substeps(sim, band, tile, TileSubsteps(sim.model, sim, "band"), 200)
+    assert (band.unstable.numpy() == 0).all() and band.contact.numpy().any(axis=1).all()
+    dx = (band.positions.numpy()[:, :, 0] - x0[:, :, 0]).mean(axis=1)
+    assert dx[1] < -1.0e-3 and dx[2] > 1.0e-3, dx  # down the slopes: tail-ward on +0.35, head-ward on −0.35
     _assert_identical(band, tile)
 
 
