@@ -180,44 +180,90 @@ def landing_floor_force(h0: float, vel: wp.vec3, n: wp.vec3, dt: float, w_inv: f
 
 
 @wp.func
-def backward_friction_scale(vt: wp.vec3, fwd: wp.vec3, mu_back: float, slip_speed: float) -> float:
-    """The factor on the friction coefficients of a vertex moving at tangential velocity ``vt`` [m/s]: 1 head-ward
-    (along ``fwd``, the floor's tangent along the worm's rest axis, +x), ``mu_back`` tail-ward (a skin whose
-    friction differs by direction), blended by a smoothstep over tail-ward speeds in [−ε, ε] (ε = ``slip_speed``):
-    a vertex held by static friction creeps at ~ε either way, and its viscous force must not jump as the creep turns.
-    Exactly 1 when ``mu_back`` is 1 (isotropic friction, the paper's)."""
+def skin_profile(a: float, b: float, mu_back: float):
+    """The direction profile g(θ) of a skin whose friction differs by direction, and its first and second
+    derivatives in θ, for a tangential direction at angle θ from the head-ward tangent (``a`` = cos θ, ``b`` =
+    sin θ): g = 1 + (mu_back − 1) S(w), S(w) = 3w² − 2w³, w = (1 − cos θ) / 2, so 1 head-ward, (1 + mu_back) / 2
+    sideways, mu_back tail-ward. A cubic in cos θ: |v| g and |v|² g are convex for every mu_back > 0 (g + g'' >=
+    min(1, mu_back), checked on a fine grid), so the friction below is a monotone force with a symmetric PSD
+    stiffness."""
+    w = 0.5 * (1.0 - a)
+    s1 = 6.0 * w * (1.0 - w)
+    d = mu_back - 1.0
+    return 1.0 + d * w * w * (3.0 - 2.0 * w), d * s1 * 0.5 * b, d * ((6.0 - 12.0 * w) * 0.25 * b * b + s1 * 0.5 * a)
+
+
+@wp.func
+def skin_scale(v: wp.vec3, fwd: wp.vec3, n: wp.vec3, mu_back: float) -> float:
+    """g(θ) of :func:`skin_profile` for the tangential part of ``v`` (1 when it has none, or when ``mu_back`` is 1):
+    the factor on both friction coefficients of a vertex moving that way (used where a landing vertex's friction is
+    applied at position level, without a Newton stiffness)."""
     if mu_back == 1.0:
         return 1.0
-    u = wp.clamp(0.5 - 0.5 * wp.dot(vt, fwd) / slip_speed, 0.0, 1.0)
-    return 1.0 + (mu_back - 1.0) * u * u * (3.0 - 2.0 * u)
+    vt = v - n * wp.dot(v, n)
+    speed = wp.length(vt)
+    if not (speed > 0.0):
+        return 1.0
+    g, g1, g2 = skin_profile(wp.dot(vt, fwd) / speed, wp.dot(vt, wp.cross(n, fwd)) / speed, mu_back)
+    return g
 
 
 @wp.func
 def friction_force(status: int, vt: wp.vec3, normal_force: float, mu_s: float, mu_k: float, mu_back: float,
-                   fwd: wp.vec3, slip_speed: float):
+                   fwd: wp.vec3, n: wp.vec3, slip_speed: float):
     """The floor's friction on a vertex on it moving at tangential velocity ``vt`` [m/s] under ``normal_force``
-    [N]: (force [N], stiffness ∂f/∂v projected PSD [N·s/m] as a scalar on the tangent plane, and the unit direction
-    the stiffness excludes (the sliding direction; zero when stuck)).
+    [N]: (force [N]; its stiffness −∂f/∂v [N·s/m] on the tangent plane as a scalar times (I − n nᵀ − t tᵀ), and the
+    unit direction t that excludes (the sliding direction; zero when stuck); and the rest of the stiffness as a
+    symmetric PSD matrix, zero for isotropic friction).
 
-    Stuck (static, ``status`` CONTACT_STUCK): f = −(mu_s F_n / ε) v_t, a stiff viscous force that reaches mu_s F_n
-    at ε = ``slip_speed``, so a vertex held by friction creeps at most ~ε; one moving faster than ε has broken loose.
-    Sliding (kinetic): f = −mu_k F_n v_t / |v_t|, whose derivative is (mu_k F_n / |v_t|)(I − t tᵀ) on the plane.
-    Both coefficients are scaled by :func:`backward_friction_scale` (``mu_back`` tail-ward, ``fwd`` head-ward); its
-    own derivative is left out of the stiffness (the Newton matrix stays symmetric; the residual is exact).
+    Isotropic (``mu_back`` 1, the paper's): stuck (static, ``status`` CONTACT_STUCK), f = −(mu_s F_n / ε) v_t, a
+    stiff viscous force that reaches mu_s F_n at ε = ``slip_speed``, so a vertex held by friction creeps at most ~ε;
+    one moving faster than ε has broken loose. Sliding (kinetic): f = −mu_k F_n v_t / |v_t|, whose derivative is
+    (mu_k F_n / |v_t|)(I − t tᵀ) on the plane.
+
+    A skin that grips by direction (``mu_back`` ≠ 1: tail-ward over head-ward; ``fwd`` the head-ward tangent, ``n``
+    the floor normal): the friction is −∇D of the convex dissipation D = mu_k F_n |v| g(θ) sliding and
+    (mu_s F_n / 2ε) |v|² g(θ) stuck (g of :func:`skin_profile`), the maximal-dissipation law of an anisotropic
+    surface: along the slide it is g times the isotropic one, and a slide at an angle to the axis is also pushed
+    toward the easier direction (−g' e_θ). Its stiffness is D's Hessian, so the Newton matrix stays symmetric and
+    exact (a scaled coefficient without its derivative made the iteration cycle: half the substeps hit the step cap).
     """
     if not (normal_force > 0.0):
-        return wp.vec3(0.0), 0.0, wp.vec3(0.0)
-    k_dir = backward_friction_scale(vt, fwd, mu_back, slip_speed)
-    mu_s = mu_s * k_dir
-    mu_k = mu_k * k_dir
-    if status == CONTACT_STUCK:
-        c = mu_s * normal_force / slip_speed
-        return vt * (-c), c, wp.vec3(0.0)
+        return wp.vec3(0.0), 0.0, wp.vec3(0.0), wp.mat33(0.0)
+    if mu_back == 1.0:
+        if status == CONTACT_STUCK:
+            c = mu_s * normal_force / slip_speed
+            return vt * (-c), c, wp.vec3(0.0), wp.mat33(0.0)
+        speed = wp.length(vt)
+        if speed > 0.0:
+            c = mu_k * normal_force / speed
+            return vt * (-c), c, vt / speed, wp.mat33(0.0)
+        return wp.vec3(0.0), 0.0, wp.vec3(0.0), wp.mat33(0.0)
+    lat = wp.cross(n, fwd)
     speed = wp.length(vt)
+    if status == CONTACT_STUCK:
+        c0 = mu_s * normal_force / slip_speed
+        if not (speed > 0.0):
+            # D's Hessian has no value at v = 0 (it depends on the direction): the mean of head-ward and tail-ward
+            return wp.vec3(0.0), 0.0, wp.vec3(0.0), (wp.identity(n=3, dtype=float) - wp.outer(n, n)) * (
+                c0 * 0.5 * (1.0 + mu_back))
+        u = vt / speed
+        a = wp.dot(u, fwd)
+        b = wp.dot(u, lat)
+        g, g1, g2 = skin_profile(a, b, mu_back)
+        e = lat * a - fwd * b  # n × u: the direction of increasing θ
+        f = (vt * g + e * (0.5 * g1 * speed)) * (-c0)
+        k = (wp.outer(u, u) * g + (wp.outer(u, e) + wp.outer(e, u)) * (0.5 * g1) + wp.outer(e, e) * (g + 0.5 * g2))
+        return f, 0.0, wp.vec3(0.0), k * c0
     if speed > 0.0:
-        c = mu_k * normal_force / speed
-        return vt * (-c), c, vt / speed
-    return wp.vec3(0.0), 0.0, wp.vec3(0.0)
+        u = vt / speed
+        a = wp.dot(u, fwd)
+        b = wp.dot(u, lat)
+        g, g1, g2 = skin_profile(a, b, mu_back)
+        e = lat * a - fwd * b
+        cn = mu_k * normal_force
+        return (u * g + e * g1) * (-cn), 0.0, wp.vec3(0.0), wp.outer(e, e) * (cn / speed * wp.max(g + g2, 0.0))
+    return wp.vec3(0.0), 0.0, wp.vec3(0.0), wp.mat33(0.0)
 
 
 @wp.func
@@ -297,7 +343,7 @@ class NewtonScratch:
     delta: wp.array2d(dtype=wp.vec3)  # (W, V) x − x̃ [m]
     hess: wp.array3d(dtype=wp.mat33)  # (W, V, B + 1) lower block band of the Newton matrix
     grad: wp.array2d(dtype=wp.vec3)  # (W, V) right-hand side, then the Newton step
-    released: wp.array2d(dtype=wp.int32)  # (W, V) 1 once a vertex let go of the floor in this substep
+    released: wp.array2d(dtype=wp.int32)  # (W, V) bit 0: it let go of the floor in this substep; above: its stick/slip switches
     newton_steps: wp.array(dtype=wp.int32)  # (W,) Newton steps taken, summed over substeps (a diagnostic counter)
     newton_capped: wp.array(dtype=wp.int32)  # (W,) substeps that took every step without meeting the tolerance
     newton_factors: wp.array(dtype=wp.int32)  # (W,) Newton steps that assembled and factored the Hessian
@@ -386,11 +432,13 @@ def friction_terms(world: int, c: WorldCoefficients, slip_speed: float, with_hes
     for i in range(s.x.shape[1]):
         st = s.contact[world, i]
         if st == CONTACT_SLIDING or st == CONTACT_STUCK:
-            f, kf, t = vertex_friction(world, i, c, slip_speed, s, w)
+            f, kf, t, k_skin = vertex_friction(world, i, c, slip_speed, s, w)
             w.grad[world, i] = w.grad[world, i] - f
             if with_hessian:
                 w.hess[world, i, 0] = w.hess[world, i, 0] + (
                     eye - wp.outer(c.floor_n, c.floor_n) - wp.outer(t, t)) * (kf * c.inv_dt)
+                if c.mu_back != 1.0:
+                    w.hess[world, i, 0] = w.hess[world, i, 0] + k_skin * c.inv_dt
 
 
 @wp.func
@@ -401,7 +449,7 @@ def vertex_friction(world: int, i: int, c: WorldCoefficients, slip_speed: float,
     vel = s.v[world, i] + w.delta[world, i] * c.inv_dt
     vt = vel - c.floor_n * wp.dot(vel, c.floor_n)
     return friction_force(s.contact[world, i], vt, wp.dot(s.floor_force[world, i], c.floor_n), c.mu_s, c.mu_k,
-                          c.mu_back, c.floor_fwd, slip_speed)
+                          c.mu_back, c.floor_fwd, c.floor_n, slip_speed)
 
 
 @wp.func
@@ -595,6 +643,37 @@ def predict(world: int, c: WorldCoefficients, m: BarHingeModel, slip_speed: floa
     return changed
 
 
+MAX_STICK_SLIP_SWITCHES = wp.constant(6)
+"""Stick/slip switches a vertex may make in one substep; past them it is held (stuck) for the rest of it."""
+
+RELEASED_LET_GO = wp.constant(1)  # bit 0 of ``released``: the vertex let go of the floor in this substep
+RELEASED_SWITCH = wp.constant(2)  # the count of its stick/slip switches in this substep, in the bits above
+
+
+@wp.func
+def stick_slip_status(st: int, vt: wp.vec3, vt_len: float, ff: wp.vec3, fn: float, fn_old: float, slip_speed: float,
+                      released: int):
+    """The stick/slip rule of a vertex on the floor between Newton steps: a stuck vertex whose viscous static friction
+    (mu_s F_n,old / ε)|v_t| exceeds what mu_s F_n can hold (the normal force now known) broke loose; a sliding one
+    whose motion reversed against its last friction ``ff`` (kinetic friction stopped it) or fell below half the slip
+    speed sticks. Returns (status, released). A vertex switches at most MAX_STICK_SLIP_SWITCHES times per substep,
+    then it is held: two neighbours can otherwise take turns (one held, carrying the load that breaks the other
+    loose, then the reverse) and keep the iteration from converging, which a skin that grips 2x tail-ward did in half
+    of its substeps; held, a vertex creeps at a few times the slip speed (~2e-5 m/s) for the rest of that substep.
+    (The rule's direction factor cancels: a skin scales mu_s F_n,old and mu_s F_n alike.)"""
+    new_st = st
+    if st == CONTACT_STUCK and vt_len * fn_old > slip_speed * fn:
+        new_st = CONTACT_SLIDING
+    elif st == CONTACT_SLIDING and (wp.dot(vt, ff) > 0.0 or vt_len < 0.5 * slip_speed):
+        new_st = CONTACT_STUCK
+    if new_st != st:
+        if released / RELEASED_SWITCH >= MAX_STICK_SLIP_SWITCHES:
+            new_st = CONTACT_STUCK
+        else:
+            released = released + RELEASED_SWITCH
+    return new_st, released
+
+
 @wp.func
 def update_contacts(world: int, c: WorldCoefficients, m: BarHingeModel, slip_speed: float, s: BarHingeState,
                     w: NewtonScratch) -> int:
@@ -629,26 +708,24 @@ def update_contacts(world: int, c: WorldCoefficients, m: BarHingeModel, slip_spe
             continue
         fn = wp.dot(w.grad[world, i], c.floor_n)  # friction is tangential: not in the normal balance
         if not (fn > 0.0):
-            if w.released[world, i] == 0:
+            if (w.released[world, i] & RELEASED_LET_GO) == 0:
                 s.contact[world, i] = CONTACT_FREE
                 s.floor_force[world, i] = wp.vec3(0.0)
-                w.released[world, i] = 1
+                w.released[world, i] = w.released[world, i] | RELEASED_LET_GO
                 changed = wp.max(changed, CONTACTS_CHANGED)
                 continue
             fn = 0.0  # it let go once already: held on the floor, without normal force (nor friction)
         vt = vel - c.floor_n * vn
         vt_len = wp.length(vt)
         ff = s.floor_force[world, i]
-        fn_old = wp.dot(ff, c.floor_n)
-        # the viscous static friction supplied (mu_s F_n,old / ε)|v_t|: more than mu_s F_n (the normal force now
-        # known) means static friction cannot hold it
-        if st == CONTACT_STUCK and vt_len * fn_old > slip_speed * fn:
-            s.contact[world, i] = CONTACT_SLIDING
-        elif st == CONTACT_SLIDING and (wp.dot(vt, ff) > 0.0 or vt_len < 0.5 * slip_speed):
-            s.contact[world, i] = CONTACT_STUCK
-        if s.contact[world, i] != st:
+        new_st, rel = stick_slip_status(st, vt, vt_len, ff, fn, wp.dot(ff, c.floor_n), slip_speed,
+                                        w.released[world, i])
+        s.contact[world, i] = new_st
+        w.released[world, i] = rel
+        if new_st != st:
             changed = wp.max(changed, CONTACTS_CHANGED)
-        f, kf, t = friction_force(s.contact[world, i], vt, fn, c.mu_s, c.mu_k, c.mu_back, c.floor_fwd, slip_speed)
+        f, kf, t, k_skin = friction_force(s.contact[world, i], vt, fn, c.mu_s, c.mu_k, c.mu_back, c.floor_fwd,
+                                          c.floor_n, slip_speed)
         s.floor_force[world, i] = c.floor_n * fn + f
     return changed
 
@@ -704,7 +781,7 @@ def finish_substep(world: int, c: WorldCoefficients, m: BarHingeModel, opt: Subs
         st = s.contact[world, i]
         if st == CONTACT_FREE:
             # a vertex that reaches the floor only in the last step: position-level contact and friction
-            k_dir = backward_friction_scale(vel, c.floor_fwd, c.mu_back, opt.slip_speed)  # fwd is tangential
+            k_dir = skin_scale(vel, c.floor_fwd, c.floor_n, c.mu_back)
             p, vel, st, depth = floor_landing(p0, vel, c.floor_n, c.mu_s * k_dir, c.mu_k * k_dir, dt)
             s.floor_force[world, i] = c.floor_n * (depth * mass_over_dt2(m.inv_mass[c.im_row, i], c.inv_dt2))
         elif st == CONTACT_STUCK or st == CONTACT_SLIDING:
@@ -712,7 +789,8 @@ def finish_substep(world: int, c: WorldCoefficients, m: BarHingeModel, opt: Subs
             vel = vel + c.floor_n * (wp.max(vn, -wp.dot(p0, c.floor_n) * c.inv_dt) - vn)
             vt = vel - c.floor_n * wp.dot(vel, c.floor_n)
             fn = wp.dot(s.floor_force[world, i], c.floor_n)
-            f, kf, t = friction_force(st, vt, fn, c.mu_s, c.mu_k, c.mu_back, c.floor_fwd, opt.slip_speed)
+            f, kf, t, k_skin = friction_force(st, vt, fn, c.mu_s, c.mu_k, c.mu_back, c.floor_fwd, c.floor_n,
+                                              opt.slip_speed)
             s.floor_force[world, i] = c.floor_n * fn + f
         else:
             vel = wp.vec3(0.0)  # infinite mass

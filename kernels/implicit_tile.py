@@ -53,15 +53,17 @@ from .implicit_euler import (
     CONTACT_STUCK,
     CONTACTS_CHANGED,
     CONTACTS_LANDED,
+    RELEASED_LET_GO,
     WORLD_CRUMPLED,
-    backward_friction_scale,
     dof_projector,
     floor_landing,
     friction_force,
     mass_over_dt2,
     landing_floor_force,
     newton_start,
+    skin_scale,
     starting_contact,
+    stick_slip_status,
 )
 
 wp.set_module_options({"enable_backward": False})
@@ -297,10 +299,12 @@ def finish_row(
     if su == CONTACT_SLIDING or su == CONTACT_STUCK:
         vel = v[world, u] + delta[world, u] * inv_dt
         vt = vel - floor_n * wp.dot(vel, floor_n)
-        f, c, t = friction_force(su, vt, wp.dot(floor_force[world, u], floor_n), mu_s, mu_k, mu_back, floor_fwd,
-                                 slip_speed)
+        f, c, t, k_skin = friction_force(su, vt, wp.dot(floor_force[world, u], floor_n), mu_s, mu_k, mu_back,
+                                         floor_fwd, floor_n, slip_speed)
         g = g - f
         hess[world, u, 0] = hess[world, u, 0] + (eye - wp.outer(floor_n, floor_n) - wp.outer(t, t)) * (c * inv_dt)
+        if mu_back != 1.0:
+            hess[world, u, 0] = hess[world, u, 0] + k_skin * inv_dt
     for band in range(bw + 1):
         vv = u - band
         if vv >= 0:
@@ -407,21 +411,19 @@ def update_contact(
         return 0
     fn = wp.dot(grad[world, i], floor_n)
     if not (fn > 0.0):
-        if released[world, i] == 0:
+        if (released[world, i] & RELEASED_LET_GO) == 0:
             contact[world, i] = CONTACT_FREE
             floor_force[world, i] = wp.vec3(0.0)
-            released[world, i] = 1
+            released[world, i] = released[world, i] | RELEASED_LET_GO
             return CONTACTS_CHANGED
         fn = 0.0  # it let go once already: held on the floor, without normal force (nor friction)
     vt = vel - floor_n * vn
     vt_len = wp.length(vt)
     ff = floor_force[world, i]
-    fn_old = wp.dot(ff, floor_n)
-    if st == CONTACT_STUCK and vt_len * fn_old > slip_speed * fn:
-        contact[world, i] = CONTACT_SLIDING
-    elif st == CONTACT_SLIDING and (wp.dot(vt, ff) > 0.0 or vt_len < 0.5 * slip_speed):
-        contact[world, i] = CONTACT_STUCK
-    f, c, t = friction_force(contact[world, i], vt, fn, mu_s, mu_k, mu_back, floor_fwd, slip_speed)
+    new_st, rel = stick_slip_status(st, vt, vt_len, ff, fn, wp.dot(ff, floor_n), slip_speed, released[world, i])
+    contact[world, i] = new_st
+    released[world, i] = rel
+    f, c, t, k_skin = friction_force(contact[world, i], vt, fn, mu_s, mu_k, mu_back, floor_fwd, floor_n, slip_speed)
     floor_force[world, i] = floor_n * fn + f
     if contact[world, i] != st:
         return CONTACTS_CHANGED
@@ -459,7 +461,7 @@ def finish_vertex(
     p0 = x_prev[world, i]
     st = contact[world, i]
     if st == CONTACT_FREE:
-        k_dir = backward_friction_scale(vel, floor_fwd, mu_back, slip_speed)  # floor_fwd is tangential
+        k_dir = skin_scale(vel, floor_fwd, floor_n, mu_back)
         p, vel2, st2, depth = floor_landing(p0, vel, floor_n, mu_s * k_dir, mu_k * k_dir, dt)
         vel = vel2
         st = st2
@@ -469,7 +471,7 @@ def finish_vertex(
         vel = vel + floor_n * (wp.max(vn, -wp.dot(p0, floor_n) * inv_dt) - vn)
         vt = vel - floor_n * wp.dot(vel, floor_n)
         fn = wp.dot(floor_force[world, i], floor_n)
-        f, c, t = friction_force(st, vt, fn, mu_s, mu_k, mu_back, floor_fwd, slip_speed)
+        f, c, t, k_skin = friction_force(st, vt, fn, mu_s, mu_k, mu_back, floor_fwd, floor_n, slip_speed)
         floor_force[world, i] = floor_n * fn + f
     else:
         vel = wp.vec3(0.0)  # infinite mass

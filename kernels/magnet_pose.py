@@ -65,6 +65,31 @@ class KeyframePath:
     rot: wp.array2d(dtype=wp.quat)
 
 
+REWIND_WINDOW = wp.constant(0.1)
+"""Half-width [cycles] of the window around each far point in which a rewound path returns (:func:`rewound_advance`)."""
+
+
+@wp.func
+def rewound_advance(s: float) -> float:
+    """The advance (in wavelengths) of a rewound path at s cycles: σ = s − ⌊s⌋ itself for σ in [δ, 1 − δ] (the
+    advancing path's first pass, δ = REWIND_WINDOW), and within δ of each far point a cubic Hermite back from 1 − δ to
+    δ with slope 1 at both ends, so that the EPM's position and velocity stay continuous: a jump back would step the
+    force on a tied worm (the force plate) at every far point, where its pulses are cut into cycles."""
+    sig = s - wp.floor(s)
+    half = float(REWIND_WINDOW)
+    out = sig
+    if sig < half or sig > 1.0 - half:
+        tau = (sig - (1.0 - half)) / (2.0 * half)
+        if sig < half:
+            tau = (sig + half) / (2.0 * half)
+        t2 = tau * tau
+        t3 = t2 * tau
+        m = 2.0 * half  # slope 1 in σ is 2δ in τ
+        out = (2.0 * t3 - 3.0 * t2 + 1.0) * (1.0 - half) + (t3 - 2.0 * t2 + tau) * m + (
+            -2.0 * t3 + 3.0 * t2) * half + (t3 - t2) * m
+    return out
+
+
 @wp.kernel
 def epm_sine_pose(
     path: SinePath,
@@ -80,14 +105,16 @@ def epm_sine_pose(
     s = t / period + phase (cycles); x = x0 + direction * w * s; z = -(depth + a (1 + cos 2 pi s) / 2): the EPM
     moves beneath the floor, starts far (a below its closest approach), comes closest (its centre ``depth`` below
     z = 0, i.e. its top face h below the origami base) at half a cycle, and advances w per cycle. With
-    ``rewind`` 1 the advance restarts at each far point (x = x0 + direction * w * (s - floor(s))): every cycle
-    repeats the first cycle's pass, for a worm tied in place (the force plate), which cannot follow the EPM.
+    ``rewind`` 1 every cycle repeats the first cycle's pass, for a worm tied in place (the force plate), which cannot
+    follow the EPM: :func:`rewound_advance`.
     Orientation: the EPM's own +z (its magnetization) at angle theta from +x toward +z in the x-z plane.
     """
     world = wp.tid()
     t = float(step_count[world]) * dt_sub
     s = t / pw(path.period, world) + pw(path.phase, world)
-    s_adv = s - pw(path.rewind, world) * wp.floor(s)  # the far point (s integer) is where a rewound pass restarts
+    s_adv = s
+    if pw(path.rewind, world) != 0.0:
+        s_adv = rewound_advance(s)
     px = pw(path.start_x, world) + pw(path.direction, world) * pw(path.wavelength, world) * s_adv
     pz = -(pw(path.depth, world) + pw(path.amplitude, world) * 0.5 * (1.0 + wp.cos(TWO_PI * s)))
     magnet_pos[world, 0] = wp.vec3(px, pw(path.start_y, world), pz)

@@ -139,4 +139,20 @@ def test_rewound_path_repeats_the_first_pass_in_place():
     for later, first in ((3, 0), (4, 1), (5, 1), (6, 2)):  # the same phase in a later cycle: the same pose
         np.testing.assert_allclose(rew[later], rew[first], atol=2e-6)
     assert np.all(np.abs(adv[5, :, 0] - adv[1, :, 0]) > 0.04)  # (the advancing path has moved on 2 w = 48 mm)
+    # the return, within 0.1 cycle of the far point, is continuous: no step larger than the fastest the cubic moves
+    # (6.5 w per cycle: 0.8 w back in 0.2 cycle, slope 1 at both ends) over the 4 ms between samples
+    fine = np.arange(0.86, 1.14 + 1e-9, 0.004)
+    ret, _ = epm_positions(replace(path, rewind=np.ones(1)), p, 2, fine)
+    steps = np.abs(np.diff(ret[:, :, 0], axis=0))
+    assert steps.max() <= 6.6 * w.max() * 0.004, steps.max() / (w.max() * 0.004)
+    np.testing.assert_allclose(ret[:, :, 2], epm_positions(path, p, 2, fine)[0][:, :, 2], atol=1e-7)
     assert d.tolist() == [1.0, -1.0]
+
+
+def test_a_rewind_other_than_0_or_1_is_refused():
+    from dataclasses import replace
+
+    p = gaits.preset_params("omega")
+    model = Model.from_params(p, 1, "cpu")
+    with pytest.raises(ValueError, match=r"EpmPath.rewind.*0.5.*expected 0"):
+        Simulator(model, dt=4e-3, substeps=2).set_path(replace(model.default_path, rewind=np.full(1, 0.5)))

@@ -8,7 +8,8 @@ step (:func:`warpworm.kernels.magnet_pose.epm_sine_pose` / ``epm_keyframe_pose``
 Sinusoidal path (per world; s = t / period + phase, in cycles)::
 
     x(t) = x0 + direction · w · s                        advances one wavelength w per cycle (``rewind``:
-                                                         w · (s − ⌊s⌋), the pass repeated in place)
+                                                         w · (s − ⌊s⌋), the pass repeated in place, returning
+                                                         smoothly within 0.1 cycle of each far point)
     gap(t) = h + a · (1 + cos 2πs) / 2                   far (h + a) at s = 0, closest approach h at s = 1/2
     z(t) = −(gap(t) + e(θ))                              the EPM's top face ``gap`` below the origami base z = 0
     moment direction = (cos θ, 0, sin θ)                 θ from +x toward +z (up), in the x–z plane
@@ -96,8 +97,10 @@ class EpmPath:
     """A kinematic EPM path for W worlds.
 
     ``kind == "sine"``: the fields of :data:`SINE_FIELDS`, each shape (1,) or (W,) [m, rad, s; direction ±1;
-    phase in cycles; rewind 0 / 1: 1 restarts the advance at each far point, x = x0 + direction · w · (s − ⌊s⌋),
-    so every cycle repeats the first pass, for a worm tied in place]; ``depth`` is how far below the origami base
+    phase in cycles; rewind 0 / 1: 1 repeats the pass of the first cycle in every cycle, x = x0 + direction · w ·
+    (s − ⌊s⌋) for s − ⌊s⌋ in [0.1, 0.9], returning smoothly (position and velocity continuous) within 0.1 cycle of
+    each far point (``kernels.magnet_pose.rewound_advance``), for a worm tied in place]; ``depth`` is how far below
+    the origami base
     (z = 0) the EPM's *centre* is at closest approach (h + the half-height e(θ) of the tilted cuboid).
     ``kind == "keyframes"``: ``key_time (K,)`` [s] ascending, ``key_pos (K, 3)`` or (W, K, 3) [m],
     ``key_rot (K, 3, 3)`` or (W, K, 3, 3) (magnet -> world); linear / slerp between keys, held outside.

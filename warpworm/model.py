@@ -114,6 +114,10 @@ class Control:
         # recaptures when the revision moves
         self.revision += 1
         if path.kind == "sine":
+            rewind = np.asarray(path.rewind, np.float64)
+            if not np.all((rewind == 0.0) | (rewind == 1.0)):
+                raise ValueError(f"EpmPath.rewind: got {rewind.reshape(-1).tolist()}; expected 0 (advance w per "
+                                 "cycle) or 1 (repeat the first pass) per world")
             sp = k.SinePath()
             for f in gaits.SINE_FIELDS:
                 setattr(sp, f, wp.array(np.asarray(getattr(path, f), np.float32).reshape(-1), dtype=float,
