@@ -84,8 +84,9 @@ class WormParams:
     friction_backward_ratio: float | np.ndarray = 1.0
     """Both friction coefficients tail-ward over head-ward (along −x / +x of the worm's rest axis, in the floor's
     plane), shape () or (W,): 1 (default) is the paper's isotropic friction; > 1 a skin that grips against sliding
-    backward (setae, scales, a sheet's cut edges), < 1 against sliding forward. Blended smoothly within the static
-    friction's slip speed of sideways motion (``kernels.implicit_euler.backward_friction_scale``)."""
+    backward (setae, scales, a sheet's cut edges), < 1 against sliding forward. In between the factor follows the
+    direction smoothly ((1 + ratio) / 2 sideways), and the friction is the gradient of a convex dissipation
+    (``kernels.implicit_euler.skin_profile``, ``friction_force``)."""
     floor_incline: float | np.ndarray = 0.0
     """Floor slope about world +y [rad]; positive raises the floor toward +x (the worm climbs going forward)."""
     support_thickness: float | np.ndarray = 0.003
