@@ -65,7 +65,8 @@ def test_direction_dependent_friction_is_mirrored_with_the_gait():
     (``friction_backward_ratio`` 0.5 on 2μ): opposite displacements to 0.1 mm (measured 0.008 of 17.0 mm over 2
     cycles; the mesh's diagonal bars have one chirality) and the segment ratios reversed to 0.002 (0.0002). The
     mirror holds whichever way a kernel takes the skin; what pins the direction is the forward run's progress
-    (> 10 mm: with the skin reversed it crawls ~8 mm) and the incline tests (tests/test_dynamics_physics.py)."""
+    (> 10 mm: with the skin reversed, ratio 0.5 on μ, it goes back 4.5 mm) and the incline tests
+    (tests/test_dynamics_physics.py)."""
     w = 0.008
     fwd = replace(gaits.preset_params("peristaltic", False), wavelength=w, friction_backward_ratio=2.0)
     bwd = replace(gaits.preset_params("peristaltic", True), wavelength=w, friction_backward_ratio=0.5,
