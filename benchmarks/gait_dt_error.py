@@ -5,7 +5,7 @@ Every grid point is one world of one batch, run ``--cycles`` EPM cycles at the d
 split into ``--substeps`` implicit substeps (each list entry a run; default 2, 4, 8: 2, 1, 0.5 ms) and once at the
 reference ``--reference`` substeps (default 16: 0.25 ms). Per point and run it prints the vertex centroid's distance
 to the reference's over the whole trajectory (frames at ``--fps``): the largest and the median, and at the end (a far
-point, where the worm should rest), with the default run's far-point motion (``gait_metrics.far_point_motion_m``: how
+point, where the worm should rest, when ``--cycles`` is whole), with the default run's far-point motion (``gait_metrics.far_point_motion_m``: how
 far the worm moves within ±0.1 cycle of the EPM's far points) and distance per cycle. Analytic magnets.
 
 A gait whose worm snaps (omega lifting its middle as the EPM comes close) is hard on a fixed step: the snap's time

@@ -50,6 +50,9 @@ def main(argv=None) -> int:
         overrides = parse_overrides(args.set)
     except ValueError as e:
         raise SystemExit(str(e)) from None
+    gridded = sorted(set(overrides) & {"wavelength", "amplitude", "closest_approach"})
+    if gridded:
+        raise SystemExit(f"--set {gridded[0]}: the grid (--w, --a, --h) sets it; give it there")
     quiet_warp()
     pts_m = np.array(list(itertools.product(*grid_from_arguments(args).values())))  # rows (w, a, h) [m]
     pts = np.round(pts_m * 1e3, 9)  # the same rows in mm, for the table and the JSON

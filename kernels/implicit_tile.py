@@ -667,8 +667,7 @@ def make_tile_substep_kernel(num_vertices: int, bandwidth: int, dense: bool = Tr
                             break
                 for u in range(lane, nv, bd):
                     finish_row(world, u, im_row, inv_mass, inv_dt, floor_n, mu_s, mu_k, mu_back, floor_fwd, slip_speed,
-                               v, delta,
-                               contact, floor_force, hess, grad)
+                               v, delta, contact, floor_force, hess, grad)
                 bad = block_max(0)  # barrier: every row finished before the solve reads it
                 moving = int(0)
                 if wp.static(DENSE):

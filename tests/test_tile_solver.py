@@ -61,8 +61,9 @@ def _lift(sim, states, lift, incline) -> None:
 
 
 def landing(incline=(0.0, 0.15, 0.35), friction_backward_ratio=1.0, **sim_kwargs):
-    """Three worlds dropped 1, 2, 3 mm onto floors inclined 0, 0.15 and 0.35 rad (the last above the friction
-    angle atan(0.268) = 0.26 rad: it slides), 1 ms substeps. Returns (sim, band state, tile state)."""
+    """Three worlds dropped 1, 2, 3 mm onto floors of the given inclines [rad] (default 0, 0.15 and 0.35: the last
+    above the friction angle atan(0.268) = 0.26 rad, so it slides), with the given ``friction_backward_ratio``
+    (scalar or per world; default 1, isotropic), 1 ms substeps. Returns (sim, band state, tile state)."""
     incline = np.asarray(incline, np.float64)
     model = Model.from_params(WormParams(floor_incline=incline, friction_backward_ratio=friction_backward_ratio),
                               3, "cpu")

@@ -479,6 +479,8 @@ def slope(offsets_deg=(-4.0, -2.0, -1.0, 1.0, 2.0, 4.0), duration: float = 0.5, 
           sample_every: int = 5, base: WormParams | None = None, dt=None, substeps=None, device="cpu",
           slide_threshold: float = 1.0e-4, workers: int | None = 1, **overrides) -> dict:
     """Slope sliding test (§IV-F): the worm (magnets off, damping 0) on inclines β = atan(μs) + offsets, one world each.
+    The worm faces uphill (the floor rises toward its head, +x), so it would slide tail-ward: with a skin that grips
+    one way (``friction_backward_ratio`` r) both coefficients are r times theirs and the angle is atan(r μs).
 
     The centroid's motion down the slope is recorded from t = 0 (worm built unloaded at rest on the slope) for
     ``settle + duration`` [s]: ``slide (S, W)`` [m] down-slope, ``predicted (S, W)`` = ½ g (sin β − μk cos β) t² where
@@ -489,7 +491,8 @@ def slope(offsets_deg=(-4.0, -2.0, -1.0, 1.0, 2.0, 4.0), duration: float = 0.5, 
     quiet_warp()
     dt, substeps = _dt_substeps(dt, substeps)
     b = base or WormParams()
-    mu_s = float(np.asarray(overrides.get("mu_static", b.mu_static)))
+    skin = float(np.asarray(overrides.get("friction_backward_ratio", b.friction_backward_ratio)))
+    mu_s = skin * float(np.asarray(overrides.get("mu_static", b.mu_static)))  # sliding down = tail-ward
     beta = np.arctan(mu_s) + np.deg2rad(np.asarray(offsets_deg, np.float64))
     kw = dict(NO_MAGNETS, damping=0.0)
     kw.update(overrides)
@@ -503,7 +506,7 @@ def slope(offsets_deg=(-4.0, -2.0, -1.0, 1.0, 2.0, 4.0), duration: float = 0.5, 
     slide = np.einsum("swc,wc->sw", r["centroid"] - r["centroid"][0], down)
     s = {"unstable": r["unstable"]}
     g = float(np.asarray(p.gravity))
-    mu_k = float(np.asarray(p.mu_kinetic))
+    mu_k = skin * float(np.asarray(p.mu_kinetic))
     acc = np.where(beta > np.arctan(mu_s), g * (np.sin(beta) - mu_k * np.cos(beta)), 0.0)
     pred = 0.5 * acc[None] * ts[:, None] ** 2
     i0 = int(np.searchsorted(ts, settle - 1e-9))
@@ -515,7 +518,8 @@ def slope(offsets_deg=(-4.0, -2.0, -1.0, 1.0, 2.0, 4.0), duration: float = 0.5, 
         "beta": beta, "offsets_deg": np.asarray(offsets_deg, np.float64), "time": ts, "slide": slide,
         "predicted": pred, "slides": slides, "unstable": s["unstable"],
         "summary": {
-            "mu_static": mu_s, "mu_kinetic": mu_k, "friction_angle_deg": float(np.rad2deg(np.arctan(mu_s))),
+            "mu_static": mu_s, "mu_kinetic": mu_k, "friction_backward_ratio": skin,
+            "friction_angle_deg": float(np.rad2deg(np.arctan(mu_s))),
             "beta_deg": np.rad2deg(beta).tolist(), "final_slide_mm": (1e3 * slide[-1]).tolist(),
             "predicted_slide_mm": (1e3 * pred[-1]).tolist(),
             "slide_after_settle_mm": (1e3 * after).tolist(), "settle_s": float(settle),
@@ -612,7 +616,8 @@ def force_plate(gait_list=GAITS, duration: float = 2.0, *, anchor_stiffness: flo
     the tied worm is driven the same way in every cycle and the pulses settle to a periodic train. Without it the
     EPM advances w per cycle as in locomotion and leaves the tied worm behind: after two or three cycles it passes
     ahead of the head and the pulses fade, so the per-cycle shapes would describe where the magnet has gone, not the
-    gait.
+    gait. With ``record`` (a :func:`run_gaits` record) the run is not repeated and its own ``rewind`` is what the
+    summary reports (``rewind`` here is then unused).
 
     Pulse shape (Fig. 10: the paper's inchworm rises steeply and falls smoothly, omega the reverse): per gait the
     10 %→90 % rise time and 90 %→10 % fall time of the pull in each EPM cycle (:func:`rise_fall_times`),

@@ -309,7 +309,7 @@ def main(args) -> int:
             params = randomized_params(args.randomize, args.gait, args.backward, args.magnet_model, args.worlds,
                                        args.seed)
         params = replace(params, **overrides)
-        Model.from_params(slice_worlds(params, args.worlds, 0, 1), 1, "cpu")  # refuse bad values before any work
+        Model.from_params(params, args.worlds, "cpu")  # refuse bad values of any world before any work (~50 ms at 4096)
     except ValueError as e:
         print(f"warpworm simulate: {e}", file=sys.stderr)
         return 2
