@@ -656,11 +656,13 @@ def stick_slip_status(st: int, vt: wp.vec3, vt_len: float, ff: wp.vec3, fn: floa
     """The stick/slip rule of a vertex on the floor between Newton steps: a stuck vertex whose viscous static friction
     (mu_s F_n,old / ε)|v_t| exceeds what mu_s F_n can hold (the normal force now known) broke loose; a sliding one
     whose motion reversed against its last friction ``ff`` (kinetic friction stopped it) or fell below half the slip
-    speed sticks. Returns (status, released). A vertex switches at most MAX_STICK_SLIP_SWITCHES times per substep,
-    then it is held: two neighbours can otherwise take turns (one held, carrying the load that breaks the other
-    loose, then the reverse) and keep the iteration from converging, which a skin that grips 2x tail-ward did in half
-    of its substeps; held, a vertex creeps at a few times the slip speed (~2e-5 m/s) for the rest of that substep.
-    (The rule's direction factor cancels: a skin scales mu_s F_n,old and mu_s F_n alike.)"""
+    speed sticks. Returns (status, released). After MAX_STICK_SLIP_SWITCHES switches in a substep a vertex is held
+    (stuck; a sliding one makes that one more switch) for the rest of it: two neighbours can otherwise take turns
+    (one held, carrying the load that breaks the other loose, then the reverse) and keep the iteration from
+    converging, which a skin that grips 2x tail-ward did in half of its substeps; held, a vertex creeps at a few times
+    the slip speed (~2e-5 m/s) for the rest of that substep. The limit applies to isotropic friction too: the
+    presets never reach it (unchanged to the last digit), other worlds may. (The rule's direction factor cancels:
+    a skin scales mu_s F_n,old and mu_s F_n alike.)"""
     new_st = st
     if st == CONTACT_STUCK and vt_len * fn_old > slip_speed * fn:
         new_st = CONTACT_SLIDING

@@ -72,13 +72,14 @@ REWIND_WINDOW = wp.constant(0.1)
 @wp.func
 def rewound_advance(s: float) -> float:
     """The advance (in wavelengths) of a rewound path at s cycles: σ = s − ⌊s⌋ itself for σ in [δ, 1 − δ] (the
-    advancing path's first pass, δ = REWIND_WINDOW), and within δ of each far point a cubic Hermite back from 1 − δ to
-    δ with slope 1 at both ends, so that the EPM's position and velocity stay continuous: a jump back would step the
-    force on a tied worm (the force plate) at every far point, where its pulses are cut into cycles."""
+    advancing path's first pass, δ = REWIND_WINDOW) and over the first cycle's start (s in [0, δ): nothing comes
+    before it), and within δ of each later far point a cubic Hermite back from 1 − δ to δ with slope 1 at both
+    ends, so that the EPM's position and velocity stay continuous: a jump back would step the force on a tied worm
+    (the force plate) at every far point, where its pulses are cut into cycles."""
     sig = s - wp.floor(s)
     half = float(REWIND_WINDOW)
     out = sig
-    if sig < half or sig > 1.0 - half:
+    if (sig < half and s >= 1.0) or sig > 1.0 - half:
         tau = (sig - (1.0 - half)) / (2.0 * half)
         if sig < half:
             tau = (sig + half) / (2.0 * half)

@@ -110,3 +110,21 @@ def test_isotropic_friction_is_the_coulomb_law():
     vs = _velocities(rng, 16, 1e-5)
     f, _ = _friction(int(ie.CONTACT_STUCK), vs, 1.0)
     np.testing.assert_allclose(f, -MU_S * FN / EPS * vs, rtol=1e-5, atol=1e-10)
+
+
+def test_isotropic_friction_adds_no_skin_stiffness_and_a_held_vertex_at_rest_gets_the_mean():
+    """r = 1: the stiffness is the isotropic one alone (mu_k F_n / |v| across a slide, mu_s F_n / ε held). r ≠ 1 and a
+    held vertex exactly at rest (every one at a substep's start): no force, and D's Hessian, which has no value at
+    v = 0, taken as the mean of head-ward and tail-ward, c0 (1 + r) / 2 on the plane."""
+    v = np.stack([FWD, LAT]) * 1e-3
+    _, k = _friction(int(ie.CONTACT_SLIDING), v, 1.0)
+    for i in range(2):
+        u = v[i] / np.linalg.norm(v[i])
+        np.testing.assert_allclose(k[i], MU_K * FN / 1e-3 * (np.eye(3) - np.outer(N, N) - np.outer(u, u)),
+                                   rtol=1e-5, atol=1e-6)
+    _, k = _friction(int(ie.CONTACT_STUCK), v * 1e-2, 1.0)
+    np.testing.assert_allclose(k, np.broadcast_to(MU_S * FN / EPS * (np.eye(3) - np.outer(N, N)), k.shape),
+                               rtol=1e-5, atol=1e-3)
+    f, k = _friction(int(ie.CONTACT_STUCK), np.zeros((1, 3)), 3.0)
+    np.testing.assert_array_equal(f, 0.0)
+    np.testing.assert_allclose(k[0], MU_S * FN / EPS * 2.0 * (np.eye(3) - np.outer(N, N)), rtol=1e-5, atol=1e-3)

@@ -120,15 +120,16 @@ def epm_positions(path, p, num_worlds: int, cycles):
 
 
 def test_rewound_path_repeats_the_first_pass_in_place():
-    """``rewind`` = 1 (a worm tied in place, the force plate): at every phase of every cycle the EPM is where the
-    advancing path puts it in the first cycle, x = x0 + direction · w · (s − ⌊s⌋), with the same gap; forward and
-    backward worlds in one batch; a rewind of 0 is the advancing path itself."""
+    """``rewind`` = 1 (a worm tied in place, the force plate): over each cycle's pass (s − ⌊s⌋ in [0.1, 0.9]) and the
+    first cycle's start the EPM is where the advancing path puts it in the first cycle, x = x0 + direction · w ·
+    (s − ⌊s⌋), with the same gap at every phase; forward and backward worlds in one batch; a rewind of 0 is the
+    advancing path itself; within 0.1 cycle of a later far point it returns continuously."""
     from dataclasses import replace
 
     p = replace(gaits.preset_params("peristaltic"), backward=np.array([False, True]))
     model = Model.from_params(p, 2, "cpu")
     path = model.default_path
-    cycles = [0.1, 0.5, 0.9, 1.1, 1.5, 2.5, 3.9]
+    cycles = [0.05, 0.1, 0.5, 0.9, 1.1, 1.5, 2.5, 3.9]  # the first cycle's start too: nothing comes before it
     adv, _ = epm_positions(path, p, 2, cycles)
     rew, _ = epm_positions(replace(path, rewind=np.ones(1)), p, 2, cycles)
     w, d = np.asarray(path.wavelength), np.asarray(path.direction)
@@ -136,9 +137,9 @@ def test_rewound_path_repeats_the_first_pass_in_place():
         shift = d * w * np.floor(s)  # (W,): how far the advancing path has gone beyond the first cycle's pass
         np.testing.assert_allclose(rew[i, :, 0], adv[i, :, 0] - shift, atol=2e-6)
         np.testing.assert_allclose(rew[i, :, 1:], adv[i, :, 1:], atol=1e-7)
-    for later, first in ((3, 0), (4, 1), (5, 1), (6, 2)):  # the same phase in a later cycle: the same pose
+    for later, first in ((4, 1), (5, 2), (6, 2), (7, 3)):  # the same phase in a later cycle: the same pose
         np.testing.assert_allclose(rew[later], rew[first], atol=2e-6)
-    assert np.all(np.abs(adv[5, :, 0] - adv[1, :, 0]) > 0.04)  # (the advancing path has moved on 2 w = 48 mm)
+    assert np.all(np.abs(adv[6, :, 0] - adv[2, :, 0]) > 0.04)  # (the advancing path has moved on 2 w = 48 mm)
     # the return, within 0.1 cycle of the far point, is continuous: no step larger than the fastest the cubic moves
     # (6.5 w per cycle: 0.8 w back in 0.2 cycle, slope 1 at both ends) over the 4 ms between samples
     fine = np.arange(0.86, 1.14 + 1e-9, 0.004)
