@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import copy
 import sys
+from dataclasses import replace
 
 import numpy as np
 
@@ -57,7 +58,8 @@ def main(argv=None) -> int:
     if args.h is not None:
         over["closest_approach"] = args.h * 1e-3
     params = gaits.preset_params(args.gait, magnet_model="analytic", **over)
-    params.support_thickness = min(float(params.support_thickness), float(np.min(params.closest_approach)))
+    params = replace(params, support_thickness=min(float(params.support_thickness),
+                                                   float(np.min(params.closest_approach))))
     W = len(place)
     model = Model.from_params(params, W, "cpu")
     sim = Simulator(model, dt=gaits.DEFAULT_DT, substeps=gaits.DEFAULT_SUBSTEPS)

@@ -180,17 +180,21 @@ def landing_floor_force(h0: float, vel: wp.vec3, n: wp.vec3, dt: float, w_inv: f
 
 
 @wp.func
-def skin_profile(a: float, b: float, mu_back: float):
-    """The direction profile g(θ) of a skin whose friction differs by direction, and its first and second
-    derivatives in θ, for a tangential direction at angle θ from the head-ward tangent (``a`` = cos θ, ``b`` =
-    sin θ): g = 1 + (mu_back − 1) S(w), S(w) = 3w² − 2w³, w = (1 − cos θ) / 2, so 1 head-ward, (1 + mu_back) / 2
-    sideways, mu_back tail-ward. A cubic in cos θ: |v| g and |v|² g are convex for every mu_back > 0 (g + g'' >=
-    min(1, mu_back), checked on a fine grid), so the friction below is a monotone force with a symmetric PSD
-    stiffness."""
+def skin_profile(u: wp.vec3, fwd: wp.vec3, n: wp.vec3, mu_back: float):
+    """The direction profile g(θ) of a skin whose friction differs by direction, its first and second derivatives in
+    θ, and e_θ = n × u, for the unit tangential direction ``u`` at angle θ from the head-ward tangent ``fwd`` (``n``
+    the floor normal): g = 1 + (mu_back − 1) S(w), S(w) = 3w² − 2w³, w = (1 − cos θ) / 2, so 1 head-ward,
+    (1 + mu_back) / 2 sideways, mu_back tail-ward. A cubic in cos θ: |v| g and |v|² g are convex for every
+    mu_back > 0 (g + g'' >= min(1, mu_back), checked on a fine grid), so the friction of :func:`friction_force` is a
+    monotone force with a symmetric PSD stiffness."""
+    lat = wp.cross(n, fwd)
+    a = wp.dot(u, fwd)  # cos θ
+    b = wp.dot(u, lat)  # sin θ
     w = 0.5 * (1.0 - a)
     s1 = 6.0 * w * (1.0 - w)
     d = mu_back - 1.0
-    return 1.0 + d * w * w * (3.0 - 2.0 * w), d * s1 * 0.5 * b, d * ((6.0 - 12.0 * w) * 0.25 * b * b + s1 * 0.5 * a)
+    g = 1.0 + d * w * w * (3.0 - 2.0 * w)
+    return g, d * s1 * 0.5 * b, d * ((6.0 - 12.0 * w) * 0.25 * b * b + s1 * 0.5 * a), lat * a - fwd * b
 
 
 @wp.func
@@ -204,7 +208,7 @@ def skin_scale(v: wp.vec3, fwd: wp.vec3, n: wp.vec3, mu_back: float) -> float:
     speed = wp.length(vt)
     if not (speed > 0.0):
         return 1.0
-    g, g1, g2 = skin_profile(wp.dot(vt, fwd) / speed, wp.dot(vt, wp.cross(n, fwd)) / speed, mu_back)
+    g, g1, g2, e = skin_profile(vt / speed, fwd, n, mu_back)
     return g
 
 
@@ -230,40 +234,30 @@ def friction_force(status: int, vt: wp.vec3, normal_force: float, mu_s: float, m
     """
     if not (normal_force > 0.0):
         return wp.vec3(0.0), 0.0, wp.vec3(0.0), wp.mat33(0.0)
+    speed = wp.length(vt)
     if mu_back == 1.0:
         if status == CONTACT_STUCK:
             c = mu_s * normal_force / slip_speed
             return vt * (-c), c, wp.vec3(0.0), wp.mat33(0.0)
-        speed = wp.length(vt)
         if speed > 0.0:
             c = mu_k * normal_force / speed
             return vt * (-c), c, vt / speed, wp.mat33(0.0)
         return wp.vec3(0.0), 0.0, wp.vec3(0.0), wp.mat33(0.0)
-    lat = wp.cross(n, fwd)
-    speed = wp.length(vt)
-    if status == CONTACT_STUCK:
-        c0 = mu_s * normal_force / slip_speed
-        if not (speed > 0.0):
+    if not (speed > 0.0):
+        if status == CONTACT_STUCK:
             # D's Hessian has no value at v = 0 (it depends on the direction): the mean of head-ward and tail-ward
             return wp.vec3(0.0), 0.0, wp.vec3(0.0), (wp.identity(n=3, dtype=float) - wp.outer(n, n)) * (
-                c0 * 0.5 * (1.0 + mu_back))
-        u = vt / speed
-        a = wp.dot(u, fwd)
-        b = wp.dot(u, lat)
-        g, g1, g2 = skin_profile(a, b, mu_back)
-        e = lat * a - fwd * b  # n × u: the direction of increasing θ
+                mu_s * normal_force / slip_speed * 0.5 * (1.0 + mu_back))
+        return wp.vec3(0.0), 0.0, wp.vec3(0.0), wp.mat33(0.0)
+    u = vt / speed
+    g, g1, g2, e = skin_profile(u, fwd, n, mu_back)
+    if status == CONTACT_STUCK:
+        c0 = mu_s * normal_force / slip_speed
         f = (vt * g + e * (0.5 * g1 * speed)) * (-c0)
         k = (wp.outer(u, u) * g + (wp.outer(u, e) + wp.outer(e, u)) * (0.5 * g1) + wp.outer(e, e) * (g + 0.5 * g2))
         return f, 0.0, wp.vec3(0.0), k * c0
-    if speed > 0.0:
-        u = vt / speed
-        a = wp.dot(u, fwd)
-        b = wp.dot(u, lat)
-        g, g1, g2 = skin_profile(a, b, mu_back)
-        e = lat * a - fwd * b
-        cn = mu_k * normal_force
-        return (u * g + e * g1) * (-cn), 0.0, wp.vec3(0.0), wp.outer(e, e) * (cn / speed * wp.max(g + g2, 0.0))
-    return wp.vec3(0.0), 0.0, wp.vec3(0.0), wp.mat33(0.0)
+    cn = mu_k * normal_force
+    return (u * g + e * g1) * (-cn), 0.0, wp.vec3(0.0), wp.outer(e, e) * (cn / speed * wp.max(g + g2, 0.0))
 
 
 @wp.func
@@ -436,9 +430,7 @@ def friction_terms(world: int, c: WorldCoefficients, slip_speed: float, with_hes
             w.grad[world, i] = w.grad[world, i] - f
             if with_hessian:
                 w.hess[world, i, 0] = w.hess[world, i, 0] + (
-                    eye - wp.outer(c.floor_n, c.floor_n) - wp.outer(t, t)) * (kf * c.inv_dt)
-                if c.mu_back != 1.0:
-                    w.hess[world, i, 0] = w.hess[world, i, 0] + k_skin * c.inv_dt
+                    eye - wp.outer(c.floor_n, c.floor_n) - wp.outer(t, t)) * (kf * c.inv_dt) + k_skin * c.inv_dt
 
 
 @wp.func
@@ -651,11 +643,10 @@ RELEASED_SWITCH = wp.constant(2)  # the count of its stick/slip switches in this
 
 
 @wp.func
-def stick_slip_status(st: int, vt: wp.vec3, vt_len: float, ff: wp.vec3, fn: float, fn_old: float, slip_speed: float,
-                      released: int):
+def stick_slip_status(st: int, vt: wp.vec3, ff: wp.vec3, fn: float, n: wp.vec3, slip_speed: float, released: int):
     """The stick/slip rule of a vertex on the floor between Newton steps: a stuck vertex whose viscous static friction
     (mu_s F_n,old / ε)|v_t| exceeds what mu_s F_n can hold (the normal force now known) broke loose; a sliding one
-    whose motion reversed against its last friction ``ff`` (kinetic friction stopped it) or fell below half the slip
+    whose motion reversed against its last floor force ``ff`` (normal + friction; kinetic friction stopped it) or fell below half the slip
     speed sticks. Returns (status, released). After MAX_STICK_SLIP_SWITCHES switches in a substep a vertex is held
     (stuck; a sliding one makes that one more switch) for the rest of it: two neighbours can otherwise take turns
     (one held, carrying the load that breaks the other loose, then the reverse) and keep the iteration from
@@ -663,8 +654,9 @@ def stick_slip_status(st: int, vt: wp.vec3, vt_len: float, ff: wp.vec3, fn: floa
     the slip speed (~2e-5 m/s) for the rest of that substep. The limit applies to isotropic friction too: the
     presets never reach it (unchanged to the last digit), other worlds may. (The rule's direction factor cancels:
     a skin scales mu_s F_n,old and mu_s F_n alike.)"""
+    vt_len = wp.length(vt)
     new_st = st
-    if st == CONTACT_STUCK and vt_len * fn_old > slip_speed * fn:
+    if st == CONTACT_STUCK and vt_len * wp.dot(ff, n) > slip_speed * fn:
         new_st = CONTACT_SLIDING
     elif st == CONTACT_SLIDING and (wp.dot(vt, ff) > 0.0 or vt_len < 0.5 * slip_speed):
         new_st = CONTACT_STUCK
@@ -718,9 +710,7 @@ def update_contacts(world: int, c: WorldCoefficients, m: BarHingeModel, slip_spe
                 continue
             fn = 0.0  # it let go once already: held on the floor, without normal force (nor friction)
         vt = vel - c.floor_n * vn
-        vt_len = wp.length(vt)
-        ff = s.floor_force[world, i]
-        new_st, rel = stick_slip_status(st, vt, vt_len, ff, fn, wp.dot(ff, c.floor_n), slip_speed,
+        new_st, rel = stick_slip_status(st, vt, s.floor_force[world, i], fn, c.floor_n, slip_speed,
                                         w.released[world, i])
         s.contact[world, i] = new_st
         w.released[world, i] = rel

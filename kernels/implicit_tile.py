@@ -302,9 +302,8 @@ def finish_row(
         f, c, t, k_skin = friction_force(su, vt, wp.dot(floor_force[world, u], floor_n), mu_s, mu_k, mu_back,
                                          floor_fwd, floor_n, slip_speed)
         g = g - f
-        hess[world, u, 0] = hess[world, u, 0] + (eye - wp.outer(floor_n, floor_n) - wp.outer(t, t)) * (c * inv_dt)
-        if mu_back != 1.0:
-            hess[world, u, 0] = hess[world, u, 0] + k_skin * inv_dt
+        hess[world, u, 0] = hess[world, u, 0] + (eye - wp.outer(floor_n, floor_n) - wp.outer(t, t)) * (
+            c * inv_dt) + k_skin * inv_dt
     for band in range(bw + 1):
         vv = u - band
         if vv >= 0:
@@ -418,9 +417,7 @@ def update_contact(
             return CONTACTS_CHANGED
         fn = 0.0  # it let go once already: held on the floor, without normal force (nor friction)
     vt = vel - floor_n * vn
-    vt_len = wp.length(vt)
-    ff = floor_force[world, i]
-    new_st, rel = stick_slip_status(st, vt, vt_len, ff, fn, wp.dot(ff, floor_n), slip_speed, released[world, i])
+    new_st, rel = stick_slip_status(st, vt, floor_force[world, i], fn, floor_n, slip_speed, released[world, i])
     contact[world, i] = new_st
     released[world, i] = rel
     f, c, t, k_skin = friction_force(contact[world, i], vt, fn, mu_s, mu_k, mu_back, floor_fwd, floor_n, slip_speed)

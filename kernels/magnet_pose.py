@@ -41,8 +41,8 @@ def mount_frame(
 class SinePath:
     """The paper's sinusoidal EPM path (§IV-C) of every world, fields as :data:`warpworm.gaits.SINE_FIELDS`, each
     shape (1,) shared or (W,): start x, y [m], wavelength w [m], amplitude a [m], depth of the centre at closest
-    approach [m], theta [rad], period [s], direction ±1, phase [cycles], rewind 0 / 1 (1: the pass repeats in
-    place, a tethered worm's path: x returns to x0 at each far point)."""
+    approach [m], theta [rad], period [s], direction ±1, phase [cycles], rewind 0 / 1 (1: the first cycle's pass
+    repeats in place, a tethered worm's path: :func:`rewound_advance`)."""
 
     start_x: wp.array(dtype=float)
     start_y: wp.array(dtype=float)

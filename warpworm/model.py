@@ -167,9 +167,10 @@ class ModelBuilder:
             raise ValueError("num_worlds must be >= 1")
         if p.magnet_model not in MAGNET_MODELS:
             raise ValueError(f"magnet_model must be one of {MAGNET_MODELS}, got {p.magnet_model!r}")
-        ratio = np.asarray(p.friction_backward_ratio, np.float64)
-        if not np.all(np.isfinite(ratio) & (ratio > 0.0)):
-            bad = ratio.reshape(-1)[~(np.isfinite(ratio) & (ratio > 0.0)).reshape(-1)][0]
+        ratio = np.asarray(p.friction_backward_ratio, np.float64).reshape(-1)
+        ok = np.isfinite(ratio) & (ratio > 0.0)
+        if not ok.all():
+            bad = ratio[~ok][0]
             raise ValueError(f"worm.friction_backward_ratio: got {bad}; expected a finite ratio > 0 (tail-ward over "
                              "head-ward friction; 1 is isotropic)")
         self.params, self.num_worlds = p, W

@@ -303,7 +303,7 @@ def main(args) -> int:
     from warpworm.params import parse_overrides
 
     try:
-        overrides = parse_overrides(getattr(args, "set", []))
+        overrides = parse_overrides(args.set)
         params = gaits.preset_params(args.gait, args.backward, magnet_model=args.magnet_model)
         if args.randomize:
             params = randomized_params(args.randomize, args.gait, args.backward, args.magnet_model, args.worlds,
