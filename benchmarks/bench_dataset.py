@@ -4,7 +4,7 @@ Run: ``python benchmarks/run.py dataset [--quick]``.
 
 * ``storage``: the same rendered samples stored as raw / LZF / gzip arrays (HDF5, one sample per chunk) and as PNG /
   JPEG blobs; bytes per sample, write and random-read samples/s. Picks the default ``output.compression``.
-* ``end_to_end``: ``warpworm.job.generate`` on the default config (short physics: the point is the pipeline, not
+* ``end_to_end``: ``warpworm.data.job.generate`` on the default config (short physics: the point is the pipeline, not
   the gait; the settle/frame times are in the row) at W worlds, against the same simulate + render calls timed alone;
   ``overhead`` = 1 − (sim + render) / total: writing, randomization, cameras, Python glue. Target ≤ 25 %.
 * ``workers``: the same job with 1 and 2 worker processes (spawn). Target: 2 workers ≥ 1.8× one.
@@ -30,7 +30,7 @@ SHORT = ["sim.settle_time=0.008", "sim.frame_times=[0.008, 0.016, 0.024, 0.032]"
 
 
 def _cfg(overrides, **top):
-    from warpworm.config import load_config
+    from warpworm.data.config import load_config
 
     return load_config("default", ["output.preview=false", *SHORT, *overrides], **top)
 
@@ -104,10 +104,10 @@ def bench_storage(samples: dict, reps_read: int = 200) -> list[dict]:
 # ---------------------------------------------------------------------------------------------------------------------
 def bench_end_to_end(W: int, width: int = 128, height: int = 96) -> tuple[dict, dict]:
     """One shard of W trajectories x 4 frames through generate(), and the same stages timed alone."""
-    from warpworm import dataset as ds
-    from warpworm.job import generate
-    from warpworm.sampling import dataset_cameras, draw_group, draw_worm, worm_params
-    from warpworm.stages import WarpStages
+    from warpworm.data import dataset as ds
+    from warpworm.data.job import generate
+    from warpworm.data.sampling import dataset_cameras, draw_group, draw_worm, worm_params
+    from warpworm.data.stages import WarpStages
 
     F = 4
     cfg = _cfg([f"sim.worlds={W}", f"shard_size={W * F}", f"render.width={width}", f"render.height={height}"],
@@ -171,8 +171,8 @@ def bench_workers(num_shards: int, W: int) -> dict:
 
 
 def bench_memory(num_shards: int, W: int) -> dict:
-    from warpworm import workers as wk
-    from warpworm.job import generate
+    from warpworm.data import workers as wk
+    from warpworm.data.job import generate
 
     F = 4
     cfg = _cfg([f"sim.worlds={W}", f"shard_size={W * F}", "render.width=64", "render.height=48"],
@@ -215,7 +215,7 @@ def bench_memory(num_shards: int, W: int) -> dict:
 
 
 def run(quick: bool = False) -> list[dict]:
-    from warpworm.job import generate
+    from warpworm.data.job import generate
 
     # warm the kernel cache so that compile time is not billed to the first measurement
     tmp = Path(tempfile.mkdtemp(prefix="ww-warm-"))
@@ -238,11 +238,11 @@ def run(quick: bool = False) -> list[dict]:
 
 
 def headline(device: str = "cpu", quick: bool = False) -> dict:
-    """One row for the summary table of ``benchmarks/run.py``: samples/s of ``warpworm.job.generate`` end to
+    """One row for the summary table of ``benchmarks/run.py``: samples/s of ``warpworm.data.job.generate`` end to
     end (simulate, render 128x96, write HDF5) on ``device`` with the default config's short physics (:data:`SHORT`),
     after a warm-up job that compiles the kernels: W = 16 worlds on the CPU (quick: 4), 1024 on CUDA (4096 samples,
     one shard: gzip on the host, not the GPU, bounds it)."""
-    from warpworm.job import generate
+    from warpworm.data.job import generate
 
     W = 1024 if str(device).startswith("cuda") else (4 if quick else 16)
     F = 4

@@ -160,7 +160,7 @@ def _worlds(W, seed=0):
 
 
 def _magnets():
-    from warpworm import magnets as mg
+    from warpworm.physics import magnets as mg
 
     epm = mg.Cuboid((0.01, 0.01, 0.04), moment=3.6)
     ipm = mg.Cylinder(0.01, 0.001, moment=0.9e6 * np.pi * 0.005**2 * 0.001)
@@ -180,7 +180,7 @@ def _time(fn, repeats):
 def _dipole_pairs_per_world(magnets, density, targets=range(4)):
     """Point-dipole pairs of the wrench on ``targets`` from all the other magnets (each magnet's own sum over its
     sources, as a baseline revision's kernel computes them)."""
-    from warpworm import magnets as mg
+    from warpworm.physics import magnets as mg
 
     n = [len(mg.dipole_grid(m, density)) for m in magnets]
     return sum(n[i] * n[j] for i in targets for j in range(4) if i != j)
@@ -262,10 +262,10 @@ def _baseline_kernels(rev: str):
 
 
 def _launcher(kernel, model_arr, arrays, device, epm, far=True):
-    """One world-wrench call: today's (``kernel`` None: :func:`warpworm.magnets.launch_world_wrenches`, the pair
+    """One world-wrench call: today's (``kernel`` None: :func:`warpworm.physics.magnets.launch_world_wrenches`, the pair
     kernels) or a baseline revision's ``world_wrench_kernel``, with or without ``epm_wrench``; ``far`` = the ring
     rules, where the kernel has them."""
-    from warpworm import magnets as mg
+    from warpworm.physics import magnets as mg
 
     a = arrays
     if kernel is None:
@@ -293,7 +293,7 @@ def _launcher(kernel, model_arr, arrays, device, epm, far=True):
 
 
 def run(quick: bool = False) -> list[dict]:
-    from warpworm import magnets as mg
+    from warpworm.physics import magnets as mg
     from warpworm.transforms import matrix_to_quat_wxyz, quat_wxyz_to_xyzw
 
     quiet_warp()

@@ -18,10 +18,10 @@ import numpy as np
 
 
 def _scene(num_worlds: int, seed: int = 0):
-    from warpworm.config import load_config
+    from warpworm.data.config import load_config
     from warpworm.render import build_scene
     from warpworm.render.demo import default_pattern, posed_worm_states
-    from warpworm.sampling import sample_appearance
+    from warpworm.data.sampling import sample_appearance
 
     pattern = default_pattern()
     states = posed_worm_states(seed * 100003 + np.arange(num_worlds), pattern)

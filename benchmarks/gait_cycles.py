@@ -1,8 +1,8 @@
 #!/usr/bin/env python
 """Cycle by cycle: does a gait deform the worm in *every* cycle, or only while the EPM starts where it was placed?
 
-Every (w, a, h) grid point is one world of one batch (``warpworm.gait_search.search_gait``, split over the cores);
-each runs ``--cycles`` EPM cycles and is measured per cycle (``warpworm.gait_metrics``):
+Every (w, a, h) grid point is one world of one batch (``warpworm.analysis.gait_search.search_gait``, split over the cores);
+each runs ``--cycles`` EPM cycles and is measured per cycle (``warpworm.analysis.gait_metrics``):
 
 - ``ratio``: the smallest anterior segment ratio of the cycle (the two segment pairs ahead of the centre, tail →
   head, behind it backward; every pair for omega), and in the summary the smallest of any pair;
@@ -34,9 +34,10 @@ import numpy as np
 
 def main(argv=None) -> int:
     from gait_grid import gait_grid_parser, grid_from_arguments
-    from warpworm import gaits, quiet_warp
-    from warpworm.gait_search import search_gait
-    from warpworm.params import parse_overrides
+    from warpworm.physics import gaits
+    from warpworm import quiet_warp
+    from warpworm.analysis.gait_search import search_gait
+    from warpworm.physics.params import parse_overrides
 
     ap = gait_grid_parser(__doc__, cycles_default=5, name="gait_cycles")
     ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",

@@ -36,7 +36,7 @@ def gait_grid_parser(doc: str, *, cycles_default, cycles_type=int, name: str = "
     ``--workers`` and ``--out`` (default ``benchmarks/results/<name>_<gait>.json``); each adds its own flags."""
     import argparse
 
-    from warpworm import gaits
+    from warpworm.physics import gaits
 
     ap = argparse.ArgumentParser(description=doc.splitlines()[0])
     ap.add_argument("gait", choices=gaits.GAITS)

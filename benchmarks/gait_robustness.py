@@ -4,7 +4,7 @@
 Every grid point is one world of one batch; the batch runs ``--cycles`` EPM cycles in 8 settings: magnet model
 (analytic, dipoles) x direction (forward, backward) x numerics (the wrench every 4 ms with two 2 ms substeps,
 the default; every 2 ms with two 1 ms substeps). A point is *robust* when no setting crumples or explodes it. This is how the gait
-presets were chosen (warpworm/gaits.py GAIT_PRESETS): a setting that crumples in one of these runs sits on the
+presets were chosen (warpworm/physics/gaits.py GAIT_PRESETS): a setting that crumples in one of these runs sits on the
 crumple edge, where a change of float rounding decides the outcome.
 
 Usage::
@@ -32,9 +32,10 @@ SETTINGS = [(mm, back, dt, sub) for mm in ("analytic", "dipoles") for back in (F
 
 def main(argv=None) -> int:
     from gait_grid import add_grid_arguments, grid_from_arguments
-    from warpworm import gaits, quiet_warp
-    from warpworm.commands.simulate import run_gait
-    from warpworm.params import parse_overrides
+    from warpworm.physics import gaits
+    from warpworm import quiet_warp
+    from warpworm.analysis.gait_runs import run_gait
+    from warpworm.physics.params import parse_overrides
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("gait", choices=gaits.GAITS)

@@ -29,11 +29,12 @@ import numpy as np
 
 
 def main(argv=None) -> int:
-    from warpworm import gaits, quiet_warp
-    from warpworm.gait_metrics import end_centres, segment_ratios
-    from warpworm.model import Model
-    from warpworm.params import EPM, IPM_CENTRE, IPM_HEAD
-    from warpworm.simulator import Simulator
+    from warpworm.physics import gaits
+    from warpworm import quiet_warp
+    from warpworm.analysis.gait_metrics import end_centres, segment_ratios
+    from warpworm.sim.model import Model
+    from warpworm.physics.params import EPM, IPM_CENTRE, IPM_HEAD
+    from warpworm.sim.simulator import Simulator
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("gait", choices=gaits.GAITS)

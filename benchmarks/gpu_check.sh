@@ -113,9 +113,10 @@ cat > /tmp/ww_cuda_vs_cpu.py <<'PY'
 import json, os, time
 import numpy as np
 import warp as wp
-from warpworm import gaits, quiet_warp
-from warpworm.model import Model
-from warpworm.simulator import Simulator
+from warpworm.physics import gaits
+from warpworm import quiet_warp
+from warpworm.sim.model import Model
+from warpworm.sim.simulator import Simulator
 quiet_warp()
 W, out = 8, {}
 p = gaits.preset_params("peristaltic", magnet_model="analytic")
@@ -137,7 +138,7 @@ for s_, x_ in ((sc, xc), (sg, xg)):
     s_.run_substeps(x_, 1)
 out["one_substep_positions_max_abs_m"] = float(np.abs(xc.positions.numpy() - xg.positions.numpy()).max())
 # the block-per-world tile solvers on the GPU against the CPU's band solve, one substep from the same state
-from warpworm import simulator as _sim
+from warpworm.sim import simulator as _sim
 for solver in [s for s in getattr(_sim, "SOLVERS", ()) if s != "band"]:
     try:
         mt = Model.from_params(p, W, "cuda:0")

@@ -79,7 +79,7 @@ class NumpyImplicit:
                   blocks[:, off].transpose(0, 1, 3, 2))
 
     def substep(self, x, v, angle, f_ext):
-        from warpworm import crease
+        from warpworm.physics import crease
 
         dt, w, W, V = self.dt, self.w, self.W, self.V
         acc = f_ext * w[..., None]

@@ -1,5 +1,5 @@
 #!/usr/bin/env python
-"""Profile of a gait run's dynamics: time per kernel launch of :meth:`warpworm.simulator.Simulator.step`.
+"""Profile of a gait run's dynamics: time per kernel launch of :meth:`warpworm.sim.simulator.Simulator.step`.
 
 The run is what ``warpworm simulate --magnet-model analytic`` does (peristaltic preset, ``gaits.DEFAULT_DT`` with
 ``gaits.DEFAULT_SUBSTEPS``: 4 ms steps of two 2 ms substeps): build, settle (EPM parked), then the gait, without
@@ -88,9 +88,9 @@ def launch_timers():
 def _build(W: int, magnet_model: str, device: str, newton: int | None = None, newton_tol: float | None = None):
     """The peristaltic gait's model and simulator; no CUDA graph (each launch must be seen to be timed: the
     profile's whole-run figures on CUDA are therefore without graph replay, see ``benchmarks/run.py`` for those)."""
-    from warpworm import gaits
-    from warpworm.model import Model
-    from warpworm.simulator import Simulator
+    from warpworm.physics import gaits
+    from warpworm.sim.model import Model
+    from warpworm.sim.simulator import Simulator
 
     model = Model.from_params(gaits.preset_params("peristaltic", magnet_model=magnet_model), W, device)
     kw = {} if newton is None else {"newton": newton}

@@ -108,7 +108,7 @@ def dihedral_angle_gradient_and_normals(xi: wp.vec3, xj: wp.vec3, xk: wp.vec3, x
     """Signed fold angle psi [rad] of the hinge stencil (i, j, k, l) (shared edge j-k; 0 flat, > 0 valley) and its
     exact gradient w.r.t. (x_i, x_j, x_k, x_l) [rad/m], sharing their cross products.
 
-    The convention of :func:`warpworm.crease.dihedral_angles`: psi = atan2((n1 x n2) . e, n1 . n2) with the outward
+    The convention of :func:`warpworm.physics.crease.dihedral_angles`: psi = atan2((n1 x n2) . e, n1 . n2) with the outward
     wing normals n1 = (x_j - x_i) x (x_k - x_i), n2 = (x_k - x_l) x (x_j - x_l) and e = (x_j - x_k) / |x_j - x_k|.
     Gradient (Liu & Paulino 2017, MERLIN, with psi = pi - theta_MERLIN): d psi/d x_i = L n1/|n1|²,
     d psi/d x_l = L n2/|n2|², x_j and x_k by the wings' projections on the hinge axis (free of translation and

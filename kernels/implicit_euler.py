@@ -1,6 +1,6 @@
 """The default solver: implicit Euler with Newton steps on a banded direct solve, one thread per world.
 
-Kernels only; the host orchestration is :class:`warpworm.simulator.Simulator`.
+Kernels only; the host orchestration is :class:`warpworm.sim.simulator.Simulator`.
 :func:`implicit_step` is launched 1-D over worlds (``world = wp.tid()``); each thread runs its world's substeps. A
 substep of length dt finds the positions x that minimise
 
@@ -273,7 +273,7 @@ def dof_projector(status: int, n: wp.vec3) -> wp.mat33:
 
 @wp.struct
 class BarHingeModel:
-    """The model arrays the substep reads (shapes as :class:`warpworm.model.Model`; "(R, ...)": R = 1 shared or W
+    """The model arrays the substep reads (shapes as :class:`warpworm.sim.model.Model`; "(R, ...)": R = 1 shared or W
     rows, read at row ``world % R``)."""
 
     inv_mass: wp.array2d(dtype=float)  # (R, V) [1/kg]
@@ -301,7 +301,7 @@ class BarHingeModel:
 
 @wp.struct
 class SubstepOptions:
-    """The solver's settings (:class:`warpworm.simulator.Simulator`)."""
+    """The solver's settings (:class:`warpworm.sim.simulator.Simulator`)."""
 
     dt: float  # substep [s]
     num_substeps: int  # substeps per launch
@@ -316,7 +316,7 @@ class SubstepOptions:
 
 @wp.struct
 class BarHingeState:
-    """The physical state the substep advances (shapes as :class:`warpworm.model.State`)."""
+    """The physical state the substep advances (shapes as :class:`warpworm.sim.model.State`)."""
 
     x: wp.array2d(dtype=wp.vec3)  # (W, V) [m]
     v: wp.array2d(dtype=wp.vec3)  # (W, V) [m/s]
@@ -330,7 +330,7 @@ class BarHingeState:
 
 @wp.struct
 class NewtonScratch:
-    """The solver's own scratch (:class:`warpworm.simulator.Simulator` owns it; its values mean nothing between
+    """The solver's own scratch (:class:`warpworm.sim.simulator.Simulator` owns it; its values mean nothing between
     launches, except ``delta``, which is zero there, and the counters)."""
 
     x_prev: wp.array2d(dtype=wp.vec3)  # (W, V) positions at the start of the substep [m]

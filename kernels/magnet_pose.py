@@ -1,6 +1,6 @@
 """Per-step kernels of the magnets' poses and of the magnetic wrench on the mesh: the kinematic EPM on its path
 (sine or keyframes), the IPMs carried by their mounts, and the distribution of each IPM's wrench onto its mount
-vertices. Launched by :class:`warpworm.simulator.Simulator` once per step, over all worlds.
+vertices. Launched by :class:`warpworm.sim.simulator.Simulator` once per step, over all worlds.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from .common import PI, TWO_PI, pw
 def mount_frame(
     x: wp.array2d(dtype=wp.vec3), world: int, mount_vertices: wp.array2d(dtype=wp.int32), m: int
 ):
-    """Body frame of mount ``m``'s vertex ring, as :func:`warpworm.crease.frame_from_vertices`: origin = centroid,
+    """Body frame of mount ``m``'s vertex ring, as :func:`warpworm.physics.crease.frame_from_vertices`: origin = centroid,
     x = ring normal by Newell's rule, y = centroid -> first vertex made orthogonal to x, z = x cross y.
 
     Returns (origin, R) with R's columns the frame axes in world coordinates (frame -> world).
@@ -39,7 +39,7 @@ def mount_frame(
 
 @wp.struct
 class SinePath:
-    """The paper's sinusoidal EPM path (§IV-C) of every world, fields as :data:`warpworm.gaits.SINE_FIELDS`, each
+    """The paper's sinusoidal EPM path (§IV-C) of every world, fields as :data:`warpworm.physics.gaits.SINE_FIELDS`, each
     shape (1,) shared or (W,): start x, y [m], wavelength w [m], amplitude a [m], depth of the centre at closest
     approach [m], theta [rad], period [s], direction ±1, phase [cycles], rewind 0 / 1 (1: the first cycle's pass
     repeats in place, a tethered worm's path: :func:`rewound_advance`)."""

@@ -9,13 +9,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from warpworm.randomize import seed_uniforms
+from warpworm.data.randomize import seed_uniforms
 from warpworm.transforms import axis_angle_to_matrix
 
 
 def default_pattern():
-    """The paper's worm (a = 20 mm, b = 8 mm, 6 units, l0 = 80 mm) from :mod:`warpworm.crease`."""
-    from warpworm.crease import build_worm
+    """The paper's worm (a = 20 mm, b = 8 mm, 6 units, l0 = 80 mm) from :mod:`warpworm.physics.crease`."""
+    from warpworm.physics.crease import build_worm
 
     return build_worm(0.020, 0.008, 6, l0=0.080)
 
@@ -54,7 +54,7 @@ def posed_worm_states(seeds, pattern=None, *, bend: float = 8.0, spread: float =
         dict with ``positions`` (W, V, 3), ``magnet_pos`` (W, 4, 3), ``magnet_rot`` (W, 4, 3, 3),
         ``crease_angle`` (W, H), ``bar_strain`` (W, E) (float64, SI).
     """
-    from warpworm.crease import dihedral_angles, edge_lengths, mount_poses
+    from warpworm.physics.crease import dihedral_angles, edge_lengths, mount_poses
 
     p = default_pattern() if pattern is None else pattern
     seeds = np.asarray(seeds).reshape(-1)

@@ -73,7 +73,7 @@ class WormBody:
 
     @classmethod
     def from_pattern(cls, pattern) -> "WormBody":
-        """Build from a :class:`warpworm.crease.CreasePattern` with keypoints seg0..seg4, tail, head."""
+        """Build from a :class:`warpworm.physics.crease.CreasePattern` with keypoints seg0..seg4, tail, head."""
         names = list(pattern.keypoint_names)
         order = [names.index(n) for n in ("seg0", "seg1", "seg2", "seg3", "seg4", "tail", "head")]
         kv = pattern.keypoint_vertices[order]
@@ -186,7 +186,7 @@ def _xywh(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
 
 def schema_labels(states: dict, body, cameras: Cameras, images: dict | None = None, *,
                   rest_positions=None, ipm_diameter=0.010, ipm_thickness=0.001) -> dict:
-    """Labels of N images of W worlds, named and typed as the dataset schema (:data:`warpworm.dataset.SCHEMA`).
+    """Labels of N images of W worlds, named and typed as the dataset schema (:data:`warpworm.data.dataset.SCHEMA`).
 
     Args:
         states: snapshot dict with ``positions`` (W, V, 3), ``magnet_pos`` (W, 4, 3), ``magnet_rot`` (W, 4, 3, 3) and,

@@ -21,7 +21,7 @@ id    surface
 
 The worm is one sheet rendered double-sided (no culling; the normal is flipped toward the camera). The floor is an
 analytic square in the plane through the world origin with normal ``(-sin i, 0, cos i)`` for incline ``i`` (positive
-raises the floor toward +x, :class:`warpworm.params.WormParams`), half side ``floor_half``; it is intersected per pixel
+raises the floor toward +x, :class:`warpworm.physics.params.WormParams`), half side ``floor_half``; it is intersected per pixel
 rather than rasterized. Nothing is drawn where no surface is hit: the background gradient.
 """
 
@@ -138,7 +138,7 @@ def hsv_to_rgb(h, s, v):
 def _default_config():
     global _DEFAULT_CONFIG
     if _DEFAULT_CONFIG is None:
-        from warpworm.config import load_config
+        from warpworm.data.config import load_config
 
         _DEFAULT_CONFIG = load_config("default")
     return _DEFAULT_CONFIG

@@ -69,14 +69,14 @@ def kernel_modules() -> list[str]:
 
 
 def factory_modules(skip=()) -> list[str]:
-    """Names of the kernel modules that building a :class:`~warpworm.simulator.Simulator` for every solver in
+    """Names of the kernel modules that building a :class:`~warpworm.sim.simulator.Simulator` for every solver in
     ``simulator.SOLVERS`` creates beyond ``skip`` (kernels made by a factory for the worm's shape, each its own
     ``module="unique"`` module, e.g. the block-per-world tile substeps), on a one-world CPU model."""
     from warp._src.context import user_modules
 
-    from warpworm import gaits
-    from warpworm.model import Model
-    from warpworm.simulator import SOLVERS, Simulator
+    from warpworm.physics import gaits
+    from warpworm.sim.model import Model
+    from warpworm.sim.simulator import SOLVERS, Simulator
 
     before = set(user_modules)
     model = Model.from_params(gaits.preset_params("peristaltic"), 1, "cpu")
@@ -96,7 +96,7 @@ def test_kernel_modules_are_discovered():
                      "warpworm.kernels.magnet_pose", "warpworm.render.raster_kernels"):
         assert expected in MODULES, (expected, MODULES)
     # and the tile solver's factory kernels (one module per factorization), unless the tile solver is gone
-    from warpworm.simulator import SOLVERS
+    from warpworm.sim.simulator import SOLVERS
 
     tiles = [s for s in SOLVERS if s.startswith("tile-")]
     assert len(MODULES) - len(FILE_MODULES) >= len(tiles), (MODULES, SOLVERS)

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from warpworm import calibration as cal
-from warpworm import magnets as mg
+from warpworm.analysis import calibration as cal
+from warpworm.physics import magnets as mg
 
 GAPS = np.array([1, 2, 3, 5, 7, 10, 15, 20, 30]) * 1e-3
 

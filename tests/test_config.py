@@ -9,10 +9,10 @@ import sys
 
 import pytest
 
-from warpworm.config import (PARAM_SPECS, ConfigError, OutputConfig, RenderConfig, SimConfig, check_output_dir,
+from warpworm.data.config import (PARAM_SPECS, ConfigError, OutputConfig, RenderConfig, SimConfig, check_output_dir,
                              config_packaged_names, load_config)
-from warpworm.params import WormParams
-from warpworm.randomize import Constant, Uniform
+from warpworm.physics.params import WormParams
+from warpworm.data.randomize import Constant, Uniform
 
 GOOD = {"num_samples": 8, "shard_size": 4, "sim": {"frame_times": [0.1, 0.2]}}
 

@@ -14,7 +14,7 @@ import pytest
 import yaml
 
 from warpworm.commands.config_schema import json_schema
-from warpworm.config import PARAM_SPECS, ConfigError, SimConfig, config_packaged_names, load_config
+from warpworm.data.config import PARAM_SPECS, ConfigError, SimConfig, config_packaged_names, load_config
 
 SCHEMA = json_schema()
 VALIDATOR = jsonschema.Draft7Validator(SCHEMA)  # what yaml-language-server (VS Code) implements

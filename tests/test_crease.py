@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from warpworm import crease as cr
+from warpworm.physics import crease as cr
 
 A, B, N, L0 = 0.020, 0.008, 6, 0.080  # WormParams defaults
 

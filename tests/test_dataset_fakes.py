@@ -17,7 +17,7 @@ import time
 import numpy as np
 
 from warpworm import transforms as tf
-from warpworm.stages import SimResult
+from warpworm.data.stages import SimResult
 
 KEYPOINT_NAMES = ["seg0", "seg1", "seg2", "seg3", "seg4", "tail", "head"]
 
@@ -38,7 +38,7 @@ def _topology(n: int):
 
 
 class FakeStages:
-    """Deterministic closed-form stand-in for :class:`warpworm.stages.WarpStages` (tests only)."""
+    """Deterministic closed-form stand-in for :class:`warpworm.data.stages.WarpStages` (tests only)."""
 
     def metadata(self, cfg):
         V, tri, edges, hinges, seg = _topology(cfg.sim.n_units)

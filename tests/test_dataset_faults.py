@@ -17,9 +17,9 @@ import h5py
 import numpy as np
 import pytest
 
-from warpworm import dataset as ds
+from warpworm.data import dataset as ds
 from warpworm.commands import verify as vf
-from warpworm.job import shard_plan
+from warpworm.data.job import shard_plan
 
 from test_dataset_pipeline import FAKE, _cli, _reference, assert_same, everything, run, tiny
 
@@ -51,7 +51,7 @@ def test_no_cuda_warning_on_cpu_and_one_device_line(tmp_path):
 # --- 2. schema: one table, generated from the code, equal to the files ----------------------------------------------
 def test_docs_table_is_the_schema_and_files_follow_it(tmp_path):
     text = DOCS.read_text()
-    assert ds.schema_markdown() in text, "docs/dataset.md: regenerate the table with warpworm.dataset.schema_markdown()"
+    assert ds.schema_markdown() in text, "docs/dataset.md: regenerate the table with warpworm.data.dataset.schema_markdown()"
     assert text.count(ds.SCHEMA_TABLE_BEGIN) == 1
     run(tiny(), tmp_path / "d")
     r = ds.open(tmp_path / "d")

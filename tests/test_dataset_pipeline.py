@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 import yaml
 
-from warpworm import dataset as ds
-from warpworm.config import ConfigError, load_config
-from warpworm.job import generate
+from warpworm.data import dataset as ds
+from warpworm.data.config import ConfigError, load_config
+from warpworm.data.job import generate
 
 FAKE = "test_dataset_fakes:FakeStages"
 TESTS = Path(__file__).parent

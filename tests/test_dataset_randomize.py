@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from warpworm import randomize as rnd
+from warpworm.data import randomize as rnd
 
 
 def test_draws_do_not_depend_on_batching():
@@ -73,8 +73,8 @@ def test_seed_uniforms_are_the_counter_generator_keyed_by_seed():
 
 
 def test_randomized_params_are_the_dataset_jobs_draws():
-    from warpworm.config import ConfigError, load_config
-    from warpworm.sampling import draw_worm, randomized_params
+    from warpworm.data.config import ConfigError, load_config
+    from warpworm.data.sampling import draw_worm, randomized_params
 
     cfg = load_config("default")
     p = randomized_params("default", 5, seed=11)
@@ -116,8 +116,8 @@ def test_different_seeds_draw_different_samples():
 def test_packaged_configs_keep_the_epm_beneath_the_plate(name):
     """Every draw of every packaged config puts the EPM's closest approach h (the gait preset's, times its scale)
     at or below the plate's underside (h >= support_thickness): a draw that did not would stop the job."""
-    from warpworm.config import load_config
-    from warpworm.sampling import randomized_params
+    from warpworm.data.config import load_config
+    from warpworm.data.sampling import randomized_params
 
     W = 4096
     # one magnet model per solver batch (production draws it per batch): fixed here, it does not move h

@@ -4,7 +4,7 @@ Two ``ray start`` nodes (1 CPU each, both on 127.0.0.1 and listening on loopback
 base temp, no dashboard, no usage stats, no auth token written to ~/.ray) run a small job of the deterministic fake
 stages (tests/test_dataset_fakes.py, slowed down so a shard is in flight for seconds). As soon as a shard task on the second
 node has opened its temporary, that node's raylet is SIGKILLed. Ray re-runs the lost task on the head node
-(``warpworm.workers.RAY_MAX_RETRIES``); the job must exit 0 with a complete dataset whose every dataset equals a local
+(``warpworm.data.workers.RAY_MAX_RETRIES``); the job must exit 0 with a complete dataset whose every dataset equals a local
 run's, sample for sample, and no temporary left. Every wait is bounded; the nodes are stopped by their process ids
 (never ``ray stop``, which stops every Ray on the machine) in a ``finally``. The test skips only if Ray is not
 installed or a node cannot start (the reason and the node's log are in the skip message).

@@ -5,10 +5,10 @@ import json
 import cv2
 import numpy as np
 
-from warpworm import dataset as ds
-from warpworm.config import load_config
-from warpworm.job import generate
-from warpworm.previews import write_previews
+from warpworm.data import dataset as ds
+from warpworm.data.config import load_config
+from warpworm.data.job import generate
+from warpworm.data.previews import write_previews
 
 
 def test_default_config_end_to_end_with_real_stages(tmp_path):

@@ -7,8 +7,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from warpworm import gaits, quiet_warp
-from warpworm.commands.simulate import run_gait
+from warpworm.physics import gaits
+from warpworm import quiet_warp
+from warpworm.analysis.gait_runs import run_gait
 
 quiet_warp()
 
@@ -83,8 +84,8 @@ def test_every_substep_converges_with_a_one_way_skin():
     6 / 45 / 5 mm, one cycle): no substep ends at the step cap (before the stick/slip switch limit, half of them
     did, two neighbouring vertices taking turns at sticking), at a cost of a few Newton steps (measured 5.4 per
     substep over two cycles against 3.6 isotropic)."""
-    from warpworm.model import Model
-    from warpworm.simulator import Simulator
+    from warpworm.sim.model import Model
+    from warpworm.sim.simulator import Simulator
 
     p = replace(gaits.preset_params("peristaltic"), wavelength=0.006, amplitude=0.045, closest_approach=0.005,
                 magnet_model="analytic", friction_backward_ratio=2.0)

@@ -7,10 +7,11 @@ from dataclasses import fields, replace
 import numpy as np
 import pytest
 
-from warpworm import gaits, magnets, quiet_warp
-from warpworm.commands.simulate import randomized_params
-from warpworm.model import Model
-from warpworm.simulator import Simulator
+from warpworm.physics import gaits, magnets
+from warpworm import quiet_warp
+from warpworm.analysis.gait_runs import randomized_params
+from warpworm.sim.model import Model
+from warpworm.sim.simulator import Simulator
 
 quiet_warp()
 

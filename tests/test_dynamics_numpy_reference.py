@@ -10,10 +10,11 @@ import numpy as np
 import pytest
 import warp as wp
 
-from warpworm import crease, gaits, quiet_warp
+from warpworm.physics import crease, gaits
+from warpworm import quiet_warp
 from warpworm.kernels import common
-from warpworm.model import Model
-from warpworm.simulator import Simulator
+from warpworm.sim.model import Model
+from warpworm.sim.simulator import Simulator
 
 quiet_warp()
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))

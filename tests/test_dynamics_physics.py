@@ -9,10 +9,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from warpworm import gaits, quiet_warp
-from warpworm.model import Model
-from warpworm.params import WormParams
-from warpworm.simulator import Simulator
+from warpworm.physics import gaits
+from warpworm import quiet_warp
+from warpworm.sim.model import Model
+from warpworm.physics.params import WormParams
+from warpworm.sim.simulator import Simulator
 
 quiet_warp()
 
@@ -173,7 +174,7 @@ def _energy(model: Model, snap: dict) -> float:
     m = model.vertex_mass_host[0]
     v = snap["velocities"][0].astype(np.float64)
     ke = 0.5 * float(np.sum(m * np.sum(v**2, axis=-1)))
-    from warpworm import crease
+    from warpworm.physics import crease
 
     L0 = model.rest_length.numpy()[0].astype(np.float64)
     L = crease.edge_lengths(snap["positions"][0], model.pattern.edges)
@@ -261,7 +262,7 @@ def test_axial_squeeze_folds_the_creases(substeps):
     x = snap["positions"][0].astype(np.float64)
     shortening = x0[head, 0].mean() - x[head, 0].mean() - (x0[tail, 0].mean() - x[tail, 0].mean())
     assert shortening > 0.7 * squeeze, f"shortened only {shortening * 1e3:.2f} mm"
-    from warpworm import crease
+    from warpworm.physics import crease
 
     valley = pat.edge_label == crease.VALLEY
     strain = crease.edge_lengths(x, pat.edges) / crease.edge_lengths(x0, pat.edges) - 1.0

@@ -1,4 +1,4 @@
-"""Virtual experiments (warpworm.experiments) against independent truths, on few worlds and short horizons.
+"""Virtual experiments (warpworm.analysis.experiments) against independent truths, on few worlds and short horizons.
 
 Truths: the closed-form cube-cube table (DESIGN-NOTES), a linear quasi-static bar-and-hinge solve in NumPy (no
 solver), the worm's weight, Coulomb's law on an incline. Gait experiments are smoke runs: they must run and report
@@ -12,7 +12,7 @@ import json
 import numpy as np
 import pytest
 
-from warpworm import experiments as ex
+from warpworm.analysis import experiments as ex
 
 
 def test_force_distance_analytic_equals_table():
@@ -46,7 +46,7 @@ def test_flexure_anchor_forces_balance_weight_and_grow_with_deflection():
     r = ex.flexure((0.02,), max_deflection=1.0e-3, increments=2, hold=0.15, settle=0.1)
     # anchor forces (as applied by the solver: Simulator.snapshot) hold the weight at the unloaded start
     # (supports' share minus the load pad's pull; the load pad also carries some)
-    from warpworm.model import Model
+    from warpworm.sim.model import Model
 
     weight = float(Model.from_params(ex.replace(ex.WormParams(), **ex.NO_MAGNETS), 1, "cpu").vertex_mass_host.sum()
                    * 9.81)
@@ -180,7 +180,7 @@ def test_set_overrides_name_the_item_and_reach_the_worlds(tmp_path, capsys):
     """``--set FIELD=VALUE`` (experiment, search-gait): parsed to WormParams overrides; a bad field or value is refused
     before any work, naming the item; a good one reaches every world (the force plate's EPM path scales with it)."""
     from warpworm.cli import main
-    from warpworm.params import parse_overrides
+    from warpworm.physics.params import parse_overrides
 
     assert parse_overrides(["closest_approach_scale=1.1", "hinge_damping=2e-4"]) == {
         "closest_approach_scale": 1.1, "hinge_damping": 2e-4}

@@ -6,11 +6,11 @@ from __future__ import annotations
 import numpy as np
 
 from warpworm import quiet_warp
-from warpworm.experiments import section_vertices
-from warpworm.gait_metrics import fold_violation, wing_altitude_ratio
-from warpworm.model import Model
-from warpworm.params import WormParams
-from warpworm.simulator import Simulator
+from warpworm.analysis.experiments import section_vertices
+from warpworm.analysis.gait_metrics import fold_violation, wing_altitude_ratio
+from warpworm.sim.model import Model
+from warpworm.physics.params import WormParams
+from warpworm.sim.simulator import Simulator
 
 quiet_warp()
 
@@ -70,7 +70,7 @@ def test_panel_contact_holds_the_wing_that_used_to_collapse():
     there (t = 0.44 s; its wing's altitude over the crease went to zero, the Newton matrix singular: flagged
     'exploded' a step later until the collapse check flagged it crumpled). With the barrier (common.wing_contact,
     from 2 % of the hinge length) the same 0.48 s run stays live, and no wing goes below 1 % (measured: 1.76 %)."""
-    from warpworm import experiments
+    from warpworm.analysis import experiments
 
     model, _ = experiments._gait_model(["inchworm"], anchors=section_vertices(6, 0), anchor_stiffness=1e4, base=None,
                                        device="cpu")

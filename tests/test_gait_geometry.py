@@ -10,10 +10,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from warpworm import gaits, quiet_warp
-from warpworm.model import Model
-from warpworm.params import WormParams
-from warpworm.simulator import Simulator
+from warpworm.physics import gaits
+from warpworm import quiet_warp
+from warpworm.sim.model import Model
+from warpworm.physics.params import WormParams
+from warpworm.sim.simulator import Simulator
 from warpworm.transforms import quat_wxyz_to_matrix, quat_xyzw_to_wxyz
 
 quiet_warp()

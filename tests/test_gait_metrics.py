@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from warpworm import crease
-from warpworm.gait_metrics import fold_violation, gait_metrics, segment_ratios, wing_altitude_ratio
-from warpworm.gait_search import grid_points, parse_grid
+from warpworm.physics import crease
+from warpworm.analysis.gait_metrics import fold_violation, gait_metrics, segment_ratios, wing_altitude_ratio
+from warpworm.analysis.gait_search import grid_points, parse_grid
 
 
 def _worm():
@@ -116,8 +116,8 @@ def test_end_hold_of_a_slide_and_of_a_squeeze_from_both_ends():
 
 
 def test_default_worm_is_mineral_paper():
-    from warpworm.materials import material_params
-    from warpworm.params import WormParams
+    from warpworm.physics.materials import material_params
+    from warpworm.physics.params import WormParams
 
     p, d = material_params("mineral_paper"), WormParams()
     for key in ("hinge_stiffness", "valley_bar_stiffness", "sheet_density", "hinge_damping"):
@@ -141,8 +141,8 @@ def test_search_gait_ranks_and_does_not_depend_on_the_worker_split(tmp_path):
     interact), the ranking holds only valid worlds, best first, and the CSV has a row per point."""
     import csv
 
-    from warpworm import gaits
-    from warpworm.gait_search import search_gait, write_csv
+    from warpworm.physics import gaits
+    from warpworm.analysis.gait_search import search_gait, write_csv
 
     params = gaits.preset_params("omega")
     grid = parse_grid("w=0.016,a=0.03,h=0.023,0.035")

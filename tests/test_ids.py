@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import json
 
-from warpworm import crease, dataset, export_bop, ids, magnets, model, params
+from warpworm.physics import crease, magnets, params
+from warpworm.data import dataset, export_bop
+from warpworm import ids
+from warpworm.sim import model
 from warpworm.kernels import common, magnet_fields, magnet_wrench
 from warpworm.render import raster_kernels, scene
 

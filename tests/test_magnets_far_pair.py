@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 import warp as wp
 
-from warpworm import magnets as mg
+from warpworm.physics import magnets as mg
 from warpworm.kernels.magnet_far_pair import cylinder_ring_rule
 
 

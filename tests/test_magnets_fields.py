@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from warpworm import magnets as mg
+from warpworm.physics import magnets as mg
 
 magpy = pytest.importorskip("magpylib")
 Rotation = pytest.importorskip("scipy.spatial.transform").Rotation

@@ -2,7 +2,7 @@
 
 import cv2
 
-from warpworm.field_plot import render_field_picture
+from warpworm.analysis.field_plot import render_field_picture
 
 
 def test_render_field_picture(tmp_path):

@@ -4,7 +4,7 @@ convergence of the dipole model, and the batched world kernel against the per-pa
 import numpy as np
 import pytest
 
-from warpworm import magnets as mg
+from warpworm.physics import magnets as mg
 
 magpy = pytest.importorskip("magpylib")
 Rotation = pytest.importorskip("scipy.spatial.transform").Rotation

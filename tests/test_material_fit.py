@@ -1,4 +1,4 @@
-"""k_α calibration from a force–displacement table (warpworm.material_fit) against planted truths.
+"""k_α calibration from a force–displacement table (warpworm.analysis.material_fit) against planted truths.
 
 Truth: a k_α planted in a simulated curve (the default material, mineral paper, every other parameter held), with
 2 % multiplicative Gaussian noise (fixed seed), written to CSV and fitted back through the file reader.
@@ -9,9 +9,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from warpworm import experiments as ex
-from warpworm import material_fit as mf
-from warpworm.materials import material_params
+from warpworm.analysis import experiments as ex
+from warpworm.analysis import material_fit as mf
+from warpworm.physics.materials import material_params
 
 K_PLANTED = 0.008  # N/rad, between mineral paper (0.005) and tracing paper (0.010)
 FAST = dict(coarse=16, fine=8)  # 16 + 8 + 1 worlds: three batches

@@ -6,9 +6,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from warpworm import gaits, quiet_warp
-from warpworm.model import Model
-from warpworm.simulator import Simulator
+from warpworm.physics import gaits
+from warpworm import quiet_warp
+from warpworm.sim.model import Model
+from warpworm.sim.simulator import Simulator
 
 quiet_warp()
 

@@ -7,7 +7,7 @@ import numpy as np
 from warpworm.render import look_at, sample_cameras
 from warpworm.render.camera import intrinsics, make_cameras
 from warpworm.render.demo import default_pattern, posed_worm_states
-from warpworm.randomize import seed_uniforms as uniforms
+from warpworm.data.randomize import seed_uniforms as uniforms
 from warpworm.render.sensor import apply_sensor
 
 from warpworm import quiet_warp
@@ -86,8 +86,8 @@ def test_render_command_simulates_worlds_drawn_from_the_config(tmp_path):
     that seed), with the command's gait; the labels are the dataset schema's."""
     from warpworm.cli import main
     from warpworm.commands.render import simulate_states
-    from warpworm.config import load_config
-    from warpworm.sampling import randomized_params
+    from warpworm.data.config import load_config
+    from warpworm.data.sampling import randomized_params
 
     cfg = load_config("default", ["randomize.worm.gait=omega"], seed=3)
     snap, model = simulate_states(cfg, 2, 3, "omega", 0.02, "cpu")

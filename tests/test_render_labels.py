@@ -16,8 +16,8 @@ from warpworm.render.demo import default_pattern, posed_worm_states
 from warpworm.render.labels import KEYPOINT_NAMES, VIS_EPS, WormBody, keypoint_depth_tolerance, schema_labels
 
 from warpworm import quiet_warp
-from warpworm.config import load_config
-from warpworm.sampling import sample_appearance
+from warpworm.data.config import load_config
+from warpworm.data.sampling import sample_appearance
 from warpworm.transforms import axis_angle_to_matrix, quat_wxyz_to_matrix
 
 quiet_warp()

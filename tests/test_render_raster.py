@@ -19,8 +19,8 @@ from warpworm.render.raycast import RayCaster
 from warpworm.render.scene import box_mesh
 
 from warpworm import quiet_warp
-from warpworm.config import load_config
-from warpworm.sampling import sample_appearance
+from warpworm.data.config import load_config
+from warpworm.data.sampling import sample_appearance
 
 quiet_warp()
 

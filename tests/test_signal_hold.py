@@ -9,10 +9,10 @@ import signal
 import numpy as np
 import pytest
 
-from warpworm import dataset as ds
-from warpworm import signal_hold
-from warpworm.job import SignalGuard
-from warpworm.shard import Interrupted
+from warpworm.data import dataset as ds
+from warpworm.data import signal_hold
+from warpworm.data.job import SignalGuard
+from warpworm.data.shard import Interrupted
 
 
 def test_signal_inside_an_io_section_is_raised_when_it_ends():

@@ -8,9 +8,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from warpworm import gaits, quiet_warp
-from warpworm.model import Model
-from warpworm.simulator import Simulator
+from warpworm.physics import gaits
+from warpworm import quiet_warp
+from warpworm.sim.model import Model
+from warpworm.sim.simulator import Simulator
 
 quiet_warp()
 
@@ -59,9 +60,10 @@ def test_a_graph_captured_first_thing_in_a_process_is_sound():
     code = """
 import numpy as np
 from dataclasses import replace
-from warpworm import gaits, magnets, quiet_warp
-from warpworm.model import Model
-from warpworm.simulator import Simulator
+from warpworm.physics import gaits, magnets
+from warpworm import quiet_warp
+from warpworm.sim.model import Model
+from warpworm.sim.simulator import Simulator
 quiet_warp()
 def run(graph):
     model = Model.from_params(replace(gaits.preset_params("peristaltic"), magnet_model="analytic"), 2, "cpu")
@@ -89,7 +91,7 @@ def test_graph_cache_is_bounded_and_a_failing_capture_falls_back(monkeypatch):
     runs, to the same positions."""
     import warp as wp
 
-    from warpworm import simulator as sim_mod
+    from warpworm.sim import simulator as sim_mod
 
     model = Model.from_params(gaits.preset_params("inchworm"), 1, "cpu")
     graph, plain = (Simulator(model, dt=gaits.DEFAULT_DT, substeps=gaits.DEFAULT_SUBSTEPS, use_graph=g)

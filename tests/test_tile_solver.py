@@ -1,4 +1,4 @@
-"""The block-per-world implicit substeps (:mod:`warpworm.tile_solver`, the GPU path) against the band path.
+"""The block-per-world implicit substeps (:mod:`warpworm.sim.tile_solver`, the GPU path) against the band path.
 
 The truth is the band path with full Newton steps (``Simulator(chord=False).run_substeps``: one thread per world,
 block-band Cholesky; the tile kernels take no chord steps, the band default does). The tile path
@@ -31,12 +31,13 @@ import numpy as np
 import pytest
 import warp as wp
 
-from warpworm import gaits, quiet_warp
-from warpworm.gait_metrics import wing_altitude_ratio
-from warpworm.model import Model
-from warpworm.params import WormParams
-from warpworm.simulator import Simulator
-from warpworm.tile_solver import DEFAULT_CUDA_BLOCK_DIM, FACTORIZATIONS, TileSubsteps, vertex_incidence
+from warpworm.physics import gaits
+from warpworm import quiet_warp
+from warpworm.analysis.gait_metrics import wing_altitude_ratio
+from warpworm.sim.model import Model
+from warpworm.physics.params import WormParams
+from warpworm.sim.simulator import Simulator
+from warpworm.sim.tile_solver import DEFAULT_CUDA_BLOCK_DIM, FACTORIZATIONS, TileSubsteps, vertex_incidence
 
 quiet_warp()
 

@@ -2,7 +2,7 @@
 
 Kernels take their ``wp.constant``s from here (``from warpworm import ids``); host modules re-export the names
 they always had (``crease.MOUNTAIN``, ``render.raster_kernels.LABEL_EPM``, ``model.SHAPE_CUBOID``, ...). The dataset
-files' ``segmentation_ids`` attribute is :data:`SEGMENTATION_IDS` (``warpworm.dataset.SEGMENTATION_IDS`` is this
+files' ``segmentation_ids`` attribute is :data:`SEGMENTATION_IDS` (``warpworm.data.dataset.SEGMENTATION_IDS`` is this
 table), the renderer's ``LABEL_NAMES`` is :data:`SEGMENTATION_NAMES`, the BOP / COCO exports and ``warpworm verify``
 read their ids from here.
 """

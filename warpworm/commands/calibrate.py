@@ -20,7 +20,7 @@ def add_arguments(parser) -> None:
 
 
 def main(args) -> int:
-    from warpworm import calibration
+    from warpworm.analysis import calibration
 
     size = args.size[0] if len(args.size) == 1 else args.size
     if len(args.size) not in (1, 3):

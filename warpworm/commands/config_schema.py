@@ -1,6 +1,6 @@
 """``warpworm config-schema``: print the JSON Schema of dataset configs, so an editor validates and completes them.
 
-pydantic exports the keys, types, ranges, descriptions and defaults from :mod:`warpworm.config`; this module adds, for
+pydantic exports the keys, types, ranges, descriptions and defaults from :mod:`warpworm.data.config`; this module adds, for
 every ``randomize`` parameter, the distribution forms its ParamSpec allows (a constant, ``{uniform: [lo, hi]}``, ...,
 with the parameter's bounds on each number), defined once per kind of parameter under ``$defs``. docs/config.md shows
 how to point VS Code (yaml-language-server) at it. The schema checks each key alone; the checks that relate two keys
@@ -23,7 +23,7 @@ is only where the references point)."""
 
 def json_schema() -> dict:
     """The dataset config's JSON Schema (draft 7)."""
-    from ..config import PARAM_SPECS, schema_adapter
+    from warpworm.data.config import PARAM_SPECS, schema_adapter
 
     schema = schema_adapter().json_schema()
     defs = schema["$defs"]
@@ -37,8 +37,8 @@ def json_schema() -> dict:
 
 
 def _forms(spec) -> tuple[str, dict]:
-    """(a name, the JSON Schema) of the YAML forms a parameter of ``spec`` (a warpworm.config.ParamSpec) may take,
-    as warpworm.randomize.parse_distribution reads them and warpworm.config's _check_spec accepts them."""
+    """(a name, the JSON Schema) of the YAML forms a parameter of ``spec`` (a warpworm.data.config.ParamSpec) may take,
+    as warpworm.data.randomize.parse_distribution reads them and warpworm.data.config's _check_spec accepts them."""
     def obj(**props):
         return {"type": "object", "properties": props, "required": list(props)[:1], "additionalProperties": False}
 

@@ -24,8 +24,8 @@ def demo_scene(height: float):
     The EPM stands vertically (south pole down, moment +z) between the centre and head IPMs, as in the peristaltic
     gait (paper §III-A). Returns (pattern, magnets, positions (4, 3) [m], rotations (4, 3, 3)).
     """
-    from warpworm import crease, magnets
-    from warpworm.params import WormParams
+    from warpworm.physics import crease, magnets
+    from warpworm.physics.params import WormParams
 
     p = WormParams()
     pattern = crease.build_worm(p.a, p.b, p.n_units, l0=p.l0)
@@ -39,9 +39,9 @@ def demo_scene(height: float):
 
 
 def main(args) -> int:
-    from warpworm import crease, magnets
-    from warpworm.field_plot import render_field_picture
-    from warpworm.params import MAGNET_SLOTS
+    from warpworm.physics import crease, magnets
+    from warpworm.analysis.field_plot import render_field_picture
+    from warpworm.physics.params import MAGNET_SLOTS
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

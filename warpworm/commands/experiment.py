@@ -22,7 +22,7 @@ def add_arguments(parser) -> None:
                         help="override a WormParams field of every world, e.g. --set closest_approach_scale=1.1 (the "
                              "gait experiments keep each preset's w, a, h and scale them)")
     parser.add_argument("--material", default="mineral_paper",
-                        help="sheet material of the worm (warpworm.materials.MATERIALS: bopet, mineral_paper, "
+                        help="sheet material of the worm (warpworm.physics.materials.MATERIALS: bopet, mineral_paper, "
                              "tracing_paper; default mineral_paper)")
     parser.add_argument("--fit", metavar="TABLE.csv", default=None,
                         help="compression / flexure only: fit k_α to a measured curve, a CSV with columns "
@@ -46,7 +46,7 @@ def _sweep(lo: float, hi: float, n: int):
 def _run(name: str, args, cache: dict, base=None):
     import numpy as np
 
-    from warpworm import experiments as ex
+    from warpworm.analysis import experiments as ex
 
     q = args.quick
     dur = args.duration if args.duration is not None else (0.3 if q else 2.0)
@@ -87,8 +87,8 @@ def _fit(args, base) -> int:
     import time
     from pathlib import Path
 
-    from warpworm import experiments as ex
-    from warpworm import material_fit as mf
+    from warpworm.analysis import experiments as ex
+    from warpworm.analysis import material_fit as mf
 
     if args.name not in mf.TESTS:
         print(f"error: --fit works with compression or flexure, not {args.name!r}", file=sys.stderr)
@@ -120,7 +120,7 @@ def _fit(args, base) -> int:
         except ImportError:
             note = "note: matplotlib is not installed (the 'plots' extra): PNG skipped"
         else:
-            from warpworm.plots import plot_fit
+            from warpworm.analysis.plots import plot_fit
 
             written.append(str(plot_fit(r, out / f"{stem}.png")))
     print(f"== {stem} ({time.perf_counter() - t0:.1f} s): " + ", ".join(written))
@@ -143,12 +143,12 @@ def main(args) -> int:
     import time
     from pathlib import Path
 
-    from warpworm import experiments as ex
-    from warpworm.materials import material_params
+    from warpworm.analysis import experiments as ex
+    from warpworm.physics.materials import material_params
 
     from dataclasses import replace
 
-    from warpworm.params import parse_overrides
+    from warpworm.physics.params import parse_overrides
 
     try:
         base = material_params(args.material)
@@ -174,7 +174,7 @@ def main(args) -> int:
         jpath = ex.save_json(r, out / f"{name}.json")
         written = [str(jpath)]
         if not args.no_plot:
-            from warpworm.plots import PLOTS
+            from warpworm.analysis.plots import PLOTS
 
             written.append(str(PLOTS[name](r, out / f"{name}.png")))
         print(f"== {name} ({time.perf_counter() - t0:.1f} s): " + ", ".join(written))

@@ -16,7 +16,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from ..export_bop import export_bop
+    from warpworm.data.export_bop import export_bop
 
     try:
         res = export_bop(args.dir, args.out, split=args.split, limit=args.limit)

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import ids
+from warpworm import ids
 
 HELP = "Export a dataset folder to COCO keypoints (images/*.png + annotations/keypoints.json)."
 
@@ -65,7 +65,7 @@ def export_coco(src, out, limit: int | None = None) -> dict:
     """Write ``out``; returns {"images": n, "annotations": n, "file": path}."""
     import cv2
 
-    from .. import dataset as ds
+    from warpworm.data import dataset as ds
 
     reader = ds.open(src)
     out = Path(out)
@@ -125,7 +125,7 @@ def export_coco(src, out, limit: int | None = None) -> dict:
 
 
 def main(args: argparse.Namespace) -> int:
-    from ..dataset import DatasetError
+    from warpworm.data.dataset import DatasetError
 
     try:
         r = export_coco(args.dir, args.out, args.limit)

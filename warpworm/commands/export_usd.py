@@ -18,7 +18,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from ..usd_export import compliance_errors, export_usd
+    from warpworm.data.usd_export import compliance_errors, export_usd
 
     try:
         worlds = [int(w) for w in str(args.worlds).split(",") if w.strip()]

@@ -17,8 +17,8 @@ def main(args) -> int:
 
     import numpy as np
 
-    from warpworm import magnets as mg
-    from warpworm.field_plot import render_field_picture
+    from warpworm.physics import magnets as mg
+    from warpworm.analysis.field_plot import render_field_picture
 
     out = Path(args.out)
     dens = tuple(d * 1e6 for d in args.densities)

@@ -56,7 +56,7 @@ def main(args: argparse.Namespace) -> int:
     import signal
     import threading
 
-    from ..job import Interrupted
+    from warpworm.data.job import Interrupted
 
     phase = ["job"]
 
@@ -65,7 +65,7 @@ def main(args: argparse.Namespace) -> int:
         # here and now, without raising into whatever runs (an exception raised inside an h5py or OpenCV callback
         # becomes a SystemError): nothing of the dataset is in flight, a preview is only ever half-written under its
         # temporary name, which goes
-        from ..previews import remove_preview_temporaries
+        from warpworm.data.previews import remove_preview_temporaries
 
         remove_preview_temporaries(args.out)
         name = signal.Signals(signum).name
@@ -97,11 +97,11 @@ def main(args: argparse.Namespace) -> int:
 def _generate(args, phase: list) -> int:
     """The command under the signal guard; ``phase[0]`` says whether the job ("job") or the previews ("previews")
     is running, for the message of a stop."""
-    from ..config import ConfigError, load_config
-    from ..dataset import DatasetError, DatasetLockedError, DatasetWriteError
-    from ..job import generate
-    from ..stages import DEFAULT_STAGES
-    from ..workers import WorkerError
+    from warpworm.data.config import ConfigError, load_config
+    from warpworm.data.dataset import DatasetError, DatasetLockedError, DatasetWriteError
+    from warpworm.data.job import generate
+    from warpworm.data.stages import DEFAULT_STAGES
+    from warpworm.data.workers import WorkerError
 
     stages = args.stages or DEFAULT_STAGES
     try:
@@ -127,7 +127,7 @@ def _generate(args, phase: list) -> int:
         return EXIT_FAILED
     phase[0] = "previews"
     if cfg.output.preview and not args.no_preview:
-        from ..previews import remove_preview_temporaries
+        from warpworm.data.previews import remove_preview_temporaries
 
         remove_preview_temporaries(args.out)  # a killed run's
         write_previews_or_warn(cfg, args.out, stages)
@@ -137,7 +137,7 @@ def _generate(args, phase: list) -> int:
 
 def _check_arguments(args) -> None:
     """The command-line values the config does not check (before anything is written to --out)."""
-    from ..config import ConfigError
+    from warpworm.data.config import ConfigError
 
     if args.workers < 1:
         raise ConfigError([f"--workers: got {args.workers}; expected >= 1"])
@@ -152,8 +152,8 @@ def _check_arguments(args) -> None:
 def write_previews_or_warn(cfg, out, stages) -> None:
     """``preview.png`` / ``preview.mp4`` of the finished dataset; a failure is a warning (a preview must never fail a
     finished dataset)."""
-    from ..job import Interrupted
-    from ..previews import write_previews
+    from warpworm.data.job import Interrupted
+    from warpworm.data.previews import write_previews
 
     try:
         write_previews(cfg, out, stages)

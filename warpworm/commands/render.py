@@ -6,8 +6,8 @@ Outputs in ``--out``:
 - ``labels.npz``: every label array of :func:`warpworm.render.labels.schema_labels`, under the dataset schema's
   names (leading axis = image), plus ``rgb``, ``depth`` [m] (0 = background), ``seg`` and ``keypoint_names``.
 
-Every draw is the default dataset config's: the worlds' parameters (:func:`warpworm.sampling.randomized_params`),
-their look (:func:`warpworm.sampling.sample_appearance`) and sensor effects, through the one counter-based generator.
+Every draw is the default dataset config's: the worlds' parameters (:func:`warpworm.data.sampling.randomized_params`),
+their look (:func:`warpworm.data.sampling.sample_appearance`) and sensor effects, through the one counter-based generator.
 """
 
 from __future__ import annotations
@@ -42,13 +42,14 @@ def add_arguments(parser) -> None:
 
 def simulate_states(cfg, num_worlds: int, seed: int, gait: str, sim_time: float, device=None) -> tuple[dict, object]:
     """Run ``gait`` on W worlds drawn as a dataset job of ``cfg`` with master ``seed`` draws its trajectories
-    (material, magnets, EPM path; :func:`warpworm.sampling.randomized_params`); ``cfg`` draws ``gait`` only.
+    (material, magnets, EPM path; :func:`warpworm.data.sampling.randomized_params`); ``cfg`` draws ``gait`` only.
 
     Returns (snapshot dict, model).
     """
-    from warpworm import gaits, sampling
-    from warpworm.model import Model
-    from warpworm.simulator import Simulator
+    from warpworm.physics import gaits
+    from warpworm.data import sampling
+    from warpworm.sim.model import Model
+    from warpworm.sim.simulator import Simulator
 
     p = sampling.randomized_params(cfg, num_worlds, seed)
     if np.any(np.asarray(p.gait) != gait):
@@ -61,9 +62,9 @@ def simulate_states(cfg, num_worlds: int, seed: int, gait: str, sim_time: float,
 
 
 def main(args) -> int:
-    from warpworm import sampling
-    from warpworm.config import load_config
-    from warpworm.randomize import derive_seeds
+    from warpworm.data import sampling
+    from warpworm.data.config import load_config
+    from warpworm.data.randomize import derive_seeds
     from warpworm.render import Renderer, sample_cameras, scene_from_snapshot
     from warpworm.render.contact_sheet import contact_sheet, save_png
     from warpworm.render.demo import default_pattern, posed_worm_states

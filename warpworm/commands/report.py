@@ -17,7 +17,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from ..report import ReportError, build, text_summary
+    from warpworm.data.report import ReportError, build, text_summary
 
     out = args.out or (str(Path(args.dirs[0]) / "report") if len(args.dirs) == 1 else "report")
     try:

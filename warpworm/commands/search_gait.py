@@ -20,7 +20,7 @@ def add_arguments(parser) -> None:
                         help="KEY=lo:hi:n or KEY=v1,v2 for w, a, h [m] (the period is one per run: --set "
                              "cycle_period=T); default 10 x 4 x 25 = 1000 points")
     parser.add_argument("--cycles", type=int, default=3, help="EPM cycles per world (default 3)")
-    parser.add_argument("--material", default=None, help="sheet material (warpworm.materials; default the worm's)")
+    parser.add_argument("--material", default=None, help="sheet material (warpworm.physics.materials; default the worm's)")
     parser.add_argument("--magnet-model", choices=["dipoles", "analytic"], default="dipoles")
     parser.add_argument("--workers", type=int, default=None, help="processes (default: every core)")
     parser.add_argument("--out", default="search_out", help="output folder for the CSV and the heat map")
@@ -32,9 +32,10 @@ def add_arguments(parser) -> None:
 
 
 def main(args) -> int:
-    from warpworm import gaits, quiet_warp
-    from warpworm.gait_search import parse_grid, search_gait, write_csv, write_heatmap
-    from warpworm.materials import material_params
+    from warpworm.physics import gaits
+    from warpworm import quiet_warp
+    from warpworm.analysis.gait_search import parse_grid, search_gait, write_csv, write_heatmap
+    from warpworm.physics.materials import material_params
 
     quiet_warp()
     try:
@@ -46,7 +47,7 @@ def main(args) -> int:
     if args.cycles < 1:
         print(f"warpworm search-gait: --cycles {args.cycles}: expected >= 1", file=sys.stderr)
         return 2
-    from warpworm.params import parse_overrides
+    from warpworm.physics.params import parse_overrides
 
     try:
         overrides = parse_overrides(args.set)

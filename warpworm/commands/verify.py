@@ -1,7 +1,7 @@
 """``warpworm verify DIR``: re-read every shard of a dataset and check it against its manifest and its own labels.
 
 Checks, per shard: the file is listed in the manifest and exists; its SHA-256 and size equal the manifest's; it opens,
-is marked complete and holds sample ids [first, first + count); every dataset of :data:`warpworm.dataset.FIELDS` is
+is marked complete and holds sample ids [first, first + count); every dataset of :data:`warpworm.data.dataset.FIELDS` is
 there with the documented shape and dtype (and every ``params/*`` has one value per sample); and the label invariants:
 
 * quaternions (``poses/body_quat``) are unit and equal ``poses/body``'s rotation; every rotation (camera, body, IPMs,
@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import ids
+from warpworm import ids
 
 HELP = "Check a dataset folder: shard checksums, sample ids, shapes and label invariants (exit 0 only if all hold)."
 
@@ -143,7 +143,7 @@ def verify_dataset(root, max_problems: int = 50) -> tuple[list[str], dict]:
     """All problems of dataset folder ``root`` (each line starts with the file it concerns), and counts."""
     import h5py
 
-    from .. import dataset as ds
+    from warpworm.data import dataset as ds
 
     root = Path(root)
     problems: list[str] = []
@@ -216,7 +216,7 @@ def verify_dataset(root, max_problems: int = 50) -> tuple[list[str], dict]:
 
 
 def main(args: argparse.Namespace) -> int:
-    from ..dataset import DatasetError
+    from warpworm.data.dataset import DatasetError
 
     try:
         problems, counts = verify_dataset(args.dir, args.max_problems)

@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from warpworm import magnets as mg
+from warpworm.physics import magnets as mg
 
 
 @dataclass

@@ -1,7 +1,7 @@
 """The paper's virtual experiments (Swaminathan et al., RA-L 2021, §IV), batched: one Simulator per experiment.
 
 Every function returns a dict with NumPy arrays and a ``"summary"`` dict of plain floats / strings (JSON-ready with
-:func:`to_jsonable`). A sweep (hinge stiffnesses, slopes, gaits) is W worlds of one :class:`~warpworm.simulator.
+:func:`to_jsonable`). A sweep (hinge stiffnesses, slopes, gaits) is W worlds of one :class:`~warpworm.sim.simulator.
 Simulator`; nothing loops over worlds on the host. SI units throughout (the plots convert to mm / mN).
 
 ==================  ====================================================================================================
@@ -19,7 +19,7 @@ deformation         §IV-E, Fig. 11: the four deformation ratios (adjacent segme
                     and the net displacement, per gait.
 ==================  ====================================================================================================
 
-Gait experiments run the three gait presets (:func:`warpworm.gaits.preset_params`) as three worlds of one batch: the
+Gait experiments run the three gait presets (:func:`warpworm.physics.gaits.preset_params`) as three worlds of one batch: the
 presets' per-gait scalars become per-world arrays and each world gets its own gait's EPM path.
 """
 
@@ -32,9 +32,10 @@ from pathlib import Path
 
 import numpy as np
 
-from . import crease, gaits, quiet_warp
-from . import magnets as mg
-from .params import GAITS, WormParams
+from warpworm.physics import crease, gaits
+from warpworm import quiet_warp
+from warpworm.physics import magnets as mg
+from warpworm.physics.params import GAITS, WormParams
 
 EXPERIMENTS = ("force-distance", "compression", "flexure", "slope", "force-plate", "strain", "deformation")
 
@@ -46,7 +47,7 @@ CUBE_TABLE = {
 (shared/DESIGN-NOTES.md; closed form and magpylib agree to 3e-7)."""
 
 DEFAULT_HINGE_SWEEP = (0.0025, 0.005, 0.01, 0.02, 0.04)
-"""Default k_α sweep [N/rad] of compression / flexure: around the default material's 0.005 (warpworm.materials)."""
+"""Default k_α sweep [N/rad] of compression / flexure: around the default material's 0.005 (warpworm.physics.materials)."""
 
 NO_MAGNETS = dict(ipm_moment=np.zeros(3), epm_moment=0.0)
 """Overrides that switch every magnet off (mechanical tests: compression, flexure, slope)."""
@@ -73,7 +74,7 @@ def world_shares(num_worlds: int, workers: int | None) -> list[tuple[int, int]]:
 def _run_share(job) -> dict:
     """One process's share of :func:`split_run`: build the share's model, run ``core`` on it."""
     core, params, num_worlds, device, model_kw, run_kw = job
-    from .model import Model
+    from warpworm.sim.model import Model
 
     quiet_warp()
     model = Model.from_params(params, num_worlds, device, **model_kw)
@@ -84,11 +85,11 @@ def split_run(core, params: WormParams, num_worlds: int, world_axis: dict, *, wo
               device="cpu", model_kw: dict | None = None, **run_kw) -> dict:
     """``core(model, params, **run_kw) -> dict of arrays`` on ``num_worlds`` worlds, the worlds split over
     ``workers`` processes (spawned; None: every core), each a batch of a contiguous share (its parameters sliced by
-    :func:`warpworm.params.slice_worlds`, as ``simulate --workers`` does). Worlds never interact, so every
+    :func:`warpworm.physics.params.slice_worlds`, as ``simulate --workers`` does). Worlds never interact, so every
     per-world result equals one process's. Each output key is concatenated along ``world_axis[key]`` (a key not in
     ``world_axis``: the first share's value, for outputs that do not depend on the worlds).
     """
-    from .params import slice_worlds
+    from warpworm.physics.params import slice_worlds
 
     shares = world_shares(num_worlds, workers)
     mkw = dict(model_kw or {})
@@ -126,7 +127,7 @@ def linear_anchor_response(model, params: WormParams, target_offsets: np.ndarray
     ``anchor_force``). No gravity, no contact: compare with a zero-gravity run.
 
     Args:
-        model: the :class:`~warpworm.model.Model` (topology, rest geometry, anchors).
+        model: the :class:`~warpworm.sim.model.Model` (topology, rest geometry, anchors).
         params: its parameters (``bar_stiffness``, ``hinge_stiffness`` per world or shared).
         target_offsets: anchor target displacements [m], shape (A, 3).
         world: which world's stiffness and geometry.
@@ -196,7 +197,7 @@ def _batched_gait_params(gait_list, base: WormParams | None = None, **overrides)
 
 def _gait_model(gait_list, *, anchors=None, anchor_stiffness=1.0e4, base=None, device="cpu", **overrides):
     """A Model with one world per gait in ``gait_list``, each on its own gait's sinusoidal EPM path."""
-    from .model import Model
+    from warpworm.sim.model import Model
 
     p = replace(_batched_gait_params(gait_list, base=base, **overrides), gait=np.array(gait_list, dtype=str))
     model = Model.from_params(p, len(gait_list), device, anchors=anchors, anchor_stiffness=anchor_stiffness)
@@ -209,8 +210,8 @@ GAIT_RECORD = ("positions", "bar_strain", "anchor_force", "magnet_pos", "time", 
 
 def _gait_core(model, params, *, duration, sample_every, settle, dt, substeps, rewind=False) -> dict:
     """Settle, then record the keys of :data:`GAIT_RECORD` every ``sample_every`` steps for ``duration`` [s]
-    (``rewind``: each world's sinusoidal path repeats its first pass in place, :class:`warpworm.gaits.EpmPath`)."""
-    from .simulator import Simulator
+    (``rewind``: each world's sinusoidal path repeats its first pass in place, :class:`warpworm.physics.gaits.EpmPath`)."""
+    from warpworm.sim.simulator import Simulator
 
     sim = Simulator(model, dt=dt, substeps=substeps)
     if rewind:
@@ -265,7 +266,7 @@ def force_distance(gaps=None, densities=(1e6, 8e6, 64e6), moment: float = 0.9, s
     ``densities (D,)``, ``table_gap (T,)`` [m] and ``table_force (T,)`` [N] (DESIGN-NOTES closed form),
     ``analytic_at_table (T,)`` and ``dipoles_at_table (D, T)``, and a summary of relative errors vs the table.
     """
-    from .calibration import pair_forces
+    from warpworm.analysis.calibration import pair_forces
 
     gaps = np.geomspace(0.5e-3, 40e-3, 60) if gaps is None else np.asarray(gaps, np.float64)
     cube = mg.Cuboid((side, side, side), moment=(0.0, 0.0, moment))
@@ -295,7 +296,7 @@ def force_distance(gaps=None, densities=(1e6, 8e6, 64e6), moment: float = 0.9, s
 def _quasi_static_core(model, params, *, anchors_moving, direction, displacements, lift, settle, hold, dt,
                        substeps) -> dict:
     """The simulation of :func:`_quasi_static` on one batch (one process's share): raw per-world readings."""
-    from .simulator import Simulator
+    from warpworm.sim.simulator import Simulator
 
     sim = Simulator(model, dt=dt, substeps=substeps)
     state = sim.initial_state()
@@ -382,10 +383,10 @@ def compression(hinge_stiffness=DEFAULT_HINGE_SWEEP, max_displacement: float = 2
     minus its value before loading [N]; ``displacement`` the head section's measured shortening [m]; ``linear`` the
     independent linear quasi-static prediction (no gravity, no friction) at the prescribed displacement.
     ``displacements`` (K,) [m], ascending and > 0, replaces the uniform ``max_displacement`` / ``increments`` steps
-    (:mod:`warpworm.material_fit` prescribes a measured table's displacements). ``workers`` processes share the
+    (:mod:`warpworm.analysis.material_fit` prescribes a measured table's displacements). ``workers`` processes share the
     worlds (:func:`split_run`; results equal one process's).
     """
-    from .model import Model
+    from warpworm.sim.model import Model
 
     ks, W, p = _stiffness_sweep(hinge_stiffness, base, overrides)
     n = int(p.n_units)
@@ -429,7 +430,7 @@ def flexure(hinge_stiffness=DEFAULT_HINGE_SWEEP, max_deflection: float = 2.0e-3,
     ``displacements`` (K,) [m], ascending and > 0, replaces the uniform ``max_deflection`` / ``increments`` steps.
     ``workers`` processes share the worlds (:func:`split_run`; results equal one process's).
     """
-    from .model import Model
+    from warpworm.sim.model import Model
 
     ks, W, p = _stiffness_sweep(hinge_stiffness, base, overrides)
     n = int(p.n_units)
@@ -466,7 +467,7 @@ def flexure(hinge_stiffness=DEFAULT_HINGE_SWEEP, max_deflection: float = 2.0e-3,
 def _slope_core(model, params, *, frame_times, dt, substeps) -> dict:
     """The simulation of :func:`slope` on one batch: vertex centroids ``(S, W, 3)`` [m] (float64) and world times
     ``(S, W)`` [s] at ``frame_times`` from t = 0, magnets off; ``unstable (W,)`` at the end."""
-    from .simulator import Simulator
+    from warpworm.sim.simulator import Simulator
 
     sim = Simulator(model, dt=dt, substeps=substeps)
     state = sim.initial_state()
@@ -612,7 +613,7 @@ def force_plate(gait_list=GAITS, duration: float = 2.0, *, anchor_stiffness: flo
     pull on the plate; +x = forward pull), ``pull (S, W)`` its x component, ``force_magnitude (S, W)`` its length
     (the paper's reading: the Anchor's strength times the displacement vector of the tied point).
 
-    ``rewind`` (default): the EPM repeats its first pass in place every cycle (:class:`warpworm.gaits.EpmPath`), so
+    ``rewind`` (default): the EPM repeats its first pass in place every cycle (:class:`warpworm.physics.gaits.EpmPath`), so
     the tied worm is driven the same way in every cycle and the pulses settle to a periodic train. Without it the
     EPM advances w per cycle as in locomotion and leaves the tied worm behind: after two or three cycles it passes
     ahead of the head and the pulses fade, so the per-cycle shapes would describe where the magnet has gone, not the

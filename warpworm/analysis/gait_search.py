@@ -3,7 +3,7 @@
 §IV-C: "the other three parameters are identified using a grid search algorithm to maximize the distance that the
 origami moves". :func:`search_gait` runs the whole grid at once (split over worker processes, each a batch of its
 share of the worlds; results do not depend on the split since worlds never interact), measures every world with
-:func:`warpworm.gait_metrics.gait_metrics` and ranks the stable, unfolded worlds by distance per cycle in the
+:func:`warpworm.analysis.gait_metrics.gait_metrics` and ranks the stable, unfolded worlds by distance per cycle in the
 commanded direction.
 """
 
@@ -78,14 +78,14 @@ def search_gait(params, grid: dict[str, np.ndarray], cycles: int = 3, *, workers
     ``displacement_m``), ``per_cycle_m`` (N,) mean distance per cycle in the commanded direction (cycles after the
     first when there are several: the first starts from rest), ``valid`` (N,) (below), ``order``
     indices of the valid worlds best first, ``best`` the best point's fields (None if no world is valid). Valid:
-    stable (never flagged exploded or crumpled, :class:`~warpworm.simulator.Simulator`), at most 1.05 w per cycle (a
+    stable (never flagged exploded or crumpled, :class:`~warpworm.sim.simulator.Simulator`), at most 1.05 w per cycle (a
     worm dragged along faster than the EPM advances slides, it does not crawl), and with ``max_ratio`` deforming.
     """
     if int(cycles) < 1:
         raise ValueError(f"cycles: {cycles}; expected at least 1 whole EPM cycle")
     pts = grid_points(grid)
     N = len(next(iter(pts.values())))
-    from .commands.simulate import run_gait_split
+    from warpworm.analysis.gait_runs import run_gait_split
 
     r = run_gait_split(replace(params, **pts), N, cycles, workers=workers, dt=dt, substeps=substeps, settle=settle,
                        fps=fps, save_worlds=0)

@@ -31,7 +31,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from .params import WormParams
+from warpworm.physics.params import WormParams
 
 MATERIALS: dict[str, dict[str, float]] = {
     "mineral_paper": dict(hinge_stiffness=0.005, valley_bar_stiffness=0.3, sheet_density=0.15, hinge_damping=1.0e-4),

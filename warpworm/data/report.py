@@ -27,7 +27,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from . import dataset as ds
+from warpworm.data import dataset as ds
 
 CONTRACTION_THRESHOLD = 0.9
 """A trajectory counts as contracted when its minimum deformation ratio is <= this."""

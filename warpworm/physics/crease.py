@@ -53,7 +53,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .ids import BOUNDARY, CREASE_LABEL_NAMES, FLAT, MOUNTAIN, VALLEY
+from warpworm.ids import BOUNDARY, CREASE_LABEL_NAMES, FLAT, MOUNTAIN, VALLEY
 
 # FLAT, MOUNTAIN, VALLEY, BOUNDARY (from warpworm.ids): the edge / hinge labels (int8)
 LABEL_NAMES = CREASE_LABEL_NAMES

@@ -1,6 +1,6 @@
 """Previews of a finished dataset: ``preview.png`` (a contact sheet of the first samples, read back from the shards)
 and ``preview.mp4`` (trajectory 0 resimulated densely with the same draws). Written by the ``generate`` command
-after the job (:func:`warpworm.job.generate` does not write them), never part of the data.
+after the job (:func:`warpworm.data.job.generate` does not write them), never part of the data.
 """
 
 from __future__ import annotations
@@ -11,11 +11,11 @@ from pathlib import Path
 
 import numpy as np
 
-from . import dataset as ds
-from .config import DatasetConfig
-from .sampling import appearance_draws, worm_params
-from .shard import ShardStats, simulate_with_replacement
-from .stages import DEFAULT_STAGES, load_stages
+from warpworm.data import dataset as ds
+from warpworm.data.config import DatasetConfig
+from warpworm.data.sampling import appearance_draws, worm_params
+from warpworm.data.shard import ShardStats, simulate_with_replacement
+from warpworm.data.stages import DEFAULT_STAGES, load_stages
 
 
 PREVIEW_TEMPORARIES = (".preview.tmp.png", ".preview.tmp.mp4")
@@ -34,8 +34,8 @@ def write_previews(cfg: DatasetConfig, out, stages=DEFAULT_STAGES, max_rows: int
     seen from sample 0's stored camera (one world, small)."""
     import cv2
 
-    from .render import make_cameras
-    from .render.contact_sheet import contact_sheet, save_png
+    from warpworm.render import make_cameras
+    from warpworm.render.contact_sheet import contact_sheet, save_png
 
     out = Path(out)
     reader = ds.open(out)

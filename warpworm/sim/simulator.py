@@ -1,7 +1,7 @@
 """Batched simulator of magnetically actuated origami worms (host orchestration of :mod:`warpworm.kernels`).
 
 One :meth:`Simulator.step` = one magnetic-wrench evaluation (EPM pose from its path, IPM poses from their mounts,
-net force and torque on every magnet from :func:`warpworm.magnets.launch_world_wrenches`, distributed onto the
+net force and torque on every magnet from :func:`warpworm.physics.magnets.launch_world_wrenches`, distributed onto the
 mount vertices) followed by ``substeps`` substeps: by default implicit Euler with Newton steps on a per-world
 banded direct solve, one launch for all substeps of all worlds (:mod:`warpworm.kernels.implicit_euler`; the magnet
 poses and the wrench distribution: :mod:`warpworm.kernels.magnet_pose`). All worlds are in every launch; nothing loops
@@ -19,7 +19,7 @@ Typical use::
     sim.settle(state, 0.3)            # EPM absent, worm settles under gravity; resets t to 0
     frames = sim.run(state, [0.5, 1.0])  # snapshots (dicts of NumPy arrays) at t = 0.5 s and 1 s
 
-The inputs of a run (the EPM path, the anchor targets) are a :class:`~warpworm.model.Control`: ``sim.control`` by
+The inputs of a run (the EPM path, the anchor targets) are a :class:`~warpworm.sim.model.Control`: ``sim.control`` by
 default, or one passed to :meth:`step` / :meth:`run`. The solver's scratch belongs to the simulator.
 """
 
@@ -28,8 +28,8 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from .model import Control, Model, State
-from .transforms import quat_wxyz_to_matrix, quat_xyzw_to_wxyz
+from warpworm.sim.model import Control, Model, State
+from warpworm.transforms import quat_wxyz_to_matrix, quat_xyzw_to_wxyz
 
 
 def launch_world_wrenches(model: Model, state: State, moment: wp.array, *, epm_wrench: bool = True,
@@ -38,8 +38,8 @@ def launch_world_wrenches(model: Model, state: State, moment: wp.array, *, epm_w
     """Net magnetic force and torque on every magnet of every world (the one place the magnet API is called), into
     ``state.magnet_force`` / ``magnet_torque`` unless other outputs are given. ``epm_wrench=False`` leaves the EPM's
     own wrench (slot 0) zero and spends nothing on it: the dynamics needs only the IPMs'. ``pair_scratch``: the
-    caller's (:func:`warpworm.magnets.pair_wrench_scratch`), else one per call."""
-    from .magnets import launch_world_wrenches as _launch
+    caller's (:func:`warpworm.physics.magnets.pair_wrench_scratch`), else one per call."""
+    from warpworm.physics.magnets import launch_world_wrenches as _launch
 
     _launch(
         model.magnet_model,
@@ -82,7 +82,7 @@ SOLVERS = ("band", "tile-band", "tile-dense")
 
 
 class Simulator:
-    """Integrator for a :class:`~warpworm.model.Model` (all worlds at once, CPU or CUDA).
+    """Integrator for a :class:`~warpworm.sim.model.Model` (all worlds at once, CPU or CUDA).
 
     Args:
         model: the batch.
@@ -124,7 +124,7 @@ class Simulator:
         solver: how each world's Newton system is solved: ``"band"`` one thread per world, block-band Cholesky
             (:mod:`warpworm.kernels.implicit_euler`); ``"tile-band"`` a block of threads per world, the same band
             factored column-parallel (bit-identical to "band"); ``"tile-dense"`` a block per world, a dense tile
-            Cholesky in shared memory (:mod:`warpworm.tile_solver`; the GPU paths, designed for occupancy).
+            Cholesky in shared memory (:mod:`warpworm.sim.tile_solver`; the GPU paths, designed for occupancy).
     """
 
     def __init__(
@@ -144,7 +144,7 @@ class Simulator:
         slip_speed: float = 1.0e-5,
         solver: str = "band",
     ):
-        from .kernels import implicit_euler, magnet_pose
+        from warpworm.kernels import implicit_euler, magnet_pose
 
         self._kpose = magnet_pose
         self._ki = implicit_euler
@@ -171,7 +171,7 @@ class Simulator:
         self.magnet_every_substep = bool(magnet_every_substep)
         self.strain_limit = float(strain_limit)
         self.fold_tolerance = float(fold_tolerance)
-        from . import crease
+        from warpworm.physics import crease
 
         waist = model.pattern.edge_label == crease.VALLEY
         self.bar_strain_limit = wp.array(np.where(waist, max(self.strain_limit, 0.9), self.strain_limit)
@@ -206,10 +206,10 @@ class Simulator:
         self.solver = solver
         self._tiles = None
         if solver.startswith("tile-"):
-            from .tile_solver import TileSubsteps
+            from warpworm.sim.tile_solver import TileSubsteps
 
             self._tiles = TileSubsteps(model, self, factorization=solver[len("tile-"):])
-        from .magnets import pair_wrench_scratch
+        from warpworm.physics.magnets import pair_wrench_scratch
 
         # the magnet pairs' wrenches between the wrench's two launches: allocated here, before any graph capture
         M = model.magnet_shape.shape[1]  # EPM and the three IPMs
@@ -468,5 +468,5 @@ class Simulator:
         self.control.set_anchor_targets(targets)
 
     def set_path(self, path) -> None:
-        """Set the default control's EPM path (:class:`warpworm.gaits.EpmPath`); takes effect at the next step."""
+        """Set the default control's EPM path (:class:`warpworm.physics.gaits.EpmPath`); takes effect at the next step."""
         self.control.set_path(path)

@@ -1,6 +1,6 @@
 """The pipeline's two heavy stages (simulation, rendering) behind one small interface, and warpworm's own.
 
-The job (:mod:`warpworm.job`) never imports the simulator or the renderer: it calls a *stages* object (see
+The job (:mod:`warpworm.data.job`) never imports the simulator or the renderer: it calls a *stages* object (see
 :class:`Stages`) given as ``"module:attribute"`` so that worker processes can import it. The default,
 :class:`WarpStages`, is warpworm's simulator and renderer; tests plug in a closed-form double.
 """
@@ -15,11 +15,11 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from .config import DatasetConfig
-from .params import WormParams
-from .sampling import appearance_from_draws, sensor_values
+from warpworm.data.config import DatasetConfig
+from warpworm.physics.params import WormParams
+from warpworm.data.sampling import appearance_from_draws, sensor_values
 
-DEFAULT_STAGES = "warpworm.stages:WarpStages"
+DEFAULT_STAGES = "warpworm.data.stages:WarpStages"
 
 
 @dataclass
@@ -52,7 +52,7 @@ class Stages(Protocol):
         ``cameras`` is a :class:`warpworm.render.Cameras` of B images (``K (B,3,3)``, ``R (B,3,3)``, ``t (B,3)``,
         ``width``, ``height``; image b shows world b of ``frame``).
 
-        Returns name -> (B, ...) arrays for the image and label datasets of :data:`warpworm.dataset.SCHEMA`
+        Returns name -> (B, ...) arrays for the image and label datasets of :data:`warpworm.data.dataset.SCHEMA`
         (rgb, depth, segmentation, poses/*, keypoints/*, creases/angle, bars/strain, worm/vertices, labels/*).
         ``appearance`` holds the drawn ``light.*``, ``color.*``, ``texture.*``, ``sensor.*`` values, (B,) each;
         ``seeds`` (B,) int64 seeds all pixel noise must derive from.
@@ -69,13 +69,13 @@ def load_stages(spec: str | Any) -> Any:
 
 
 class WarpStages:
-    """warpworm's own simulator (:mod:`warpworm.simulator`) and rasterizer (:mod:`warpworm.render`).
+    """warpworm's own simulator (:mod:`warpworm.sim.simulator`) and rasterizer (:mod:`warpworm.render`).
 
     Simulation: ``Model.from_params`` -> ``Simulator(dt, substeps)`` -> ``settle(settle_time)`` -> ``step`` to each
     frame time -> ``snapshot``. A world flagged unstable at any frame is reported unstable.
     Rendering: ``render.build_scene`` (worm sheet, IPM disks, EPM bar, floor) with an appearance built from the drawn
     ``light/color/texture`` values, ``Renderer.render``, then sensor effects (:func:`warpworm.render.sensor.apply_sensor`
-    with the drawn ``sensor.*`` values, :func:`warpworm.sampling.sensor_values`) and labels in the dataset's form
+    with the drawn ``sensor.*`` values, :func:`warpworm.data.sampling.sensor_values`) and labels in the dataset's form
     (:func:`warpworm.render.labels.schema_labels`).
     """
 
@@ -85,7 +85,7 @@ class WarpStages:
         (:meth:`warm` compiles them together). Discovered, not listed, so a new solver module is warmed too."""
         import pkgutil
 
-        from . import kernels, render
+        from warpworm import kernels, render
 
         names = []
         for pkg in (kernels, render):
@@ -99,11 +99,11 @@ class WarpStages:
 
     def preload(self):
         """Heavy imports (Warp, the simulator, the renderer), so a worker does them while the parent warms the cache."""
-        from . import quiet_warp
+        from warpworm import quiet_warp
 
         quiet_warp()
-        from . import model, simulator  # noqa: F401
-        from . import render  # noqa: F401
+        from warpworm.sim import model, simulator  # noqa: F401
+        from warpworm import render  # noqa: F401
 
         for name in self.kernel_modules():
             importlib.import_module(name)
@@ -128,7 +128,7 @@ class WarpStages:
         wp.force_load(device=cfg.sim.device, modules=[wp.get_module(n) for n in names], max_workers=max_workers)
 
     def _pattern(self, n_units: int):
-        from . import crease
+        from warpworm.physics import crease
 
         p = self._patterns.get(n_units)
         if p is None:
@@ -138,15 +138,15 @@ class WarpStages:
 
     def metadata(self, cfg):
         p = self._pattern(cfg.sim.n_units)
-        from .render.labels import KEYPOINT_NAMES
+        from warpworm.render.labels import KEYPOINT_NAMES
 
         return {"keypoint_names": list(KEYPOINT_NAMES), "triangles": p.triangles,
                 "triangle_segment": p.triangle_segment, "hinges": p.hinges, "hinge_label": p.hinge_label,
                 "edges": p.edges, "num_vertices": p.num_vertices}
 
     def simulate_batch(self, params, num_worlds, cfg):
-        from .model import Model
-        from .simulator import Simulator
+        from warpworm.sim.model import Model
+        from warpworm.sim.simulator import Simulator
 
         model = Model.from_params(params, num_worlds, device=cfg.sim.device)
         sim = Simulator(model, dt=cfg.sim.dt, substeps=cfg.sim.substeps)
@@ -163,7 +163,7 @@ class WarpStages:
         return SimResult(frames=frames, unstable=unstable)
 
     def _renderer(self, cfg):
-        from .render import Renderer
+        from warpworm.render import Renderer
 
         key = (cfg.render.width, cfg.render.height, cfg.sim.device)
         r = self._renderers.get(key)
@@ -172,7 +172,7 @@ class WarpStages:
         return r
 
     def render_batch(self, frame, params, cameras, appearance, seeds, cfg):
-        from . import render
+        from warpworm import render
 
         B = len(seeds)
         pattern = self._pattern(cfg.sim.n_units)
@@ -181,8 +181,8 @@ class WarpStages:
             magnet_rot=frame["magnet_rot"], worm_texcoords=pattern.vertices, ipm_diameter=params.ipm_diameter,
             ipm_thickness=params.ipm_thickness, epm_size=params.epm_size, floor_incline=params.floor_incline,
             appearance=appearance_from_draws(appearance, seeds))
-        from .render.labels import schema_labels
-        from .render.sensor import apply_sensor
+        from warpworm.render.labels import schema_labels
+        from warpworm.render.sensor import apply_sensor
 
         cams = dataclasses.replace(cameras, world=np.arange(B, dtype=np.int32))
         img = self._renderer(cfg).render(scene, cams)

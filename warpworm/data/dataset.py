@@ -37,7 +37,8 @@ from typing import Any, Iterable
 import h5py
 import numpy as np
 
-from . import ids, signal_hold
+from warpworm import ids
+from warpworm.data import signal_hold
 
 SCHEMA_VERSION = 1
 MANIFEST = "manifest.json"
@@ -122,7 +123,7 @@ SCHEMA: dict[str, tuple[str, str, str]] = {
              f"{f.description}") for f in FIELDS}
 """name -> (dtype, unit, description with the per-sample shape); the ``description`` attribute of each dataset."""
 
-SCHEMA_TABLE_BEGIN = "<!-- schema table: generated from warpworm.dataset.FIELDS by schema_markdown(); do not edit -->"
+SCHEMA_TABLE_BEGIN = "<!-- schema table: generated from warpworm.data.dataset.FIELDS by schema_markdown(); do not edit -->"
 SCHEMA_TABLE_END = "<!-- end of schema table -->"
 
 
@@ -305,7 +306,7 @@ class ShardWriter:
         compression, level: image filter ('lzf' | 'gzip' | 'none').
     """
 
-    @signal_hold.holds_signals  # h5py calls back into Python here (warpworm.signal_hold)
+    @signal_hold.holds_signals  # h5py calls back into Python here (warpworm.data.signal_hold)
     def __init__(self, out_dir, index: int, first_id: int, count: int, root_attrs: dict,
                  compression: str = "lzf", level: int = 1):
         self.dir = Path(out_dir)
@@ -354,7 +355,7 @@ class ShardWriter:
             ds.attrs["description"] = f"randomized value of {name[7:]} per sample"
         return ds
 
-    @signal_hold.holds_signals  # h5py calls back into Python here (warpworm.signal_hold)
+    @signal_hold.holds_signals  # h5py calls back into Python here (warpworm.data.signal_hold)
     def write(self, row: int, batch: dict[str, np.ndarray], step: int = 1) -> None:
         """Write ``batch`` (name -> (n, ...) arrays) to rows row, row + step, ..., row + (n-1)*step.
 
@@ -391,7 +392,7 @@ class ShardWriter:
         if sl is not None:
             self.rows_written[sl] = True
 
-    @signal_hold.holds_signals  # h5py calls back into Python here (warpworm.signal_hold)
+    @signal_hold.holds_signals  # h5py calls back into Python here (warpworm.data.signal_hold)
     def commit(self) -> Path:
         """Mark complete, flush, fsync, rename to the final name; returns the final path."""
         if not self.rows_written.all():
@@ -420,7 +421,7 @@ class ShardWriter:
             raise write_error(err, self.tmp, "finishing shard") from exc
         return self.final
 
-    @signal_hold.holds_signals  # h5py calls back into Python here (warpworm.signal_hold)
+    @signal_hold.holds_signals  # h5py calls back into Python here (warpworm.data.signal_hold)
     def _cleanup(self):
         try:
             if getattr(self, "f", None) is not None:
@@ -733,7 +734,7 @@ class DatasetReader:
 
 
 def open(root) -> DatasetReader:  # noqa: A001 - mirrors h5py.File / zarr.open
-    """Open a dataset folder for random access: ``ds = warpworm.dataset.open(DIR); ds[i]["rgb"]``."""
+    """Open a dataset folder for random access: ``ds = warpworm.data.dataset.open(DIR); ds[i]["rgb"]``."""
     return DatasetReader(root)
 
 

@@ -28,8 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
-from . import dataset as ds
-from . import ids
+from warpworm.data import dataset as ds
+from warpworm import ids
 
 OBJECTS = {1: ("worm", ids.SEG_WORM), 2: ("ipm_tail", (ids.SEG_IPMS[0],)), 3: ("ipm_centre", (ids.SEG_IPMS[1],)),
            4: ("ipm_head", (ids.SEG_IPMS[2],)), 5: ("epm", (ids.SEG_EPM,))}

@@ -1,6 +1,6 @@
 """Permanent magnets: shapes, magnetization, and the batched Warp wrench / field evaluations (host API).
 
-Two models of the interaction (``warpworm.params.MAGNET_MODELS``):
+Two models of the interaction (``warpworm.physics.params.MAGNET_MODELS``):
 
 ``"dipoles"``
     The paper's aggregation (Swaminathan et al. 2021, §II-B): each magnet is a regular grid of point dipoles at a

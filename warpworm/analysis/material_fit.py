@@ -2,7 +2,7 @@
 
 The paper tuned k_α until the simulated compression and 3-point flexure curves matched the measured ones. Here the
 measured curve is a CSV table (:func:`read_curve`); every candidate k_α is one world of ONE batch of the virtual
-experiment (:func:`warpworm.experiments.compression` / :func:`~warpworm.experiments.flexure`), every other parameter
+experiment (:func:`warpworm.analysis.experiments.compression` / :func:`~warpworm.analysis.experiments.flexure`), every other parameter
 held at the base (material) values. :func:`fit_hinge_stiffness` runs a log-spaced coarse batch over ``k_range``, a
 finer log-spaced batch between the coarse minimum's neighbours, interpolates the minimum of the squared residual
 with a parabola in log k_α, and runs the fitted k_α once more (one world) to report its residual and curve.
@@ -146,13 +146,13 @@ def simulate_curves(test: str, hinge_stiffness, displacement, *, base=None, max_
         test: ``"compression"`` or ``"flexure"``.
         hinge_stiffness: candidate k_α [N/rad], shape (W,).
         displacement: the table's displacements [m], shape (N,), ascending, ≥ 0.
-        base: the :class:`~warpworm.params.WormParams` holding every other parameter (the material).
+        base: the :class:`~warpworm.physics.params.WormParams` holding every other parameter (the material).
         kwargs: passed to the experiment (``hold``, ``settle``, ``anchor_stiffness``, ``dt``, …), over
             :data:`FIT_SETTINGS`.
 
     Returns: ``force (W, N)`` [N] at ``displacement``, and ``result``: the experiment's own result dict.
     """
-    from . import experiments as ex
+    from warpworm.analysis import experiments as ex
 
     if test not in TESTS:
         raise ValueError(f"test: expected one of {TESTS}, got {test!r}")
@@ -176,7 +176,7 @@ def fit_hinge_stiffness(test: str, displacement, force, *, base=None, k_range=(5
                         fine: int = 16, verify: bool = True, **kwargs) -> dict:
     """Fit k_α [N/rad] so that the simulated ``test`` curve matches a measured one (least squares in force).
 
-    Every other parameter is held at ``base`` (e.g. :func:`warpworm.materials.material_params`). Stage 1: ``coarse``
+    Every other parameter is held at ``base`` (e.g. :func:`warpworm.physics.materials.material_params`). Stage 1: ``coarse``
     candidates log-spaced over ``k_range``, one batch; stage 2: ``fine`` candidates log-spaced between the stage-1
     minimum's neighbours, one batch; the minimum of the sum of squared residuals is interpolated by a parabola in
     log k_α through the stage-2 minimum and its neighbours. With ``verify`` the fitted k_α runs once more (one world)

@@ -1,7 +1,7 @@
 """Host launcher of the block-per-world implicit substeps (:mod:`warpworm.kernels.implicit_tile`), the GPU path.
 
 :class:`TileSubsteps` does what ``Simulator._world_cmd(state, control, n).launch()`` does (``n`` implicit substeps
-of every world, in place on the :class:`~warpworm.model.State`), with one block of ``block_dim`` threads per world
+of every world, in place on the :class:`~warpworm.sim.model.State`), with one block of ``block_dim`` threads per world
 instead of one thread. It assembles the band path's Newton systems bit for bit; with ``factorization="band"`` it
 also factors them with the same arithmetic (results identical on the CPU), with "dense" (``wp.tile_cholesky``) the
 factor rounds differently: results agree to float rounding where the dynamics is continuous (a contact decision
@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from .kernels.implicit_tile import MAX_REGISTERS, make_tile_substep_kernel
+from warpworm.kernels.implicit_tile import MAX_REGISTERS, make_tile_substep_kernel
 
 FACTORIZATIONS = ("band", "dense")
 """How a block solves its world's Newton systems: "band", the block band factored in place column-parallel (bit for
@@ -69,8 +69,8 @@ class TileSubsteps:
     """The implicit substeps of every world of ``model``, one block of threads per world.
 
     Args:
-        model: the batch (:class:`~warpworm.model.Model`); its topology sets the kernel's tile size (3V).
-        simulator: the :class:`~warpworm.simulator.Simulator` whose substep length, Newton count, friction and
+        model: the batch (:class:`~warpworm.sim.model.Model`); its topology sets the kernel's tile size (3V).
+        simulator: the :class:`~warpworm.sim.simulator.Simulator` whose substep length, Newton count, friction and
             stability settings are used (read at each new recording, as ``_world_cmd`` does).
         factorization: one of :data:`FACTORIZATIONS` (default "band").
         block_dim: threads per world; default :data:`DEFAULT_CUDA_BLOCK_DIM` on CUDA, 1 on the CPU. On the CPU values

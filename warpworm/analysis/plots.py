@@ -1,4 +1,4 @@
-"""Figures of the virtual experiments (:mod:`warpworm.experiments`), matplotlib with the Agg backend.
+"""Figures of the virtual experiments (:mod:`warpworm.analysis.experiments`), matplotlib with the Agg backend.
 
 matplotlib is the optional ``plots`` extra (``pip install -e .[plots]``); it is imported only when a plot is drawn,
 with a clear error when it is missing. Each ``plot_<name>(result, path)`` writes one PNG and returns its path.
@@ -175,7 +175,7 @@ def plot_deformation(r: dict, path) -> Path:
 
 
 def plot_fit(r: dict, path) -> Path:
-    """k_α calibration (:func:`warpworm.material_fit.fit_hinge_stiffness`): measured vs fitted curve, and the RMS
+    """k_α calibration (:func:`warpworm.analysis.material_fit.fit_hinge_stiffness`): measured vs fitted curve, and the RMS
     residual of every candidate of the coarse and fine batches."""
     plt = _plt()
     fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4.2))

@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import crease
+from warpworm.physics import crease
 
-from .params import EPM as EPM_SLOT, IPM_CENTRE as IPM_CENTRE_SLOT, IPM_HEAD as IPM_HEAD_SLOT
+from warpworm.physics.params import EPM as EPM_SLOT, IPM_CENTRE as IPM_CENTRE_SLOT, IPM_HEAD as IPM_HEAD_SLOT
 
 
 def segment_ratios(pattern: crease.CreasePattern, positions: np.ndarray) -> np.ndarray:

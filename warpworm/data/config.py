@@ -29,8 +29,8 @@ from pydantic import AfterValidator, BeforeValidator, ConfigDict, Field, PlainVa
 from pydantic_core import PydanticCustomError
 from typing_extensions import TypedDict
 
-from . import randomize as rnd
-from .params import GAITS, MAGNET_MODELS, WormParams
+from warpworm.data import randomize as rnd
+from warpworm.physics.params import GAITS, MAGNET_MODELS, WormParams
 
 
 class ConfigError(ValueError):
@@ -52,7 +52,7 @@ class ParamSpec:
     values: tuple | None = None  # allowed values for discrete parameters
     doc: str = ""
     positive: bool = False  # strictly > 0
-    preset: bool = False  # NaN (the default) means "the gait preset's value" (warpworm.gaits.GAIT_PRESETS)
+    preset: bool = False  # NaN (the default) means "the gait preset's value" (warpworm.physics.gaits.GAIT_PRESETS)
     ranges_only: bool = False  # a constant or {uniform: [lo, hi]} only (the camera sampler's ranges)
     constant_only: bool = False  # a setting, not a distribution
     integer: bool = False  # whole numbers only
@@ -103,8 +103,8 @@ def _worm_specs() -> dict[str, ParamSpec]:
         "magnet_model": ParamSpec(_WP.magnet_model, "", values=MAGNET_MODELS, doc="magnet force model"),
     }
     # Path (and other) fields that the gait presets tune default to NaN = "the preset's value for the sample's gait",
-    # so a config that only names a gait gets the tuned path (resolved per sample in warpworm.sampling.draw_worm).
-    from .gaits import GAIT_PRESETS
+    # so a config that only names a gait gets the tuned path (resolved per sample in warpworm.data.sampling.draw_worm).
+    from warpworm.physics.gaits import GAIT_PRESETS
 
     for key in sorted({k for preset in GAIT_PRESETS.values() for k in preset}):
         if key in s:
@@ -117,7 +117,7 @@ def _worm_specs() -> dict[str, ParamSpec]:
         v = getattr(_WP, f.name)
         if f.name not in s and f.name not in ("n_units", "epm_size", "ipm_moment") and isinstance(v, (int, float)) \
                 and not isinstance(v, bool):
-            s[f.name] = ParamSpec(float(v), "see warpworm.params", doc=f"WormParams.{f.name}")
+            s[f.name] = ParamSpec(float(v), "see warpworm.physics.params", doc=f"WormParams.{f.name}")
     return s
 
 
@@ -221,7 +221,7 @@ def _check_device(ident: str) -> str:
     it here (so a CUDA config fails before any work on a machine without a GPU, not in a worker's traceback)."""
     import warp as wp
 
-    from . import quiet_warp
+    from warpworm import quiet_warp
 
     quiet_warp()
     if ident == "auto":
@@ -242,7 +242,7 @@ class SimConfig:
     worlds: Annotated[Int, Field(ge=1)] = 64
     """W: worlds simulated at once in one solver batch."""
     dt: Annotated[Num, Field(gt=0)] = 0.004
-    """Solver time step [s] (the gait runs' warpworm.gaits.DEFAULT_DT)."""
+    """Solver time step [s] (the gait runs' warpworm.physics.gaits.DEFAULT_DT)."""
     substeps: Annotated[Int, Field(ge=1)] = 2
     """Solver substeps per time step."""
     settle_time: Annotated[Num, Field(ge=0)] = 0.3
@@ -290,7 +290,7 @@ class OutputConfig:
 
 # ---------------------------------------------------------------------------------------------------------------------
 # randomize: group -> parameter -> distribution, one TypedDict per group generated from PARAM_SPECS. A parameter is
-# parsed by warpworm.randomize.parse_distribution, then checked against its ParamSpec (_check_spec).
+# parsed by warpworm.data.randomize.parse_distribution, then checked against its ParamSpec (_check_spec).
 def _check_spec(dist: rnd.Distribution, spec: ParamSpec) -> list[str]:
     """What is wrong with ``dist`` for a parameter of ``spec`` ("got X; expected Y" each); [] if nothing."""
     got = f"got {_fmt(dist.to_yaml())}"
@@ -358,7 +358,7 @@ def _group(name: str, specs: dict[str, ParamSpec]):
 _DEFAULTS = {g: {n: rnd.parse_distribution(s.default) for n, s in specs.items()} for g, specs in PARAM_SPECS.items()}
 _Randomize = TypedDict("Randomize", {g: _group(g, specs) for g, specs in PARAM_SPECS.items()}, total=False)
 _Randomize.__pydantic_config__ = ConfigDict(extra="forbid")
-_Randomize.__doc__ = "group -> parameter -> distribution (warpworm.randomize; docs/dataset.md)."
+_Randomize.__doc__ = "group -> parameter -> distribution (warpworm.data.randomize; docs/dataset.md)."
 
 
 def _with_defaults(given: dict) -> dict:
@@ -397,8 +397,8 @@ class DatasetConfig:
     """The HDF5 files and previews."""
     randomize: Annotated[_Randomize, BeforeValidator(_none_is_empty), AfterValidator(_with_defaults)] = \
         field(default_factory=dict)
-    """group -> parameter -> distribution (a number is a constant; the forms: warpworm.randomize); parameters not
-    named keep their defaults. Loaded, it holds every parameter of PARAM_SPECS as a warpworm.randomize.Distribution."""
+    """group -> parameter -> distribution (a number is a constant; the forms: warpworm.data.randomize); parameters not
+    named keep their defaults. Loaded, it holds every parameter of PARAM_SPECS as a warpworm.data.randomize.Distribution."""
 
     # ---- derived -------------------------------------------------------------------------------------------------
     @property

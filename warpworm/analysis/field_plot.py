@@ -13,7 +13,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from warpworm import magnets as mg
+from warpworm.physics import magnets as mg
 
 PANEL_PX = (300, 420)  # (width, height) of each panel's plot area
 HEADER_PX = 46

@@ -22,10 +22,10 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from . import crease, gaits
-from .params import MAGNET_MODELS, WormParams, per_world
-from .ids import SHAPE_CUBOID, SHAPE_CYLINDER
-from .transforms import axis_angle_to_matrix, matrix_to_quat_wxyz, quat_wxyz_to_xyzw
+from warpworm.physics import crease, gaits
+from warpworm.physics.params import MAGNET_MODELS, WormParams, per_world
+from warpworm.ids import SHAPE_CUBOID, SHAPE_CYLINDER
+from warpworm.transforms import axis_angle_to_matrix, matrix_to_quat_wxyz, quat_wxyz_to_xyzw
 
 
 def _scalar_param(value, num_worlds: int, name: str) -> np.ndarray:
@@ -88,11 +88,11 @@ class State:
 class Control:
     """The inputs of a run (device arrays): the EPM path of every world and the anchor targets.
 
-    ``path`` is a :class:`warpworm.gaits.EpmPath`, sinusoidal or keyframed; ``sine`` / ``keyframes`` are its device
+    ``path`` is a :class:`warpworm.physics.gaits.EpmPath`, sinusoidal or keyframed; ``sine`` / ``keyframes`` are its device
     form (named fields, :class:`warpworm.kernels.magnet_pose.SinePath` / ``KeyframePath``)."""
 
     def __init__(self, model: "Model", path: "gaits.EpmPath | None" = None):
-        from .kernels import magnet_pose
+        from warpworm.kernels import magnet_pose
 
         self._kpose = magnet_pose
         self.device = model.device
@@ -145,7 +145,7 @@ class Control:
 
 
 class ModelBuilder:
-    """Assembles a batch of ``num_worlds`` worms from :class:`~warpworm.params.WormParams` on the host; ends in
+    """Assembles a batch of ``num_worlds`` worms from :class:`~warpworm.physics.params.WormParams` on the host; ends in
     :meth:`finalize` (the device :class:`Model`).
 
     Args:
@@ -365,7 +365,7 @@ class Model:
     Host (NumPy): ``params``, ``pattern`` (world 0's crease pattern), ``rest_positions_host (W, V, 3)``,
     ``vertex_mass_host (R, V)``, ``sheet_mass_host (R,)``, ``ipm_mass_host (W,)``, ``hinge_rest_angle_host``,
     ``magnet_size_host``, ``magnet_moment_host``, ``ipm_rest_pos_host (W, 3, 3)`` (tail, centre, head),
-    ``default_path`` (the params' EPM path, :class:`warpworm.gaits.EpmPath`).
+    ``default_path`` (the params' EPM path, :class:`warpworm.physics.gaits.EpmPath`).
     """
 
     def __init__(self):

@@ -1,5 +1,5 @@
 """Every randomized value of a dataset sample, drawn from the config's distributions (``cfg.randomize``) with the one
-counter-based generator of :mod:`warpworm.randomize`, and turned into what the simulator and renderer take.
+counter-based generator of :mod:`warpworm.data.randomize`, and turned into what the simulator and renderer take.
 
 What each draw is keyed by (so that any shard size, worker count, engine or device gives the same samples):
 
@@ -17,8 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import randomize as rnd
-from .params import WormParams
+from warpworm.data import randomize as rnd
+from warpworm.physics.params import WormParams
 
 _WORM_VECTOR = {"epm_size": ("epm_size_x", "epm_size_y", "epm_size_z"),
                 "ipm_moment": ("ipm_moment_tail", "ipm_moment_centre", "ipm_moment_head")}
@@ -38,9 +38,9 @@ def draw_worm(cfg, traj: np.ndarray, attempt: np.ndarray) -> rnd.Draws:
 
 
 def _fill_gait_presets(d: rnd.Draws) -> None:
-    """NaN = "the gait preset's value" (:data:`warpworm.gaits.GAIT_PRESETS`), resolved in place per sample's gait;
+    """NaN = "the gait preset's value" (:data:`warpworm.physics.gaits.GAIT_PRESETS`), resolved in place per sample's gait;
     a NaN orientation becomes the preset's EPM moment angle for the sample's gait and direction."""
-    from .gaits import GAIT_PRESETS, gait_theta
+    from warpworm.physics.gaits import GAIT_PRESETS, gait_theta
 
     gait = np.asarray(d["worm.gait"]).astype(str)
     for g, preset in GAIT_PRESETS.items():
@@ -60,7 +60,7 @@ def _fill_gait_presets(d: rnd.Draws) -> None:
 
 def worm_params(cfg, draws: rnd.Draws, sel: np.ndarray | slice = slice(None)) -> WormParams:
     """WormParams for the selected worlds of ``draws``. ``gait``, ``backward`` and ``magnet_model`` are one value
-    when equal over ``sel`` (always, for the fields of :data:`warpworm.config.BATCH_SHARED`, by which the job splits
+    when equal over ``sel`` (always, for the fields of :data:`warpworm.data.config.BATCH_SHARED`, by which the job splits
     its batches), else (W,) arrays."""
     p = WormParams(n_units=cfg.sim.n_units)
     for name, arr in draws.values.items():
@@ -81,7 +81,7 @@ def worm_params(cfg, draws: rnd.Draws, sel: np.ndarray | slice = slice(None)) ->
 
 def randomized_params(cfg_name_or_cfg, num_worlds: int, seed: int) -> WormParams:
     """``WormParams`` of ``num_worlds`` worlds drawn from a config's ``worm.*`` distributions (a
-    :class:`~warpworm.config.DatasetConfig`, or a config name / path for :func:`warpworm.config.load_config`) with the
+    :class:`~warpworm.data.config.DatasetConfig`, or a config name / path for :func:`warpworm.data.config.load_config`) with the
     counter-based generator: world ``w`` is trajectory ``w`` at attempt 0 of that config with master seed ``seed``
     (the same values a dataset job with that seed draws for its trajectory ``w``).
 
@@ -90,7 +90,7 @@ def randomized_params(cfg_name_or_cfg, num_worlds: int, seed: int) -> WormParams
     """
     import dataclasses
 
-    from .config import ConfigError, load_config
+    from warpworm.data.config import ConfigError, load_config
 
     cfg = load_config(cfg_name_or_cfg) if isinstance(cfg_name_or_cfg, str) else cfg_name_or_cfg
     if int(num_worlds) < 1:
@@ -128,7 +128,7 @@ def appearance_draws(cfg, traj: np.ndarray) -> dict[str, np.ndarray]:
 
 def appearance_from_draws(app: dict, seeds: np.ndarray):
     """The renderer's :class:`~warpworm.render.Appearance` from the drawn ``light/color/texture`` values (B,) each."""
-    from .render import default_appearance, hsv_to_rgb
+    from warpworm.render import default_appearance, hsv_to_rgb
 
     B = len(seeds)
     a = default_appearance(B)
@@ -203,7 +203,7 @@ def dataset_cameras(cfg, index: np.ndarray, worm_points: np.ndarray):
     worker. Returns (cameras, ``camera.*`` values (n,) each as stored in ``params/``: the kept view's distance,
     elevation, azimuth, roll, fov_y [rad], look-at offset length [m], its in-frame fraction, max_tries).
     """
-    from .render import sample_cameras
+    from warpworm.render import sample_cameras
 
     c = cfg.randomize["camera"]
     index = np.asarray(index, dtype=np.int64)

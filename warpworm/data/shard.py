@@ -6,11 +6,11 @@ Sample ids and what determines them (so that any shard size, worker count, engin
 * trajectory ``j``'s physical parameters are drawn from the counter-based generator keyed by (seed, j, attempt);
   attempt starts at 0 and a world that goes unstable is redrawn with attempt + 1 (dropped, replaced, counted);
 * its camera is keyed by (seed, j) (or by (seed, i) with ``render.camera_per_frame``), its appearance by (seed, j) and
-  its sensor noise by (seed, i) (:mod:`warpworm.sampling`);
+  its sensor noise by (seed, i) (:mod:`warpworm.data.sampling`);
 * shard k holds ids [k·S, min((k+1)·S, N)): its content depends only on (config, k).
 
-:func:`run_shard` is what a worker process runs (:mod:`warpworm.workers`); the job around it (plan, manifest, resume,
-signals) is :mod:`warpworm.job`.
+:func:`run_shard` is what a worker process runs (:mod:`warpworm.data.workers`); the job around it (plan, manifest, resume,
+signals) is :mod:`warpworm.data.job`.
 """
 
 from __future__ import annotations
@@ -23,27 +23,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import dataset as ds
-from . import ids
-from . import randomize as rnd
-from .config import BATCH_SHARED, DatasetConfig
-from .sampling import appearance_draws, dataset_cameras, draw_worm, worm_params
-from .stages import load_stages
-
-
-class Interrupted(BaseException):
-    """The job got SIGTERM or SIGINT and stopped cleanly: finished shards committed and in the manifest, the shard in
-    flight discarded (its temporary deleted), workers stopped. ``--resume`` continues. Exit code 128 + signal.
-
-    A ``BaseException``, as ``KeyboardInterrupt`` is: the signal handler raises it wherever the main thread is, and
-    library code's ``except Exception`` (``inspect.getfullargspec`` turns any exception into ``TypeError('unsupported
-    callable')``, a best-effort clean-up swallows it) must not catch or transform a stop."""
-
-    def __init__(self, signum: int):
-        import signal as _signal
-
-        self.signum = int(signum)
-        super().__init__(f"interrupted by {_signal.Signals(self.signum).name}")
+from warpworm.data import dataset as ds
+from warpworm import ids
+from warpworm.data import randomize as rnd
+from warpworm.data.config import BATCH_SHARED, DatasetConfig
+from warpworm.data.sampling import appearance_draws, dataset_cameras, draw_worm, worm_params
+from warpworm.data.signal_hold import Interrupted  # noqa: F401  (re-exported: the workers and job raise it)
+from warpworm.data.stages import load_stages
 
 
 @dataclass

@@ -1,9 +1,9 @@
 """A dataset job: plan the shards (resume, sharding for the workers), hold the folder lock and the signals, run the
-shards (:mod:`warpworm.workers`, each one :func:`warpworm.shard.run_shard`), keep ``manifest.json`` current.
+shards (:mod:`warpworm.data.workers`, each one :func:`warpworm.data.shard.run_shard`), keep ``manifest.json`` current.
 
-What determines each sample is in :mod:`warpworm.shard`; resuming a killed job means redoing the missing shards
+What determines each sample is in :mod:`warpworm.data.shard`; resuming a killed job means redoing the missing shards
 (shard k's content depends only on (config, k)). Previews are not part of the job: the ``generate`` command writes
-them afterwards (:func:`warpworm.previews.write_previews`).
+them afterwards (:func:`warpworm.data.previews.write_previews`).
 """
 
 from __future__ import annotations
@@ -20,12 +20,12 @@ from pathlib import Path
 
 import numpy as np
 
-from . import dataset as ds
-from . import signal_hold
-from . import workers as wk
-from .config import ConfigError, DatasetConfig, check_output_dir
-from .shard import Interrupted, ShardStats, warp_version
-from .stages import DEFAULT_STAGES
+from warpworm.data import dataset as ds
+from warpworm.data import signal_hold
+from warpworm.data import workers as wk
+from warpworm.data.config import ConfigError, DatasetConfig, check_output_dir
+from warpworm.data.shard import Interrupted, ShardStats, warp_version
+from warpworm.data.stages import DEFAULT_STAGES
 
 
 @dataclass
@@ -115,7 +115,7 @@ class SignalGuard:
         if self._depth:
             self._held = signum
             return
-        if signal_hold.in_io():  # inside an h5py call: raised when it returns (warpworm.signal_hold)
+        if signal_hold.in_io():  # inside an h5py call: raised when it returns (warpworm.data.signal_hold)
             signal_hold.defer(signum)
             return
         raise Interrupted(signum)
@@ -256,7 +256,7 @@ def _config_from_shards(cfg: DatasetConfig, out: Path, requested: int) -> Datase
     import h5py
     import yaml
 
-    from .config import load_config
+    from warpworm.data.config import load_config
 
     for name in sorted(os.listdir(out)):
         if not ds.SHARD_RE.match(name):
@@ -296,10 +296,10 @@ def device_line(cfg: DatasetConfig) -> str:
 
 def generate(cfg: DatasetConfig, out_dir, *, workers: int = 1, resume: bool = False, stages: str = DEFAULT_STAGES,
              engine: str = "local", address: str | None = None, progress: bool = True, log=None) -> Summary:
-    """Run a dataset job; returns its :class:`Summary`. See :mod:`warpworm.shard` for what determines each sample.
+    """Run a dataset job; returns its :class:`Summary`. See :mod:`warpworm.data.shard` for what determines each sample.
 
-    Raises :class:`ConfigError` (bad input, before any work), :class:`warpworm.dataset.DatasetLockedError` (another
-    job holds the folder), :class:`warpworm.dataset.DatasetWriteError` (disk full, read-only: completed shards intact),
+    Raises :class:`ConfigError` (bad input, before any work), :class:`warpworm.data.dataset.DatasetLockedError` (another
+    job holds the folder), :class:`warpworm.data.dataset.DatasetWriteError` (disk full, read-only: completed shards intact),
     :class:`Interrupted` (SIGTERM / SIGINT: stopped cleanly), ``WorkerError`` (a worker died).
     """
     t0 = time.perf_counter()

@@ -26,9 +26,9 @@ import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from typing import Callable
 
-from . import signal_hold
-from .shard import Interrupted, run_shard
-from .stages import load_stages
+from warpworm.data import signal_hold
+from warpworm.data.shard import Interrupted, run_shard
+from warpworm.data.stages import load_stages
 
 _progress_queue = None
 _in_shard = False
@@ -37,7 +37,7 @@ _in_shard = False
 def _worker_signal(signum, frame):
     """SIGTERM / SIGINT in a worker: discard the shard in flight (run_shard deletes its temporary), then exit."""
     if _in_shard:
-        if signal_hold.in_io():  # inside an h5py call: raised when it returns (warpworm.signal_hold)
+        if signal_hold.in_io():  # inside an h5py call: raised when it returns (warpworm.data.signal_hold)
             signal_hold.defer(signum)
             return
         raise Interrupted(signum)
@@ -160,7 +160,7 @@ def _run_local_pool(cfg, out, todo, stages, workers, on_progress, on_shard):
                 except Exception as exc:  # noqa: BLE001 - re-raised with the recovery advice
                     for f in pending:
                         f.cancel()
-                    from .dataset import DatasetWriteError
+                    from warpworm.data.dataset import DatasetWriteError
 
                     if isinstance(exc, DatasetWriteError):  # disk full in a worker: its own one-line message
                         _stop_workers(pool)
@@ -231,7 +231,7 @@ def _remove_dead_attempts(out, shards) -> list[str]:
     shard in ``shards`` is committed: Ray re-ran those attempts elsewhere, and a task whose node died is gone (its
     worker exits when its raylet does), so nothing is still writing them. (The pid in a name is another host's, so it
     cannot tell here whether its writer lives.)"""
-    from .dataset import clean_temporaries, shard_name
+    from warpworm.data.dataset import clean_temporaries, shard_name
 
     return [name for k in shards for name in clean_temporaries(out, f".{shard_name(k)}.tmp-*")]
 

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
-from .ids import MAGNET_MODELS
+from warpworm.ids import MAGNET_MODELS
 
 N52_MOMENT_PER_VOLUME = 0.9e6
 """Fitted magnetization of the paper's N52 magnets: 0.9 A·m² per cm³ = 0.9e6 A/m (DESIGN-NOTES)."""
@@ -44,7 +44,7 @@ class WormParams:
     """Areal density of the sheet [kg/m²] (mineral paper ≈ 0.15), shape () or (W,)."""
     hinge_stiffness: float | np.ndarray = 0.005
     """Crease stiffness k_α per metre of crease [N·m/rad/m = N/rad], shape () or (W,): the default material,
-    mineral paper (warpworm.materials; the paper's 11.55 is Kangaroo's unitless strength and does not convert)."""
+    mineral paper (warpworm.physics.materials; the paper's 11.55 is Kangaroo's unitless strength and does not convert)."""
     bar_stiffness: float | np.ndarray = 20.0
     """Axial rigidity EA of every bar but the valley rings [N] (force per unit Cauchy strain), shape () or (W,).
     Near-rigid: strains of ~1e-3 under the magnets' ~0.02 N. Not stiffer by default: the implicit solver reads the
@@ -55,7 +55,7 @@ class WormParams:
     """Axial rigidity EA_w of the VALLEY-ring (waist) bars at the unit middles [N], shape () or (W,): the sheet's
     in-plane compliance. The tube is isostatic (docs/crease.md): these bars stand for the panel bending near the
     waists that lets the paper bellows fold, so they must be far softer than ``bar_stiffness`` for the worm to
-    shorten under the magnets (default: mineral paper, warpworm.materials)."""
+    shorten under the magnets (default: mineral paper, warpworm.physics.materials)."""
     waist_close_strain: float | np.ndarray = 0.3
     """How far a waist (VALLEY) bar may shorten, as a strain magnitude ε_c [1], before it turns as stiff as the rigid
     bars, shape () or (W,). The bellows' folding mode shrinks its waists (they close completely at about 17 %
@@ -73,7 +73,7 @@ class WormParams:
     """Linear velocity damping rate [1/s], shape () or (W,)."""
     hinge_damping: float | np.ndarray = 1.0e-4
     """Crease damping c_α per metre of crease [N·m·s/rad/m]: a hinge resists folding speed with c_α L dψ/dt,
-    shape () or (W,). Default: mineral paper's (warpworm.materials), a crease relaxation time c_α / k_α = 20 ms.
+    shape () or (W,). Default: mineral paper's (warpworm.physics.materials), a crease relaxation time c_α / k_α = 20 ms.
     Without it a soft worm close to the EPM snaps and crumples (docs/dynamics.md)."""
 
     # --- floor ---
@@ -129,7 +129,7 @@ class WormParams:
     of the EPM, which moves beneath the support plate (>= ``support_thickness``), shape () or (W,)."""
     orientation: float | np.ndarray = float("nan")
     """EPM moment angle θ in the x–z plane from +x toward +z (up) [rad]: −π/2 south pole up, 0 north pole forward,
-    +π/2 north pole up; NaN takes the gait preset's value (warpworm.gaits.GAIT_ORIENTATION)."""
+    +π/2 north pole up; NaN takes the gait preset's value (warpworm.physics.gaits.GAIT_ORIENTATION)."""
     cycle_period: float | np.ndarray = 1.0
     """Duration of one EPM cycle [s], shape () or (W,)."""
     closest_approach_scale: float | np.ndarray = 1.0

@@ -20,7 +20,7 @@ Sources:
 * a trajectory file (``.npz`` or ``.h5``) with ``positions (F, W, V, 3)`` [m], ``magnet_pos (F, W, 4, 3)``,
   ``magnet_rot (F, W, 4, 3, 3)``, ``crease_angle (F, W, H)``, ``bar_strain (F, W, E)``, ``time (F,)`` [s] and the
   topology ``triangles (T, 3)``, ``hinges (H, 4)``, ``edges (E, 2)`` (optional ``ipm_diameter``, ``ipm_thickness``,
-  ``epm_size``, ``floor_incline``; when absent the :class:`~warpworm.params.WormParams` defaults are used).
+  ``epm_size``, ``floor_incline``; when absent the :class:`~warpworm.physics.params.WormParams` defaults are used).
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .params import WormParams
+from warpworm.physics.params import WormParams
 
 TIME_CODES_PER_SECOND = 100.0
 MAGNET_NAMES = ("EPM", "IPM_tail", "IPM_centre", "IPM_head")
@@ -59,7 +59,7 @@ class Track:
 
 def tracks_from_dataset(root, trajectories=(0,)) -> list[Track]:
     """Tracks of the given trajectory ids of a dataset folder."""
-    from . import dataset as ds
+    from warpworm.data import dataset as ds
 
     r = ds.open(root)
     a = r.attrs
@@ -88,7 +88,7 @@ def tracks_from_dataset(root, trajectories=(0,)) -> list[Track]:
 
 def tracks_from_trajectory(path, worlds=(0,)) -> list[Track]:
     """Tracks of worlds ``worlds`` of a trajectory file (.npz or .h5; keys in the module docstring)."""
-    from . import transforms as tf
+    from warpworm import transforms as tf
 
     path = Path(path)
     if path.suffix == ".npz":

@@ -40,7 +40,7 @@ inchworm       north pole up (θ = +π/2): anterior half an   between centre and
                                                                                                   centre and tail
 =============  ===========================================  ====================================  =====================
 
-:func:`preset_params` returns :class:`~warpworm.params.WormParams` with a gait's tuned path (w, a, h, period); the
+:func:`preset_params` returns :class:`~warpworm.physics.params.WormParams` with a gait's tuned path (w, a, h, period); the
 tuning (``warpworm search-gait``, a batched grid search as the paper's Table I) is documented in ``docs/dynamics.md``.
 """
 
@@ -50,7 +50,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .params import GAITS, WormParams, per_world
+from warpworm.physics.params import GAITS, WormParams, per_world
 
 DEFAULT_DT = 4.0e-3
 """Step of the gait runs [s]: the magnetic wrench and EPM pose are refreshed every step."""

@@ -1,0 +1,1 @@
+"""Measures on simulations: gait metrics and search, the paper's virtual experiments, fits, plots."""

@@ -1,0 +1,1 @@
+"""Dataset pipeline: configs, randomization, sampling, jobs and workers, shards, HDF5, previews, exports."""

@@ -1,0 +1,1 @@
+"""The batched simulator: Model / State / Control, the Simulator and its solver layouts."""
