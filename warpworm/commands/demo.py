@@ -3,10 +3,11 @@ magnet models, the worm mesh (GLB) and the field picture (PNG)."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
+
+from warpworm.data import export_json as strict_json
 
 HELP = "Build the default worm and magnets, print the magnetic wrench on each IPM under both models, write GLB + PNG."
 
@@ -53,7 +54,7 @@ def main(args) -> int:
     glb = crease.export_mesh(pattern, out / "worm.glb")
     png = render_field_picture(out / "field.png")
     if args.json:
-        print(json.dumps({"magnets": list(MAGNET_SLOTS), "wrenches": results, "files": [str(glb), str(png)]}))
+        print(strict_json.dumps({"magnets": list(MAGNET_SLOTS), "wrenches": results, "files": [str(glb), str(png)]}))
         return 0
     print(f"worm: {pattern.num_vertices} vertices, {pattern.num_triangles} facets, {pattern.num_edges} bars, "
           f"{pattern.num_hinges} hinges; EPM centre at {np.round(pos[0] * 1e3, 2)} mm")

@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from warpworm.data import export_json as strict_json
 from warpworm import ids
 
 HELP = "Export a dataset folder to COCO keypoints (images/*.png + annotations/keypoints.json)."
@@ -118,7 +119,7 @@ def export_coco(src, out, limit: int | None = None) -> dict:
     }
     path = out / "annotations" / "keypoints.json"
     tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(coco))
+    tmp.write_text(strict_json.dumps(coco))
     os.replace(tmp, path)
     reader.close()
     return {"images": len(images), "annotations": len(anns), "file": str(path)}

@@ -12,11 +12,12 @@ their look (:func:`warpworm.data.sampling.sample_appearance`) and sensor effects
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 
 import numpy as np
+
+from warpworm.data import export_json as strict_json
 
 HELP = "render W worlds from C seeded cameras each (RGB, depth, segmentation, labels) and write a contact sheet PNG"
 
@@ -129,7 +130,7 @@ def main(args) -> int:
         "files": [str(out / "contact_sheet.png"), str(out / "labels.npz")], "notes": notes,
     }
     if args.json:
-        print(json.dumps(summary))
+        print(strict_json.dumps(summary))
         return 0
     for n in notes:
         print("note:", n)

@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
-import json
 import os
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+from warpworm.data import export_json as strict_json
 
 HELP = "grid-search the EPM path (w, a, h) of a gait, every grid point one world; rank by distance per cycle"
 
@@ -80,7 +81,7 @@ def main(args) -> int:
                "max_ratio": args.max_ratio, "points": n, "crumpled": int(m["crumpled"].sum()),
                "unstable": int(m["unstable"].sum()), "valid": int(res["valid"].sum()), "wall_time_s": wall, "best": res["best"],
                "best_per_cycle_m": float(res["per_cycle_m"][res["order"][0]]) if len(res["order"]) else None}
-    (out / "search.json").write_text(json.dumps(summary, indent=1))
+    strict_json.write(out / "search.json", summary, indent=1)
     print(f"  best: {res['best']}")
     print(f"  wrote {out / 'search.csv'}, {out / 'heatmap.png'}, {out / 'search.json'}")
     return 0

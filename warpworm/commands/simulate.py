@@ -10,13 +10,13 @@ Outputs in ``--out`` (default ``./simulate_out``):
 
 from __future__ import annotations
 
-import json
 import sys
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
+from warpworm.data import export_json as strict_json
 from warpworm.analysis.gait_runs import randomized_params, run_gait_split
 
 HELP = "run a gait (peristaltic, omega, inchworm; forward or backward) on W worlds and report net displacement"
@@ -221,7 +221,7 @@ def main(args) -> int:
         }
         if result["metrics"] is not None:
             summary.update({k: np.asarray(v).tolist() for k, v in result["metrics"].items()})
-        sys.stdout.write(json.dumps(summary) + "\n")
+        sys.stdout.write(strict_json.dumps(summary) + "\n")
         return 0
     direction = "backward" if args.backward else "forward"
     print(f"{args.gait} {direction}: {args.cycles} cycles, {result['sim_time_s']:.2f} s simulated on {args.worlds} "

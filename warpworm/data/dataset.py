@@ -256,7 +256,9 @@ def atomic_write_json(path: str | os.PathLike, obj: Any) -> None:
     """Write JSON via temp file + fsync + rename, so readers see the old or the new file, never half of one."""
     path = Path(path)
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    data = json.dumps(obj, indent=1, sort_keys=False, default=_json_default)
+    from warpworm.data.export_json import jsonable  # strict JSON: NaN / inf as null (JSON.parse rejects NaN)
+
+    data = json.dumps(jsonable(obj), indent=1, sort_keys=False, default=_json_default, allow_nan=False)
     try:
         with builtins.open(tmp, "w") as f:
             f.write(data)

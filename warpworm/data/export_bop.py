@@ -22,13 +22,13 @@ approximation, stated in ``models_info.json``).
 
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 
 import numpy as np
 
 from warpworm.data import dataset as ds
+from warpworm.data import export_json as strict_json
 from warpworm import ids
 
 OBJECTS = {1: ("worm", ids.SEG_WORM), 2: ("ipm_tail", (ids.SEG_IPMS[0],)), 3: ("ipm_centre", (ids.SEG_IPMS[1],)),
@@ -49,7 +49,7 @@ def _bbox(mask: np.ndarray) -> list[int]:
 
 def _write_json(path: Path, obj) -> None:
     tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(obj, indent=1))
+    tmp.write_text(strict_json.dumps(obj, indent=1))
     os.replace(tmp, path)
 
 
