@@ -26,6 +26,7 @@ Sources:
 from __future__ import annotations
 
 import json
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -86,25 +87,39 @@ def tracks_from_dataset(root, trajectories=(0,)) -> list[Track]:
     return out
 
 
-def tracks_from_trajectory(path, worlds=(0,)) -> list[Track]:
-    """Tracks of worlds ``worlds`` of a trajectory file (.npz or .h5; keys in the module docstring)."""
-    from warpworm import transforms as tf
-
-    path = Path(path)
-    if path.suffix == ".npz":
-        with np.load(path, allow_pickle=False) as z:
-            d = {k: z[k] for k in z.files}
-    else:
+def _read_arrays(path: Path) -> dict:
+    """Every array of an .npz or HDF5 file (name -> array); ValueError naming the file if it is neither."""
+    try:
+        if path.suffix == ".npz":
+            with np.load(path, allow_pickle=False) as z:
+                return {k: z[k] for k in z.files}
         import h5py
 
         with h5py.File(path, "r") as f:
             d = {}
             f.visititems(lambda n, o: d.__setitem__(n, o[...]) if isinstance(o, h5py.Dataset) else None)
+            return d
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+        raise ValueError(f"{path}: not a trajectory file (expected .npz or HDF5: {exc})") from None
+
+
+def tracks_from_trajectory(path, worlds=(0,)) -> list[Track]:
+    """Tracks of worlds ``worlds`` of a trajectory file (.npz or .h5; keys in the module docstring)."""
+    from warpworm import transforms as tf
+
+    path = Path(path)
+    d = _read_arrays(path)
+    if "time" not in d and "times" in d:  # `warpworm simulate`'s trajectory.npz names it `times`
+        d["time"] = d["times"]
     missing = [k for k in ("positions", "magnet_pos", "magnet_rot", "time", "triangles") if k not in d]
     if missing:
-        raise ValueError(f"{path}: not a trajectory file (missing {missing})")
+        raise ValueError(f"{path}: not a trajectory file (missing {missing}; expected `warpworm simulate`'s "
+                         "trajectory.npz or a dataset folder)")
     w = WormParams()
-    F = d["positions"].shape[0]
+    F, S = d["positions"].shape[:2]
+    bad = [j for j in worlds if not 0 <= j < S]
+    if bad:
+        raise ValueError(f"--worlds: got {bad}; expected world indices in [0, {S}) (the file holds {S} world(s))")
     out = []
     for j in worlds:
         pose = tf.pose_matrix(d["magnet_rot"][:, j], d["magnet_pos"][:, j])
