@@ -46,6 +46,8 @@ class Summary:
     engine: str
     new_samples: int = 0
     cameras_below_min: int = 0
+    kernels_s: float = 0.0
+    """Wall time [s] loading the Warp kernels before the first shard (compiling them on a cold cache: ~20-30 s)."""
 
     @property
     def samples_per_s(self) -> float:
@@ -57,7 +59,8 @@ class Summary:
                 f"were already complete) to {self.out} in {self.wall_s:.1f} s = {self.samples_per_s:.1f} samples/s "
                 f"with {self.workers} worker(s) [{self.engine}]; unstable worlds dropped and replaced: "
                 f"{self.replaced_worlds}; cameras below camera.min_in_frame after max_tries: {self.cameras_below_min}; "
-                f"stage time (all workers): sim {self.sim_s:.1f} s, render {self.render_s:.1f} s, "
+                f"kernels {self.kernels_s:.1f} s{' (compiled: first run)' if self.kernels_s > KERNEL_NOTICE_S else ''}"
+                f"; stage time (all workers): sim {self.sim_s:.1f} s, render {self.render_s:.1f} s, "
                 f"write {self.write_s:.1f} s")
 
 
@@ -159,7 +162,7 @@ def shard_plan(cfg: DatasetConfig, workers: int) -> tuple[DatasetConfig, str | N
     to run and a one-line note (None when nothing changed and no worker idles)."""
     if workers <= 1 or cfg.num_shards >= workers:
         return cfg, None
-    F = cfg.frames_per_trajectory
+    F = cfg.samples_per_trajectory  # every view of every frame of a trajectory
     n_traj = -(-cfg.num_samples // F)
     per = -(-n_traj // workers) * F
     note = None
@@ -175,6 +178,46 @@ def shard_plan(cfg: DatasetConfig, workers: int) -> tuple[DatasetConfig, str | N
         note = (note + "; " if note else "") + (f"{workers - new.num_shards} of {workers} workers will be idle: "
                                                 f"{why}")
     return new, note
+
+
+KERNEL_NOTICE_S = 1.0
+"""Loading the kernels longer than this [s] means they are compiling: say so (a cold cache sits ~24 s at 0 %)."""
+
+
+def warm_kernels(cfg: DatasetConfig, stages: str, log) -> float:
+    """Load (on a cold cache: compile) the stages' Warp kernels before the progress bar starts; returns the wall
+    time [s]. If it takes longer than :data:`KERNEL_NOTICE_S`, one line says that kernels are compiling, roughly how
+    long it takes and that it happens once, and another how long it took."""
+    import threading
+
+    from warpworm.data.stages import load_stages
+
+    warm = getattr(load_stages(stages), "warm", None)
+    if warm is None:
+        return 0.0
+    t0 = time.perf_counter()
+    done = threading.Event()
+    said = []
+
+    def notice():
+        if not done.wait(KERNEL_NOTICE_S):
+            said.append(True)
+            log("compiling Warp kernels (first run on this machine or after an upgrade: about 20-60 s on a CPU; "
+                "cached for later runs)...")
+
+    t = threading.Thread(target=notice, daemon=True)
+    t.start()
+    try:
+        warm(cfg)
+    except Exception as exc:  # noqa: BLE001 - a failed warm-up only costs time; the shards report real errors
+        log(f"warning: kernel warm-up failed ({type(exc).__name__}: {exc}); modules load on first use")
+    finally:
+        done.set()
+        t.join()
+    wall = time.perf_counter() - t0
+    if said:
+        log(f"kernels ready in {wall:.0f} s")
+    return wall
 
 
 def _json_rt(d):
@@ -338,6 +381,7 @@ def _generate_locked(cfg, out, t0, guard, log, *, workers, resume, stages, engin
                                                               shard_size_requested=requested))
 
     save(complete=not todo)
+    kernels_s = warm_kernels(cfg, stages, log) if todo and engine == "local" else 0.0
 
     from tqdm import tqdm
 
@@ -362,6 +406,7 @@ def _generate_locked(cfg, out, t0, guard, log, *, workers, resume, stages, engin
         bar.close()
     summary = _summary(cfg, out, written, wall_s=time.perf_counter() - t0, done_before=done_before, workers=workers,
                        engine=engine)
+    summary.kernels_s = kernels_s
     save(complete=True, summary=summary)
     return summary
 
