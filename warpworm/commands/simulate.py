@@ -185,22 +185,30 @@ def main(args) -> int:
     from warpworm.sim.model import Model
     from warpworm.physics.params import parse_overrides
 
-    try:
+    from warpworm.commands.common import check_minimum, check_positive, device_option, refuse
+    from warpworm.data.config import check_options, check_worm_params
+
+    try:  # the rules generate applies to the same values (warpworm.data.config), before any work
+        check_options({"--worlds": (args.worlds, "sim.worlds"), "--dt": (args.dt, "sim.dt"),
+                       "--substeps": (args.substeps, "sim.substeps"), "--settle": (args.settle, "sim.settle_time")})
+        check_minimum(cycles=(args.cycles, 1), save_worlds=(args.save_worlds, 1), workers=(args.workers, 1))
+        check_positive(fps=args.fps)
+        device = device_option(args.device)
         overrides = parse_overrides(args.set)
         params = gaits.preset_params(args.gait, args.backward, magnet_model=args.magnet_model)
         if args.randomize:
             params = randomized_params(args.randomize, args.gait, args.backward, args.magnet_model, args.worlds,
                                        args.seed)
-        params = replace(params, **overrides)
+        params = check_worm_params(replace(params, **overrides))
         Model.from_params(params, args.worlds, "cpu")  # refuse bad values of any world before any work (~50 ms at 4096)
+        if not args.no_output and Path(args.out).exists() and not Path(args.out).is_dir():
+            raise ValueError(f"--out: got '{args.out}'; expected a folder (it is a file)")
     except ValueError as e:
-        print(f"warpworm simulate: {e}", file=sys.stderr)
-        return 2
-    device = "cuda:0" if args.device == "cuda" else args.device
+        return refuse(e)
     want_files = not args.no_output
-    if args.workers is not None and args.workers < 1:
-        print(f"warpworm simulate: --workers {args.workers}: expected >= 1", file=sys.stderr)
-        return 2
+    if args.worlds > 1 and not args.randomize:
+        print(f"note: the {args.worlds} worlds are identical (one parameter set); add --randomize to draw each "
+              "world's material, magnets and EPM path from the default dataset config", file=sys.stderr)
     # one process per core on the CPU; a GPU runs every world in one batch
     workers = args.workers if device == "cpu" else 1
     result = run_gait_split(params, args.worlds, args.cycles, workers=workers, device=device, dt=args.dt,

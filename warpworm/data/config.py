@@ -18,11 +18,13 @@ import functools
 import math
 import os
 import tempfile
+import typing
 from dataclasses import dataclass, field, fields
 from importlib import resources
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
+import numpy as np
 import yaml
 from pydantic import AfterValidator, BeforeValidator, ConfigDict, Field, PlainValidator, TypeAdapter, \
     ValidationError, ValidationInfo, WithJsonSchema
@@ -38,7 +40,9 @@ class ConfigError(ValueError):
 
     def __init__(self, errors: list[str]):
         self.errors = list(errors)
-        super().__init__("invalid dataset config:\n  " + "\n  ".join(self.errors))
+        # one problem: one line (what a command prints after "error: "); several: one line each
+        super().__init__(self.errors[0] if len(self.errors) == 1 else
+                         f"{len(self.errors)} problems:\n  " + "\n  ".join(self.errors))
 
 
 # ---------------------------------------------------------------------------------------------------------------------
@@ -111,6 +115,18 @@ def _worm_specs() -> dict[str, ParamSpec]:
             s[key] = dataclasses.replace(s[key], default=float("nan"), preset=True,
                                          doc=s[key].doc + " (default NaN: the gait preset's value)")
     s["hinge_damping"] = ParamSpec(_WP.hinge_damping, "N*m*s/rad/m", low=0.0, doc="crease damping c_alpha")
+    s["support_thickness"] = ParamSpec(_WP.support_thickness, "m", low=0.0,
+                                       doc="support plate the worm walks on; the EPM moves beneath it")
+    s["closest_approach_scale"] = ParamSpec(_WP.closest_approach_scale, "1", positive=True,
+                                            doc="closest approach h x this (after the gait preset)")
+    s["wavelength_scale"] = ParamSpec(_WP.wavelength_scale, "1", positive=True,
+                                      doc="wavelength w x this (after the gait preset)")
+    s["waist_close_strain"] = ParamSpec(_WP.waist_close_strain, "1", low=0.0, high=1.0,
+                                        doc="how far a waist bar may shorten before it turns rigid (strain)")
+    s["waist_stop_strain"] = ParamSpec(_WP.waist_stop_strain, "1", low=0.0,
+                                       doc="stretch beyond which a waist bar turns rigid (strain)")
+    s["fold_limit_stiffness"] = ParamSpec(_WP.fold_limit_stiffness, "N*m/rad/m", low=0.0,
+                                          doc="barrier stiffness of a crease past its fold range")
     # Any other scalar WormParams field is randomizable too (constant at its default unless configured), so a field
     # added to the parameter contract is never silently unreachable from configs.
     for f in fields(WormParams):
@@ -163,7 +179,8 @@ PARAM_SPECS: dict[str, dict[str, ParamSpec]] = {
         "floor": ParamSpec({"choice": ["plain", "checker", "noise"]}, "", values=("plain", "checker", "noise"),
                            doc="floor pattern"),
         "floor_scale": ParamSpec({"loguniform": [0.005, 0.03]}, "m", positive=True, doc="floor pattern period"),
-        "worm": ParamSpec({"choice": ["plain", "fibre"]}, "", values=("plain", "fibre"), doc="sheet pattern"),
+        "worm": ParamSpec({"choice": ["plain", "fibre"]}, "", values=("plain", "fibre", "bands"),
+                          doc="sheet pattern ('bands': the paper's five marker bands, warpworm.render.scene.BAND_COLORS)"),
     },
     "sensor": {
         "noise_std": ParamSpec({"uniform": [0.0, 4.0]}, "8-bit levels", low=0.0, doc="Gaussian pixel noise std"),
@@ -227,6 +244,8 @@ def _check_device(ident: str) -> str:
     if ident == "auto":
         ident = "cuda:0" if wp.get_cuda_device_count() > 0 else "cpu"
     try:
+        if ident.startswith("cuda") and wp.get_cuda_device_count() == 0:
+            raise ValueError(ident)  # asking Warp for it would print CUDA driver errors first
         wp.get_device(ident)
     except (ValueError, RuntimeError):
         raise _problem(f"got {_fmt(ident)}; expected 'auto' or a Warp device available here: one of "
@@ -259,6 +278,12 @@ class SimConfig:
     """Warp device for simulation and rendering: "cpu", "cuda:N", or "auto" (the first GPU if any, else the CPU)."""
 
 
+def _check_range(r: list) -> list:
+    if r[0] > r[1] or r[0] < 0:
+        raise _problem(f"got {r}; expected [lo, hi] with 0 <= lo <= hi")
+    return r
+
+
 @dataclass
 class RenderConfig:
     """The images."""
@@ -272,6 +297,63 @@ class RenderConfig:
     """False: one camera per trajectory (frames of a world form a video); True: a new camera for every frame."""
     batch: Annotated[Int, Field(ge=1)] = 1024
     """Images per render call (whole trajectories); bounds the memory of images held before writing."""
+    views_per_frame: Annotated[Int, Field(ge=1)] = 1
+    """K: cameras rendered of every simulated frame, each its own sample (own camera draw, labels and sample id);
+    a trajectory gives K * len(sim.frame_times) samples. 1 (the default) writes the datasets of before this option."""
+    # -- issue 24: nothing world-fixed relative to the worm; shadows (docs/render.md "Transfer"); OFF values keep the
+    # datasets of before (RENDER_OFF_GROUPS leaves them out of config_yaml)
+    plate_pose: Bool = False
+    """Draw the plate's pose relative to the worm per trajectory: yaw uniform in [0, 2π) about the floor normal and
+    an offset uniform in a disk of radius ``plate_offset``; the floor square, its textures (another uniform angle and
+    offset) and every light move with it, so nothing drawn is fixed relative to the worm's head and tail. Simulation,
+    cameras and labels are untouched. False: floor, textures and lamp fixed in the world the worm starts in (+x)."""
+    plate_offset: Annotated[Num, Field(ge=0)] = 0.05
+    """Radius [m] of the disk the plate's offset is drawn in (``plate_pose``)."""
+    lights: Literal["fixed", "random"] = "fixed"
+    """'fixed': the directional light (``randomize.light``) and one lamp at (-0.15, 0.2, 0.3) m (in the plate's frame
+    with ``plate_pose``); 'random': the directional light and ``light_count`` point lights drawn per trajectory."""
+    light_count: Annotated[list[Int], Field(strict=True, min_length=2, max_length=2), AfterValidator(_check_range)] = \
+        field(default_factory=lambda: [1, 4])
+    """[lo, hi]: point lights per trajectory, uniform integers (``lights: random``; 0 allowed: directional only)."""
+    light_distance: Annotated[list[Num], Field(strict=True, min_length=2, max_length=2),
+                              AfterValidator(_check_range)] = field(default_factory=lambda: [0.15, 0.6])
+    """[lo, hi] [m]: each point light's distance from the plate's centre, uniform."""
+    light_elevation: Annotated[list[Num], Field(strict=True, min_length=2, max_length=2),
+                               AfterValidator(_check_range)] = field(default_factory=lambda: [0.35, 1.45])
+    """[lo, hi] [rad]: each point light's elevation above the plate seen from its centre (azimuth uniform)."""
+    light_size: Annotated[list[Num], Field(strict=True, min_length=2, max_length=2),
+                          AfterValidator(_check_range)] = field(default_factory=lambda: [0.002, 0.03])
+    """[lo, hi] [m]: radius of each point light (spherical); sets its shadows' softness."""
+    light_irradiance: Annotated[list[Num], Field(strict=True, min_length=2, max_length=2),
+                                AfterValidator(_check_range)] = field(default_factory=lambda: [0.1, 0.6])
+    """[lo, hi]: each point light's irradiance at the plate's centre (facing it), uniform; the sun's is
+    ``light.intensity``."""
+    light_warmth: Annotated[list[Num], Field(strict=True, min_length=2, max_length=2),
+                            AfterValidator(_check_range)] = field(default_factory=lambda: [0.0, 1.0])
+    """[lo, hi] in [0, 1]: each light's colour from cool daylight (0, ~6500 K) to warm tungsten (1, ~3000 K)."""
+    shadows: Bool = False
+    """Shadows from every light (the directional light and each point light): a depth map of the scene's meshes
+    rendered from the light by the same rasterizer, soft by percentage-closer filtering (docs/render.md)."""
+    shadow_map: Annotated[Int, Field(ge=16, le=4096)] = 256
+    """Side [px] of each light's shadow map."""
+
+
+RENDER_OFF_GROUPS = {"plate_pose": ("plate_offset",),
+                     "lights": ("light_count", "light_distance", "light_elevation", "light_size", "light_irradiance",
+                                "light_warmth"),
+                     "shadows": ("shadow_map",)}
+"""render switch -> the keys it enables: a group whose switch and keys are all at their defaults (OFF) is left out
+of ``to_dict`` (so the files' config_yaml stays that of before the option)."""
+
+
+def _render_keys_left_out(render: "RenderConfig") -> set:
+    default = RenderConfig()
+    out = set()
+    for switch, keys in RENDER_OFF_GROUPS.items():
+        group = (switch, *keys)
+        if all(getattr(render, k) == getattr(default, k) for k in group):
+            out.update(group)
+    return out
 
 
 @dataclass
@@ -374,6 +456,15 @@ def _whole_trajectories(sim: SimConfig, info: ValidationInfo) -> SimConfig:
     return sim
 
 
+def _whole_trajectory_views(render: RenderConfig, info: ValidationInfo) -> RenderConfig:
+    shard_size, sim = info.data.get("shard_size"), info.data.get("sim")
+    k = render.views_per_frame
+    if k > 1 and shard_size is not None and sim is not None and shard_size % (k * len(sim.frame_times)):
+        raise _problem(f"got {shard_size}; expected a multiple of render.views_per_frame * len(sim.frame_times) = "
+                       f"{k} * {len(sim.frame_times)} (a shard holds whole trajectories)", path="shard_size")
+    return render
+
+
 # ---------------------------------------------------------------------------------------------------------------------
 @dataclass
 class DatasetConfig:
@@ -391,7 +482,8 @@ class DatasetConfig:
     sim: Annotated[SimConfig, BeforeValidator(_none_is_empty), AfterValidator(_whole_trajectories)] = \
         field(default_factory=SimConfig)
     """The batched simulation."""
-    render: Annotated[RenderConfig, BeforeValidator(_none_is_empty)] = field(default_factory=RenderConfig)
+    render: Annotated[RenderConfig, BeforeValidator(_none_is_empty), AfterValidator(_whole_trajectory_views)] = \
+        field(default_factory=RenderConfig)
     """Images."""
     output: Annotated[OutputConfig, BeforeValidator(_none_is_empty)] = field(default_factory=OutputConfig)
     """The HDF5 files and previews."""
@@ -404,6 +496,11 @@ class DatasetConfig:
     @property
     def frames_per_trajectory(self) -> int:
         return len(self.sim.frame_times)
+
+    @property
+    def samples_per_trajectory(self) -> int:
+        """K * F: every view (``render.views_per_frame``) of every frame of one simulated world."""
+        return self.render.views_per_frame * len(self.sim.frame_times)
 
     @property
     def num_shards(self) -> int:
@@ -420,7 +517,10 @@ class DatasetConfig:
     def to_dict(self) -> dict:
         return {
             "name": self.name, "seed": self.seed, "num_samples": self.num_samples, "shard_size": self.shard_size,
-            "sim": dataclasses.asdict(self.sim), "render": dataclasses.asdict(self.render),
+            "sim": dataclasses.asdict(self.sim),
+            # views_per_frame = 1 is left out, so the files' config_yaml stays that of before the option
+            "render": {k: v for k, v in dataclasses.asdict(self.render).items()
+                       if not (k == "views_per_frame" and v == 1) and k not in _render_keys_left_out(self.render)},
             "output": dataclasses.asdict(self.output),
             "randomize": {g: {n: dist.to_yaml() for n, dist in p.items()} for g, p in self.randomize.items()},
         }
@@ -468,6 +568,100 @@ def _message(e: dict) -> str:
         ctx = {k: int(v) if isinstance(v, float) and v.is_integer() else v for k, v in ctx.items()}
         expected = _EXPECTED[kind].format(**ctx) if kind in _EXPECTED else e["msg"]
     return f"{path}: got {_fmt(e['input'])}; expected {expected}"
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# One validation for every entry point: the commands that take no config (simulate, search-gait, experiment, render)
+# and the Python API (warpworm.sim.model.Model.from_params) check their values by the rules above.
+_VECTOR_PARTS = {"epm_size_x": ("epm_size", 0), "epm_size_y": ("epm_size", 1), "epm_size_z": ("epm_size", 2),
+                 "ipm_moment_tail": ("ipm_moment", 0), "ipm_moment_centre": ("ipm_moment", 1),
+                 "ipm_moment_head": ("ipm_moment", 2)}
+
+
+def _value_problem(values, spec: ParamSpec) -> str | None:
+    """What is wrong with the values (one per world) of a parameter of ``spec`` ("got X; expected Y"), or None."""
+    if spec.values is not None:
+        bad = [v for v in np.atleast_1d(np.asarray(values, dtype=object)).tolist() if v not in spec.values]
+        return f"got {_fmt(bad[0])}; expected one of {list(spec.values)}" if bad else None
+    try:
+        a = np.asarray(values, np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        return f"got {_fmt(values)}; expected a number [{spec.unit}]"
+    nan = np.isnan(a)
+    if nan.any() and not spec.preset:  # NaN = "the gait preset's value", only where a preset gives one
+        return f"got nan; expected a number [{spec.unit}]"
+    a = a[~nan]
+    checks = [(~np.isfinite(a), "a finite number"), (a <= 0 if spec.positive else a != a, "values > 0"),
+              (a < spec.low if spec.low is not None else a != a, f"values >= {spec.low}"),
+              (a > spec.high if spec.high is not None else a != a, f"values <= {spec.high}")]
+    for bad, what in checks:
+        if bad.any():
+            return f"got {_fmt(float(a[bad][0]))}; expected {what} [{spec.unit}]"
+    return None
+
+
+def worm_param_problems(params: WormParams) -> list[str]:
+    """Every value of ``params`` (shared or one per world) checked by the rules of ``randomize.worm.*``
+    (:data:`PARAM_SPECS`); one "worm.<field>: got X; expected Y" per problem (empty: all hold)."""
+    out = []
+    for name, spec in PARAM_SPECS["worm"].items():
+        if name in _VECTOR_PARTS:
+            field_name, k = _VECTOR_PARTS[name]
+            v = np.asarray(getattr(params, field_name), np.float64)
+            v = v[..., k] if v.ndim and v.shape[-1] == 3 else v
+        elif hasattr(params, name):
+            v = getattr(params, name)
+        else:
+            continue
+        problem = _value_problem(v, spec)
+        if problem:
+            out.append(f"worm.{name}: {problem}")
+    if not (isinstance(params.n_units, (int, np.integer)) and params.n_units >= 1):
+        out.append(f"worm.n_units: got {_fmt(params.n_units)}; expected a whole number >= 1")
+    return out
+
+
+def check_worm_params(params: WormParams) -> WormParams:
+    """``params`` if every value holds the config's rules (:func:`worm_param_problems`), else :class:`ConfigError`."""
+    problems = worm_param_problems(params)
+    if problems:
+        raise ConfigError(problems)
+    return params
+
+
+@functools.cache
+def _field_adapter(section: str, name: str) -> TypeAdapter:
+    cls = {"sim": SimConfig, "render": RenderConfig, "output": OutputConfig}[section]
+    return TypeAdapter(typing.get_type_hints(cls, include_extras=True)[name])
+
+
+def check_option(option: str, value, key: str):
+    """A command-line ``option``'s ``value`` validated as the config key ``key`` (e.g. ``--dt`` as ``sim.dt``,
+    ``--device`` as ``sim.device``): the validated value, or :class:`ConfigError` "--dt (sim.dt): got X; expected Y"."""
+    section, name = key.split(".")
+    try:
+        return _field_adapter(section, name).validate_python(value)
+    except ValidationError as exc:
+        msgs = [_message({**e, "loc": ()}) for e in exc.errors(include_url=False)]
+        msgs = [m.replace(f"(override with {key}=cpu)", f"(use {option} cpu)") for m in msgs]
+        raise ConfigError([f"{option} ({key}){m}" for m in msgs]) from None
+
+
+def check_options(options: dict) -> dict:
+    """:func:`check_option` of every ``{option: (value, key)}`` whose value is not None, all problems at once;
+    returns {option: validated value}."""
+    out, problems = {}, []
+    for option, (value, key) in options.items():
+        if value is None:
+            out[option] = None
+            continue
+        try:
+            out[option] = check_option(option, value, key)
+        except ConfigError as exc:
+            problems += exc.errors
+    if problems:
+        raise ConfigError(problems)
+    return out
 
 
 def config_from_dict(raw: dict) -> DatasetConfig:

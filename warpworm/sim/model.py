@@ -173,6 +173,9 @@ class ModelBuilder:
             bad = ratio[~ok][0]
             raise ValueError(f"worm.friction_backward_ratio: got {bad}; expected a finite ratio > 0 (tail-ward over "
                              "head-ward friction; 1 is isotropic)")
+        from warpworm.data.config import check_worm_params  # the rules every entry point shares (ConfigError)
+
+        check_worm_params(p)
         self.params, self.num_worlds = p, W
         self.anchors = np.zeros(0, np.int32) if anchors is None else np.asarray(anchors, np.int32).reshape(-1)
         self.anchor_stiffness = anchor_stiffness

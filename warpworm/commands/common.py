@@ -1,0 +1,52 @@
+"""What the commands share for their input checks: one rule set (:mod:`warpworm.data.config`), one error format.
+
+Every command refuses bad input before any work with ``error: <what>: got X; expected Y`` on one line of stderr and
+exit code 2 (:data:`EXIT_USAGE`), and writes nothing.
+"""
+
+from __future__ import annotations
+
+import sys
+
+EXIT_USAGE = 2
+"""Bad arguments, a missing or wrong file, an unavailable device: refused before any work, nothing written."""
+
+
+def refuse(message) -> int:
+    """Print ``error: message`` (one line per problem) on stderr; returns :data:`EXIT_USAGE`."""
+    print(f"error: {message}", file=sys.stderr)
+    return EXIT_USAGE
+
+
+def check_minimum(**values) -> None:
+    """``option_name=(value, minimum)``: ConfigError for each value below its minimum (None values are skipped);
+    option names use ``_`` for ``-`` (``save_worlds`` is ``--save-worlds``)."""
+    from warpworm.data.config import ConfigError
+
+    problems = [f"--{name.replace('_', '-')}: got {v}; expected >= {lo}"
+                for name, (v, lo) in values.items() if v is not None and not v >= lo]
+    if problems:
+        raise ConfigError(problems)
+
+
+def check_positive(**values) -> None:
+    """``option_name=value``: ConfigError for each value that is not a finite number > 0 (None skipped)."""
+    import math
+
+    from warpworm.data.config import ConfigError
+
+    problems = [f"--{name.replace('_', '-')}: got {v}; expected a number > 0"
+                for name, v in values.items() if v is not None and not (math.isfinite(v) and v > 0)]
+    if problems:
+        raise ConfigError(problems)
+
+
+def device_option(value: str | None) -> str | None:
+    """``--device`` checked as ``sim.device`` (so ``cuda`` on a machine without a GPU is refused as ``generate``
+    refuses ``sim.device=cuda``); ``cuda`` becomes ``cuda:0``; None stays None (Warp's default)."""
+    from warpworm.data.config import check_option
+
+    if value is None:
+        return None
+    dev = check_option("--device", value, "sim.device")
+    return "cuda:0" if dev == "cuda" else dev
