@@ -122,6 +122,8 @@ SCHEMA: dict[str, tuple[str, str, str]] = {
     f.name: (f.dtype, f.unit, f"({', '.join(str(d) for d in f.shape[1:])}{',' if len(f.shape) == 2 else ''}) "
              f"{f.description}") for f in FIELDS}
 """name -> (dtype, unit, description with the per-sample shape); the ``description`` attribute of each dataset."""
+SCHEMA["view"] = ("int32", "", "() which of the trajectory's render.views_per_frame cameras shows this sample "
+                  "(written only when views_per_frame > 1; sample = (trajectory K + view) F + frame)")
 
 SCHEMA_TABLE_BEGIN = "<!-- schema table: generated from warpworm.data.dataset.FIELDS by schema_markdown(); do not edit -->"
 SCHEMA_TABLE_END = "<!-- end of schema table -->"

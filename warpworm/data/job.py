@@ -221,7 +221,9 @@ def warm_kernels(cfg: DatasetConfig, stages: str, log) -> float:
 
 
 def _json_rt(d):
-    return json.loads(json.dumps(d, default=str))
+    from warpworm.data.export_json import jsonable  # as the manifest stores it: NaN (a gait preset's value) as null
+
+    return json.loads(json.dumps(jsonable(d), default=str))
 
 
 def plan_job(cfg: DatasetConfig, out_dir, resume: bool, requested_shard_size: int | None = None,

@@ -192,7 +192,7 @@ def _range(dist: rnd.Distribution) -> tuple[float, float]:
     return (float(dist.value), float(dist.value))
 
 
-def dataset_cameras(cfg, index: np.ndarray, worm_points: np.ndarray):
+def dataset_cameras(cfg, index: np.ndarray, worm_points: np.ndarray, view: np.ndarray | None = None):
     """Cameras of ``index`` (n,) trajectory or sample ids (whatever the camera is keyed by) from the ``camera.*``
     ranges, with :func:`warpworm.render.sample_cameras`: on a shell around the mean of ``worm_points`` (n, P, 3) (the
     worm's vertices over every frame the camera shows), redrawn until at least ``camera.min_in_frame`` of those
@@ -200,14 +200,21 @@ def dataset_cameras(cfg, index: np.ndarray, worm_points: np.ndarray):
     point at the image centre, ``fov_y`` vertical.
 
     Each camera draws from its own seed, derived from (master seed, index), so it is the same in any batch, shard or
-    worker. Returns (cameras, ``camera.*`` values (n,) each as stored in ``params/``: the kept view's distance,
+    worker. ``view`` (n,): which of a trajectory's ``render.views_per_frame`` cameras (None: all view 0); view 0 is
+    the camera of before that option, view v > 0 draws from its own stream ``camera.view<v>`` of the same key.
+    Returns (cameras, ``camera.*`` values (n,) each as stored in ``params/``: the kept view's distance,
     elevation, azimuth, roll, fov_y [rad], look-at offset length [m], its in-frame fraction, max_tries).
     """
     from warpworm.render import sample_cameras
 
     c = cfg.randomize["camera"]
     index = np.asarray(index, dtype=np.int64)
-    seeds = rnd.derived_seed(rnd.sample_keys(cfg.seed, index), "camera")
+    keys = rnd.sample_keys(cfg.seed, index)
+    seeds = rnd.derived_seed(keys, "camera")
+    if view is not None:
+        view = np.asarray(view, dtype=np.int64)
+        for v in np.unique(view[view > 0]):
+            seeds[view == v] = rnd.derived_seed(keys[view == v], f"camera.view{int(v)}")
     pts = np.asarray(worm_points, dtype=np.float64)
     target = pts.mean(axis=1)
     deg = lambda name: tuple(np.rad2deg(_range(c[name])))  # noqa: E731

@@ -2,11 +2,13 @@
 
 Sample ids and what determines them (so that any shard size, worker count, engine or device gives the same samples):
 
-* sample ``i`` is frame ``i % F`` of trajectory ``i // F`` (F = ``len(sim.frame_times)``);
+* sample ``i`` is frame ``i % F`` of view ``(i // F) % K`` of trajectory ``i // (K F)`` (F = ``len(sim.frame_times)``,
+  K = ``render.views_per_frame``, 1 by default: then sample ``i`` is frame ``i % F`` of trajectory ``i // F``); the K
+  views of a trajectory are K cameras watching the same simulated world, each over all its F frames;
 * trajectory ``j``'s physical parameters are drawn from the counter-based generator keyed by (seed, j, attempt);
   attempt starts at 0 and a world that goes unstable is redrawn with attempt + 1 (dropped, replaced, counted);
-* its camera is keyed by (seed, j) (or by (seed, i) with ``render.camera_per_frame``), its appearance by (seed, j) and
-  its sensor noise by (seed, i) (:mod:`warpworm.data.sampling`);
+* its camera (view v) is keyed by (seed, j, v) (or by (seed, i) with ``render.camera_per_frame``), its appearance by
+  (seed, j) and its sensor noise by (seed, i) (:mod:`warpworm.data.sampling`);
 * shard k holds ids [k·S, min((k+1)·S, N)): its content depends only on (config, k).
 
 :func:`run_shard` is what a worker process runs (:mod:`warpworm.data.workers`); the job around it (plan, manifest, resume,
@@ -190,7 +192,7 @@ def run_shard(cfg: DatasetConfig, out_dir, k: int, stages, progress=None) -> Sha
     t_start = time.perf_counter()
     stages = load_stages(stages)
     start, stop = cfg.shard_range(k)
-    F = cfg.frames_per_trajectory
+    F = cfg.samples_per_trajectory  # K views x frames
     stats = ShardStats(index=k, count=stop - start)
     writer = ds.ShardWriter(out_dir, k, start, stop - start, root_attributes(cfg, stages.metadata(cfg)),
                             cfg.output.compression, cfg.output.compression_level)
@@ -232,45 +234,59 @@ class _Trajectories:
     attempt: np.ndarray
     appearance: dict
     cams: object = None
+    """Cameras of every (trajectory, view), trajectory-major: camera ``b * K + v`` is view v of trajectory b."""
     cam_draws: dict | None = None
+
+
+def _views(cfg: DatasetConfig) -> int:
+    return int(getattr(cfg.render, "views_per_frame", 1))
 
 
 def _trajectory_rows(stages, cfg: DatasetConfig, traj: np.ndarray, stop: int, stats: ShardStats):
     """Simulate trajectories ``traj`` and render their samples below ``stop``; yields (first sample id, rows) per
-    render call, rows in sample order (trajectory-major, frame-minor) so every write is a contiguous row range:
-    strided HDF5 writes into chunked, compressed datasets measured ~25x slower than contiguous ones."""
-    F = cfg.frames_per_trajectory
+    render call, rows in sample order (trajectory-major, then view, then frame) so every write is a contiguous row
+    range: strided HDF5 writes into chunked, compressed datasets measured ~25x slower than contiguous ones."""
+    F, K = cfg.frames_per_trajectory, _views(cfg)
     frames, wdraws, attempt = simulate_with_replacement(stages, cfg, traj, stats)
     stats.trajectories += len(traj)
     batch = _Trajectories(traj=traj, stacked=_stack_frames(frames), draws=wdraws, attempt=attempt,
                           appearance=appearance_draws(cfg, traj))
-    if not cfg.render.camera_per_frame:
-        # one camera per trajectory, keyed by the trajectory: the worm (all its frames) in view
-        pts = np.concatenate([f["positions"] for f in frames], axis=1)
-        batch.cams, batch.cam_draws = dataset_cameras(cfg, traj, pts)
-        stats.cameras_below_min += int((~batch.cams.accepted).sum())
     B = len(traj)
-    sid_all = (traj[:, None] * F + np.arange(F)[None]).reshape(-1)
-    tsel_all = np.repeat(np.arange(B), F)  # trajectory (position in this batch) of each sample
-    fidx_all = np.tile(np.arange(F), B)
+    if not cfg.render.camera_per_frame:
+        # K cameras per trajectory, keyed by (trajectory, view): the worm (all its frames) in view of each
+        pts = np.concatenate([f["positions"] for f in frames], axis=1)
+        if K == 1:
+            batch.cams, batch.cam_draws = dataset_cameras(cfg, traj, pts)
+        else:
+            batch.cams, batch.cam_draws = dataset_cameras(cfg, np.repeat(traj, K), np.repeat(pts, K, axis=0),
+                                                          view=np.tile(np.arange(K), B))
+        stats.cameras_below_min += int((~batch.cams.accepted).sum())
+    S = F * K
+    sid_all = (traj[:, None] * S + np.arange(S)[None]).reshape(-1)
+    tsel_all = np.repeat(np.arange(B), S)  # trajectory (position in this batch) of each sample
+    vidx_all = np.tile(np.repeat(np.arange(K), F), B)
+    fidx_all = np.tile(np.arange(F), B * K)
     n_keep = int(np.sum(sid_all < stop))
-    step = max(F, (cfg.render.batch // F) * F)  # images per render call: whole trajectories
+    step = max(S, (cfg.render.batch // S) * S)  # images per render call: whole trajectories
     for r0 in range(0, n_keep, step):
         sl = slice(r0, min(r0 + step, n_keep))
-        yield sid_all[sl][0], _render_rows(stages, cfg, batch, sid_all[sl], tsel_all[sl], fidx_all[sl], stats)
+        yield sid_all[sl][0], _render_rows(stages, cfg, batch, sid_all[sl], tsel_all[sl], fidx_all[sl], stats,
+                                           vidx_all[sl])
 
 
 def _render_rows(stages, cfg: DatasetConfig, batch: _Trajectories, sid: np.ndarray, tsel: np.ndarray,
-                 fidx: np.ndarray, stats: ShardStats) -> dict:
-    """The dataset rows of samples ``sid`` (n,): trajectory ``batch.traj[tsel]``, frame ``fidx``."""
+                 fidx: np.ndarray, stats: ShardStats, vidx: np.ndarray) -> dict:
+    """The dataset rows of samples ``sid`` (n,): trajectory ``batch.traj[tsel]``, frame ``fidx``, view ``vidx``."""
+    K = _views(cfg)
     # the snapshot of each sample's (trajectory, frame), stacked: (n, ...) "worlds" of the renderer
     fr = _gather_frames(batch.stacked, tsel, fidx)
     if cfg.render.camera_per_frame:  # a camera per sample, keyed by the sample id
         cams, cam_draws = dataset_cameras(cfg, sid, fr["positions"])
         stats.cameras_below_min += int((~cams.accepted).sum())
     else:
-        cam_draws = _take(batch.cam_draws, tsel)
-        cams = batch.cams.take(tsel)
+        csel = tsel * K + vidx
+        cam_draws = _take(batch.cam_draws, csel)
+        cams = batch.cams.take(csel)
     cams.world = np.arange(len(sid), dtype=np.int32)
     seeds = rnd.derived_seed(rnd.sample_keys(cfg.seed, sid))
     app = _take(batch.appearance, tsel)
@@ -286,6 +302,8 @@ def _render_rows(stages, cfg: DatasetConfig, batch: _Trajectories, sid: np.ndarr
         "trajectory": batch.traj[tsel], "frame": fidx.astype(np.int32),
         "attempt": batch.attempt[tsel].astype(np.int32), "sample_id": sid, "seed": seeds,
     }
+    if K > 1:  # only then: a dataset of views_per_frame = 1 keeps exactly the datasets of before the option
+        rows["view"] = vidx.astype(np.int32)
     for name, v in {**_take(batch.draws.values, tsel), **app, **cam_draws}.items():
         rows[f"params/{name}"] = v
     stats.write_s += time.perf_counter() - t0
