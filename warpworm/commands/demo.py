@@ -44,7 +44,16 @@ def main(args) -> int:
     from warpworm.analysis.field_plot import render_field_picture
     from warpworm.physics.params import MAGNET_SLOTS
 
+    from warpworm.commands.common import check_positive, device_option, refuse
+
     out = Path(args.out)
+    try:
+        check_positive(height=args.height)
+        args.device = device_option(args.device)
+        if out.exists() and not out.is_dir():
+            raise ValueError(f"--out: got '{out}'; expected a folder (it is a file)")
+    except ValueError as exc:
+        return refuse(exc)
     out.mkdir(parents=True, exist_ok=True)
     pattern, mags, pos, rot = demo_scene(args.height)
     results = {}

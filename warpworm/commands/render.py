@@ -72,10 +72,22 @@ def main(args) -> int:
     from warpworm.render.labels import KEYPOINT_NAMES, schema_labels
     from warpworm.render.sensor import apply_sensor
 
+    from warpworm.commands.common import check_minimum, device_option, refuse
+    from warpworm.data.config import check_options
+
     out = Path(args.out)
+    try:  # the rules generate applies (warpworm.data.config), before any work
+        check_options({"--worlds": (args.worlds, "sim.worlds"), "--size": (args.size, "render.width")})
+        check_minimum(cameras=(args.cameras, 1), sheet_rows=(args.sheet_rows, 1), sim_time=(args.sim_time, 0.0),
+                      seed=(args.seed, 0))
+        args.device = device_option(args.device)
+        cfg = load_config(args.config, [f"randomize.worm.gait={args.gait}"], seed=int(args.seed))
+        if out.exists() and not out.is_dir():
+            raise ValueError(f"--out: got '{out}'; expected a folder (it is a file)")
+    except ValueError as exc:
+        return refuse(exc)
     out.mkdir(parents=True, exist_ok=True)
     W, C, S = int(args.worlds), int(args.cameras), int(args.size)
-    cfg = load_config(args.config, [f"randomize.worm.gait={args.gait}"], seed=int(args.seed))
     t0 = time.perf_counter()
     notes = []
     params = None
