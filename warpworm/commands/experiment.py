@@ -143,6 +143,8 @@ def main(args) -> int:
     import time
     from pathlib import Path
 
+    import numpy as np
+
     from warpworm.analysis import experiments as ex
     from warpworm.physics.materials import material_params
 
@@ -155,14 +157,20 @@ def main(args) -> int:
     except ValueError as exc:
         print(f"error: --{exc}", file=sys.stderr)
         return 2
-    try:
-        base = replace(base, **parse_overrides(args.set))
+    from warpworm.commands.common import check_minimum, check_positive, refuse
+    from warpworm.data.config import check_worm_params
+
+    try:  # the rules generate applies (warpworm.data.config), before any work
+        base = check_worm_params(replace(base, **parse_overrides(args.set)))
+        check_minimum(worlds=(args.worlds, 1), workers=(args.workers, 1))
+        check_positive(duration=args.duration)
+        lo, hi = args.k_range
+        if not (0 < lo < hi and np.isfinite(hi)):
+            raise ValueError(f"--k-range: got {lo} {hi}; expected 0 < LO < HI [N/rad]")
+        if Path(args.out).exists() and not Path(args.out).is_dir():
+            raise ValueError(f"--out: got '{args.out}'; expected a folder (it is a file)")
     except ValueError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    if args.workers is not None and args.workers < 1:
-        print(f"error: --workers {args.workers}: expected >= 1", file=sys.stderr)
-        return 2
+        return refuse(exc)
     if args.fit is not None:
         return _fit(args, base)
     out = Path(args.out)
