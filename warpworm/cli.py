@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
 # subcommand name -> module under warpworm.commands
@@ -39,12 +40,21 @@ def _load(module_name: str):
         raise
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """An argument mistake is one line on stderr (``warpworm CMD: error: ...; see warpworm CMD --help``), exit 2,
+    as every other refused input (warpworm.commands.common), not argparse's usage block."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     from warpworm import __version__
 
-    parser = argparse.ArgumentParser(prog="warpworm", description="Batched simulation of magnetically actuated origami worms, and labeled datasets from it.")
+    parser = OneLineParser(prog="warpworm", description="Batched simulation of magnetically actuated origami worms, "
+                           "and labeled datasets from it. `warpworm COMMAND --help` for each command.")
     parser.add_argument("--version", action="version", version=f"warpworm {__version__}")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=OneLineParser)
     for name, module_name in COMMANDS.items():
         module = _load(module_name)
         if module is None:
@@ -66,7 +76,17 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "_main", None):
         parser.print_help()
         return 2
-    return int(args._main(args) or 0)
+    try:
+        return int(args._main(args) or 0)
+    except KeyboardInterrupt:
+        print(f"warpworm {args.command}: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:  # noqa: BLE001 - the commands refuse bad input themselves (exit 2); this is a bug
+        if os.environ.get("WARPWORM_DEBUG"):
+            raise
+        print(f"warpworm {args.command}: internal error: {type(exc).__name__}: {exc} (a bug: please report it with "
+              "the output of the same command run with WARPWORM_DEBUG=1, which shows the traceback)", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":
