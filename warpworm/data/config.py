@@ -284,6 +284,28 @@ def _check_range(r: list) -> list:
     return r
 
 
+def _mitsuba_missing() -> bool:
+    import importlib.util
+
+    return importlib.util.find_spec("mitsuba") is None
+
+
+def _check_engine(engine: str) -> str:
+    if engine == "pathtraced" and _mitsuba_missing():
+        raise _problem("got 'pathtraced'; expected 'raster' here: Mitsuba 3 is not installed (pip install "
+                       "'warpworm[pathtrace]')")
+    return engine
+
+
+def _check_pathtraced_fraction(frac: float, info: ValidationInfo) -> float:
+    if frac > 0 and info.data.get("engine") == "pathtraced":
+        raise _problem(f"got {frac}; expected 0 with render.engine 'pathtraced' (every image is path-traced; mix the "
+                       "engines with engine 'raster' and a fraction)")
+    if frac > 0 and _mitsuba_missing():
+        raise _problem(f"got {frac}; expected 0 here: Mitsuba 3 is not installed (pip install 'warpworm[pathtrace]')")
+    return frac
+
+
 @dataclass
 class RenderConfig:
     """The images."""
@@ -336,12 +358,22 @@ class RenderConfig:
     rendered from the light by the same rasterizer, soft by percentage-closer filtering (docs/render.md)."""
     shadow_map: Annotated[Int, Field(ge=16, le=4096)] = 256
     """Side [px] of each light's shadow map."""
+    # -- issue 24: the path-traced engine (warpworm.render.pathtrace, the `pathtrace` extra); labels stay the raster's
+    engine: Annotated[Literal["raster", "pathtraced"], AfterValidator(_check_engine)] = "raster"
+    """'raster': every image from the rasterizer; 'pathtraced': every image path-traced by Mitsuba 3 (same meshes,
+    cameras, colours, lights; depth, segmentation and every label from the rasterizer's exact passes)."""
+    pathtraced_fraction: Annotated[Num, Field(ge=0, le=1), AfterValidator(_check_pathtraced_fraction)] = 0.0
+    """With ``engine: raster``: the share of samples path-traced instead, drawn per sample from its seed (each
+    sample's engine is stored in the ``engine`` dataset). 0: none."""
+    pathtraced_spp: Annotated[Int, Field(ge=1)] = 16
+    """Samples per pixel of the path-traced images."""
 
 
 RENDER_OFF_GROUPS = {"plate_pose": ("plate_offset",),
                      "lights": ("light_count", "light_distance", "light_elevation", "light_size", "light_irradiance",
                                 "light_warmth"),
-                     "shadows": ("shadow_map",)}
+                     "shadows": ("shadow_map",),
+                     "engine": ("pathtraced_fraction", "pathtraced_spp")}
 """render switch -> the keys it enables: a group whose switch and keys are all at their defaults (OFF) is left out
 of ``to_dict`` (so the files' config_yaml stays that of before the option)."""
 

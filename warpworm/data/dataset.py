@@ -124,6 +124,8 @@ SCHEMA: dict[str, tuple[str, str, str]] = {
 """name -> (dtype, unit, description with the per-sample shape); the ``description`` attribute of each dataset."""
 SCHEMA["view"] = ("int32", "", "() which of the trajectory's render.views_per_frame cameras shows this sample "
                   "(written only when views_per_frame > 1; sample = (trajectory K + view) F + frame)")
+SCHEMA["engine"] = ("uint8", "", "() renderer of this sample's rgb: 0 raster, 1 path-traced (warpworm.render.pathtrace; "
+                    "written only with render.engine pathtraced or render.pathtraced_fraction > 0; labels are raster)")
 
 SCHEMA_TABLE_BEGIN = "<!-- schema table: generated from warpworm.data.dataset.FIELDS by schema_markdown(); do not edit -->"
 SCHEMA_TABLE_END = "<!-- end of schema table -->"

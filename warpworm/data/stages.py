@@ -186,7 +186,30 @@ class WarpStages:
 
         cams = dataclasses.replace(cameras, world=np.arange(B, dtype=np.int32))
         img = self._renderer(cfg).render(scene, cams)
-        rgb = apply_sensor(img["rgb"], seeds, values=sensor_values(appearance))
+        engine = pathtraced_samples(cfg, seeds)  # None: the option is off (nothing more is written)
+        rgb = img["rgb"]
+        if engine is not None and engine.any():  # RGB only: labels stay the rasterizer's exact passes
+            from warpworm.render.pathtrace import render_pathtraced
+
+            sel = np.flatnonzero(engine)
+            rgb = rgb.copy()
+            rgb[sel] = render_pathtraced(scene, cams.take(sel), spp=cfg.render.pathtraced_spp, seeds=seeds[sel])
+        rgb = apply_sensor(rgb, seeds, values=sensor_values(appearance))
         labels = schema_labels(frame, pattern, cams, img, rest_positions=frame.get("rest_positions"),
                                ipm_diameter=params.ipm_diameter, ipm_thickness=params.ipm_thickness)
-        return {"rgb": rgb, "depth": img["depth"], "segmentation": img["seg"], **labels}
+        out = {"rgb": rgb, "depth": img["depth"], "segmentation": img["seg"], **labels}
+        if engine is not None:
+            out["engine"] = engine.astype(np.uint8)
+        return out
+
+
+def pathtraced_samples(cfg, seeds: np.ndarray) -> np.ndarray | None:
+    """Which of the samples with per-sample ``seeds`` (B,) are path-traced ((B,) bool; ``render.engine`` /
+    ``render.pathtraced_fraction``, drawn from each sample's seed), or None when neither option is on."""
+    r = cfg.render
+    engine, frac = getattr(r, "engine", "raster"), float(getattr(r, "pathtraced_fraction", 0.0))
+    if engine == "raster" and frac <= 0:
+        return None
+    from warpworm.render.pathtrace import choose_pathtraced
+
+    return choose_pathtraced(seeds, 1.0 if engine == "pathtraced" else frac)
