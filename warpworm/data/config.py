@@ -225,7 +225,7 @@ def _none_is_empty(v):
 def _check_frame_times(ft: list[float], info: ValidationInfo) -> list[float]:
     if any(t < 0 for t in ft) or any(b <= a for a, b in zip(ft, ft[1:])):
         raise _problem(f"got {ft}; expected strictly increasing times >= 0 [s]")
-    dt = info.data.get("dt")
+    dt = info.data.get("dt") if info.data.get("frame_unit", "s") == "s" else None  # cycles: rounded per world
     # frames are taken after whole steps: a time between steps would be rounded silently, and two frames within one
     # step would store the same snapshot under two times
     if dt is not None and any(abs(t / dt - round(t / dt)) > 1e-6 * max(1.0, t / dt) for t in ft):
@@ -266,6 +266,11 @@ class SimConfig:
     """Solver substeps per time step."""
     settle_time: Annotated[Num, Field(ge=0)] = 0.3
     """Time [s] the worm settles under gravity with the EPM parked at the path start."""
+    frame_unit: Literal["s", "cycle"] = "s"
+    """Unit of ``frame_times``: 's' (seconds, multiples of ``dt``), or 'cycle' (issue 24: cycles of each world's EPM
+    path, ``worm.cycle_period``: frame f of a world is taken at ``round(frame_times[f] · period / dt) · dt``, so
+    k + 0.5 is its k-th closest approach and a whole number a far point, whatever the period; ``time`` stores the
+    seconds)."""
     frame_times: Annotated[list[Num], Field(strict=True, min_length=1), AfterValidator(_check_frame_times)] = \
         field(default_factory=lambda: [0.2, 0.5, 0.8, 1.0])
     """Times [s] after settling at which frames are taken, strictly increasing, multiples of ``dt``; each trajectory
@@ -549,7 +554,7 @@ class DatasetConfig:
     def to_dict(self) -> dict:
         return {
             "name": self.name, "seed": self.seed, "num_samples": self.num_samples, "shard_size": self.shard_size,
-            "sim": dataclasses.asdict(self.sim),
+            "sim": {k: v for k, v in dataclasses.asdict(self.sim).items() if not (k == "frame_unit" and v == "s")},
             # views_per_frame = 1 is left out, so the files' config_yaml stays that of before the option
             "render": {k: v for k, v in dataclasses.asdict(self.render).items()
                        if not (k == "views_per_frame" and v == 1) and k not in _render_keys_left_out(self.render)},

@@ -298,7 +298,8 @@ def _render_rows(stages, cfg: DatasetConfig, batch: _Trajectories, sid: np.ndarr
         **out,
         "camera/K": cams.K, "camera/R": cams.R, "camera/t": cams.t,
         "camera/position": cams.position, "camera/in_frame": cams.in_frame.astype(np.float32),
-        "time": np.asarray(cfg.sim.frame_times, dtype=np.float32)[fidx],
+        "time": (fr["frame_time"].astype(np.float32) if "frame_time" in fr  # sim.frame_unit: cycle (per world)
+                 else np.asarray(cfg.sim.frame_times, dtype=np.float32)[fidx]),
         "trajectory": batch.traj[tsel], "frame": fidx.astype(np.int32),
         "attempt": batch.attempt[tsel].astype(np.int32), "sample_id": sid, "seed": seeds,
     }

@@ -154,7 +154,10 @@ class WarpStages:
         rest = model.rest_positions_host.astype(np.float32)  # per-world rest geometry (a, b, l0 may differ)
         sim.settle(state, cfg.sim.settle_time)
         keep = ("positions", "magnet_pos", "magnet_rot", "crease_angle", "bar_strain", "unstable")
-        frames = sim.run(state, cfg.sim.frame_times, keys=keep)
+        if getattr(cfg.sim, "frame_unit", "s") == "cycle":
+            frames = run_at_phases(sim, state, params, num_worlds, cfg.sim.frame_times, keep)
+        else:
+            frames = sim.run(state, cfg.sim.frame_times, keys=keep)
         unstable = np.zeros(num_worlds, bool)
         for f in frames:
             unstable |= f.pop("unstable") | ~np.isfinite(f["positions"]).all(axis=(1, 2))
@@ -201,6 +204,45 @@ class WarpStages:
         if engine is not None:
             out["engine"] = engine.astype(np.uint8)
         return out
+
+
+def frame_steps(phases, period, dt: float) -> np.ndarray:
+    """Steps after settling (W, F) at which each world's frames fall: ``round(phases[f] · period[w] / dt)``, phases in
+    cycles of the EPM path (k + 0.5: its k-th closest approach, k: a far point), ``period`` (W,) [s]. ValueError when
+    two frames of a world round to one step."""
+    steps = np.rint(np.outer(np.asarray(period, np.float64), np.asarray(phases, np.float64)) / dt).astype(np.int64)
+    if steps.shape[1] > 1 and np.any(np.diff(steps, axis=1) <= 0):
+        w = int(np.flatnonzero(np.any(np.diff(steps, axis=1) <= 0, axis=1))[0])
+        raise ValueError(f"sim.frame_times: got {list(phases)} cycles; with worm.cycle_period {period[w]} s and "
+                         f"sim.dt {dt} s two frames fall on one step; expected phases further apart")
+    return steps
+
+
+def run_at_phases(sim, state, params, num_worlds: int, phases, keys) -> list[dict]:
+    """``sim.run`` for frames given in cycles of each world's EPM period (``sim.frame_unit: cycle``): one snapshot
+    per distinct step over the worlds, each world keeping its own steps. Returns F dicts of (W, ...) arrays like
+    ``sim.run`` plus ``frame_time`` (W,) [s] and ``clock``."""
+    from warpworm.physics.params import per_world
+
+    W = num_worlds
+    steps = frame_steps(phases, per_world(params.cycle_period, W), sim.dt)  # (W, F)
+    frames = [None] * steps.shape[1]
+    done = 0
+    for n in np.unique(steps):
+        snap = sim.run(state, [(int(n) - done) * sim.dt], keys=keys)[0]
+        done = int(n)
+        for f in range(steps.shape[1]):
+            hit = steps[:, f] == n
+            if not hit.any():
+                continue
+            if frames[f] is None:
+                frames[f] = {k: np.zeros_like(np.asarray(v)) for k, v in snap.items() if k != "clock"}
+            for k, fr in frames[f].items():
+                fr[hit] = np.asarray(snap[k])[hit]
+    for f, fr in enumerate(frames):
+        fr["frame_time"] = (steps[:, f] * sim.dt).astype(np.float32)
+        fr["clock"] = float(steps[:, f].max() * sim.dt)
+    return frames
 
 
 def pathtraced_samples(cfg, seeds: np.ndarray) -> np.ndarray | None:
