@@ -162,9 +162,17 @@ def test_packaged_configs_all_validate():
 def test_output_folder_checks(tmp_path):
     (tmp_path / "full").mkdir()
     (tmp_path / "full" / "x").write_text("1")
-    with pytest.raises(ConfigError, match="not empty"):
+    # a folder of someone else's files is refused, with or without --resume (issue 25: --resume wrote next to them)
+    for resume in (False, True):
+        with pytest.raises(ConfigError, match="holds other files, e.g. x, and no manifest.json"):
+            check_output_dir(tmp_path / "full", resume=resume)
+    (tmp_path / "full" / "manifest.json").write_text("{}")
+    with pytest.raises(ConfigError, match="holds a warpworm dataset; use --resume"):
         check_output_dir(tmp_path / "full", resume=False)
     check_output_dir(tmp_path / "full", resume=True)
+    (tmp_path / "killed").mkdir()  # a job killed before its manifest: only its hidden lock / temporaries
+    (tmp_path / "killed" / ".warpworm.lock").write_text("")
+    check_output_dir(tmp_path / "killed", resume=True)
     check_output_dir(tmp_path / "new" / "deeper", resume=False)
     assert not (tmp_path / "new").exists()  # checking writes nothing
     # /proc is read-only for everyone, root included (chmod is not, for root)

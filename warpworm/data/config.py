@@ -17,6 +17,7 @@ import dataclasses
 import functools
 import math
 import os
+import re
 import tempfile
 import typing
 from dataclasses import dataclass, field, fields
@@ -793,9 +794,16 @@ def check_output_dir(out: str | os.PathLike, resume: bool) -> None:
     if out.exists() and not out.is_dir():
         raise ConfigError([f"--out: got '{out}'; expected a folder (it is a file)"])
     if out.is_dir():
-        if not resume and any(out.iterdir()):
-            raise ConfigError([f"--out: got '{out}'; expected an empty or new folder (it is not empty; "
-                               "use --resume to continue a job there)"])
+        names = sorted(p.name for p in out.iterdir())
+        ours = [n for n in names if n == "manifest.json" or re.fullmatch(r"shard-\d+\.h5", n)]
+        visible = [n for n in names if not n.startswith(".")]  # hidden: a killed job's lock and temporaries
+        if visible and not ours:  # not a warpworm dataset: never write next to someone else's files
+            what = "an empty or new folder" + (" or a dataset to resume" if resume else "")
+            raise ConfigError([f"--out: got '{out}'; expected {what} (it holds other files, e.g. {visible[0]}, and "
+                               "no manifest.json or shard-*.h5 of a warpworm dataset)"])
+        if not resume and names:
+            raise ConfigError([f"--out: got '{out}'; expected an empty or new folder (it holds a warpworm dataset; "
+                               "use --resume to continue its job, or another --out)"])
         probe_dir = out
     else:
         probe_dir = out.parent
