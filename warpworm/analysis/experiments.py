@@ -26,7 +26,6 @@ presets' per-gait scalars become per-world arrays and each world gets its own ga
 from __future__ import annotations
 
 import json
-import os
 from dataclasses import fields, replace
 from pathlib import Path
 
@@ -64,44 +63,31 @@ def _dt_substeps(dt, substeps):
 
 
 
-def world_shares(num_worlds: int, workers: int | None) -> list[tuple[int, int]]:
-    """Contiguous world ranges [lo, hi) for ``workers`` processes (None: every core; never more than the worlds)."""
-    workers = max(1, min(int(workers or os.cpu_count() or 1), int(num_worlds)))
-    bounds = np.linspace(0, num_worlds, workers + 1).astype(int)
-    return [(int(lo), int(hi)) for lo, hi in zip(bounds[:-1], bounds[1:])]
-
-
-def _run_share(job) -> dict:
-    """One process's share of :func:`split_run`: build the share's model, run ``core`` on it."""
-    core, params, num_worlds, device, model_kw, run_kw = job
-    from warpworm.sim.model import Model
-
-    quiet_warp()
-    model = Model.from_params(params, num_worlds, device, **model_kw)
-    return core(model, params, **run_kw)
+from warpworm.analysis.world_split import simulator as _simulator
+from warpworm.analysis.world_split import world_shares  # noqa: F401  (the split's shares; re-exported)
 
 
 def split_run(core, params: WormParams, num_worlds: int, world_axis: dict, *, workers: int | None = 1,
               device="cpu", model_kw: dict | None = None, **run_kw) -> dict:
     """``core(model, params, **run_kw) -> dict of arrays`` on ``num_worlds`` worlds, the worlds split over
-    ``workers`` processes (spawned; None: every core), each a batch of a contiguous share (its parameters sliced by
-    :func:`warpworm.physics.params.slice_worlds`, as ``simulate --workers`` does). Worlds never interact, so every
-    per-world result equals one process's. Each output key is concatenated along ``world_axis[key]`` (a key not in
-    ``world_axis``: the first share's value, for outputs that do not depend on the worlds).
+    ``workers`` threads of this process (None: every core), each a batch of a contiguous share with its own Model
+    (its parameters sliced by :func:`warpworm.physics.params.slice_worlds`) and Simulator
+    (:func:`warpworm.analysis.world_split.run_shares`, as ``simulate --workers`` does). Worlds never interact, so
+    every per-world result equals one batch's bit for bit. Each output key is concatenated along ``world_axis[key]``
+    (a key not in ``world_axis``: the first share's value, for outputs that do not depend on the worlds).
     """
+    from warpworm.analysis.world_split import concat, run_shares
     from warpworm.physics.params import slice_worlds
+    from warpworm.sim.model import Model
 
-    shares = world_shares(num_worlds, workers)
+    quiet_warp()
     mkw = dict(model_kw or {})
-    if len(shares) == 1:
-        return _run_share((core, params, num_worlds, device, mkw, run_kw))
-    import multiprocessing as mp
 
-    jobs = [(core, slice_worlds(params, num_worlds, lo, hi), hi - lo, device, mkw, run_kw) for lo, hi in shares]
-    with mp.get_context("spawn").Pool(len(jobs)) as pool:
-        parts = pool.map(_run_share, jobs)
-    return {k: (np.concatenate([q[k] for q in parts], axis=world_axis[k]) if k in world_axis else parts[0][k])
-            for k in parts[0]}
+    def share(lo, hi):
+        p = params if (lo, hi) == (0, num_worlds) else slice_worlds(params, num_worlds, lo, hi)
+        return core(Model.from_params(p, hi - lo, device, **mkw), p, **run_kw)
+
+    return concat(run_shares(share, num_worlds, workers, device=device), world_axis)
 
 
 def section_vertices(n_units: int, section: int, corners=(0, 1, 2)) -> np.ndarray:
@@ -211,9 +197,7 @@ GAIT_RECORD = ("positions", "bar_strain", "anchor_force", "magnet_pos", "time", 
 def _gait_core(model, params, *, duration, sample_every, settle, dt, substeps, rewind=False) -> dict:
     """Settle, then record the keys of :data:`GAIT_RECORD` every ``sample_every`` steps for ``duration`` [s]
     (``rewind``: each world's sinusoidal path repeats its first pass in place, :class:`warpworm.physics.gaits.EpmPath`)."""
-    from warpworm.sim.simulator import Simulator
-
-    sim = Simulator(model, dt=dt, substeps=substeps)
+    sim = _simulator(model, dt=dt, substeps=substeps)
     if rewind:
         sim.set_path(replace(model.default_path, rewind=np.ones(1)))
     state = sim.initial_state()
@@ -232,7 +216,7 @@ def run_gaits(gait_list=GAITS, duration: float = 2.0, *, sample_every: int = 2, 
 
     Returns ``gaits`` (list), ``time (S,)``, ``positions (S, W, V, 3)``, ``bar_strain (S, W, E)``,
     ``anchor_force (S, W, A, 3)``, ``magnet_pos (S, W, 4, 3)``, ``unstable (W,)``, ``rest_positions (W, V, 3)``
-    (the settled shape at t = 0), ``rewind`` and ``model``. ``workers`` processes share the worlds
+    (the settled shape at t = 0), ``rewind`` and ``model``. ``workers`` threads share the worlds
     (:func:`split_run`). ``rewind``: every cycle repeats the EPM's first pass in place (a worm tied down).
     """
     quiet_warp()
@@ -295,10 +279,8 @@ def force_distance(gaps=None, densities=(1e6, 8e6, 64e6), moment: float = 0.9, s
 
 def _quasi_static_core(model, params, *, anchors_moving, direction, displacements, lift, settle, hold, dt,
                        substeps) -> dict:
-    """The simulation of :func:`_quasi_static` on one batch (one process's share): raw per-world readings."""
-    from warpworm.sim.simulator import Simulator
-
-    sim = Simulator(model, dt=dt, substeps=substeps)
+    """The simulation of :func:`_quasi_static` on one batch (one thread's share): raw per-world readings."""
+    sim = _simulator(model, dt=dt, substeps=substeps)
     state = sim.initial_state()
     av = model.anchor_vertex.numpy()
     moving = np.isin(av, anchors_moving)
@@ -331,7 +313,7 @@ def _quasi_static_core(model, params, *, anchors_moving, direction, displacement
 def _quasi_static(params, num_worlds, anchors, anchor_stiffness, anchors_moving, direction, displacements, *,
                   lift=0.0, settle=0.2, hold=0.1, dt=None, substeps=None, device="cpu", workers=1) -> dict:
     """Shared driver: moving anchors' targets stepped by ``displacements`` along ``direction``; other anchors fixed;
-    the worlds split over ``workers`` processes (:func:`split_run`).
+    the worlds split over ``workers`` threads (:func:`split_run`).
 
     Returns ``force (K+1, W)`` [N]: the load on the fixed anchors along ``direction`` (the load cell) minus its value
     at zero displacement, ``force_raw`` (without that subtraction), ``force_pusher`` / ``force_pusher_raw``: the same
@@ -383,8 +365,8 @@ def compression(hinge_stiffness=DEFAULT_HINGE_SWEEP, max_displacement: float = 2
     minus its value before loading [N]; ``displacement`` the head section's measured shortening [m]; ``linear`` the
     independent linear quasi-static prediction (no gravity, no friction) at the prescribed displacement.
     ``displacements`` (K,) [m], ascending and > 0, replaces the uniform ``max_displacement`` / ``increments`` steps
-    (:mod:`warpworm.analysis.material_fit` prescribes a measured table's displacements). ``workers`` processes share the
-    worlds (:func:`split_run`; results equal one process's).
+    (:mod:`warpworm.analysis.material_fit` prescribes a measured table's displacements). ``workers`` threads share the
+    worlds (:func:`split_run`; results equal one batch's).
     """
     from warpworm.sim.model import Model
 
@@ -428,7 +410,7 @@ def flexure(hinge_stiffness=DEFAULT_HINGE_SWEEP, max_deflection: float = 2.0e-3,
     measured deflection [m]. The supports are anchors (pins, not rollers), so at large deflection the span's stretch
     adds a membrane stiffening that a roller test would not have; ``linear`` is the linear prediction.
     ``displacements`` (K,) [m], ascending and > 0, replaces the uniform ``max_deflection`` / ``increments`` steps.
-    ``workers`` processes share the worlds (:func:`split_run`; results equal one process's).
+    ``workers`` threads share the worlds (:func:`split_run`; results equal one batch's).
     """
     from warpworm.sim.model import Model
 
@@ -467,9 +449,7 @@ def flexure(hinge_stiffness=DEFAULT_HINGE_SWEEP, max_deflection: float = 2.0e-3,
 def _slope_core(model, params, *, frame_times, dt, substeps) -> dict:
     """The simulation of :func:`slope` on one batch: vertex centroids ``(S, W, 3)`` [m] (float64) and world times
     ``(S, W)`` [s] at ``frame_times`` from t = 0, magnets off; ``unstable (W,)`` at the end."""
-    from warpworm.sim.simulator import Simulator
-
-    sim = Simulator(model, dt=dt, substeps=substeps)
+    sim = _simulator(model, dt=dt, substeps=substeps)
     state = sim.initial_state()
     rec = sim.run(state, frame_times, epm=False, keys=("positions", "time", "unstable"), stack=True)
     return {"centroid": rec["positions"].astype(np.float64).mean(axis=2), "time": rec["time"],
@@ -487,7 +467,7 @@ def slope(offsets_deg=(-4.0, -2.0, -1.0, 1.0, 2.0, 4.0), duration: float = 0.5, 
     ``settle + duration`` [s]: ``slide (S, W)`` [m] down-slope, ``predicted (S, W)`` = ½ g (sin β − μk cos β) t² where
     β > atan(μs), else 0. A world "slides" when it moves more than ``slide_threshold`` [m] after ``settle`` (the
     worm takes its weight first; a contact transient may slip a few vertices by ~0.1 mm); the summary gives
-    the transition angle bracket. ``workers`` processes share the worlds (:func:`split_run`).
+    the transition angle bracket. ``workers`` threads share the worlds (:func:`split_run`).
     """
     quiet_warp()
     dt, substeps = _dt_substeps(dt, substeps)

@@ -1,5 +1,6 @@
 """Run a gait on a batch of worlds: settle, run N EPM cycles, measure. Shared by the ``simulate`` and ``search-gait``
-commands, the gait search and the gait benchmarks; ``run_gait_split`` spreads the worlds over processes."""
+commands, the gait search and the gait benchmarks; ``run_gait_split`` spreads the worlds over the cores (threads of
+this process, :mod:`warpworm.analysis.world_split`)."""
 
 from __future__ import annotations
 
@@ -38,14 +39,14 @@ def run_gait(params, num_worlds: int, cycles: float, *, device="cpu", dt=None, s
     ``save_worlds`` worlds, or None), model, sim."""
     from warpworm.physics import gaits
     from warpworm.analysis.gait_metrics import gait_metrics
+    from warpworm.analysis.world_split import simulator
     from warpworm.sim.model import Model
-    from warpworm.sim.simulator import Simulator
 
     dt = gaits.DEFAULT_DT if dt is None else dt
     substeps = gaits.DEFAULT_SUBSTEPS if substeps is None else substeps
     t_wall = time.perf_counter()
     model = Model.from_params(params, num_worlds, device)
-    sim = Simulator(model, dt=dt, substeps=substeps)
+    sim = simulator(model, dt=dt, substeps=substeps)
     state = sim.initial_state()
     if settle > 0:
         sim.settle(state, settle)
@@ -82,45 +83,35 @@ def run_gait(params, num_worlds: int, cycles: float, *, device="cpu", dt=None, s
     }
 
 
-def _run_share(job):
-    """A worker's share of :func:`run_gait_split`: the picklable part of run_gait's result."""
-    params, n, cycles, kw = job
-    from warpworm import quiet_warp
-
-    quiet_warp()
-    r = run_gait(params, n, cycles, **kw)
-    return {k: r[k] for k in ("displacement_m", "unstable", "crumpled", "sim_time_s", "metrics", "frames")}
+RESULT_WORLD_AXIS = {"displacement_m": 0, "unstable": 0, "crumpled": 0}
+"""Per-world outputs of :func:`run_gait` (world axis); ``metrics`` arrays are per world along axis 0, ``frames``
+along axis 1 (time first)."""
 
 
 def run_gait_split(params, num_worlds: int, cycles: float, *, workers: int | None = None, **kw):
-    """:func:`run_gait` with the worlds split over ``workers`` processes (default: every core), each a batch of a
-    contiguous share; worlds never interact, so every per-world result equals one process's. The trajectory frames
-    are those of the first ``save_worlds`` worlds, gathered from the shares that hold them."""
-    import os
-
-    workers = max(1, min(int(workers or os.cpu_count() or 1), num_worlds))
-    if workers == 1:
-        return run_gait(params, num_worlds, cycles, **kw)
-    import multiprocessing as mp
-
-    from warpworm.sim.model import Model
+    """:func:`run_gait` with the worlds split over ``workers`` threads (default: every core), each a batch of a
+    contiguous share with its own Model and Simulator (:func:`warpworm.analysis.world_split.run_shares`); worlds never
+    interact, so every per-world result equals one batch's bit for bit. The trajectory frames are those of the first
+    ``save_worlds`` worlds, gathered from the shares that hold them; ``model`` and ``sim`` are the first share's."""
+    from warpworm.analysis.world_split import concat, run_shares
 
     t0 = time.perf_counter()
-    bounds = np.linspace(0, num_worlds, workers + 1).astype(int)
     save = kw.pop("save_worlds", 4)
-    jobs = [(slice_worlds(params, num_worlds, lo, hi), int(hi - lo), cycles,
-             dict(kw, save_worlds=int(max(0, min(save - lo, hi - lo)))))
-            for lo, hi in zip(bounds[:-1], bounds[1:])]
-    with mp.get_context("spawn").Pool(workers) as pool:
-        parts = pool.map(_run_share, jobs)
-    out = {k: np.concatenate([p[k] for p in parts]) for k in ("displacement_m", "unstable", "crumpled")}
+
+    def share(lo, hi):
+        p = params if (lo, hi) == (0, num_worlds) else slice_worlds(params, num_worlds, lo, hi)
+        return run_gait(p, hi - lo, cycles, save_worlds=int(max(0, min(save - lo, hi - lo))), **kw)
+
+    parts = run_shares(share, num_worlds, workers, device=kw.get("device", "cpu"))
+    if len(parts) == 1:
+        return parts[0]
+    out = concat([{k: p[k] for k in RESULT_WORLD_AXIS} for p in parts], RESULT_WORLD_AXIS)
     out["metrics"] = (None if parts[0]["metrics"] is None else
-                      {k: np.concatenate([p["metrics"][k] for p in parts]) for k in parts[0]["metrics"]})
+                      concat([p["metrics"] for p in parts], dict.fromkeys(parts[0]["metrics"], 0)))
     fr = [p["frames"] for p in parts if p["frames"] is not None]
     out["frames"] = None if not fr else {
         k: (fr[0][k] if fr[0][k].ndim == 1 else np.concatenate([f[k] for f in fr], axis=1)) for k in fr[0]}
     out["sim_time_s"] = parts[0]["sim_time_s"]
     out["wall_time_s"] = time.perf_counter() - t0
-    out["model"] = Model.from_params(jobs[0][0], jobs[0][1], "cpu")  # topology and sizes for the pictures
-    out["sim"] = None
+    out["model"], out["sim"] = parts[0]["model"], parts[0]["sim"]
     return out

@@ -1,8 +1,9 @@
 """The paper's Table I as a batched search: every (w, a, h) grid point of a gait is one world of one batch.
 
 §IV-C: "the other three parameters are identified using a grid search algorithm to maximize the distance that the
-origami moves". :func:`search_gait` runs the whole grid at once (split over worker processes, each a batch of its
-share of the worlds; results do not depend on the split since worlds never interact), measures every world with
+origami moves". :func:`search_gait` runs the whole grid at once (split over threads, one per core, each a batch of
+its share of the worlds, :mod:`warpworm.analysis.world_split`; results do not depend on the split since worlds
+never interact), measures every world with
 :func:`warpworm.analysis.gait_metrics.gait_metrics` and ranks the stable, unfolded worlds by distance per cycle in the
 commanded direction.
 """
@@ -23,7 +24,7 @@ def parse_grid(spec: str) -> dict[str, np.ndarray]:
     """``"w=0.008:0.024:5,a=0.03,0.05,h=0.01:0.03:5"`` -> {"wavelength": array, ...} [m, s].
 
     Each key takes ``lo:hi:n`` (n values, linear, ends included) or a comma-separated list of values. Keys: w, a, h
-    (the period is one for the whole batch: a worker runs its worlds for cycles × the longest period of its share).
+    (the period is one for the whole batch: a share runs its worlds for cycles × the longest period of its share).
     Raises ValueError naming the item and what was expected."""
     out: dict[str, list[float]] = {}
     key = None
@@ -71,7 +72,7 @@ def search_gait(params, grid: dict[str, np.ndarray], cycles: int = 3, *, workers
         params: base WormParams (gait, direction, material); the grid fields override it per world.
         grid: from :func:`parse_grid`.
         cycles: EPM cycles per world.
-        workers: processes (default: the machine's cores); each simulates a contiguous share of the worlds.
+        workers: threads (default: the machine's cores); each simulates a contiguous share of the worlds.
         max_ratio: if given, a valid world must also deform: some deformation ratio at or below it (e.g. 0.9).
 
     Returns a dict: ``points`` (field -> (N,)), ``metrics`` (per-world arrays, as gait_metrics, plus ``unstable``,

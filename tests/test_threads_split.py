@@ -1,0 +1,75 @@
+"""One batch of worlds over the cores as threads of one process (warpworm.analysis.world_split): the shares run at
+the same time on their own threads, each with its own Simulator stepping without CPU graphs, and every per-world
+result (displacements, gait metrics, saved frames) equals the one-batch run bit for bit. Tiny sizes: the speed is
+measured in benchmarks/bench_threads.py, not here."""
+
+import threading
+
+import numpy as np
+import pytest
+
+from warpworm.analysis import world_split as ws
+from warpworm.analysis.gait_runs import randomized_params, run_gait_split
+
+
+def test_shares_are_contiguous_and_bad_counts_are_refused():
+    assert ws.world_shares(5, 2) == [(0, 2), (2, 5)]
+    assert ws.world_shares(2, 8) == [(0, 1), (1, 2)]  # never more shares than worlds
+    assert ws.world_shares(7, 1) == [(0, 7)]
+    with pytest.raises(ValueError, match=r"workers: got 0; expected >= 1"):
+        ws.world_shares(4, 0)
+    with pytest.raises(ValueError, match=r"num_worlds: got 0; expected >= 1"):
+        ws.world_shares(0, 2)
+
+
+def test_shares_run_at_once_on_their_own_threads_without_graphs():
+    """A barrier that both shares must reach before either returns: it only opens if they run concurrently."""
+    from warpworm.physics.params import WormParams
+    from warpworm.sim.model import Model
+
+    barrier = threading.Barrier(2, timeout=60)
+    seen = {}
+
+    def share(lo, hi):
+        sim = ws.simulator(Model.from_params(WormParams(), hi - lo, "cpu"), dt=0.004, substeps=2)
+        barrier.wait()
+        seen[(lo, hi)] = (threading.get_ident(), ws.in_split(), sim.use_graph)
+        return {"n": np.array([hi - lo])}
+
+    out = ws.concat(ws.run_shares(share, 5, workers=2), {"n": 0})
+    assert out["n"].tolist() == [2, 3]
+    (t0, s0, g0), (t1, s1, g1) = seen[(0, 2)], seen[(2, 5)]
+    assert t0 != t1 and threading.get_ident() not in (t0, t1)
+    assert s0 and s1 and not g0 and not g1
+    assert not ws.in_split()  # the flag does not leak into the caller's thread
+
+
+def test_an_error_in_a_share_reaches_the_caller():
+    def share(lo, hi):
+        if lo > 0:
+            raise RuntimeError(f"share {lo}:{hi} failed")
+        return {}
+
+    with pytest.raises(RuntimeError, match="share 2:4 failed"):
+        ws.run_shares(share, 4, workers=2)
+
+
+def test_gait_run_over_threads_equals_one_batch():
+    """Randomized worlds (every one different), 1 vs 2 vs 3 threads: displacements, flags, every gait metric and
+    the saved frames of the first worlds (which straddle the shares at 3 threads) identical."""
+    p = randomized_params("default", "omega", False, "analytic", 5, 11)
+    kw = dict(settle=0.02, fps=50.0, save_worlds=3)
+    one = run_gait_split(p, 5, 0.06, workers=1, **kw)
+    assert one["sim"].use_graph  # one share: this thread, graphs as usual
+    for w in (2, 3):
+        r = run_gait_split(p, 5, 0.06, workers=w, **kw)
+        for k in ("displacement_m", "unstable", "crumpled"):
+            np.testing.assert_array_equal(one[k], r[k], err_msg=k)
+        assert set(r["metrics"]) == set(one["metrics"])
+        for k, v in one["metrics"].items():
+            np.testing.assert_array_equal(v, r["metrics"][k], err_msg=k)
+        assert set(r["frames"]) == set(one["frames"])
+        for k, v in one["frames"].items():
+            np.testing.assert_array_equal(v, r["frames"][k], err_msg=k)
+        assert r["frames"]["positions"].shape[1] == 3
+    assert np.ptp(one["displacement_m"]) > 0  # the worlds do differ: a mixed-up share would show

@@ -1,0 +1,109 @@
+"""One batch of worlds on every core: contiguous shares of the worlds, one thread each, in this process.
+
+Worlds never interact, so a batch of W worlds can run as a few batches of contiguous shares, each with its own
+:class:`~warpworm.sim.model.Model` and :class:`~warpworm.sim.simulator.Simulator`, and every per-world result is the
+one-batch result bit for bit (tests/test_threads_split.py). Threads, not processes: Warp's CPU kernels run on the
+launching thread and release the GIL while they run (a ctypes call), so two threads keep two cores busy, and nothing
+is paid per share to start (a spawned process paid ~1-1.5 s of Python, ``import warp`` and kernel loading, per batch:
+that is what made a short job on 2 cores 1.1x one core on a busy machine; benchmarks/bench_threads.py).
+
+Two rules make the threads safe with Warp 1.19: the kernel modules are loaded once before the threads start (a
+module loaded by two threads at once would be loaded twice), and a split run steps without CPU graphs (a graph
+capture is process-wide state in Warp: launches of another thread during a capture would be recorded into it, not
+run). :func:`simulator` builds a Simulator with that setting; graphs replay the same trajectory bit for bit
+(tests/test_step_graph.py), so the results do not depend on it.
+
+Used by :func:`warpworm.analysis.gait_runs.run_gait_split` (``simulate``, ``search-gait``) and
+:func:`warpworm.analysis.experiments.split_run` (``experiment``).
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+from concurrent.futures import ThreadPoolExecutor
+from typing import Callable
+
+import numpy as np
+
+_local = threading.local()
+
+
+def default_workers() -> int:
+    """The cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        return os.cpu_count() or 1
+
+
+def world_shares(num_worlds: int, workers: int | None) -> list[tuple[int, int]]:
+    """Contiguous world ranges [lo, hi) for ``workers`` threads (None: every core; never more than the worlds)."""
+    if int(num_worlds) < 1:
+        raise ValueError(f"num_worlds: got {num_worlds}; expected >= 1")
+    if workers is not None and int(workers) < 1:
+        raise ValueError(f"workers: got {workers}; expected >= 1 (or None: every core)")
+    n = max(1, min(int(workers or default_workers()), int(num_worlds)))
+    bounds = np.linspace(0, num_worlds, n + 1).astype(int)
+    return [(int(lo), int(hi)) for lo, hi in zip(bounds[:-1], bounds[1:])]
+
+
+def in_split() -> bool:
+    """Whether the calling thread runs a share of a split batch (then it must step without CPU graphs)."""
+    return getattr(_local, "split", False)
+
+
+def simulator(model, **kw):
+    """``Simulator(model, **kw)``, stepping without graphs inside a split run (module docstring)."""
+    from warpworm.sim.simulator import Simulator
+
+    if in_split() and not model.device.is_cuda:
+        kw["use_graph"] = False
+    return Simulator(model, **kw)
+
+
+def load_kernels(device="cpu") -> None:
+    """Load every module of ``warpworm.kernels`` on ``device`` (from Warp's cache; compiled in parallel when cold)."""
+    import importlib
+    import pkgutil
+
+    import warp as wp
+
+    from warpworm import kernels, quiet_warp
+
+    quiet_warp()
+    names = [importlib.import_module(f"{kernels.__name__}.{m.name}").__name__
+             for m in pkgutil.iter_modules(kernels.__path__)]
+    wp.force_load(device=device, modules=[wp.get_module(n) for n in names], max_workers=default_workers())
+
+
+def run_shares(fn: Callable[[int, int], dict], num_worlds: int, workers: int | None = None,
+               device="cpu") -> list[dict]:
+    """``fn(lo, hi)`` for the contiguous shares of ``num_worlds`` worlds (:func:`world_shares`), one thread each
+    (one share: in this thread, graphs allowed); returns their results in world order. ``fn`` builds its own Model
+    and Simulator (through :func:`simulator`) for worlds [lo, hi). An exception in a share is re-raised here after
+    every share has stopped."""
+    shares = world_shares(num_worlds, workers)
+    if len(shares) == 1 or str(device).startswith("cuda"):  # one device queue: a GPU runs the batch as one
+        return [fn(0, int(num_worlds))]
+    load_kernels(device)
+
+    def share(lo_hi):
+        _local.split = True
+        try:
+            return fn(*lo_hi)
+        finally:
+            _local.split = False
+
+    with ThreadPoolExecutor(max_workers=len(shares), thread_name_prefix="warpworm-share") as pool:
+        return list(pool.map(share, shares))
+
+
+def concat(parts: list[dict], world_axis: dict) -> dict:
+    """The shares' result dicts as one: key ``k`` concatenated along ``world_axis[k]``; a key not in ``world_axis``
+    (a value that does not depend on the worlds) is the first share's."""
+    return {k: (np.concatenate([q[k] for q in parts], axis=world_axis[k]) if k in world_axis else parts[0][k])
+            for k in parts[0]}
+
+
+__all__ = ["concat", "default_workers", "in_split", "load_kernels", "run_shares", "simulator", "world_shares"]
