@@ -50,3 +50,35 @@ def device_option(value: str | None) -> str | None:
         return None
     dev = check_option("--device", value, "sim.device")
     return "cuda:0" if dev == "cuda" else dev
+
+
+def dataset_folder(path, option: str = "DIR"):
+    """``path`` as a Path if it is a dataset folder written by ``warpworm generate`` (has manifest.json), else
+    ValueError saying which it is not (no such folder / a file / a folder without a manifest)."""
+    from pathlib import Path
+
+    p = Path(path)
+    if not p.exists():
+        raise ValueError(f"{option}: got '{path}'; expected a dataset folder written by warpworm generate (no such "
+                         "folder)")
+    if not p.is_dir():
+        raise ValueError(f"{option}: got '{path}'; expected a dataset folder written by warpworm generate (it is a "
+                         "file)")
+    if not (p / "manifest.json").is_file():
+        raise ValueError(f"{option}: got '{path}'; expected a dataset folder written by warpworm generate (it has no "
+                         "manifest.json; if a job was killed there, rerun it with --resume)")
+    return p
+
+
+def output_folder(path, option: str = "OUT", *, overwrite: bool = False):
+    """``path`` as a Path for an export: new, empty, or (with ``overwrite``) any folder; ValueError otherwise
+    (a file, or a non-empty folder without ``overwrite``). Creates nothing."""
+    from pathlib import Path
+
+    p = Path(path)
+    if p.exists() and not p.is_dir():
+        raise ValueError(f"{option}: got '{path}'; expected a folder (it is a file)")
+    if p.is_dir() and any(p.iterdir()) and not overwrite:
+        raise ValueError(f"{option}: got '{path}'; expected a new or empty folder (it is not empty: add --overwrite "
+                         "to write over it)")
+    return p

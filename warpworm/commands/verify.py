@@ -218,9 +218,12 @@ def verify_dataset(root, max_problems: int = 50) -> tuple[list[str], dict]:
 def main(args: argparse.Namespace) -> int:
     from warpworm.data.dataset import DatasetError
 
+    from warpworm.commands.common import dataset_folder
+
     try:
+        dataset_folder(args.dir)
         problems, counts = verify_dataset(args.dir, args.max_problems)
-    except DatasetError as exc:
+    except (DatasetError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     for p in problems:

@@ -180,7 +180,7 @@ def shard_plan(cfg: DatasetConfig, workers: int) -> tuple[DatasetConfig, str | N
     return new, note
 
 
-KERNEL_NOTICE_S = 1.0
+KERNEL_NOTICE_S = 3.0
 """Loading the kernels longer than this [s] means they are compiling: say so (a cold cache sits ~24 s at 0 %)."""
 
 

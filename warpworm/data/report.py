@@ -279,17 +279,16 @@ def _plot(folders, rows, varying, constant, report, png: Path, differs=frozenset
     from matplotlib.ticker import MaxNLocator
 
     nf = len(folders)
-    CW = 3.6 if nf == 1 else 4.5  # [in] per column
+    CW = 3.6  # [in] per column
     panels = [(t, arrays, report["bins"][k], k) for k, t, arrays in rows]
     for n in varying:
         arrays = [f.params.get(n, np.zeros(0)) for f in folders]
-        panels.append((f"params/{n}" + ("   [config differs between folders]" if n in differs else ""), arrays,
+        panels.append((f"params/{n}" + (" [config differs]" if n in differs else ""), arrays,
                        None, n))
-    if nf == 1:  # one folder: a grid of panels, 4 across
-        ncol = 4
-        nrow = math.ceil(len(panels) / ncol)
-    else:  # side by side: a row per quantity, a column per folder
-        ncol, nrow = nf, len(panels)
+    # a grid of panels, 4 across; several folders share each panel (one colour each, shared bins), so the picture
+    # stays the size of one folder's (it was a column per folder and a row per quantity: 720 x 9542 px for two)
+    ncol = 4
+    nrow = math.ceil(len(panels) / ncol)
     import textwrap
 
     lines = []
@@ -307,14 +306,13 @@ def _plot(folders, rows, varying, constant, report, png: Path, differs=frozenset
     width_chars = int(CW * ncol * 15)
     text = "\n".join(textwrap.fill(line, width_chars, subsequent_indent="  ") for line in lines)
     text_h = 0.13 * (text.count("\n") + 1) + 0.15  # [in]
-    H = 2.3 * nrow + 0.7 + (0.35 if nf > 1 else 0) + text_h
+    legend_h = 0.18 * nf if nf > 1 else 0.0
+    H = 2.3 * nrow + 0.7 + legend_h + text_h
     fig, axes = plt.subplots(nrow, ncol, figsize=(CW * ncol, H), squeeze=False)
     colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
 
     def ax_for(i, j):
-        if nf == 1:
-            return axes[i // ncol][i % ncol]
-        return axes[i][j]
+        return axes[i // ncol][i % ncol]
 
     for i, (title, arrays, edges, key) in enumerate(panels):
         numeric = all(_is_numeric(a) for a in arrays if len(a))
@@ -331,37 +329,41 @@ def _plot(folders, rows, varying, constant, report, png: Path, differs=frozenset
                 x = a.astype(np.float64)
                 x = x[np.isfinite(x)]
                 h, _ = np.histogram(x, bins=edges)
-                ax.stairs(h, edges, fill=True, color=c, alpha=0.75)
+                if nf == 1:
+                    ax.stairs(h, edges, fill=True, color=c, alpha=0.75)
+                else:
+                    ax.stairs(h, edges, fill=False, color=c, lw=1.6)
                 ymax = max(ymax, int(h.max()) if h.size else 0)
                 if key == "min_deformation_per_trajectory":
                     ax.axvline(CONTRACTION_THRESHOLD, color="k", lw=0.8, ls="--")
                 if x.size:
-                    ax.text(0.98, 0.95, f"n={x.size}\n[{x.min():.3g}, {x.max():.3g}]", transform=ax.transAxes,
-                            ha="right", va="top", fontsize=7)
+                    ax.text(0.98, 0.95 - 0.17 * j, f"n={x.size}\n[{x.min():.3g}, {x.max():.3g}]",
+                            transform=ax.transAxes, ha="right", va="top", fontsize=7, color=c if nf > 1 else "k")
             else:
                 t = _as_text(a)
                 cnt = [int(np.sum(t == v)) for v in cats]
-                ax.bar(range(len(cats)), cnt, color=c, alpha=0.75)
+                width = 0.8 / nf
+                ax.bar(np.arange(len(cats)) + (j - (nf - 1) / 2) * width, cnt, width=width, color=c, alpha=0.75)
                 ax.set_xticks(range(len(cats)), cats, fontsize=7)
                 ymax = max(ymax, max(cnt, default=0))
-            ax.set_title(title if nf == 1 or j == 0 else "", fontsize=8, loc="left")
+            if j == 0:
+                ax.set_title(title, fontsize=8, loc="left")
             ax.tick_params(labelsize=7)
             ax.yaxis.set_major_locator(MaxNLocator(3, integer=True))
             if numeric:
                 ax.xaxis.set_major_locator(MaxNLocator(5))
-            if nf > 1 and i == 0:
-                ax.annotate(_short(folders[j].root), (0.5, 1.32), xycoords="axes fraction", ha="center",
-                            fontsize=9, fontweight="bold", color=c)
         for j in range(len(arrays)):  # shared y scale within a row
             ax_for(i, j).set_ylim(0, max(1, ymax) * 1.25)
     for i in range(len(panels), nrow * ncol):
-        if nf == 1:
-            ax_for(i, 0).axis("off")
-    fig.suptitle("warpworm report: " + (f"one column per folder, shared bins" if nf > 1 else
+        ax_for(i, 0).axis("off")
+    fig.suptitle("warpworm report: " + ("one colour per folder, shared bins" if nf > 1 else
                  _short(folders[0].root, 80)), fontsize=11, x=0.01, y=1 - 0.12 / H, ha="left", va="top")
+    for j, f in enumerate(folders if nf > 1 else []):
+        fig.text(0.01, 1 - (0.5 + 0.18 * j) / H, f"\u25a0 {_short(f.root, 90)}", fontsize=9, fontweight="bold",
+                 color=colors[j % len(colors)], ha="left", va="top")
     fig.text(0.01, 0.05 / H, text, fontsize=7, va="bottom", ha="left", family="monospace")
     # fixed margins in inches (tight_layout costs as much as drawing here)
-    top_in = 0.55 + (0.35 if nf > 1 else 0)
+    top_in = 0.55 + legend_h
     fig.subplots_adjust(left=0.35 / (CW * ncol), right=1 - 0.15 / (CW * ncol), top=1 - top_in / H,
                         bottom=(text_h + 0.3) / H, hspace=0.5, wspace=0.22)
     fig.savefig(png, dpi=80)
