@@ -41,9 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from warpworm.render.camera import Cameras
-from warpworm.ids import SEG_IPM_FIRST as LABEL_IPM_FIRST
-from warpworm.ids import SEG_WORM_FIRST as LABEL_WORM_FIRST
-from warpworm.ids import SEG_WORM_LAST as LABEL_WORM_LAST
+from warpworm.ids import SEG_IPM_FIRST, SEG_WORM_FIRST, SEG_WORM_LAST
 from warpworm.transforms import matrix_to_quat_wxyz, pose_matrix
 
 VIS_EPS = 5e-4
@@ -173,8 +171,8 @@ def keypoint_visibility(uv: np.ndarray, z: np.ndarray, depth: np.ndarray, segm: 
     # each keypoint's own object: the worm's ids for worm keypoints, its magnet's id for an IPM centre
     worm_kp = np.ones(P, bool)
     worm_kp[7:10] = False
-    own = np.where(worm_kp[None], (L >= LABEL_WORM_FIRST) & (L <= LABEL_WORM_LAST),
-                   L == (LABEL_IPM_FIRST + np.arange(P) - 7)[None])
+    own = np.where(worm_kp[None], (L >= SEG_WORM_FIRST) & (L <= SEG_WORM_LAST),
+                   L == (SEG_IPM_FIRST + np.arange(P) - 7)[None])
     gap = z - D
     visible = (D == 0) | (gap <= VIS_EPS) | ((gap <= tol) & own)
     return np.where(inside, np.where(visible, 2, 1), 0).astype(np.uint8)
@@ -253,7 +251,7 @@ def schema_labels(states: dict, body, cameras: Cameras, images: dict | None = No
 def _image_labels(images: dict, uv: np.ndarray, z: np.ndarray, tol: np.ndarray) -> dict:
     """The labels that need the rendered images: visibility, the visible box and fraction, the worm mask."""
     segm = images["seg"]
-    worm_vis = (segm >= LABEL_WORM_FIRST) & (segm <= LABEL_WORM_LAST)
+    worm_vis = (segm >= SEG_WORM_FIRST) & (segm <= SEG_WORM_LAST)
     vb = _box_from_mask(worm_vis).astype(np.float32)  # inclusive pixels, -1 when hidden
     nv = worm_vis.sum(axis=(1, 2))
     nt = images["worm_mask"].sum(axis=(1, 2))

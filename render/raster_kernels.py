@@ -36,15 +36,12 @@ from warpworm import ids
 # forward only: nothing differentiates through rendering, and skipping adjoints halves the compile time
 wp.set_module_options({"enable_backward": False})
 
-NUM_LABELS = ids.NUM_SEGMENTATION_IDS
-"""Segmentation ids 0..10 (:mod:`warpworm.ids`): 0 background, 1 floor, 2..6 worm segments, 7..9 IPMs, 10 EPM."""
-
-LABEL_BACKGROUND = wp.constant(ids.SEG_BACKGROUND)
-LABEL_FLOOR = wp.constant(ids.SEG_FLOOR)
-LABEL_WORM_FIRST = wp.constant(ids.SEG_WORM_FIRST)
-LABEL_WORM_LAST = wp.constant(ids.SEG_WORM_LAST)
-LABEL_IPM_FIRST = wp.constant(ids.SEG_IPM_FIRST)
-LABEL_EPM = wp.constant(ids.SEG_EPM)
+# segmentation ids (:mod:`warpworm.ids`): 0 background, 1 floor, 2..6 worm segments, 7..9 IPMs, 10 EPM
+SEG_BACKGROUND = wp.constant(ids.SEG_BACKGROUND)
+SEG_FLOOR = wp.constant(ids.SEG_FLOOR)
+SEG_WORM_FIRST = wp.constant(ids.SEG_WORM_FIRST)
+SEG_WORM_LAST = wp.constant(ids.SEG_WORM_LAST)
+SEG_EPM = wp.constant(ids.SEG_EPM)
 
 TRI_BITS = 24
 """Low bits of the packed key that hold the triangle index."""
@@ -221,7 +218,7 @@ def raster_triangles(
     tl0 = is_top_left(u1, v1, u2, v2)
     tl1 = is_top_left(u2, v2, u0, v0)
     tl2 = is_top_left(u0, v0, u1, v1)
-    worm = tri_label[tri] >= LABEL_WORM_FIRST and tri_label[tri] <= LABEL_WORM_LAST
+    worm = tri_label[tri] >= SEG_WORM_FIRST and tri_label[tri] <= SEG_WORM_LAST
     tkey = wp.int64(tri)
 
     for y in range(box[2], box[3] + 1):
@@ -245,6 +242,114 @@ def raster_triangles(
 
 
 # ---------------------------------------------------------------------------------------------------------------------
+# shadow maps (the raster pass rendered from each light) and lights
+# ---------------------------------------------------------------------------------------------------------------------
+
+
+@wp.struct
+class Lights:
+    """Every light of every world (arrays read as ``a[w % a.shape[0]]``) and, with ``shadows`` = 1, their shadow maps.
+
+    ``pos``, ``power``, ``size``: point lights, shape (Wl, L): position [m], irradiance at 1 m (falls as 1/r²; zero
+    pads a world with fewer lights), radius [m]. ``sun_dir`` (unit, toward the light), ``sun_color`` (irradiance),
+    ``ambient``: per world. Shadow map ``m`` is a depth image (packed keys of :func:`raster_triangles`, side
+    ``map_side``) seen by a pinhole ``map_rot``/``map_trans``/``map_intr`` at the light; world ``w``'s maps are
+    ``map_first[w]`` (the sun) and ``map_first[w] + 1 + i`` (point light i); ``map_first[w] < 0``: none (lit).
+    ``map_light_size``: the light's radius [m] as placed for the map (it sets the penumbra).
+    """
+
+    ambient: wp.array(dtype=wp.vec3)
+    sun_dir: wp.array(dtype=wp.vec3)
+    sun_color: wp.array(dtype=wp.vec3)
+    pos: wp.array2d(dtype=wp.vec3)
+    power: wp.array2d(dtype=wp.vec3)
+    size: wp.array2d(dtype=float)
+    shadows: int
+    map_first: wp.array(dtype=wp.int32)
+    map_key: wp.array2d(dtype=wp.int64)
+    map_rot: wp.array(dtype=wp.mat33)
+    map_trans: wp.array(dtype=wp.vec3)
+    map_intr: wp.array(dtype=wp.vec4)
+    map_light_size: wp.array(dtype=float)
+    map_side: int
+
+
+@wp.func
+def map_depth(L: Lights, m: int, x: int, y: int) -> float:
+    """Camera z [m] of the nearest occluder in texel (x, y) of shadow map ``m``; 1e30 where nothing (or outside)."""
+    s = L.map_side
+    z = float(1.0e30)
+    if x >= 0 and y >= 0 and x < s and y < s:
+        key = L.map_key[m, y * s + x]
+        if key != _EMPTY:
+            z = float(key / _TRI_SCALE) / _DEPTH_SCALE
+    return z
+
+
+@wp.func
+def pcf_taps(L: Lights, m: int, u: float, v: float, z: float, radius: float) -> wp.vec2:
+    """4 x 4 taps of shadow map ``m`` on a grid spanning ``radius`` texels about (u, v): (number of taps nearer than
+    ``z``, their summed depth) -- the blocker search and the percentage-closer filter of PCSS share it."""
+    hits = float(0.0)
+    zsum = float(0.0)
+    for j in range(4):
+        for i in range(4):
+            x = int(wp.floor(u + radius * (float(i) - 1.5) / 1.5 + 0.5))
+            y = int(wp.floor(v + radius * (float(j) - 1.5) / 1.5 + 0.5))
+            d = map_depth(L, m, x, y)
+            if d < z:
+                hits += 1.0
+                zsum += d
+    return wp.vec2(hits, zsum)
+
+
+@wp.func
+def light_visibility(L: Lights, m: int, p: wp.vec3, n: wp.vec3) -> float:
+    """Fraction [0, 1] of light ``m`` reaching surface point ``p`` (normal ``n`` toward the viewer/light side), by
+    percentage-closer soft shadows: a blocker search over the texels the light's disk can be hidden by, then a
+    percentage-closer filter as wide as the penumbra a blocker at their mean depth casts (at least one texel)."""
+    k = L.map_intr[m]
+    R = L.map_rot[m]
+    t = L.map_trans[m]
+    pc = R * p + t
+    if pc[2] <= 0.0:
+        return 1.0
+    texel = pc[2] / k[0]  # a texel's size [m] at the receiver
+    pc = R * (p + n * (1.5 * texel)) + t  # normal offset against self-shadowing of the receiver's own surface
+    u = k[0] * pc[0] / pc[2] + k[2]
+    v = k[1] * pc[1] / pc[2] + k[3]
+    z = pc[2] - texel
+    size = L.map_light_size[m]
+    search = wp.clamp(size * k[0] / z, 1.0, 8.0)
+    blk = pcf_taps(L, m, u, v, z, search)
+    if blk[0] == 0.0:
+        return 1.0
+    zb = blk[1] / blk[0]
+    penumbra = wp.clamp(size * (z - zb) / zb * k[0] / z, 1.0, 8.0)
+    return 1.0 - pcf_taps(L, m, u, v, z, penumbra)[0] / 16.0
+
+
+@wp.func
+def point_light(L: Lights, wl: int, i: int, p: wp.vec3, n: wp.vec3):
+    """Point light ``i`` of world row ``wl`` at ``p``: (unit direction toward it, irradiance on a facing surface,
+    n . direction clamped at 0)."""
+    to_lamp = L.pos[wl, i] - p
+    r2 = wp.max(wp.dot(to_lamp, to_lamp), 1.0e-6)
+    inv_r = 1.0 / wp.sqrt(r2)
+    ldir = to_lamp * inv_r
+    return ldir, L.power[wl, i] * (inv_r * inv_r), wp.max(wp.dot(n, ldir), 0.0)
+
+
+@wp.func
+def shadow_factor(L: Lights, first: int, light: int, ndl: float, p: wp.vec3, n: wp.vec3) -> float:
+    """``ndl`` times the visibility of light ``light`` (0 = sun, 1 + i = point light i) when shadows are on."""
+    out = ndl
+    if L.shadows != 0 and first >= 0 and ndl > 0.0:
+        out = ndl * light_visibility(L, first + light, p, n)
+    return out
+
+
+# ---------------------------------------------------------------------------------------------------------------------
 # pass 2: resolve and shade
 # ---------------------------------------------------------------------------------------------------------------------
 
@@ -256,40 +361,34 @@ def spec_power(c: float, e: float) -> float:
 
 
 @wp.func
-def light_surface(
-    albedo: wp.vec3,
-    spec: wp.vec2,
-    p: wp.vec3,
-    n: wp.vec3,
-    to_eye: wp.vec3,
-    ambient: wp.vec3,
-    sun_dir: wp.vec3,
-    sun_color: wp.vec3,
-    lamp_pos: wp.vec3,
-    lamp_power: wp.vec3,
-) -> wp.vec3:
-    """Ambient + Lambert + Blinn-Phong for one directional (sun) and one point (lamp) light, linear RGB.
+def light_surface(albedo: wp.vec3, spec: wp.vec2, p: wp.vec3, n: wp.vec3, to_eye: wp.vec3, L: Lights, w: int,
+                  first: int) -> wp.vec3:
+    """Ambient + Lambert + Blinn-Phong for the directional sun and every point light of world ``w``, linear RGB.
 
-    ``to_eye`` points from the surface toward the camera (any length); ``lamp_power`` is the lamp's irradiance at
-    1 m, falling with the inverse square of the distance. Specular terms are evaluated only where ``spec[0] > 0``
-    (magnets), with Schlick's approximation of the power, so matte surfaces pay for Lambert only.
+    ``to_eye`` points from the surface toward the camera (any length); a point light's irradiance falls with the
+    inverse square of the distance. Specular terms are evaluated only where ``spec[0] > 0`` (magnets), with
+    Schlick's approximation of the power, so matte surfaces pay for Lambert only. ``first``: the world's first
+    shadow map (< 0: unshadowed).
     """
-    ndl = wp.max(wp.dot(n, sun_dir), 0.0)
-    to_lamp = lamp_pos - p
-    r2 = wp.max(wp.dot(to_lamp, to_lamp), 1.0e-6)
-    inv_r = 1.0 / wp.sqrt(r2)
-    ldir = to_lamp * inv_r
-    lpow = lamp_power * (inv_r * inv_r)
-    ndp = wp.max(wp.dot(n, ldir), 0.0)
-    color = wp.cw_mul(albedo, ambient + sun_color * ndl + lpow * ndp)
+    sd = L.sun_dir[w % L.sun_dir.shape[0]]
+    sc = L.sun_color[w % L.sun_color.shape[0]]
+    wl = w % L.pos.shape[0]
+    ndl = wp.max(wp.dot(n, sd), 0.0)
+    irr = L.ambient[w % L.ambient.shape[0]] + sc * shadow_factor(L, first, 0, ndl, p, n)
+    for i in range(L.pos.shape[1]):
+        ldir, lpow, ndp = point_light(L, wl, i, p, n)
+        irr = irr + lpow * shadow_factor(L, first, 1 + i, ndp, p, n)
+    color = wp.cw_mul(albedo, irr)
     if spec[0] > 0.0:
         v = wp.normalize(to_eye)
-        hs = wp.max(wp.dot(n, wp.normalize(sun_dir + v)), 0.0)
-        hl = wp.max(wp.dot(n, wp.normalize(ldir + v)), 0.0)
+        hs = wp.max(wp.dot(n, wp.normalize(sd + v)), 0.0)
         if ndl > 0.0:
-            color = color + sun_color * (spec[0] * spec_power(hs, spec[1]))
-        if ndp > 0.0:
-            color = color + lpow * (spec[0] * spec_power(hl, spec[1]))
+            color = color + sc * (spec[0] * spec_power(hs, spec[1]) * shadow_factor(L, first, 0, 1.0, p, n))
+        for i in range(L.pos.shape[1]):
+            ldir, lpow, ndp = point_light(L, wl, i, p, n)
+            hl = wp.max(wp.dot(n, wp.normalize(ldir + v)), 0.0)
+            if ndp > 0.0:
+                color = color + lpow * (spec[0] * spec_power(hl, spec[1]) * shadow_factor(L, first, 1 + i, 1.0, p, n))
     return color
 
 
@@ -312,7 +411,7 @@ def mesh_surface(
     """The triangle the raster pass kept at pixel (px, py) (its ``zkey``): (camera z, segmentation id, unnormalized
     world normal, material coordinates of the hit), or (1e30, background, 0, 0) where no triangle covers it."""
     best_z = float(1.0e30)
-    label = int(LABEL_BACKGROUND)
+    label = int(SEG_BACKGROUND)
     n_world = wp.vec3(0.0)
     mat = wp.vec3(0.0)
     if key != _EMPTY:
@@ -339,7 +438,8 @@ def mesh_surface(
 class FloorRow:
     """One image row's ray against the floor plane: along a row the world ray is affine in x, d(x) = d0 + x dx, and
     so are its dot products with the floor normal and axes (``den``, ``du``, ``dv``: value at x = 0, step per pixel).
-    ``height``: the eye's height above the plane; ``eu``, ``ev``: the eye's floor coordinates; ``half``: half side."""
+    ``height``: the eye's height above the plane; ``eu``, ``ev``: the eye's floor coordinates (from the floor's
+    origin); ``half``: half side."""
 
     den0: float
     dden: float
@@ -351,6 +451,25 @@ class FloorRow:
     ev: float
     height: float
     half: float
+
+
+@wp.func
+def floor_row(fn: wp.vec3, fa: wp.vec3, fo: wp.vec3, half: float, eye: wp.vec3, d0: wp.vec3, dx: wp.vec3) -> FloorRow:
+    """The :class:`FloorRow` of the row whose ray is ``d0 + x dx`` from ``eye``, for the floor square with normal
+    ``fn``, in-plane axis ``fa`` and centre ``fo`` (a point of the plane through the world origin)."""
+    fb = wp.cross(fn, fa)
+    fr = FloorRow()
+    fr.den0 = wp.dot(fn, d0)
+    fr.dden = wp.dot(fn, dx)
+    fr.eu = wp.dot(eye - fo, fa)
+    fr.ev = wp.dot(eye - fo, fb)
+    fr.du0 = wp.dot(d0, fa)
+    fr.ddu = wp.dot(dx, fa)
+    fr.dv0 = wp.dot(d0, fb)
+    fr.ddv = wp.dot(dx, fb)
+    fr.height = wp.dot(fn, eye)
+    fr.half = half
+    return fr
 
 
 @wp.func
@@ -368,58 +487,105 @@ def nearer_floor(fr: FloorRow, px: float, best_z: float, label: int, mat: wp.vec
             fv = fr.ev + zf * (fr.dv0 + px * fr.ddv)
             if wp.abs(fu) <= fr.half and wp.abs(fv) <= fr.half:
                 z_out = zf
-                label_out = int(LABEL_FLOOR)
+                label_out = int(SEG_FLOOR)
                 mat_out = wp.vec3(fu, fv, 0.0)
     return z_out, label_out, mat_out
 
 
+@wp.struct
+class Look:
+    """Per-world surfaces (arrays read as ``a[w % a.shape[0]]``): ``albedo`` (linear RGB) and ``specular``
+    (strength, Blinn exponent) per segmentation id, (Wa, 11); the floor square: unit ``floor_normal``, in-plane
+    ``floor_axis`` (+u), centre ``floor_origin`` [m], ``floor_half`` [m]; ``floor_tex`` (tile [m], checker contrast,
+    grain amplitude, grain frequency [1/m]); ``floor_color2``; ``paper_tex`` (fibre, mottle amplitudes);
+    ``tex_seed`` (offsets the shared ``noise`` texture per world); background gradient ``bg_top``, ``bg_bottom``."""
+
+    albedo: wp.array2d(dtype=wp.vec3)
+    specular: wp.array2d(dtype=wp.vec2)
+    floor_normal: wp.array(dtype=wp.vec3)
+    floor_axis: wp.array(dtype=wp.vec3)
+    floor_origin: wp.array(dtype=wp.vec3)
+    floor_half: wp.array(dtype=float)
+    floor_tex: wp.array(dtype=wp.vec4)
+    floor_color2: wp.array(dtype=wp.vec3)
+    paper_tex: wp.array(dtype=wp.vec2)
+    tex_seed: wp.array(dtype=wp.int32)
+    bg_top: wp.array(dtype=wp.vec3)
+    bg_bottom: wp.array(dtype=wp.vec3)
+    noise: wp.array2d(dtype=float)
+
+
 @wp.func
-def shade_floor(
-    base: wp.vec3,
-    mat: wp.vec3,
-    inv_tile: float,
-    ft: wp.vec4,
-    fc2: wp.vec3,
-    noise: wp.array2d(dtype=float),
-    off_u: float,
-    off_v: float,
-    p: wp.vec3,
-    fn: wp.vec3,
-    floor_irr: wp.vec3,
-    lp: wp.vec3,
-    lpw: wp.vec3,
-) -> wp.vec3:
-    """Checker + grain in floor coordinates [m]; matte: ambient + sun (``floor_irr``, constant) + lamp (per pixel)."""
-    cu = int(wp.floor(mat[0] * inv_tile))
-    cv = int(wp.floor(mat[1] * inv_tile))
+def noise_offset(look: Look, w: int) -> wp.vec2:
+    """World ``w``'s offset [texels] into the shared noise texture, from its texture seed."""
+    seed0 = look.tex_seed[w % look.tex_seed.shape[0]]
+    return wp.vec2(float(seed0 & 4095) * 0.03125, float((seed0 >> 12) & 4095) * 0.03125)
+
+
+@wp.func
+def shade_floor(look: Look, L: Lights, w: int, first: int, mat: wp.vec3, p: wp.vec3) -> wp.vec3:
+    """Checker + grain in floor coordinates [m] (``mat``); matte: ambient + sun + every point light at ``p``."""
+    fn = look.floor_normal[w % look.floor_normal.shape[0]]
+    ft = look.floor_tex[w % look.floor_tex.shape[0]]
+    off = noise_offset(look, w)
+    base = look.albedo[w % look.albedo.shape[0], SEG_FLOOR]
+    cu = int(wp.floor(mat[0] * (1.0 / ft[0])))
+    cv = int(wp.floor(mat[1] * (1.0 / ft[0])))
     albedo = base
     if ((cu + cv) & 1) != 0:
-        albedo = wp.lerp(base, fc2, ft[1])
-    g = noise_tex(noise, mat[0] * ft[3] + off_u, mat[1] * ft[3] + off_v)
+        albedo = wp.lerp(base, look.floor_color2[w % look.floor_color2.shape[0]], ft[1])
+    g = noise_tex(look.noise, mat[0] * ft[3] + off[0], mat[1] * ft[3] + off[1])
     albedo = albedo * (1.0 + ft[2] * (g - 0.5))
-    to_lamp = lp - p
-    inv_r2 = 1.0 / wp.max(wp.dot(to_lamp, to_lamp), 1.0e-6)
-    ndp = wp.max(wp.dot(fn, to_lamp), 0.0) * wp.sqrt(inv_r2)
-    return wp.cw_mul(albedo, floor_irr + lpw * (ndp * inv_r2))
+    sc = L.sun_color[w % L.sun_color.shape[0]]
+    ndl = wp.max(wp.dot(fn, L.sun_dir[w % L.sun_dir.shape[0]]), 0.0)
+    irr = L.ambient[w % L.ambient.shape[0]] + sc * shadow_factor(L, first, 0, ndl, p, fn)
+    wl = w % L.pos.shape[0]
+    for i in range(L.pos.shape[1]):
+        to_lamp = L.pos[wl, i] - p
+        inv_r2 = 1.0 / wp.max(wp.dot(to_lamp, to_lamp), 1.0e-6)
+        ndp = wp.max(wp.dot(fn, to_lamp), 0.0) * wp.sqrt(inv_r2)
+        irr = irr + L.power[wl, i] * (shadow_factor(L, first, 1 + i, ndp, p, fn) * inv_r2)
+    return wp.cw_mul(albedo, irr)
 
 
 @wp.func
-def object_albedo(base: wp.vec3, label: int, mat: wp.vec3, pt: wp.vec2, noise: wp.array2d(dtype=float),
-                  off_u: float, off_v: float) -> wp.vec3:
+def object_albedo(look: Look, w: int, label: int, mat: wp.vec3) -> wp.vec3:
     """A worm or magnet surface's albedo at material coordinates ``mat``: paper texture on the sheet, the EPM's
     painted half."""
-    albedo = base
-    if label <= LABEL_WORM_LAST:
+    albedo = look.albedo[w % look.albedo.shape[0], label]
+    if label <= SEG_WORM_LAST:
         # paper: short fibres (noise stretched along the sheet's x) over a soft mottle; material coordinates
         # are the rest positions [m], so the texture sticks to the sheet as it folds
+        pt = look.paper_tex[w % look.paper_tex.shape[0]]
+        off = noise_offset(look, w)
         sw = mat[1] + mat[2]
-        fib = noise_tex(noise, mat[0] * 2500.0 + off_v, sw * 600.0 + off_u)
-        mot = noise_tex(noise, mat[0] * 180.0 - off_u, (mat[1] - mat[2]) * 180.0 + off_v)
-        albedo = base * (1.0 + pt[0] * (fib - 0.5) + pt[1] * (mot - 0.5))
-    elif label == LABEL_EPM:
+        fib = noise_tex(look.noise, mat[0] * 2500.0 + off[1], sw * 600.0 + off[0])
+        mot = noise_tex(look.noise, mat[0] * 180.0 - off[0], (mat[1] - mat[2]) * 180.0 + off[1])
+        albedo = albedo * (1.0 + pt[0] * (fib - 0.5) + pt[1] * (mot - 0.5))
+    elif label == SEG_EPM:
         if mat[2] > 0.0:
-            albedo = base * 0.55  # a painted north half breaks the bar's 180 degree symmetry
+            albedo = albedo * 0.55  # a painted north half breaks the bar's 180 degree symmetry
     return albedo
+
+
+@wp.func
+def shade_hit(look: Look, L: Lights, w: int, first: int, label: int, z: float, mat: wp.vec3, n_world: wp.vec3,
+              eye: wp.vec3, d_world: wp.vec3, bg: wp.vec3):
+    """Colour (linear RGB) and unit world normal (0 for background) of the surface ``label`` hit at camera depth
+    ``z`` along ``d_world`` (mesh normal ``n_world``, unnormalized; material coordinates ``mat``)."""
+    color = bg
+    nrm = wp.vec3(0.0)
+    if label == SEG_FLOOR:
+        nrm = look.floor_normal[w % look.floor_normal.shape[0]]
+        color = shade_floor(look, L, w, first, mat, eye + z * d_world)
+    elif label != SEG_BACKGROUND:
+        nrm = n_world
+        if wp.dot(n_world, -d_world) < 0.0:
+            nrm = -n_world  # double-sided sheet: light the side the camera sees
+        base = object_albedo(look, w, label, mat)
+        color = light_surface(base, look.specular[w % look.specular.shape[0], label], eye + z * d_world, nrm,
+                              -d_world, L, w, first)
+    return color, nrm
 
 
 @wp.kernel
@@ -427,6 +593,8 @@ def resolve_shade(
     # Model:
     triangles: wp.array(dtype=wp.vec3i),
     tri_label: wp.array(dtype=wp.int32),
+    look: Look,
+    lights: Lights,
     # Data in:
     vertices: wp.array2d(dtype=wp.vec3),
     texcoords: wp.array2d(dtype=wp.vec3),
@@ -438,24 +606,6 @@ def resolve_shade(
     width: int,
     height: int,
     span: int,
-    # Model (per-world appearance, read as a[w % a.shape[0]]):
-    albedo: wp.array2d(dtype=wp.vec3),
-    specular: wp.array2d(dtype=wp.vec2),
-    floor_normal: wp.array(dtype=wp.vec3),
-    floor_axis: wp.array(dtype=wp.vec3),
-    floor_half: wp.array(dtype=float),
-    floor_tex: wp.array(dtype=wp.vec4),
-    floor_color2: wp.array(dtype=wp.vec3),
-    paper_tex: wp.array(dtype=wp.vec2),
-    tex_seed: wp.array(dtype=wp.int32),
-    ambient: wp.array(dtype=wp.vec3),
-    sun_dir: wp.array(dtype=wp.vec3),
-    sun_color: wp.array(dtype=wp.vec3),
-    lamp_pos: wp.array(dtype=wp.vec3),
-    lamp_power: wp.array(dtype=wp.vec3),
-    bg_top: wp.array(dtype=wp.vec3),
-    bg_bottom: wp.array(dtype=wp.vec3),
-    noise: wp.array2d(dtype=float),
     write_normals: int,
     # Data out:
     rgb: wp.array2d(dtype=wp.vec3ub),
@@ -469,18 +619,11 @@ def resolve_shade(
     thread per row, so per-row setup is paid once and the per-thread launch overhead vanishes). Same code either way.
 
     Args (beyond :func:`raster_triangles`'s):
+        look: per-world surfaces (:class:`Look`). lights: lights and shadow maps (:class:`Lights`).
         texcoords: material coordinates [m] of every scene vertex (rest position for the sheet, magnet-local for
             magnets), shape (W, Vs); procedural textures are functions of them, so they move with the surface.
         zkey: keys written by the raster pass, shape (N, H * W).
         span: pixels per thread along a row.
-        albedo: linear RGB albedo per segmentation id, shape (Wa, 11). specular: (strength, Blinn exponent), (Wa, 11).
-        floor_normal, floor_axis: unit normal and in-plane +u axis of the floor plane through the world origin, (Wf,).
-        floor_half: half side [m] of the square floor, (Wf,).
-        floor_tex: (tile size [m], checker contrast [0, 1], grain amplitude, grain frequency [1/m]), (Wf,).
-        floor_color2: second checker colour (linear RGB), (Wf,). paper_tex: (fibre amplitude, mottle amplitude).
-        tex_seed: per-world texture seed (offsets the shared noise texture per world and surface). ambient, sun_dir (unit, toward the sun), sun_color, lamp_pos [m],
-            lamp_power (irradiance at 1 m), bg_top, bg_bottom (background gradient): per world.
-        noise: baked tileable noise texture in [0, 1], (NOISE_SIZE, NOISE_SIZE) (see :func:`bake_noise`).
         write_normals: 1 to write camera-frame unit normals (facing the camera; 0 for background), 0 to skip.
         rgb: (N, H * W) vec3ub. depth: camera z [m], 0 for background, (N, H * W). seg: ids, (N, H * W).
         normals: (N, H * W) vec3, or a 1-element dummy when write_normals is 0.
@@ -495,75 +638,33 @@ def resolve_shade(
     Rt = wp.transpose(R)
     eye = -(Rt * t)
     py = float(y)
-
-    # per-world constants, loaded once per thread
-    wa = w % albedo.shape[0]
-    wf = w % floor_normal.shape[0]
-    fn = floor_normal[wf]
-    fa = floor_axis[wf]
-    fb = wp.cross(fn, fa)
-    half = floor_half[wf]
-    ft = floor_tex[wf]
-    fc2 = floor_color2[wf]
-    pt = paper_tex[w % paper_tex.shape[0]]
-    seed0 = tex_seed[w % tex_seed.shape[0]]
-    # per-world offsets into the shared noise texture (texels)
-    off_u = float(seed0 & 4095) * 0.03125
-    off_v = float((seed0 >> 12) & 4095) * 0.03125
-    amb = ambient[w % ambient.shape[0]]
-    sd = sun_dir[w % sun_dir.shape[0]]
-    sc = sun_color[w % sun_color.shape[0]]
-    lp = lamp_pos[w % lamp_pos.shape[0]]
-    lpw = lamp_power[w % lamp_power.shape[0]]
-    hgt = wp.dot(fn, eye)
-    bg = wp.lerp(bg_top[w % bg_top.shape[0]], bg_bottom[w % bg_bottom.shape[0]], py / float(height))
+    wf = w % look.floor_normal.shape[0]
+    bg = wp.lerp(look.bg_top[w % look.bg_top.shape[0]], look.bg_bottom[w % look.bg_bottom.shape[0]],
+                 py / float(height))
+    first = int(-1)
+    if lights.shadows != 0:
+        first = lights.map_first[w]
     row = y * width
-    inv_tile = 1.0 / ft[0]
-    # the floor is matte with a constant normal: its ambient + sun irradiance is one constant per thread
-    floor_irr = amb + sc * wp.max(wp.dot(fn, sd), 0.0)
-
     # along a row the world ray is affine in x: d(x) = d0 + x * dx, and so are its dot products with the floor axes
     d0 = Rt * wp.vec3(-k[2] / k[0], (py - k[3]) / k[1], 1.0)
     dx = Rt * wp.vec3(1.0 / k[0], 0.0, 0.0)
-    fr = FloorRow()
-    fr.den0 = wp.dot(fn, d0)
-    fr.dden = wp.dot(fn, dx)
-    fr.eu = wp.dot(eye, fa)
-    fr.ev = wp.dot(eye, fb)
-    fr.du0 = wp.dot(d0, fa)
-    fr.ddu = wp.dot(dx, fa)
-    fr.dv0 = wp.dot(d0, fb)
-    fr.ddv = wp.dot(dx, fb)
-    fr.height = hgt
-    fr.half = half
-
+    fr = floor_row(look.floor_normal[wf], look.floor_axis[w % look.floor_axis.shape[0]],
+                   look.floor_origin[w % look.floor_origin.shape[0]], look.floor_half[w % look.floor_half.shape[0]],
+                   eye, d0, dx)
     for x in range(x_begin, x_end):
         px = float(x)
         d_world = d0 + px * dx  # a point at camera depth z lies at eye + z * d_world
         best_z, label, n_world, mat = mesh_surface(zkey[img, row + x], triangles, tri_label, vertices, texcoords, w,
                                                    R, t, k, px, py, eye, d_world)
         best_z, label, mat = nearer_floor(fr, px, best_z, label, mat)
-
-        color = bg
-        nrm = wp.vec3(0.0)
-        if label == LABEL_BACKGROUND:
+        color, nrm = shade_hit(look, lights, w, first, label, best_z, mat, n_world, eye, d_world, bg)
+        if label == SEG_BACKGROUND:
             best_z = 0.0
-        elif label == LABEL_FLOOR:
-            color = shade_floor(albedo[wa, LABEL_FLOOR], mat, inv_tile, ft, fc2, noise, off_u, off_v,
-                                eye + best_z * d_world, fn, floor_irr, lp, lpw)
-            if write_normals != 0:
-                nrm = R * fn
-        else:
-            p = eye + best_z * d_world
-            view = -d_world  # toward the camera (unnormalized)
-            if wp.dot(n_world, view) < 0.0:
-                n_world = -n_world  # double-sided sheet: light the side the camera sees
-            base = object_albedo(albedo[wa, label], label, mat, pt, noise, off_u, off_v)
-            color = light_surface(base, specular[wa, label], p, n_world, view, amb, sd, sc, lp, lpw)
-            if write_normals != 0:
-                nrm = R * n_world
         if write_normals != 0:
-            normals[img, row + x] = nrm
+            if label == SEG_BACKGROUND:
+                normals[img, row + x] = wp.vec3(0.0)
+            else:
+                normals[img, row + x] = R * nrm
         rgb[img, row + x] = wp.vec3ub(to_srgb8(color[0]), to_srgb8(color[1]), to_srgb8(color[2]))
         depth[img, row + x] = best_z
         seg[img, row + x] = wp.uint8(label)

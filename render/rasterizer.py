@@ -63,7 +63,7 @@ class Renderer:
     """Off-screen z-buffer rasterizer for batches of (world, camera) images, on any Warp device."""
 
     def __init__(self, width: int, height: int, *, device=None, near: float = 1e-3,
-                 max_chunk_pixels: int = 1 << 23, threads: int = 1):
+                 max_chunk_pixels: int = 1 << 23, threads: int = 1, shadows: bool = False, shadow_map: int = 256):
         """
         Args:
             width, height: image size [px].
@@ -71,6 +71,8 @@ class Renderer:
             near: triangles with a vertex closer than this to the camera plane [m] are skipped.
             max_chunk_pixels: largest number of pixels rendered per launch pair (per thread).
             threads: CPU only: render this many chunks concurrently (one core each); ignored on CUDA.
+            shadows: shadows from the sun and every point light (a ``shadow_map`` x ``shadow_map`` depth map per
+                light and world, rasterized by the same pass; soft by percentage-closer filtering).
         """
         wp.init()
         self.width = int(width)
@@ -79,6 +81,11 @@ class Renderer:
         self.near = float(near)
         self.max_chunk_images = max(1, int(max_chunk_pixels) // (self.width * self.height))
         self.threads = max(1, int(threads)) if self.device.is_cpu else 1
+        self.max_chunk_pixels = int(max_chunk_pixels)
+        self.shadows = bool(shadows)
+        self.shadow_map = int(shadow_map)
+        if self.shadow_map < 1:
+            raise ValueError(f"shadow_map: got {shadow_map}; expected a positive side [px]")
         self._buffers: dict = {}
         # load the kernels once here: concurrent first launches from several threads would race to load them
         wp.load_module(rk, device=self.device)
@@ -89,29 +96,33 @@ class Renderer:
     def _upload_scene(self, scene: SceneBatch) -> dict:
         d = self.device
         a = scene.appearance
-        s = {
+        look = rk.Look()
+        look.albedo = _vec_array(a.albedo, wp.vec3, d)
+        look.specular = _vec_array(a.specular, wp.vec2, d)
+        look.floor_normal = _vec_array(scene.floor_normal, wp.vec3, d)
+        look.floor_axis = _vec_array(scene.floor_axis, wp.vec3, d)
+        look.floor_origin = _vec_array(scene.floor_origin, wp.vec3, d)
+        look.floor_half = wp.array(np.asarray(scene.floor_half, dtype=np.float32), dtype=float, device=d)
+        look.floor_tex = _vec_array(a.floor_tex, wp.vec4, d)
+        look.floor_color2 = _vec_array(a.floor_color2, wp.vec3, d)
+        look.paper_tex = _vec_array(a.paper_tex, wp.vec2, d)
+        look.tex_seed = wp.array(np.asarray(a.tex_seed, dtype=np.int32), dtype=wp.int32, device=d)
+        look.bg_top = _vec_array(a.bg_top, wp.vec3, d)
+        look.bg_bottom = _vec_array(a.bg_bottom, wp.vec3, d)
+        look.noise = self._noise
+        light_arrays = {
+            "ambient": _vec_array(a.ambient, wp.vec3, d), "sun_dir": _vec_array(a.sun_dir, wp.vec3, d),
+            "sun_color": _vec_array(a.sun_color, wp.vec3, d), "pos": _vec_array(a.light_pos, wp.vec3, d),
+            "power": _vec_array(a.light_power, wp.vec3, d),
+            "size": wp.array(np.asarray(a.light_size, dtype=np.float32), dtype=float, device=d),
+        }
+        return {
             "triangles": wp.array(np.ascontiguousarray(scene.triangles, dtype=np.int32), dtype=wp.vec3i, device=d),
             "tri_label": wp.array(np.ascontiguousarray(scene.tri_label, dtype=np.int32), dtype=wp.int32, device=d),
             "vertices": _vec_array(scene.vertices, wp.vec3, d),
             "texcoords": _vec_array(scene.texcoords, wp.vec3, d),
-            "albedo": _vec_array(a.albedo, wp.vec3, d),
-            "specular": _vec_array(a.specular, wp.vec2, d),
-            "floor_normal": _vec_array(scene.floor_normal, wp.vec3, d),
-            "floor_axis": _vec_array(scene.floor_axis, wp.vec3, d),
-            "floor_half": wp.array(np.asarray(scene.floor_half, dtype=np.float32), dtype=float, device=d),
-            "floor_tex": _vec_array(a.floor_tex, wp.vec4, d),
-            "floor_color2": _vec_array(a.floor_color2, wp.vec3, d),
-            "paper_tex": _vec_array(a.paper_tex, wp.vec2, d),
-            "tex_seed": wp.array(np.asarray(a.tex_seed, dtype=np.int32), dtype=wp.int32, device=d),
-            "ambient": _vec_array(a.ambient, wp.vec3, d),
-            "sun_dir": _vec_array(a.sun_dir, wp.vec3, d),
-            "sun_color": _vec_array(a.sun_color, wp.vec3, d),
-            "lamp_pos": _vec_array(a.lamp_pos, wp.vec3, d),
-            "lamp_power": _vec_array(a.lamp_power, wp.vec3, d),
-            "bg_top": _vec_array(a.bg_top, wp.vec3, d),
-            "bg_bottom": _vec_array(a.bg_bottom, wp.vec3, d),
+            "look": look, "light_arrays": light_arrays, "lights": self._lights(light_arrays, None), "scene": scene,
         }
-        return s
 
     def _get_buffers(self, n: int, normals: bool, slot: int = 0) -> dict:
         key = (n, normals, slot)
@@ -132,6 +143,44 @@ class Renderer:
                 "cam_intr": wp.empty(n, dtype=wp.vec4, device=d),
             }
         return self._buffers[key]
+
+    def _lights(self, arrays: dict, maps: dict | None) -> rk.Lights:
+        """The kernel's :class:`Lights` from uploaded light arrays and, when shadows are on, a chunk's maps."""
+        d = self.device
+        lights = rk.Lights()
+        for name, arr in arrays.items():
+            setattr(lights, name, arr)
+        lights.shadows = 0 if maps is None else 1
+        lights.map_side = self.shadow_map
+        if maps is None:  # never read: placeholders
+            maps = {"first": wp.zeros(1, dtype=wp.int32, device=d), "key": wp.zeros((1, 1), dtype=wp.int64, device=d),
+                    "rot": wp.zeros(1, dtype=wp.mat33, device=d), "trans": wp.zeros(1, dtype=wp.vec3, device=d),
+                    "intr": wp.zeros(1, dtype=wp.vec4, device=d), "size": wp.zeros(1, dtype=float, device=d)}
+        lights.map_first, lights.map_key, lights.map_rot = maps["first"], maps["key"], maps["rot"]
+        lights.map_trans, lights.map_intr, lights.map_light_size = maps["trans"], maps["intr"], maps["size"]
+        return lights
+
+    def _shadow_maps(self, s: dict, worlds: np.ndarray) -> rk.Lights:
+        """The scene's :class:`Lights` with the shadow maps of ``worlds`` (unique scene world ids) rasterized: one
+        map for the sun and one per point light of each world (:func:`shadow_cameras`)."""
+        d, S = self.device, self.shadow_map
+        scene = s["scene"]
+        cams = shadow_cameras(scene, worlds, S)
+        M = len(cams["world"])
+        first = np.full(scene.num_worlds, -1, np.int32)
+        first[worlds] = np.arange(len(worlds), dtype=np.int32) * (M // len(worlds))
+        maps = {"first": wp.array(first, dtype=wp.int32, device=d),
+                "key": wp.full((M, S * S), rk.EMPTY_KEY, dtype=wp.int64, device=d),
+                "rot": _vec_array(cams["R"], wp.mat33, d), "trans": _vec_array(cams["t"], wp.vec3, d),
+                "intr": _vec_array(cams["intr"], wp.vec4, d),
+                "size": wp.array(cams["size"].astype(np.float32), dtype=float, device=d)}
+        mask = wp.zeros((M, S * S), dtype=wp.uint8, device=d)  # (the raster pass's worm silhouette: unused here)
+        wp.launch(rk.raster_triangles, dim=(M, s["triangles"].shape[0]), device=d,
+                  inputs=[s["triangles"], s["tri_label"], s["vertices"],
+                          wp.array(cams["world"].astype(np.int32), dtype=wp.int32, device=d), maps["rot"],
+                          maps["trans"], maps["intr"], S, S, self.near],
+                  outputs=[maps["key"], mask])
+        return self._lights(s["light_arrays"], maps)
 
     # -- rendering -----------------------------------------------------------------------------------------------------
 
@@ -164,6 +213,9 @@ class Renderer:
         s = self._upload_scene(scene)
         T = min(self.threads, N)
         chunk = min(-(-N // T), self.max_chunk_images)
+        if self.shadows:  # the chunk's shadow maps (a world per image at most) count against max_chunk_pixels too
+            per_image = (1 + scene.appearance.light_pos.shape[1]) * self.shadow_map ** 2
+            chunk = max(1, min(chunk, self.max_chunk_pixels // per_image))
         pieces = [(start, min(N, start + chunk)) for start in range(0, N, chunk)]
         for slot in range(T):  # allocate every stream's buffers before any thread starts
             self._get_buffers(chunk, normals, slot)
@@ -202,6 +254,9 @@ class Renderer:
         b["zkey"].fill_(rk.EMPTY_KEY)
         b["mask"].zero_()
         d = self.device
+        lights = s["lights"]
+        if self.shadows:
+            lights = self._shadow_maps(s, np.unique(world[:n]))
         common = [b["image_world"], b["cam_rot"], b["cam_trans"], b["cam_intr"]]
         wp.launch(rk.raster_triangles, dim=(n, s["triangles"].shape[0]), device=d,
                   inputs=[s["triangles"], s["tri_label"], s["vertices"], *common, self.width, self.height, self.near],
@@ -209,12 +264,8 @@ class Renderer:
         # CPU: a thread per image row (per-thread overhead and per-row setup paid once); GPU: a thread per pixel
         span = self.width if d.is_cpu else 1
         wp.launch(rk.resolve_shade, dim=(n, self.height, (self.width + span - 1) // span), device=d,
-                  inputs=[s["triangles"], s["tri_label"], s["vertices"], s["texcoords"], *common, b["zkey"],
-                          self.width, self.height, span,
-                          s["albedo"], s["specular"], s["floor_normal"], s["floor_axis"], s["floor_half"],
-                          s["floor_tex"], s["floor_color2"], s["paper_tex"], s["tex_seed"], s["ambient"],
-                          s["sun_dir"], s["sun_color"], s["lamp_pos"], s["lamp_power"], s["bg_top"], s["bg_bottom"],
-                          self._noise, int(normals)],
+                  inputs=[s["triangles"], s["tri_label"], s["look"], lights, s["vertices"], s["texcoords"], *common,
+                          b["zkey"], self.width, self.height, span, int(normals)],
                   outputs=[b["rgb"], b["depth"], b["seg"], b["normals"]])
         H, W = self.height, self.width
         res = {
@@ -226,3 +277,38 @@ class Renderer:
         if normals:
             res["normals"] = b["normals"].numpy()[:n].reshape(n, H, W, 3)
         return res
+
+
+def shadow_cameras(scene: SceneBatch, worlds: np.ndarray, side: int) -> dict:
+    """Pinhole cameras of the shadow maps of ``worlds`` (M = len(worlds) * (1 + L) maps, world-major: the sun, then
+    point light 0..L-1), each looking from its light at the centre of the world's meshes and just covering their
+    bounding sphere (radius r). The directional sun is a point light ``max(100 r, 1 m)`` away along ``sun_dir`` (its
+    rays then within r / 100 rad of parallel), of radius ``sun_size`` (angular, rad) times that distance.
+
+    Returns dict: ``world`` (M,), ``R`` (M, 3, 3), ``t`` (M, 3), ``intr`` (M, 4) = (fx, fy, cx, cy) [px], ``size``
+    (M,) light radius [m]. A light inside the sphere gets a 160 degree field of view (its map sees what it can).
+    """
+    from warpworm.render.camera import look_at
+
+    a = scene.appearance
+    worlds = np.asarray(worlds, dtype=np.int64)
+    v = scene.vertices[worlds].astype(np.float64)  # (n, V, 3)
+    lo, hi = v.min(axis=1), v.max(axis=1)
+    centre = 0.5 * (lo + hi)
+    radius = np.maximum(np.linalg.norm(v - centre[:, None], axis=2).max(axis=1), 1e-4)
+    L = a.light_pos.shape[1]
+    sun_d = np.maximum(100.0 * radius, 1.0)
+    sun = a.sun_dir[worlds % a.sun_dir.shape[0]]
+    eye = np.concatenate([(centre + sun * sun_d[:, None])[:, None], a.light_pos[worlds % a.light_pos.shape[0]]],
+                         axis=1)  # (n, 1 + L, 3)
+    size = np.concatenate([(np.tan(a.sun_size[worlds % a.sun_size.shape[0]]) * sun_d)[:, None],
+                           a.light_size[worlds % a.light_size.shape[0]]], axis=1)
+    tgt = np.broadcast_to(centre[:, None], eye.shape)
+    dist = np.linalg.norm(eye - tgt, axis=2)
+    half = np.where(dist > radius[:, None] * 1.01, np.arcsin(np.minimum(radius[:, None] / np.maximum(dist, 1e-9),
+                                                                        0.999)), np.deg2rad(80.0))
+    R, t = look_at(eye.reshape(-1, 3), tgt.reshape(-1, 3))
+    f = 0.5 * side / np.tan(half.reshape(-1))
+    c = np.full_like(f, (side - 1) / 2)
+    return {"world": np.repeat(worlds, 1 + L), "R": R, "t": t, "intr": np.stack([f, f, c, c], axis=1),
+            "size": size.reshape(-1)}

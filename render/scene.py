@@ -32,11 +32,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from warpworm import ids
-from warpworm.ids import NUM_SEGMENTATION_IDS as NUM_LABELS
-from warpworm.ids import SEG_EPM as LABEL_EPM
-from warpworm.ids import SEG_FLOOR as LABEL_FLOOR
-from warpworm.ids import SEG_IPM_FIRST as LABEL_IPM_FIRST
-from warpworm.ids import SEG_WORM_FIRST as LABEL_WORM_FIRST
+from warpworm.ids import NUM_SEGMENTATION_IDS, SEG_EPM, SEG_FLOOR, SEG_IPM_FIRST, SEG_WORM_FIRST
 
 LABEL_NAMES = ids.SEGMENTATION_NAMES
 """Name of every segmentation id, indexed by id."""
@@ -69,10 +65,17 @@ class Appearance:
     """Unit direction toward the directional light (world), shape (W, 3)."""
     sun_color: np.ndarray
     """Directional light irradiance, shape (W, 3)."""
-    lamp_pos: np.ndarray
-    """Point light position [m] (world), shape (W, 3)."""
-    lamp_power: np.ndarray
-    """Point light irradiance at 1 m (falls as 1/r²), shape (W, 3)."""
+    sun_size: np.ndarray
+    """Angular radius [rad] of the directional light (the softness of its shadows), shape (W,)."""
+    light_pos: np.ndarray
+    """Point light positions [m] (world), shape (W, L, 3); any number L >= 1 of lights per world."""
+    light_power: np.ndarray
+    """Point light irradiance at 1 m (falls as 1/r²), shape (W, L, 3); zero pads a world with fewer lights."""
+    light_size: np.ndarray
+    """Point light radius [m] (spherical lights: the softness of their shadows), shape (W, L)."""
+    plate: np.ndarray
+    """Pose of the floor square (the plate) in its plane, shape (W, 3): yaw [rad] of its axes (and textures) about
+    the floor normal, offset [m] of its centre along the unrotated floor axes u, v (:func:`floor_frame`)."""
     bg_top: np.ndarray
     """Background colour at the top image row, shape (W, 3)."""
     bg_bottom: np.ndarray
@@ -81,6 +84,16 @@ class Appearance:
     @property
     def num_worlds(self) -> int:
         return self.albedo.shape[0]
+
+    @property
+    def lamp_pos(self) -> np.ndarray:
+        """The first point light's position [m], (W, 3) (of ``light_pos``: every light is there)."""
+        return self.light_pos[:, 0]
+
+    @property
+    def lamp_power(self) -> np.ndarray:
+        """The first point light's irradiance at 1 m, (W, 3) (of ``light_power``: every light is there)."""
+        return self.light_power[:, 0]
 
     def take(self, index) -> "Appearance":
         """Appearance of the worlds ``index`` (broadcasting a single shared world)."""
@@ -92,17 +105,25 @@ class Appearance:
         return Appearance(**out)
 
 
+DEFAULT_LAMP_POS = (-0.15, 0.2, 0.3)
+"""The default point light's position [m] (in the plate's frame: in the world unless the plate is posed)."""
+DEFAULT_LAMP_SIZE = 0.01
+"""The default point light's radius [m]."""
+SUN_SIZE = 0.02
+"""The directional light's angular radius [rad] (a window or softbox rather than the 0.005 rad sun)."""
+
+
 def default_appearance(num_worlds: int = 1) -> Appearance:
     """A plain, fixed look: white paper, grey checker floor, nickel magnets, sun + lamp, grey background."""
-    albedo = np.zeros((NUM_LABELS, 3))
-    albedo[LABEL_FLOOR] = (0.45, 0.42, 0.38)
-    albedo[LABEL_WORM_FIRST:LABEL_WORM_FIRST + 5] = (0.80, 0.78, 0.72)
-    albedo[LABEL_IPM_FIRST:LABEL_IPM_FIRST + 3] = (0.55, 0.55, 0.58)
-    albedo[LABEL_EPM] = (0.60, 0.60, 0.62)
-    spec = np.zeros((NUM_LABELS, 2))
+    albedo = np.zeros((NUM_SEGMENTATION_IDS, 3))
+    albedo[SEG_FLOOR] = (0.45, 0.42, 0.38)
+    albedo[SEG_WORM_FIRST:SEG_WORM_FIRST + 5] = (0.80, 0.78, 0.72)
+    albedo[SEG_IPM_FIRST:SEG_IPM_FIRST + 3] = (0.55, 0.55, 0.58)
+    albedo[SEG_EPM] = (0.60, 0.60, 0.62)
+    spec = np.zeros((NUM_SEGMENTATION_IDS, 2))
     spec[:, 1] = 16.0
     # floor and paper are matte (no specular term: it is evaluated only where strength > 0)
-    spec[LABEL_IPM_FIRST:] = (0.8, 60.0)
+    spec[SEG_IPM_FIRST:] = (0.8, 60.0)
     sun = np.array([0.4, -0.3, 0.87])
     a = Appearance(
         albedo=albedo[None],
@@ -114,8 +135,11 @@ def default_appearance(num_worlds: int = 1) -> Appearance:
         ambient=np.array([[0.25, 0.25, 0.27]]),
         sun_dir=(sun / np.linalg.norm(sun))[None],
         sun_color=np.array([[0.75, 0.72, 0.68]]),
-        lamp_pos=np.array([[-0.15, 0.2, 0.3]]),
-        lamp_power=np.array([[0.04, 0.04, 0.045]]),
+        sun_size=np.array([SUN_SIZE]),
+        light_pos=np.array([[DEFAULT_LAMP_POS]]),
+        light_power=np.array([[[0.04, 0.04, 0.045]]]),
+        light_size=np.array([[DEFAULT_LAMP_SIZE]]),
+        plate=np.zeros((1, 3)),
         bg_top=np.array([[0.55, 0.6, 0.68]]),
         bg_bottom=np.array([[0.25, 0.27, 0.3]]),
     )
@@ -199,6 +223,17 @@ def floor_frame(incline, num_worlds: int) -> tuple[np.ndarray, np.ndarray]:
     return np.stack([-s, z, c], 1), np.stack([c, z, s], 1)
 
 
+def plate_frame(normal: np.ndarray, axis: np.ndarray, plate: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The posed plate's in-plane axis and centre, each (W, 3): ``axis`` (W, 3) turned by yaw ``plate[:, 0]`` [rad]
+    about ``normal`` (W, 3), and the centre ``plate[:, 1] u + plate[:, 2] v`` [m] along the unturned axes
+    (v = normal x u). A zero pose returns ``axis`` itself and the origin."""
+    plate = np.asarray(plate, dtype=np.float64)
+    c, s = np.cos(plate[:, :1]), np.sin(plate[:, :1])
+    b = np.cross(normal, axis)
+    turned = np.where(plate[:, :1] == 0.0, axis, c * axis + s * b)
+    return turned, plate[:, 1:2] * axis + plate[:, 2:3] * b
+
+
 @dataclass
 class SceneBatch:
     """W worlds sharing one triangle topology. Arrays are NumPy; the renderer uploads them."""
@@ -215,6 +250,8 @@ class SceneBatch:
     """Unit floor normal (world), shape (W, 3)."""
     floor_axis: np.ndarray
     """Unit in-plane +u axis of the floor (checker orientation), shape (W, 3)."""
+    floor_origin: np.ndarray
+    """Centre [m] of the floor square (and origin of its textures), a point of the plane, shape (W, 3)."""
     floor_half: np.ndarray
     """Half side of the square floor [m], shape (W,); 0 removes the floor."""
     appearance: Appearance
@@ -236,11 +273,13 @@ class SceneBatch:
         if tc.ndim == 2:
             tc = tc[None]
         n, a = floor_frame(floor_incline, W)
+        app = appearance if appearance is not None else default_appearance(W)
+        a, origin = plate_frame(n, a, app.plate[np.arange(W) % app.plate.shape[0]])
         return cls(vertices=np.ascontiguousarray(v), triangles=np.ascontiguousarray(triangles, dtype=np.int32),
                    tri_label=np.broadcast_to(np.asarray(tri_label, dtype=np.int32), (len(triangles),)).copy(),
-                   texcoords=np.ascontiguousarray(tc), floor_normal=n, floor_axis=a,
+                   texcoords=np.ascontiguousarray(tc), floor_normal=n, floor_axis=a, floor_origin=origin,
                    floor_half=np.broadcast_to(np.asarray(floor_half, dtype=np.float64), (W,)).copy(),
-                   appearance=appearance if appearance is not None else default_appearance(W))
+                   appearance=app)
 
     def reference_mesh(self, world: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """World ``world`` as one plain mesh including the floor square as two triangles (for reference ray casting).
@@ -251,10 +290,11 @@ class SceneBatch:
         n, a = self.floor_normal[world], self.floor_axis[world]
         b = np.cross(n, a)
         h = float(self.floor_half[world])
-        corners = np.array([h * (su * a + sv * b) for su, sv in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
+        corners = np.array([self.floor_origin[world] + h * (su * a + sv * b)
+                            for su, sv in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
         V = v.shape[0]
         tris = np.concatenate([self.triangles, np.array([[V, V + 1, V + 2], [V, V + 2, V + 3]], dtype=np.int32)])
-        labels = np.concatenate([self.tri_label, [LABEL_FLOOR, LABEL_FLOOR]]).astype(np.int32)
+        labels = np.concatenate([self.tri_label, [SEG_FLOOR, SEG_FLOOR]]).astype(np.int32)
         if h <= 0:
             tris, labels = tris[:-2], labels[:-2]
         return np.concatenate([v, corners]), tris, labels
@@ -294,7 +334,7 @@ def build_scene(
     P = np.asarray(worm_positions, dtype=np.float64)
     W, V, _ = P.shape
     tris = [np.asarray(worm_triangles, dtype=np.int32)]
-    labels = [LABEL_WORM_FIRST + np.asarray(triangle_segment, dtype=np.int32)]
+    labels = [SEG_WORM_FIRST + np.asarray(triangle_segment, dtype=np.int32)]
     tc = P[:1] if worm_texcoords is None else np.asarray(worm_texcoords, dtype=np.float64)
     if tc.ndim == 2:
         tc = tc[None]
@@ -314,7 +354,7 @@ def build_scene(
             verts.append(world)
             texs.append(local)
             tris.append(dt + offset)
-            labels.append(np.full(len(dt), LABEL_IPM_FIRST + slot - 1, dtype=np.int32))
+            labels.append(np.full(len(dt), SEG_IPM_FIRST + slot - 1, dtype=np.int32))
             offset += dv.shape[0]
         if show_epm:
             bv, bt = box_mesh()
@@ -323,7 +363,7 @@ def build_scene(
             verts.append(np.einsum("wij,wkj->wki", mr[:, 0], local) + mp[:, 0, None])
             texs.append(local)
             tris.append(bt + offset)
-            labels.append(np.full(len(bt), LABEL_EPM, dtype=np.int32))
+            labels.append(np.full(len(bt), SEG_EPM, dtype=np.int32))
             offset += bv.shape[0]
     scene = SceneBatch.from_mesh(np.concatenate(verts, axis=1), np.concatenate(tris), np.concatenate(labels),
                                  texcoords=np.concatenate(texs, axis=1), floor_incline=floor_incline,
@@ -346,4 +386,4 @@ def scene_from_snapshot(snapshot: dict, pattern, params=None, *, rest_vertices=N
 
 
 __all__ = ["LABEL_NAMES", "Appearance", "SceneBatch", "box_mesh", "build_scene", "default_appearance", "disk_mesh",
-           "floor_frame", "scene_from_snapshot"]
+           "floor_frame", "plate_frame", "scene_from_snapshot"]

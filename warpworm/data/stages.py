@@ -168,10 +168,11 @@ class WarpStages:
     def _renderer(self, cfg):
         from warpworm.render import Renderer
 
-        key = (cfg.render.width, cfg.render.height, cfg.sim.device)
+        key = (cfg.render.width, cfg.render.height, cfg.sim.device, cfg.render.shadows, cfg.render.shadow_map)
         r = self._renderers.get(key)
         if r is None:
-            r = self._renderers[key] = Renderer(cfg.render.width, cfg.render.height, device=cfg.sim.device)
+            r = self._renderers[key] = Renderer(cfg.render.width, cfg.render.height, device=cfg.sim.device,
+                                                shadows=cfg.render.shadows, shadow_map=cfg.render.shadow_map)
         return r
 
     def render_batch(self, frame, params, cameras, appearance, seeds, cfg):
