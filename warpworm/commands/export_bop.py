@@ -1,27 +1,37 @@
-"""``warpworm export-bop DIR OUT``: a dataset folder in the BOP layout (mm, depth_scale, masks, scene_gt*)."""
+"""``warpworm export-bop DIR OUT``: a dataset folder in the BOP layout (mm, depth_scale, masks, scene_gt*, models/)."""
 
 from __future__ import annotations
 
 import argparse
-import sys
 
-HELP = "Export a generated dataset folder to the BOP format (camera.json, scene_gt.json in mm, PNG rgb/depth/masks)."
+HELP = ("Export a generated dataset folder to the BOP format (camera.json, models/ PLY + models_info.json, "
+        "scene_gt.json in mm, PNG rgb/depth/masks).")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("dir", help="dataset folder written by 'warpworm generate'")
-    parser.add_argument("out", help="BOP output folder")
+    parser.add_argument("out", help="BOP output folder (new or empty, unless --overwrite)")
     parser.add_argument("--split", default="train_pbr", help="BOP split folder name (default train_pbr)")
     parser.add_argument("--limit", type=int, default=None, help="export only the first N samples")
+    parser.add_argument("--overwrite", action="store_true", help="write into a non-empty OUT")
 
 
 def main(args: argparse.Namespace) -> int:
+    from warpworm.commands.common import check_minimum, dataset_folder, output_folder, refuse
     from warpworm.data.export_bop import export_bop
 
     try:
+        dataset_folder(args.dir)
+        output_folder(args.out, overwrite=args.overwrite)
+        check_minimum(limit=(args.limit, 1))
+        if not args.split or "/" in args.split:
+            raise ValueError(f"--split: got {args.split!r}; expected a folder name such as train_pbr")
+    except ValueError as exc:
+        return refuse(exc)
+    try:
         res = export_bop(args.dir, args.out, split=args.split, limit=args.limit)
     except (FileNotFoundError, ValueError, OSError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 1
-    print(f"wrote {res['images']} images in {res['scenes']} scene(s) to {args.out}")
+        return refuse(exc)
+    print(f"wrote {res['images']} images in {res['scenes']} scene(s) and {res.get('models', 5)} object models to "
+          f"{args.out}")
     return 0

@@ -3,7 +3,9 @@
 Layout written::
 
     OUT/camera.json                                 # the first image's intrinsics + depth_scale (per image: scene_camera)
-    OUT/models_info.json                            # object ids and names (the worm is deformable: no model files)
+    OUT/models/obj_{obj_id:06d}.ply                 # each object's mesh in its own frame [mm] (ASCII PLY)
+    OUT/models/models_info.json                     # diameter, min_x/y/z, size_x/y/z [mm], symmetries (below)
+    OUT/models_info.json                            # = models/models_info.json plus names and segmentation ids
     OUT/train_pbr/{scene:06d}/rgb/{im:06d}.png
     OUT/train_pbr/{scene:06d}/depth/{im:06d}.png    # uint16; depth [mm] = value * depth_scale
     OUT/train_pbr/{scene:06d}/mask/{im:06d}_{gt:06d}.png        # object silhouette (occlusion ignored; see below)
@@ -14,6 +16,15 @@ Layout written::
 
 Scenes hold 1000 images: sample i is image ``i % 1000`` of scene ``i // 1000``. Objects (obj_id): 1 worm body frame,
 2 tail IPM, 3 centre IPM, 4 head IPM, 5 EPM. BOP units are mm for translations and depth.
+
+Models: the worm is its rest-shape mesh in its body frame (``poses/body``: x tail -> head, z dorsal, origin the mean
+of the segment centres; docs/render.md) for the first sample's a, b, l0 (a dataset that randomizes them has one mesh
+per sample: the model is then that of sample 0, as ``models_info.json``'s note says); a deformed worm differs from it
+by its folds. The IPMs are disks (axis +z, the moment), the EPM a cuboid of its extents (long axis +z). Symmetries
+(BOP's ``symmetries_discrete``: 4x4 row-major, translation in mm; ``symmetries_continuous``: axis and offset): the worm
+is nearly symmetric under a half turn about its dorsal axis z (head <-> tail; it looks the same, so a pose metric must
+accept both; the magnets' moments are not visible); an IPM disk is continuous about z and has a half turn about x; the
+EPM has quarter turns about z and half turns about x.
 
 The worm's ``mask`` is its full silhouette as rendered (``labels/worm_mask``); for the magnets the dataset has no
 unoccluded render, so their ``mask`` is their visible mask and their ``visib_fract`` is 1 when visible (an
@@ -53,6 +64,75 @@ def _write_json(path: Path, obj) -> None:
     os.replace(tmp, path)
 
 
+def _half_turn(axis: int) -> list[float]:
+    T = np.eye(4)
+    for k in range(3):
+        if k != axis:
+            T[k, k] = -1.0
+    return T.reshape(-1).tolist()
+
+
+def _turn_z(quarters: int) -> list[float]:
+    c, s_ = np.rint(np.cos(quarters * np.pi / 2)), np.rint(np.sin(quarters * np.pi / 2))
+    T = np.eye(4)
+    T[:2, :2] = [[c, -s_], [s_, c]]
+    return T.reshape(-1).tolist()
+
+
+def object_meshes(reader) -> dict:
+    """obj_id -> trimesh.Trimesh in the object's own frame [m] (module docstring), from sample 0's parameters."""
+    import trimesh
+
+    from warpworm.physics import crease
+    from warpworm.render.labels import WormBody
+
+    p = {k: float(reader.read(f"params/worm.{k}", [0])[0]) for k in
+         ("a", "b", "l0", "ipm_diameter", "ipm_thickness", "epm_size_x", "epm_size_y", "epm_size_z")}
+    n_units = _n_units(reader)
+    pattern = crease.build_worm(p["a"], p["b"], n_units, l0=p["l0"])
+    R, o = WormBody.from_pattern(pattern).body_frame(pattern.vertices)
+    worm = trimesh.Trimesh((pattern.vertices - o) @ R, pattern.triangles, process=False)
+    disk = trimesh.creation.cylinder(radius=0.5 * p["ipm_diameter"], height=p["ipm_thickness"], sections=32)
+    epm = trimesh.creation.box(extents=(p["epm_size_x"], p["epm_size_y"], p["epm_size_z"]))
+    return {1: worm, 2: disk, 3: disk.copy(), 4: disk.copy(), 5: epm}
+
+
+def _n_units(reader) -> int:
+    import yaml
+
+    text = reader.attrs["config_yaml"]
+    cfg = yaml.safe_load(text.decode() if isinstance(text, bytes) else str(text))
+    return int((cfg.get("sim") or {}).get("n_units", 6))
+
+
+SYMMETRIES = {
+    1: {"symmetries_discrete": [_half_turn(2)]},
+    2: {"symmetries_continuous": [{"axis": [0, 0, 1], "offset": [0, 0, 0]}], "symmetries_discrete": [_half_turn(0)]},
+    5: {"symmetries_discrete": [_turn_z(1), _turn_z(2), _turn_z(3), _half_turn(0), _half_turn(1)]},
+}
+SYMMETRIES[3] = SYMMETRIES[4] = SYMMETRIES[2]
+"""obj_id -> BOP symmetry fields (module docstring)."""
+
+
+def write_models(reader, out: Path) -> dict:
+    """``models/obj_*.ply`` [mm] and ``models/models_info.json``; returns models_info (obj_id -> fields)."""
+    (out / "models").mkdir(parents=True, exist_ok=True)
+    info = {}
+    for obj_id, mesh in object_meshes(reader).items():
+        v = np.asarray(mesh.vertices) * 1000.0
+        mm = mesh.copy()
+        mm.vertices = v
+        (out / "models" / f"obj_{obj_id:06d}.ply").write_bytes(mm.export(file_type="ply", encoding="ascii"))
+        lo, hi = v.min(axis=0), v.max(axis=0)
+        diff = v[:, None, :] - v[None, :, :]
+        info[str(obj_id)] = {"diameter": float(np.sqrt((diff ** 2).sum(-1)).max()),
+                             "min_x": float(lo[0]), "min_y": float(lo[1]), "min_z": float(lo[2]),
+                             "size_x": float(hi[0] - lo[0]), "size_y": float(hi[1] - lo[1]),
+                             "size_z": float(hi[2] - lo[2]), **SYMMETRIES.get(obj_id, {})}
+    _write_json(out / "models" / "models_info.json", info)
+    return info
+
+
 def export_bop(src, out, *, split: str = "train_pbr", limit: int | None = None) -> dict:
     """Write the BOP layout of dataset ``src`` to ``out``; returns {"images": n, "scenes": k}."""
     import cv2
@@ -68,9 +148,11 @@ def export_bop(src, out, *, split: str = "train_pbr", limit: int | None = None) 
     _write_json(out / "camera.json", {"cx": float(K0[0, 2]), "cy": float(K0[1, 2]), "fx": float(K0[0, 0]),
                                       "fy": float(K0[1, 1]), "width": int(W), "height": int(H),
                                       "depth_scale": DEPTH_SCALE})
+    models = write_models(reader, out)
     _write_json(out / "models_info.json", {
-        str(k): {"name": v[0], "segmentation_ids": list(v[1]),
-                 "note": ("body frame of the deformable worm (docs/dataset.md)" if k == 1 else
+        str(k): {**models[str(k)], "name": v[0], "segmentation_ids": list(v[1]),
+                 "note": ("rest shape of the deformable worm in its body frame, sample 0's a, b, l0; nearly "
+                          "symmetric under a half turn about z (head <-> tail)" if k == 1 else
                           "mask = visible mask and visib_fract = 1 if visible: no unoccluded render is stored")}
         for k, v in OBJECTS.items()})
     scenes = 0
