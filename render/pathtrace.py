@@ -1,10 +1,11 @@
 """A path-traced engine for the rasterizer's scenes: Mitsuba 3 (``pip install warpworm[pathtrace]``), ``scalar_rgb``.
 
-Same meshes (worm sheet by segment, IPM disks, EPM bar, floor square), cameras, colours and lights as
-:mod:`warpworm.render.rasterizer`, but light transport simulated: shadows (soft from the lamp, which is a small
-sphere, and from the ambient sky), interreflection between panels and floor, anti-aliased edges (``spp`` samples
+Same meshes (worm sheet by segment, IPM disks, EPM bar, floor square at the plate's pose), cameras, colours and
+lights (every point light, a sphere of its ``light_size``) as :mod:`warpworm.render.rasterizer`, but light transport
+simulated: shadows (soft from the spherical lights and from the ambient sky; hard from the sun, whose angular size
+``sun_size`` is not reproduced), interreflection between panels and floor, anti-aliased edges (``spp`` samples
 spread over each pixel by a Gaussian filter). Only RGB comes from here; depth, segmentation, keypoints and every
-other label stay the rasterizer's exact pixel-centre passes (docs/render.md, "Path-traced engine").
+other label stay the rasterizer's exact pixel-centre passes (docs/dataset.md, "The path-traced engine").
 
 Light units are matched to the rasterizer's Lambert shading (radiance ``albedo * (ambient + E_sun cos + ...)``):
 a diffuse BSDF reflects ``albedo / pi`` of the irradiance, so the sun's irradiance and the lamp's intensity are the
@@ -14,8 +15,8 @@ Not reproduced: the procedural paper fibres and the floor grain (the checker is)
 Camera (OpenCV ``x_cam = R x + t``, pixel centres at integers) -> Mitsuba's perspective sensor: ``to_world =
 [R^T diag(-1, -1, 1) | -R^T t]``, vertical fov ``2 atan(H / (2 fy))``, principal-point offset
 ``((W - 1) / 2 - cx) / W`` and ``((H - 1) / 2 - cy) / H`` (Mitsuba's pixel x covers [x, x + 1]); square pixels
-(``fx == fy``, as the dataset sampler draws) only. :func:`pixel_centre_seg` casts Mitsuba rays through the pixel centres of the same sensors, so a
-test can compare the two engines' geometry pixel by pixel.
+(``fx == fy``, as the dataset sampler draws) only. :func:`pixel_centre_seg` casts Mitsuba rays through the pixel
+centres of the same sensors, so a test can compare the two engines' geometry pixel by pixel.
 """
 
 from __future__ import annotations
@@ -32,7 +33,8 @@ VARIANT = "scalar_rgb"
 """Mitsuba variant: runs on any CPU from the PyPI wheel. ``llvm_ad_rgb`` is ~2x faster per sample but needs
 libLLVM >= 16 (Debian 12 ships 14 and 15, which it refuses or crashes on), so it is not the default."""
 LAMP_RADIUS = 0.02
-"""Radius [m] of the sphere that stands for the rasterizer's point lamp (soft shadows); same radiant intensity."""
+"""Radius [m] of the sphere that stands for a point lamp when the appearance gives no ``light_size`` (soft shadows);
+same radiant intensity."""
 ENGINES = ("raster", "pathtraced")
 """Values of the per-sample ``params/render.engine`` dataset."""
 _ENGINE_STREAM = 0x9A7E
@@ -112,6 +114,7 @@ def _floor(mi, scene: SceneBatch, w: int, albedo: np.ndarray) -> dict:
     h = float(scene.floor_half[w])
     m = np.eye(4)
     m[:3, 0], m[:3, 1], m[:3, 2] = ax * h, b * h, n
+    m[:3, 3] = scene.floor_origin[w] if hasattr(scene, "floor_origin") else 0.0  # the plate's centre
     ft = a.floor_tex[w % a.floor_tex.shape[0]]
     fc2 = a.floor_color2[w % a.floor_color2.shape[0]]
     refl = _rgb(albedo)
@@ -152,13 +155,29 @@ def scene_dict(scene: SceneBatch, world: int) -> dict:
     if np.any(sun > 0):
         out["sun"] = {"type": "directional", "direction": [float(-x) for x in a.sun_dir[w % a.sun_dir.shape[0]]],
                       "irradiance": {"type": "rgb", "value": [float(math.pi * x) for x in sun]}}
-    lamp = a.lamp_power[w % a.lamp_power.shape[0]]
-    if np.any(lamp > 0):  # a sphere of radiance L has intensity pi r^2 L toward any direction: pi * lamp_power
-        out["lamp"] = {"type": "sphere", "center": [float(x) for x in a.lamp_pos[w % a.lamp_pos.shape[0]]],
-                       "radius": LAMP_RADIUS,
-                       "emitter": {"type": "area", "radiance": {
-                           "type": "rgb", "value": [float(x / LAMP_RADIUS**2) for x in lamp]}}}
+    for k, (pos, power, radius) in enumerate(_point_lights(a, w)):
+        if not np.any(power > 0):
+            continue  # padding of a world with fewer lights
+        if radius <= 0:
+            out[f"lamp{k}"] = {"type": "point", "position": [float(x) for x in pos],
+                               "intensity": {"type": "rgb", "value": [float(math.pi * x) for x in power]}}
+            continue
+        # a sphere of radiance L has intensity pi r^2 L toward any direction: L = power / r^2 gives pi * power
+        out[f"lamp{k}"] = {"type": "sphere", "center": [float(x) for x in pos], "radius": float(radius),
+                           "emitter": {"type": "area", "radiance": {
+                               "type": "rgb", "value": [float(x / radius**2) for x in power]}}}
     return out
+
+
+def _point_lights(a, w: int):
+    """(position [m], irradiance at 1 m (3,), radius [m]) of every point light of world ``w``: the appearance's
+    ``light_pos / light_power / light_size`` (W, L, ...), or its single ``lamp_pos / lamp_power`` with
+    :data:`LAMP_RADIUS`."""
+    if hasattr(a, "light_pos"):
+        pos, power = a.light_pos[w % a.light_pos.shape[0]], a.light_power[w % a.light_power.shape[0]]
+        size = a.light_size[w % a.light_size.shape[0]]
+        return list(zip(pos, power, size))
+    return [(a.lamp_pos[w % a.lamp_pos.shape[0]], a.lamp_power[w % a.lamp_power.shape[0]], LAMP_RADIUS)]
 
 
 # ---------------------------------------------------------------------------------------------------------------------

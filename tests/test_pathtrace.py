@@ -30,7 +30,9 @@ def _scene(appearance, worlds=3, seed=40):
 
 @pytest.fixture(scope="module")
 def scenes():
-    scene, st = _scene(sample_appearance(load_config("default"), np.arange(3)))
+    # the plate's pose drawn (floor square and its checker moved and turned) and 1-4 spherical lights per world
+    cfg = load_config("default", ["render.plate_pose=true", "render.lights=random"])
+    scene, st = _scene(sample_appearance(cfg, np.arange(3)))
     # principal-point jitter on (the sensor's offset), square pixels (Mitsuba's sensor has one focal length)
     cams = sample_cameras(900 + np.arange(6), st["positions"], width=W_IMG, height=H_IMG,
                           world_index=np.arange(6) % 3, aspect_jitter=0.0, principal_jitter=0.05)
