@@ -325,7 +325,9 @@ def light_visibility(L: Lights, m: int, p: wp.vec3, n: wp.vec3) -> float:
     if blk[0] == 0.0:
         return 1.0
     zb = blk[1] / blk[0]
-    penumbra = wp.clamp(size * (z - zb) / zb * k[0] / z, 1.0, 8.0)
+    # the 4 x 4 grid's taps at +-r, +-r/3 have the second moment (5/9 r^2) of a disk light's edge profile (its
+    # penumbra half-width p: p^2 / 4) for r = 0.67 p
+    penumbra = wp.clamp(0.67 * size * (z - zb) / zb * k[0] / z, 1.0, 8.0)
     return 1.0 - pcf_taps(L, m, u, v, z, penumbra)[0] / 16.0
 
 

@@ -1,0 +1,131 @@
+"""Shadows (issue 24, item 2): the shadow-map pass against ray casting to the light's disk (an independent truth:
+analytic ray-box slab tests), for a small and a large point light and the directional light; no self-shadowing of lit
+surfaces; the renders of before are unchanged with shadows off."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from warpworm import quiet_warp
+from warpworm.render import Renderer, SceneBatch, default_appearance, make_cameras
+from warpworm.render.camera import intrinsics, look_at
+from warpworm.render.scene import box_mesh
+
+quiet_warp()
+BOX_LO, BOX_HI = np.array([-0.01, -0.01, 0.01]), np.array([0.01, 0.01, 0.03])  # a 2 cm cube 1 cm above the floor
+SIZE = 96
+
+
+def _scene(light_pos, light_size, light_power, sun_dir=(0.0, 0.0, 1.0), sun_color=0.0):
+    v, t = box_mesh()
+    a = default_appearance(1)
+    a.floor_tex = np.array([[0.01, 0.0, 0.0, 300.0]])  # plain floor: only light changes its brightness
+    a.ambient = np.full((1, 3), 0.03)
+    a.sun_dir = np.asarray(sun_dir, dtype=np.float64)[None] / np.linalg.norm(sun_dir)
+    a.sun_color = np.full((1, 3), sun_color)
+    a.light_pos = np.asarray(light_pos, dtype=np.float64).reshape(1, 1, 3)
+    a.light_power = np.full((1, 1, 3), light_power)
+    a.light_size = np.full((1, 1), light_size)
+    return SceneBatch.from_mesh(v * (BOX_HI - BOX_LO) + (BOX_HI + BOX_LO) / 2, t, np.full(len(t), 10),
+                                appearance=a, floor_half=0.2)
+
+
+def _camera():
+    R, t = look_at([[0.0, 0.0, 0.35]], [[0.0, 0.0, 0.0]], up=(0.0, 1.0, 0.0))
+    return make_cameras(intrinsics(300.0, 300.0, (SIZE - 1) / 2, (SIZE - 1) / 2), R, t, 0, SIZE, SIZE)
+
+
+def _linear(scene, shadows):
+    out = Renderer(SIZE, SIZE, shadows=shadows, shadow_map=256).render(scene, _camera())
+    return (out["rgb"][0].astype(np.float64).mean(axis=-1) / 255) ** 2, out["seg"][0]
+
+
+def _floor_points(seg):
+    """World points (n, 3) of the floor pixels (seg == 1) and their mask."""
+    cams = _camera()
+    mask = seg == 1
+    v, u = np.nonzero(mask)
+    d = np.stack([(u - cams.K[0, 0, 2]) / cams.K[0, 0, 0], (v - cams.K[0, 1, 2]) / cams.K[0, 1, 1], np.ones(len(u))], 1)
+    ray = d @ cams.R[0]  # R^T d per row
+    eye = cams.position[0]
+    return eye + ray * (-eye[2] / ray[:, 2])[:, None], mask
+
+
+def _hits_box(p, d):
+    """Whether rays p + s d, s in (0, inf), cross the box (slab test); p (n, 3), d (n, k, 3) -> (n, k)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t0 = (BOX_LO - p[:, None]) / d
+        t1 = (BOX_HI - p[:, None]) / d
+    near = np.nanmax(np.minimum(t0, t1), axis=-1)
+    far = np.nanmin(np.maximum(t0, t1), axis=-1)
+    return (far >= np.maximum(near, 0.0)) & (far > 0)
+
+
+def _disk(n_ring=6, n_ang=12):
+    """Unit-disk sample points (k, 2), area-uniform rings."""
+    r = np.sqrt((np.arange(n_ring) + 0.5) / n_ring)
+    a = 2 * np.pi * (np.arange(n_ang) + 0.5) / n_ang
+    return np.concatenate([[[0.0, 0.0]], (r[:, None, None] * np.stack([np.cos(a), np.sin(a)], -1)[None]).reshape(-1, 2)])
+
+
+def _lit_fraction(p, to_light_centre, radius):
+    """Fraction of a light's disk (radius [m] at the end of ``to_light_centre`` (n, 3), or angular radius [rad] for
+    a direction at infinity when ``to_light_centre`` is unit and radius < 1) seen from floor points p (n, 3)."""
+    w = to_light_centre / np.linalg.norm(to_light_centre, axis=-1, keepdims=True)
+    e1 = np.cross(w, [0.3, 0.5, 0.8])
+    e1 /= np.linalg.norm(e1, axis=-1, keepdims=True)
+    e2 = np.cross(w, e1)
+    s = _disk()
+    targets = to_light_centre[:, None] + radius * (s[None, :, :1] * e1[:, None] + s[None, :, 1:] * e2[:, None])
+    return 1.0 - _hits_box(p, targets).mean(axis=1)
+
+
+def _visibility(scene_on, scene_dark):
+    lit, seg = _linear(scene_on, True)
+    unshadowed, _ = _linear(scene_on, False)
+    dark, _ = _linear(scene_dark, False)
+    p, mask = _floor_points(seg)
+    den = unshadowed[mask] - dark[mask]
+    assert den.min() > 0.05  # every floor pixel is well lit without shadows
+    return (lit[mask] - dark[mask]) / den, p
+
+
+@pytest.mark.parametrize("size", [0.002, 0.02])
+def test_point_light_shadow_matches_ray_cast_penumbra(size):
+    lp = np.array([0.06, 0.03, 0.25])
+    vis, p = _visibility(_scene(lp, size, 0.04), _scene(lp, size, 0.0))
+    truth = _lit_fraction(p, lp - p, size)
+    lit, umbra = truth == 1.0, truth == 0.0
+    assert umbra.sum() > 30  # the cube's shadow is in view
+    assert np.mean(vis[lit] > 0.9) > 0.99 and np.mean(vis[umbra] < 0.1) > 0.98
+    # the soft band: between the fully lit and the fully hidden rays, as wide as the truth's within a factor of 2
+    soft, soft_truth = np.sum((vis > 0.1) & (vis < 0.9)), np.sum((truth > 0.1) & (truth < 0.9))
+    assert np.abs(vis - truth).mean() < 0.01  # measured 1e-4 (2 mm light), 0.0018 (2 cm), 0.0007 (sun)
+    if size > 0.01:
+        assert 0.5 * soft_truth <= soft <= 2.0 * soft_truth, (soft, soft_truth)
+
+
+def test_directional_light_shadow_matches_ray_cast():
+    sd = np.array([0.3, -0.2, 0.93])
+    sd /= np.linalg.norm(sd)
+    vis, p = _visibility(_scene([0, 0, 1], 0.01, 0.0, sun_dir=sd, sun_color=0.8),
+                         _scene([0, 0, 1], 0.01, 0.0, sun_dir=sd, sun_color=0.0))
+    far = 1e3  # the sun's disk (angular radius SUN_SIZE) seen from each point, 1 km away
+    from warpworm.render.scene import SUN_SIZE
+
+    truth = _lit_fraction(p, np.broadcast_to(sd * far, p.shape), far * np.tan(SUN_SIZE))
+    lit, umbra = truth == 1.0, truth == 0.0
+    assert umbra.sum() > 30
+    assert np.mean(vis[lit] > 0.9) > 0.99 and np.mean(vis[umbra] < 0.1) > 0.98
+    assert np.abs(vis - truth).mean() < 0.01  # measured 1e-4 (2 mm light), 0.0018 (2 cm), 0.0007 (sun)
+
+
+def test_lit_surfaces_do_not_shadow_themselves():
+    # the cube's top faces the light: with shadows it must look exactly as without (no acne from the depth test)
+    lp = np.array([0.02, -0.01, 0.3])
+    on, seg = _linear(_scene(lp, 0.01, 0.04), True)
+    off, _ = _linear(_scene(lp, 0.01, 0.04), False)
+    top = seg == 10
+    assert top.sum() > 100
+    assert np.array_equal(on[top], off[top])
