@@ -5,8 +5,11 @@ Written::
     OUT/images/{sample_id:06d}.png        # the dataset's rgb, losslessly
     OUT/annotations/keypoints.json        # COCO: info, images, annotations, categories
 
-One category, ``worm`` (id 1), with the dataset's ``keypoint_names`` and a ``skeleton`` (1-based pairs: the body axis
-tail - seg0 ... seg4 - head, each IPM centre to its segment, the end-section corners to their end). One annotation per
+One category, ``worm`` (id 1), with the 16 distinct keypoints of :mod:`warpworm.data.export_keypoints` (the dataset's
+IPM centres, which coincide with other keypoints in the image, are replaced by three dorsal points) and a ``skeleton``
+(1-based pairs: the body axis tail - seg0 ... seg4 - head, each dorsal point to its segment, the end-section corners
+to their end), ``flip_pairs`` (1-based: the keypoints a left-right mirrored image swaps) and ``half_turn_pairs`` (the
+keypoints the worm's near-symmetry, a half turn about its dorsal axis, swaps: head <-> tail). One annotation per
 image: ``keypoints`` = [u, v, v_flag] * P with the dataset's visibility (0 outside the image, 1 occluded, 2 visible;
 u = v = 0 where the flag is 0, as COCO requires), ``num_keypoints`` = keypoints with a flag > 0, ``bbox`` = the visible
 worm box (x, y, w, h) [px] (``labels/bbox_visib``; the projected box ``labels/bbox_obj`` clipped to the image where
@@ -15,15 +18,13 @@ uncompressed RLE (column-major, as pycocotools' ``frPyObjects``), ``iscrowd`` 0.
 coordinates (the dataset's OpenCV convention, which is also COCO's keypoint convention).
 
 For ``COCOeval(..., "keypoints")`` set ``params.kpt_oks_sigmas`` to P values (pycocotools' default has COCO's 17
-person keypoints); the file's ``info.kpt_oks_sigmas`` holds a uniform suggestion (0.025 per keypoint).
+person keypoints); the file's ``info.kpt_oks_sigmas`` holds ours (export_keypoints.OKS_SIGMAS).
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -36,8 +37,9 @@ HELP = "Export a dataset folder to COCO keypoints (images/*.png + annotations/ke
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("dir", help="dataset folder")
-    parser.add_argument("out", help="output folder (created; must be empty or new)")
+    parser.add_argument("out", help="output folder (new or empty, unless --overwrite)")
     parser.add_argument("--limit", type=int, default=None, help="export only the first N samples")
+    parser.add_argument("--overwrite", action="store_true", help="write into a non-empty OUT")
 
 
 def skeleton(names: list[str]) -> list[list[int]]:
@@ -45,7 +47,7 @@ def skeleton(names: list[str]) -> list[list[int]]:
     idx = {n: i + 1 for i, n in enumerate(names)}
     chain = ["tail"] + [f"seg{i}" for i in range(5)] + ["head"]
     pairs = list(zip(chain[:-1], chain[1:]))
-    pairs += [("ipm_tail", "seg0"), ("ipm_centre", "seg2"), ("ipm_head", "seg4")]
+    pairs += [("seg1_top", "seg1"), ("seg2_top", "seg2"), ("seg3_top", "seg3")]
     for end in ("tail", "head"):
         pairs += [(f"{end}_{c}", end) for c in ("top", "left", "right")]
     return [[idx[a], idx[b]] for a, b in pairs if a in idx and b in idx]
@@ -62,19 +64,22 @@ def rle_uncompressed(mask: np.ndarray) -> dict:
     return {"size": [int(mask.shape[0]), int(mask.shape[1])], "counts": [int(c) for c in counts]}
 
 
-def export_coco(src, out, limit: int | None = None) -> dict:
+def export_coco(src, out, limit: int | None = None, overwrite: bool = False) -> dict:
     """Write ``out``; returns {"images": n, "annotations": n, "file": path}."""
     import cv2
 
     from warpworm.data import dataset as ds
 
+    from warpworm.data import export_keypoints as ek
+
     reader = ds.open(src)
     out = Path(out)
-    if out.exists() and any(out.iterdir()):
-        raise ValueError(f"OUT: got '{out}'; expected an empty or new folder")
+    if out.exists() and any(out.iterdir()) and not overwrite:
+        raise ValueError(f"OUT: got '{out}'; expected an empty or new folder (or --overwrite)")
     (out / "images").mkdir(parents=True, exist_ok=True)
     (out / "annotations").mkdir(parents=True, exist_ok=True)
-    names = json.loads(reader.attrs["keypoint_names"])
+    kpx = ek.KeypointExporter(reader)
+    names = list(kpx.names)
     P = len(names)
     n = len(reader) if limit is None else min(limit, len(reader))
     images, anns = [], []
@@ -87,8 +92,8 @@ def export_coco(src, out, limit: int | None = None) -> dict:
         if not cv2.imwrite(str(out / "images" / fname), np.ascontiguousarray(rgb[..., ::-1])):
             raise OSError(f"could not write {out / 'images' / fname}")
         images.append({"id": sid, "file_name": f"images/{fname}", "width": int(W), "height": int(H)})
-        vis = s["keypoints/visibility"].astype(np.int64)
-        uv = s["keypoints/pixel"]
+        uv, vis = kpx.read([i])
+        uv, vis = uv[0], vis[0].astype(np.int64)
         kp = np.zeros((P, 3))
         kp[:, :2] = np.where(vis[:, None] > 0, uv, 0.0)
         kp[:, 2] = vis
@@ -110,12 +115,14 @@ def export_coco(src, out, limit: int | None = None) -> dict:
     coco = {
         "info": {"description": f"warpworm dataset {Path(src).resolve().name} (COCO keypoints export)",
                  "version": str(reader.attrs.get("warpworm_version", "")), "year": 2024,
-                 "kpt_oks_sigmas": [0.025] * P},
+                 "kpt_oks_sigmas": [ek.OKS_SIGMAS[n] for n in names]},
         "licenses": [],
         "images": images,
         "annotations": anns,
         "categories": [{"id": 1, "name": "worm", "supercategory": "robot", "keypoints": names,
-                        "skeleton": skeleton(names)}],
+                        "skeleton": skeleton(names),
+                        "flip_pairs": ek.index_pairs(ek.MIRROR_PAIRS, names, base=1),
+                        "half_turn_pairs": ek.index_pairs(ek.HALF_TURN_PAIRS, names, base=1)}],
     }
     path = out / "annotations" / "keypoints.json"
     tmp = path.with_name(path.name + ".tmp")
@@ -126,12 +133,14 @@ def export_coco(src, out, limit: int | None = None) -> dict:
 
 
 def main(args: argparse.Namespace) -> int:
-    from warpworm.data.dataset import DatasetError
+    from warpworm.commands.common import check_minimum, dataset_folder, output_folder, refuse
 
     try:
-        r = export_coco(args.dir, args.out, args.limit)
-    except (DatasetError, ValueError, OSError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+        dataset_folder(args.dir)
+        output_folder(args.out, overwrite=args.overwrite)
+        check_minimum(limit=(args.limit, 1))
+        r = export_coco(args.dir, args.out, args.limit, overwrite=args.overwrite)
+    except (ValueError, OSError) as exc:
+        return refuse(exc)
     print(f"wrote {r['images']} images and {r['annotations']} keypoint annotations: {r['file']}")
     return 0
