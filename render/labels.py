@@ -261,3 +261,46 @@ def _image_labels(images: dict, uv: np.ndarray, z: np.ndarray, tol: np.ndarray) 
         "labels/visib_fract": np.where(nt > 0, nv / np.maximum(nt, 1), 0.0).astype(np.float32),
         "labels/worm_mask": images["worm_mask"].astype(np.uint8),
     }
+
+
+def band_centres(positions, triangles, triangle_segment, view=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """Centres [m] of the five marker bands (segments 0..4, tail -> head; ``render.scene.BAND_COLORS``) as a camera
+    looking along ``-view`` sees them: the centroid of each band's facets weighted by their area projected on
+    ``view`` (facets facing away weigh 0), i.e. the centre of the band's pixels in an orthographic view.
+    ``positions`` (..., V, 3), ``triangles`` (T, 3), ``triangle_segment`` (T,), ``view`` (3,) or (..., 3) unit
+    (default: straight up, a camera above a flat floor). Returns (..., 5, 3); NaN for a band facing away entirely."""
+    x = np.asarray(positions, dtype=np.float64)
+    tri = np.asarray(triangles)
+    a, b, c = (x[..., tri[:, k], :] for k in range(3))
+    n2 = np.cross(b - a, c - a)  # 2 * area * unit normal
+    v = np.asarray(view, dtype=np.float64)[..., None, :]
+    w = np.maximum(np.einsum("...tc,...tc->...t", n2, np.broadcast_to(v, n2.shape)), 0.0)
+    onehot = (np.asarray(triangle_segment)[:, None] == np.arange(5)[None]).astype(np.float64)  # (T, 5)
+    num = np.einsum("...t,tb,...tc->...bc", w, onehot, (a + b + c) / 3.0)
+    den = np.einsum("...t,tb->...b", w, onehot)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return num / den[..., None]
+
+
+def band_labels(images: dict, cameras: Cameras) -> dict:
+    """The marker bands as N rendered images show them (scenes painted with
+    :func:`warpworm.render.scene.band_appearance`; what ``warpworm track`` measures): ``bands/pixel`` (N, 5, 2) [px]
+    the centroid of band b's visible pixels (segmentation id 2 + b), ``bands/pixels`` (N, 5) their count,
+    ``bands/world`` (N, 5, 3) [m] the mean surface point under them (pixels lifted with the depth); NaN when unseen."""
+    seg = np.asarray(images["seg"])
+    depth = np.asarray(images["depth"], dtype=np.float64)
+    N, H, W = seg.shape
+    v, u = np.mgrid[0:H, 0:W].astype(np.float64)
+    Kinv = np.linalg.inv(cameras.K)
+    ray = np.einsum("nij,jhw->nhwi", Kinv, np.stack([u, v, np.ones_like(u)]))  # z = 1 rays (N, H, W, 3)
+    pc = ray * depth[..., None]
+    pw = np.einsum("nji,nhwj->nhwi", cameras.R, pc - cameras.t[:, None, None])  # R^T (x_cam - t)
+    pix, cnt, world = np.full((N, 5, 2), np.nan), np.zeros((N, 5), np.int64), np.full((N, 5, 3), np.nan)
+    for b in range(5):
+        m = seg == SEG_WORM_FIRST + b
+        n = m.sum(axis=(1, 2))
+        cnt[:, b] = n
+        with np.errstate(invalid="ignore", divide="ignore"):
+            pix[:, b] = np.stack([(m * u).sum(axis=(1, 2)), (m * v).sum(axis=(1, 2))], -1) / n[:, None]
+            world[:, b] = np.einsum("nhw,nhwc->nc", m, pw) / n[:, None]
+    return {"bands/pixel": pix, "bands/pixels": cnt, "bands/world": world}

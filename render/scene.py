@@ -159,6 +159,28 @@ def hsv_to_rgb(h, s, v):
     return np.take_along_axis(table, i[None, ..., None].repeat(3, -1), 0)[0]
 
 
+BAND_NAMES = ("blue", "pink", "white", "green", "red")
+"""The paper's marker bands (§IV-E, Fig. 11), one per segment 0..4 (``CreasePattern.triangle_segment``), tail -> head."""
+BAND_COLORS = np.array([[0.15, 0.35, 0.95], [1.00, 0.45, 0.80], [0.95, 0.95, 0.95], [0.20, 0.80, 0.30],
+                        [0.90, 0.12, 0.10]])
+"""Default band colours as displayed (gamma-2 RGB in [0, 1], what a camera sees under white light), (5, 3)."""
+
+
+def band_appearance(appearance: Appearance, colors=None) -> Appearance:
+    """``appearance`` with the worm painted in five bands: segment i (segmentation id 2 + i) gets display colour
+    ``colors[i]`` ((5, 3) in [0, 1], default :data:`BAND_COLORS`; albedo = colour², the renderer shows sqrt) and no
+    paper texture (flat paint, so the bands' hues stay clean for a tracker)."""
+    c = BAND_COLORS if colors is None else np.asarray(colors, dtype=np.float64)
+    if c.shape != (5, 3) or not np.all((c >= 0) & (c <= 1)):
+        raise ValueError(f"band colors: got shape {c.shape} / range [{c.min():.3g}, {c.max():.3g}]; expected (5, 3) "
+                         "RGB values in [0, 1], tail -> head")
+    out = appearance.take(np.arange(appearance.num_worlds))
+    out.albedo = out.albedo.copy()
+    out.albedo[:, SEG_WORM_FIRST:SEG_WORM_FIRST + 5] = c[None] ** 2
+    out.paper_tex = np.zeros_like(out.paper_tex)
+    return out
+
+
 def _default_config():
     global _DEFAULT_CONFIG
     if _DEFAULT_CONFIG is None:

@@ -28,6 +28,8 @@ COMMANDS = {
     "export-coco": "export_coco",
     "verify": "verify",
     "report": "report",
+    "track": "track",
+    "fit-track": "fit_track",
 }
 
 

@@ -151,6 +151,12 @@ def appearance_from_draws(app: dict, seeds: np.ndarray):
     a.floor_tex = ft
     fibre = np.asarray(app["texture.worm"]).astype(str) == "fibre"
     a.paper_tex = np.stack([np.where(fibre, 0.25, 0.0), np.where(fibre, 0.10, 0.0)], axis=1)
+    bands = np.asarray(app["texture.worm"]).astype(str) == "bands"
+    if bands.any():  # the paper's marker bands (§IV-E): one colour per segment, flat paint
+        from warpworm.render.scene import BAND_COLORS
+
+        a.albedo[bands, 2:7] = BAND_COLORS[None] ** 2
+        a.paper_tex[bands] = 0.0
     tex_seed = app.get("texture.seed")  # per trajectory (appearance_draws); a bare per-sample seed otherwise
     a.tex_seed = ((seeds if tex_seed is None else np.asarray(tex_seed)) % (2**31 - 1)).astype(np.int32)
     el, az = app["light.elevation"], app["light.azimuth"]

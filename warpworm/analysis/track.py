@@ -1,0 +1,345 @@
+"""A reference tracker for the paper's five marker bands (§IV-E, Fig. 11): HSV segmentation, per-band centroid,
+back-projection onto a plane parallel to the floor, then the four deformation ratios and the displacement per frame.
+
+Host-side OpenCV and NumPy only. The camera follows OpenCV (``x_cam = R x_world + t``; K, distortion ``(k1, k2, p1,
+p2[, k3])``) and the floor is the plane through the world origin with normal ``(-sin i, 0, cos i)`` for incline i
+(warpworm's floor; ``floor_incline`` in the camera file). A band's centre is taken on the plane at ``height`` [m]
+above the floor along its normal: the height of the band centres seen from above in the worm's rest pose
+(:func:`default_band_height`). A worm part that lifts off the floor is seen displaced (parallax): the same camera
+model must then be used for the simulation it is compared with (``warpworm fit-track`` does so).
+
+Thresholds (OpenCV HSV: H in [0, 180), S and V in [0, 255]) follow from the band colours (:meth:`Thresholds.from_colors`,
+the colours' own hue H_b, saturation S_b and value V_b): a pixel goes to the coloured band of nearest hue if that
+hue is within ``hue_tol`` (25, i.e. 50 degrees), its saturation >= ``sat_frac`` S_b and its value >= ``val_frac``
+V_b; to the white (low-saturation) band if its saturation is below ``sat_frac`` times that of the colour of nearest hue
+and its value >= ``val_frac`` V_white (both fractions 0.5). Splitting at the midpoints (nearest hue, half the
+saturation, half the value) divides a pixel that mixes a band with its neighbour, the floor or a magnet (blur,
+JPEG's halved chroma) evenly, so no centroid is pulled. Of each mask only the largest 8-connected blob and the blobs
+near it (centroid within ``blob_reach`` times its size) are kept: a band is one patch of paint, a grey magnet or
+noise elsewhere is not. A band with fewer than ``min_pixels`` pixels is *unseen* in that frame: its centre is NaN,
+and so are the ratios and the displacement that need it. A dark, unsaturated floor keeps the white band clean.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+NUM_BANDS = 5
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
+
+
+@dataclass
+class CameraModel:
+    """A calibrated camera and the floor: K (3, 3) [px], dist (5,) OpenCV distortion, R (3, 3) and t (3,) [m] world
+    -> camera, floor_incline [rad] (the floor's slope about +y, warpworm's ``floor_incline``)."""
+
+    K: np.ndarray
+    R: np.ndarray
+    t: np.ndarray
+    dist: np.ndarray = field(default_factory=lambda: np.zeros(5))
+    floor_incline: float = 0.0
+
+    @classmethod
+    def load(cls, path) -> "CameraModel":
+        """Read CAMERA.json: ``K`` (3x3), ``R`` (3x3), ``t`` (3), optional ``dist`` and ``floor_incline`` (the
+        dataset's ``camera/K``, ``camera/R``, ``camera/t`` and ``params/worm.floor_incline`` of one sample)."""
+        d = json.loads(Path(path).read_text())
+        missing = [k for k in ("K", "R", "t") if k not in d]
+        if missing:
+            raise ValueError(f"{path}: missing key(s) {missing}; expected K (3x3), R (3x3), t (3) and optionally "
+                             "dist (4, 5, 8 or 12 values) and floor_incline [rad]")
+        return cls(K=np.asarray(d["K"], np.float64), R=np.asarray(d["R"], np.float64),
+                   t=np.asarray(d["t"], np.float64).reshape(3), dist=np.asarray(d.get("dist", np.zeros(5)), np.float64),
+                   floor_incline=float(d.get("floor_incline", 0.0)))
+
+    def save(self, path) -> None:
+        d = {k: np.asarray(v).tolist() for k, v in asdict(self).items()}
+        Path(path).write_text(json.dumps(d, indent=1))
+
+    def validate(self) -> None:
+        for name, shape in (("K", (3, 3)), ("R", (3, 3)), ("t", (3,))):
+            if np.shape(getattr(self, name)) != shape:
+                raise ValueError(f"camera {name}: got shape {np.shape(getattr(self, name))}; expected {shape}")
+        if not (self.K[0, 0] > 0 and self.K[1, 1] > 0):
+            raise ValueError(f"camera K: got fx={self.K[0, 0]}, fy={self.K[1, 1]}; expected positive focal lengths")
+        if abs(np.linalg.det(self.R) - 1.0) > 1e-6:
+            raise ValueError(f"camera R: got det {np.linalg.det(self.R):.6g}; expected a rotation (det 1)")
+
+
+OVERRIDABLE = ("hue_tol", "sat_frac", "val_frac", "min_pixels", "blob_reach")
+
+
+@dataclass
+class Thresholds:
+    """HSV thresholds of the five bands (OpenCV units): the colours' ``hue`` (5,) in [0, 180), ``sat`` and ``val``
+    (5,) in [0, 255], ``white`` (5,) bool (a low-saturation band), and the rules' knobs (module docstring)."""
+
+    hue: np.ndarray
+    sat: np.ndarray
+    val: np.ndarray
+    white: np.ndarray
+    hue_tol: float = 25.0
+    sat_frac: float = 0.5
+    val_frac: float = 0.5
+    min_pixels: int = 12
+    blob_reach: float = 1.5
+
+    @classmethod
+    def from_colors(cls, colors=None, **overrides) -> "Thresholds":
+        """Thresholds for display colours (5, 3) in [0, 1] (default the paper's, ``render.scene.BAND_COLORS``);
+        a colour with saturation < 0.3 is a white band. ``overrides``: any of :data:`OVERRIDABLE`."""
+        import cv2
+
+        from warpworm.render.scene import BAND_COLORS
+
+        c = np.asarray(BAND_COLORS if colors is None else colors, np.float64)
+        if c.shape != (NUM_BANDS, 3) or not np.all((c >= 0) & (c <= 1)):
+            raise ValueError(f"band colors: got shape {c.shape}; expected (5, 3) RGB in [0, 1], tail -> head")
+        bad = [k for k in overrides if k not in OVERRIDABLE]
+        if bad:
+            raise ValueError(f"threshold override(s) {bad}: unknown; expected one of {OVERRIDABLE}")
+        hsv = cv2.cvtColor(np.round(c * 255).astype(np.uint8)[None], cv2.COLOR_RGB2HSV)[0].astype(np.float64)
+        return cls(hue=hsv[:, 0], sat=hsv[:, 1], val=hsv[:, 2], white=hsv[:, 1] < 0.3 * 255, **overrides)
+
+
+def band_masks(rgb: np.ndarray, thr: Thresholds) -> np.ndarray:
+    """The five band masks (5, H, W) bool of one RGB uint8 image (H, W, 3) (rules in the module docstring)."""
+    import cv2
+
+    hsv = cv2.cvtColor(np.ascontiguousarray(rgb, np.uint8), cv2.COLOR_RGB2HSV).astype(np.int16)
+    h, s, v = hsv[..., 0], hsv[..., 1], hsv[..., 2]
+    dh = np.abs(h[None] - thr.hue[:, None, None])
+    dh = np.minimum(dh, 180 - dh)
+    dh[thr.white] = 999
+    nearest = np.argmin(dh, axis=0)
+    hue_ok = np.min(dh, axis=0) <= thr.hue_tol
+    # white/colour split at half the saturation of the colour the pixel's hue is nearest to
+    white_sat = thr.sat_frac * np.where(thr.white, 255.0, thr.sat)[nearest]
+    out = np.zeros((NUM_BANDS,) + rgb.shape[:2], bool)
+    for b in range(NUM_BANDS):
+        bright = v >= thr.val_frac * thr.val[b]
+        if thr.white[b]:
+            m = (s < white_sat) & bright
+        else:
+            m = hue_ok & (nearest == b) & (s >= thr.sat_frac * thr.sat[b]) & bright
+        out[b] = _near_largest(m, thr.blob_reach)
+    return out
+
+
+def _near_largest(mask: np.ndarray, reach: float) -> np.ndarray:
+    """The largest 8-connected blob of ``mask`` and every other blob of 2+ pixels whose centroid lies within
+    ``reach`` times the largest's size (sqrt of its area) of its centroid: a band is one patch of paint, seen in
+    pieces where folds hide parts of it, while a grey magnet or noise elsewhere is not the band."""
+    import cv2
+
+    n, lab, stats, cents = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
+    if n <= 2:
+        return lab > 0
+    area = stats[1:, cv2.CC_STAT_AREA]
+    big = int(np.argmax(area))
+    near = (np.linalg.norm(cents[1:] - cents[1 + big], axis=1) <= reach * np.sqrt(area[big])) & (area >= 2)
+    return np.isin(lab, 1 + np.nonzero(near)[0])
+
+
+def band_centroids(rgb: np.ndarray, thr: Thresholds) -> tuple[np.ndarray, np.ndarray]:
+    """Pixel centroids (5, 2) (u = column, v = row; NaN when unseen) and pixel counts (5,) of the bands."""
+    m = band_masks(rgb, thr)
+    n = m.sum(axis=(1, 2))
+    rows, cols = np.arange(rgb.shape[0]), np.arange(rgb.shape[1])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        u = (m.sum(axis=1) * cols).sum(axis=1) / n
+        v = (m.sum(axis=2) * rows).sum(axis=1) / n
+    uv = np.stack([u, v], -1)
+    uv[n < thr.min_pixels] = np.nan
+    return uv, n
+
+
+def back_project(uv: np.ndarray, cam: CameraModel, height: float) -> np.ndarray:
+    """World points [m] (..., 3) where the pixel rays through ``uv`` (..., 2) (distorted pixels) meet the plane
+    ``height`` [m] above the floor (along its normal); NaN in, NaN out."""
+    import cv2
+
+    uv = np.asarray(uv, np.float64)
+    flat = uv.reshape(-1, 2)
+    ok = np.isfinite(flat).all(axis=1)
+    xn = np.full_like(flat, np.nan)
+    if ok.any():
+        xn[ok] = cv2.undistortPoints(flat[ok][:, None], cam.K, cam.dist).reshape(-1, 2)
+    ray_c = np.concatenate([xn, np.ones((len(flat), 1))], axis=1)
+    ray_w = ray_c @ cam.R  # R^T d for each row
+    centre = -cam.R.T @ cam.t
+    i = cam.floor_incline
+    n = np.array([-np.sin(i), 0.0, np.cos(i)])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        s = (height - centre @ n) / (ray_w @ n)
+    return (centre + s[:, None] * ray_w).reshape(uv.shape[:-1] + (3,))
+
+
+def ratios_and_displacement(centres: np.ndarray, ref: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Four deformation ratios (F, 4) (adjacent band-centre distances over frame ``ref``'s) and the displacement
+    (F,) [m] of the five centres' mean along frame ``ref``'s tail -> head direction, from centres (F, 5, 3) [m];
+    NaN where a band is missing."""
+    c = np.asarray(centres, np.float64)
+    d = np.linalg.norm(np.diff(c, axis=1), axis=-1)
+    axis = c[ref, -1] - c[ref, 0]
+    axis = axis / np.linalg.norm(axis)
+    mean = c.mean(axis=1)
+    return d / d[ref], (mean - mean[ref]) @ axis
+
+
+def read_frames(source, fps: float | None = None):
+    """Frames of a video file or an image folder (sorted names): (list of RGB uint8 (H, W, 3), fps)."""
+    import cv2
+
+    p = Path(source)
+    if p.is_dir():
+        files = sorted(f for f in p.iterdir() if f.suffix.lower() in IMAGE_SUFFIXES)
+        if not files:
+            raise ValueError(f"FRAMES {source}: a folder without images; expected {IMAGE_SUFFIXES} files")
+        frames = [cv2.imread(str(f), cv2.IMREAD_COLOR) for f in files]
+        bad = [str(f) for f, im in zip(files, frames) if im is None]
+        if bad:
+            raise ValueError(f"FRAMES: unreadable image(s) {bad[:3]}")
+        return [cv2.cvtColor(f, cv2.COLOR_BGR2RGB) for f in frames], float(fps or 30.0)
+    if not p.is_file():
+        raise ValueError(f"FRAMES {source}: no such file or folder; expected a video file or an image folder")
+    cap = cv2.VideoCapture(str(p))
+    frames = []
+    while True:
+        ok, im = cap.read()
+        if not ok:
+            break
+        frames.append(cv2.cvtColor(im, cv2.COLOR_BGR2RGB))
+    rate = fps or cap.get(cv2.CAP_PROP_FPS) or 30.0
+    cap.release()
+    if not frames:
+        raise ValueError(f"FRAMES {source}: OpenCV read no frame; expected a video file or an image folder")
+    return frames, float(rate)
+
+
+def track(frames, cam: CameraModel, thr: Thresholds | None = None, *, height: float, fps: float = 30.0) -> dict:
+    """Track the bands in ``frames`` (sequence of RGB uint8 (H, W, 3)).
+
+    Returns a dict: ``time`` (F,) [s] (frame / fps), ``pixel`` (F, 5, 2) band centroids [px] (NaN unseen),
+    ``pixels`` (F, 5) counts, ``seen`` (F, 5) bool, ``world`` (F, 5, 3) [m] on the plane ``height`` above the floor,
+    ``ratios`` (F, 4), ``displacement`` (F,) [m] (reference: the first frame with all five bands seen, ``ref``).
+    """
+    cam.validate()
+    thr = Thresholds.from_colors() if thr is None else thr
+    got = [band_centroids(f, thr) for f in frames]
+    uv = np.stack([g[0] for g in got])
+    counts = np.stack([g[1] for g in got])
+    seen = np.isfinite(uv).all(axis=-1)
+    full = np.nonzero(seen.all(axis=1))[0]
+    if len(full) == 0:
+        raise ValueError("no frame shows all five bands; check the thresholds (docs/calibration.md)")
+    world = back_project(uv, cam, height)
+    ratios, disp = ratios_and_displacement(world, ref=int(full[0]))
+    return {"time": np.arange(len(frames)) / fps, "pixel": uv, "pixels": counts, "seen": seen, "world": world,
+            "ratios": ratios, "displacement": disp, "ref": int(full[0])}
+
+
+CSV_COLUMNS = (["frame", "time_s", "seen"] + [f"{a}{b}" for b in range(NUM_BANDS) for a in ("u", "v")]
+               + [f"{a}{b}_m" for b in range(NUM_BANDS) for a in ("x", "y", "z")]
+               + [f"ratio{b}" for b in range(4)] + ["displacement_m"])
+"""track.csv: one row per frame; ``seen`` five 0/1 digits (tail -> head); empty cells where a band is unseen."""
+
+
+def write_csv(path, tr: dict) -> None:
+    def cell(x):
+        return "" if not np.isfinite(x) else repr(float(x))
+
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(CSV_COLUMNS)
+        for i in range(len(tr["time"])):
+            w.writerow([i, repr(float(tr["time"][i])), "".join("1" if s else "0" for s in tr["seen"][i])]
+                       + [cell(x) for x in tr["pixel"][i].ravel()] + [cell(x) for x in tr["world"][i].ravel()]
+                       + [cell(x) for x in tr["ratios"][i]] + [cell(tr["displacement"][i])])
+
+
+def read_csv(path) -> dict:
+    """A track.csv back: ``time`` (F,), ``seen`` (F, 5), ``pixel`` (F, 5, 2), ``world`` (F, 5, 3), ``ratios`` (F, 4),
+    ``displacement`` (F,) (NaN for empty cells)."""
+    with open(path, newline="") as f:
+        rows = list(csv.reader(f))
+    if not rows or rows[0] != CSV_COLUMNS:
+        raise ValueError(f"{path}: header {rows[0][:4] if rows else []}...; expected the track.csv columns "
+                         f"{CSV_COLUMNS[:4]}... (written by warpworm track)")
+    body = rows[1:]
+    num = np.array([[float(x) if x != "" else np.nan for x in r[3:]] for r in body]).reshape(len(body), -1)
+    return {"time": np.array([float(r[1]) for r in body]),
+            "seen": np.array([[c == "1" for c in r[2]] for r in body]).reshape(len(body), NUM_BANDS),
+            "pixel": num[:, :10].reshape(-1, 5, 2), "world": num[:, 10:25].reshape(-1, 5, 3),
+            "ratios": num[:, 25:29], "displacement": num[:, 29]}
+
+
+def default_band_height(params=None) -> float:
+    """Height [m] above the floor of the band centres seen from above (:func:`warpworm.render.labels.band_centres`)
+    in the rest pose of ``params`` (default WormParams) lying on its base: the plane :func:`track` back-projects
+    onto."""
+    from warpworm.physics import crease
+    from warpworm.physics.params import WormParams
+    from warpworm.render.labels import band_centres
+
+    p = WormParams() if params is None else params
+    pat = crease.build_worm(float(np.ravel(p.a)[0]), float(np.ravel(p.b)[0]), int(p.n_units), float(np.ravel(p.l0)[0]))
+    c = band_centres(pat.vertices, pat.triangles, pat.triangle_segment)
+    return float(np.mean(c[:, 2]) - pat.vertices[:, 2].min())
+
+
+def render_band_video(frames: dict, model, cam: CameraModel, width: int, height: int, *, world: int = 0,
+                      colors=None, sensor_values: dict | None = None, seed: int = 0, device="cpu",
+                      return_images: bool = False):
+    """RGB uint8 frames (F, H, W, 3) of one simulated world painted with the bands, seen by ``cam`` (no distortion):
+    ``frames`` holds stacked snapshots (``positions`` (F, W', V, 3), ``magnet_pos``, ``magnet_rot``) as
+    :func:`warpworm.analysis.gait_runs.run_gait` returns them. A dark plain floor; ``sensor_values`` (per-image
+    :func:`warpworm.render.sensor.apply_sensor` values, each (F,)) add the camera's noise, blur and JPEG. With
+    ``return_images``: (rgb, the renderer's clean output dict with ``seg`` and ``depth``)."""
+    from warpworm.render import Renderer, default_appearance, make_cameras, scene_from_snapshot
+    from warpworm.render.scene import band_appearance
+
+    pos = np.asarray(frames["positions"])[:, world]
+    F = pos.shape[0]
+    snap = {"positions": pos, "magnet_pos": np.asarray(frames["magnet_pos"])[:, world],
+            "magnet_rot": np.asarray(frames["magnet_rot"])[:, world]}
+    app = default_appearance(1)
+    app.albedo = app.albedo.copy()
+    app.albedo[:, 1] = 0.03  # dark plain floor
+    app.floor_tex = np.array([[0.02, 0.0, 0.0, 300.0]])
+    app = band_appearance(app, colors).take(np.zeros(F, np.int64))
+    p = model.params
+    one = lambda v: float(np.ravel(v)[world % np.size(v)])  # noqa: E731
+    scene = scene_from_snapshot(snap, model.pattern, None, appearance=app, rest_vertices=model.rest_positions_host[world],
+                                ipm_diameter=one(p.ipm_diameter), ipm_thickness=one(p.ipm_thickness),
+                                epm_size=np.asarray(p.epm_size, np.float64).reshape(-1, 3)[0],
+                                floor_incline=one(p.floor_incline))
+    cams = make_cameras(cam.K, np.broadcast_to(cam.R, (F, 3, 3)), np.broadcast_to(cam.t, (F, 3)), np.arange(F),
+                        width, height)
+    images = Renderer(width, height, device=device).render(scene, cams)
+    rgb = images["rgb"]
+    if sensor_values is not None:
+        from warpworm.render.sensor import apply_sensor
+
+        rgb = apply_sensor(rgb, seed + np.arange(F), values=sensor_values)
+    return (rgb, images) if return_images else rgb
+
+
+def overhead_camera(centre=(0.045, 0.0, 0.0), distance=0.25, width=320, height=240, fov_deg=40.0,
+                    tilt_deg=0.0) -> CameraModel:
+    """A camera ``distance`` [m] above ``centre`` looking down (tilted ``tilt_deg`` toward -y), image +x = world +x:
+    the paper's view of the bench."""
+    from warpworm.render import focal_from_fov, look_at
+
+    c = np.asarray(centre, np.float64)
+    tl = np.radians(tilt_deg)
+    eye = c + distance * np.array([0.0, -np.sin(tl), np.cos(tl)])
+    R, t = look_at(eye, c, up=(0.0, 1.0, 0.0))
+    f = float(focal_from_fov(np.radians(fov_deg), height))
+    K = np.array([[f, 0, (width - 1) / 2], [0, f, (height - 1) / 2], [0, 0, 1.0]])
+    return CameraModel(K=K, R=R, t=t)
