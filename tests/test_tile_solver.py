@@ -1,4 +1,4 @@
-"""The block-per-world implicit substeps (:mod:`warpworm.sim.tile_solver`, the GPU path) against the band path.
+"""The block-per-world implicit substeps (:class:`warpworm.sim.tile_solver.TileSolver`, the GPU path) against the band path.
 
 The truth is the band path with full Newton steps (``Simulator(chord=False).run_substeps``: one thread per world,
 block-band Cholesky; the tile kernels take no chord steps, the band default does). The tile path
@@ -37,7 +37,7 @@ from warpworm.analysis.gait_metrics import wing_altitude_ratio
 from warpworm.sim.model import Model
 from warpworm.physics.params import WormParams
 from warpworm.sim.simulator import Simulator
-from warpworm.sim.tile_solver import DEFAULT_CUDA_BLOCK_DIM, FACTORIZATIONS, TileSubsteps, vertex_incidence
+from warpworm.sim.tile_solver import DEFAULT_CUDA_BLOCK_DIM, FACTORIZATIONS, TileSolver, vertex_incidence
 
 quiet_warp()
 
@@ -96,7 +96,7 @@ def anchored():
 
 def _run_substeps(sim, band, tile, tiles, n: int) -> None:
     sim.run_substeps(band, n)
-    tiles.launch(tile, n)
+    tiles.step(tile, sim.control, n)
 
 
 def _gait_steps(sim, band, tile, tiles, steps: int) -> None:
@@ -105,7 +105,7 @@ def _gait_steps(sim, band, tile, tiles, steps: int) -> None:
         sim.update_magnets(band)
         sim.run_substeps(band, sim.substeps)
         sim.update_magnets(tile)
-        tiles.launch(tile, sim.substeps)
+        tiles.step(tile, sim.control, sim.substeps)
 
 
 def gait():
@@ -146,13 +146,13 @@ def test_vertex_incidence_lists_every_element_of_each_vertex_in_order():
 
 def test_bad_arguments_name_the_key():
     model = Model.from_params(WormParams(), 1, "cpu")
-    sim = Simulator(model)
+    sim = Simulator(model, chord=False)
     with pytest.raises(ValueError, match="factorization"):
-        TileSubsteps(model, sim, factorization="lu")
+        TileSolver(model, sim.settings, factorization="lu")
     with pytest.raises(ValueError, match="block_dim"):
-        TileSubsteps(model, sim, block_dim=0)
+        TileSolver(model, sim.settings, block_dim=0)
     with pytest.raises(ValueError, match="num_substeps"):
-        TileSubsteps(model, sim).launch(sim.initial_state(), 0)
+        TileSolver(model, sim.settings).step(sim.initial_state(), sim.control, 0)
 
 
 def _assert_identical(band, tile) -> None:
@@ -163,7 +163,7 @@ def _assert_identical(band, tile) -> None:
 def test_band_factorization_is_bit_for_bit_the_band_path_landing_and_sliding():
     sim, band, tile = landing()
     x0 = band.positions.numpy().copy()
-    _run_substeps(sim, band, tile, TileSubsteps(sim.model, sim, "band"), 200)
+    _run_substeps(sim, band, tile, TileSolver(sim.model, sim.settings, "band"), 200)
     # the run did what it is meant to exercise: every world landed and touches its floor, the steep one slid
     assert (band.unstable.numpy() == 0).all() and (band.step_count.numpy() == 200).all()
     assert band.contact.numpy().any(axis=1).all()
@@ -178,7 +178,7 @@ def test_band_factorization_is_bit_for_bit_the_band_path_with_a_one_way_skin():
     friction, contact updates and landings scale μ as the band path's, bit for bit."""
     sim, band, tile = landing(incline=(0.0, 0.35, -0.35), friction_backward_ratio=np.array([2.0, 0.5, 2.0]))
     x0 = band.positions.numpy().copy()
-    _run_substeps(sim, band, tile, TileSubsteps(sim.model, sim, "band"), 200)
+    _run_substeps(sim, band, tile, TileSolver(sim.model, sim.settings, "band"), 200)
     assert (band.unstable.numpy() == 0).all() and band.contact.numpy().any(axis=1).all()
     dx = (band.positions.numpy()[:, :, 0] - x0[:, :, 0]).mean(axis=1)
     assert dx[1] < -1.0e-3 and dx[2] > 1.0e-3, dx  # down the slopes: tail-ward on +0.35, head-ward on −0.35
@@ -187,7 +187,7 @@ def test_band_factorization_is_bit_for_bit_the_band_path_with_a_one_way_skin():
 
 def test_band_factorization_is_bit_for_bit_the_band_path_anchored():
     sim, band, tile = anchored()
-    _run_substeps(sim, band, tile, TileSubsteps(sim.model, sim, "band"), 200)
+    _run_substeps(sim, band, tile, TileSolver(sim.model, sim.settings, "band"), 200)
     x = band.positions.numpy()
     assert x[:, 3:, 2].min() < 1.0e-4 < x[:, :3, 2].min()  # the body reached the floor, the anchored tail did not
     _assert_identical(band, tile)
@@ -197,7 +197,7 @@ def test_band_factorization_freezes_the_same_worlds():
     """The speed check at 0.17 m/s: the worlds dropped 2 and 3 mm (0.20, 0.24 m/s at impact) are frozen, the one
     dropped 1 mm (0.14 m/s) is not; a frozen world stays as the band path leaves it."""
     sim, band, tile = landing(speed_limit=0.17)
-    _run_substeps(sim, band, tile, TileSubsteps(sim.model, sim, "band"), 60)
+    _run_substeps(sim, band, tile, TileSolver(sim.model, sim.settings, "band"), 60)
     np.testing.assert_array_equal(band.unstable.numpy(), [0, 1, 1])
     _assert_identical(band, tile)
 
@@ -205,7 +205,7 @@ def test_band_factorization_freezes_the_same_worlds():
 def test_band_factorization_is_bit_for_bit_the_band_path_under_the_gait_magnets():
     sim, band, tile = gait()
     x0 = band.positions.numpy().copy()
-    _gait_steps(sim, band, tile, TileSubsteps(sim.model, sim, "band"), 100)
+    _gait_steps(sim, band, tile, TileSolver(sim.model, sim.settings, "band"), 100)
     assert np.linalg.norm(band.positions.numpy() - x0, axis=-1).max() > 1.0e-3  # the magnets moved the worm
     _assert_identical(band, tile)
 
@@ -222,7 +222,7 @@ def test_band_factorization_is_bit_for_bit_the_band_path_at_the_panel_contact():
     sim.step(band, 700)  # the band path alone to t = 1.4 s, before the second closest approach (t = 1.5 s)
     tile = model.state()
     _copy_state(band, tile)
-    tiles = TileSubsteps(sim.model, sim, "band")
+    tiles = TileSolver(sim.model, sim.settings, "band")
     hinges = model.hinges.numpy()
     lowest = 1.0
     for _ in range(10):  # to t = 1.6 s
@@ -236,7 +236,7 @@ def test_band_factorization_is_bit_for_bit_the_band_path_at_the_panel_contact():
 def test_dense_tile_factorization_matches_the_band_path_to_rounding(scenario):
     sim, band, tile = globals()[scenario]()
     x0 = band.positions.numpy().copy()
-    tiles = TileSubsteps(sim.model, sim, "dense")
+    tiles = TileSolver(sim.model, sim.settings, "dense")
     if scenario == "gait_off_floor":
         _gait_steps(sim, band, tile, tiles, 100)
     else:
@@ -260,8 +260,8 @@ def test_cooperative_threads_per_world_match_the_band_path(factorization, block_
     old = wp.config.enable_cpu_blocks
     wp.config.enable_cpu_blocks = True
     try:
-        tiles = TileSubsteps(sim.model, sim, factorization, block_dim=block_dim)
-        tiles.launch(tile, 30)
+        tiles = TileSolver(sim.model, sim.settings, factorization, block_dim=block_dim)
+        tiles.step(tile, sim.control, 30)
     finally:
         wp.config.enable_cpu_blocks = old
     sim.run_substeps(band, 30)
@@ -279,12 +279,12 @@ def test_shared_memory_per_world():
     reduction scratch, and four such blocks (with the 1 KB the hardware reserves per block) fit the 228 KB of an
     H200 (sm_90) SM; band: the reduction scratch only."""
     model = Model.from_params(WormParams(), 1, "cpu")
-    sim = Simulator(model)
+    sim = Simulator(model, chord=False)
     n = 3 * model.num_vertices
-    dense = TileSubsteps(model, sim, "dense").shared_bytes_per_world
+    dense = TileSolver(model, sim.settings, "dense").shared_bytes_per_world
     assert 4 * (n * n + n) <= dense < 4 * (n * n + n) + 1024, dense
     assert 4 * (dense + 1024) <= 228 * 1024
-    assert TileSubsteps(model, sim, "band").shared_bytes_per_world < 1024
+    assert TileSolver(model, sim.settings, "band").shared_bytes_per_world < 1024
 
 
 def _nvrtc_reason() -> str | None:

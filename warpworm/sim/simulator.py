@@ -28,7 +28,9 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from warpworm.ids import WORLD_CRUMPLED
 from warpworm.sim.model import Control, Model, State
+from warpworm.sim.solver import BandSolver, SubstepSettings, put_bounded
 from warpworm.transforms import quat_wxyz_to_matrix, quat_xyzw_to_wxyz
 
 
@@ -69,13 +71,6 @@ MAX_GRAPHS = 4
 """Step graphs a simulator keeps (one per (state, control, EPM on/off), the oldest dropped first): each pins its
 state's arrays, and a caller that makes a state per trajectory would otherwise keep them all."""
 
-
-def _put_bounded(cache: dict, key, value, limit: int) -> None:
-    """``cache[key] = value`` as the newest entry, dropping the oldest while more than ``limit`` would remain."""
-    cache.pop(key, None)
-    while len(cache) >= limit:
-        cache.pop(next(iter(cache)))  # dicts keep insertion order
-    cache[key] = value
 
 SOLVERS = ("band", "tile-band", "tile-dense")
 """The ways a world's Newton system is solved (``Simulator(solver=...)``)."""
@@ -144,24 +139,11 @@ class Simulator:
         slip_speed: float = 1.0e-5,
         solver: str = "band",
     ):
-        from warpworm.kernels import implicit_euler, magnet_pose
+        from warpworm.kernels import magnet_pose
 
         self._kpose = magnet_pose
-        self._ki = implicit_euler
-        self.newton = int(newton)
-        if self.newton < 2:
-            raise ValueError(f"newton must be >= 2 (the contacts are updated between Newton steps), got {newton}")
         if solver not in SOLVERS:
             raise ValueError(f"solver: got {solver!r}; expected one of {SOLVERS}")
-        self.chord = solver == "band" if chord is None else bool(chord)
-        if self.chord and solver != "band":
-            raise ValueError(f"chord: chord Newton steps are implemented by the 'band' solver only, got solver={solver!r}")
-        self.newton_tol = float(newton_tol)
-        if not self.newton_tol >= 0:
-            raise ValueError(f"newton_tol must be >= 0 [m/s], got {newton_tol}")
-        self.slip_speed = float(slip_speed)
-        if not self.slip_speed > 0:
-            raise ValueError(f"slip_speed must be > 0 [m/s], got {slip_speed}")
         self.model = model
         self.dt = float(dt)
         self.substeps = int(substeps)
@@ -169,46 +151,22 @@ class Simulator:
             raise ValueError("dt must be > 0 and substeps >= 1")
         self.dt_sub = self.dt / self.substeps
         self.magnet_every_substep = bool(magnet_every_substep)
-        self.strain_limit = float(strain_limit)
-        self.fold_tolerance = float(fold_tolerance)
-        from warpworm.physics import crease
-
-        waist = model.pattern.edge_label == crease.VALLEY
-        self.bar_strain_limit = wp.array(np.where(waist, max(self.strain_limit, 0.9), self.strain_limit)
-                                         .astype(np.float32), dtype=float, device=model.device)
-        """Strain beyond which a bar flags its world unstable, shape (E,), float."""
-        self.speed_limit = float(speed_limit)
+        self.settings = SubstepSettings(
+            dt=self.dt_sub, newton=int(newton), newton_tol=float(newton_tol),
+            chord=solver == "band" if chord is None else bool(chord), slip_speed=float(slip_speed),
+            strain_limit=float(strain_limit), speed_limit=float(speed_limit), fold_tolerance=float(fold_tolerance))
+        """The substep's settings, as the solver takes them."""
         self.use_graph = (model.device.is_cuda or cpu_graphs_supported()) if use_graph is None else bool(use_graph)
         self.control = model.control()
         """The default inputs (the params' EPM path, anchors at rest): ``step`` uses it unless given another."""
-        ki = self._ki
-        self._model_arrays = ki.BarHingeModel()
-        for f in ("inv_mass", "gravity", "damping", "edges", "rest_length", "bar_stiffness", "bar_stop_strain",
-                  "bar_stop_stiffness", "hinges", "hinge_length", "hinge_label", "hinge_stiffness", "hinge_damping",
-                  "fold_limit_stiffness", "anchor_vertex", "anchor_stiffness", "floor_incline", "mu_static",
-                  "mu_kinetic", "friction_backward_ratio"):
-            setattr(self._model_arrays, f, getattr(model, f))
-        self._model_arrays.hinge_rest = model.hinge_rest_angle
-        W, V, dev = model.num_worlds, model.num_vertices, model.device
-        self.scratch = ki.NewtonScratch()
-        """The solver's own scratch (:class:`warpworm.kernels.implicit_euler.NewtonScratch`), shared by every state
-        this simulator steps: nothing in it outlives a launch (a tile solver owns its own: none here)."""
-        B = model.vertex_bandwidth + 1 if solver == "band" else 1
-        Vs = V if solver == "band" else 1
-        self.scratch.x_prev = wp.zeros((W, Vs), dtype=wp.vec3, device=dev)
-        self.scratch.delta = wp.zeros((W, Vs), dtype=wp.vec3, device=dev)
-        self.scratch.hess = wp.zeros((W, Vs, B), dtype=wp.mat33, device=dev)
-        self.scratch.grad = wp.zeros((W, Vs), dtype=wp.vec3, device=dev)
-        self.scratch.released = wp.zeros((W, Vs), dtype=wp.int32, device=dev)
-        self.scratch.newton_steps = wp.zeros(W, dtype=wp.int32, device=dev)
-        self.scratch.newton_capped = wp.zeros(W, dtype=wp.int32, device=dev)
-        self.scratch.newton_factors = wp.zeros(W, dtype=wp.int32, device=dev)
-        self.solver = solver
-        self._tiles = None
-        if solver.startswith("tile-"):
-            from warpworm.sim.tile_solver import TileSubsteps
+        if solver == "band":
+            self.solver = BandSolver(model, self.settings)
+        else:
+            from warpworm.sim.tile_solver import TileSolver
 
-            self._tiles = TileSubsteps(model, self, factorization=solver[len("tile-"):])
+            self.solver = TileSolver(model, self.settings, factorization=solver[len("tile-"):])
+        """The substep solver (:class:`~warpworm.sim.solver.SolverBase`), owner of its scratch."""
+        W, dev = model.num_worlds, model.device
         from warpworm.physics.magnets import pair_wrench_scratch
 
         # the magnet pairs' wrenches between the wrench's two launches: allocated here, before any graph capture
@@ -217,24 +175,16 @@ class Simulator:
         self._snapshot_wrench = (wp.zeros((W, M), dtype=wp.vec3, device=dev),
                                  wp.zeros((W, M), dtype=wp.vec3, device=dev))
         self._last_moment = model.magnet_moment
-        self._cmds = {}
         self._graphs = {}
 
-    def newton_stats(self, reset: bool = False) -> dict | None:
-        """Per world since the simulator was built (or last reset), shape (W,) int each: ``steps``, the Newton steps
-        its substeps took (divided by the substeps run: the mean the tolerance left), ``factors``, those of them that
-        assembled and factored the Hessian (the rest were chord steps), and ``capped``, the substeps that took all
-        ``newton`` steps without meeting the tolerance. ``None`` for the tile solvers (they do not count)."""
-        if self._tiles is not None:
-            return None
-        out = {"steps": self.scratch.newton_steps.numpy().astype(np.int64),
-               "factors": self.scratch.newton_factors.numpy().astype(np.int64),
-               "capped": self.scratch.newton_capped.numpy().astype(np.int64)}
-        if reset:
-            self.scratch.newton_steps.zero_()
-            self.scratch.newton_factors.zero_()
-            self.scratch.newton_capped.zero_()
-        return out
+    @property
+    def newton(self) -> int:
+        """Newton steps per substep at most."""
+        return self.settings.newton
+
+    def newton_stats(self, reset: bool = False) -> dict:
+        """The solver's Newton counters per world (:meth:`~warpworm.sim.solver.SolverBase.newton_stats`)."""
+        return self.solver.newton_stats(reset)
 
     # ------------------------------------------------------------------------------------------------------------
     def initial_state(self) -> State:
@@ -283,52 +233,21 @@ class Simulator:
                           state.magnet_torque],
                   outputs=[state.external_force], device=m.device)
 
-    def _substep_options(self, num_substeps: int):
-        o = self._ki.SubstepOptions()
-        o.dt, o.num_substeps, o.newton = self.dt_sub, int(num_substeps), self.newton
-        o.refactor = 0 if self.chord else 1
-        o.newton_tol = self.newton_tol * self.dt_sub
-        o.slip_speed, o.strain_limit = self.slip_speed, self.bar_strain_limit
-        o.speed_limit, o.fold_tolerance = self.speed_limit, self.fold_tolerance
-        return o
-
-    def _world_cmd(self, state: State, control: Control, num_substeps: int):
-        """The per-world launch of ``num_substeps`` implicit substeps over all worlds, recorded once per (state,
-        control)."""
-        if self._tiles is not None:
-            return self._tiles.command(state, control, num_substeps)
-        key = (id(state), id(control), num_substeps)
-        cmd = self._cmds.get(key)
-        if cmd is not None and cmd[0] is state and cmd[1] is control:
-            return cmd[2]
-        m = self.model
-        s = self._ki.BarHingeState()
-        for f, name in (("x", "positions"), ("v", "velocities"), ("floor_force", "floor_force"),
-                        ("bar_strain", "bar_strain"), ("crease_angle", "crease_angle"), ("contact", "contact"),
-                        ("unstable", "unstable"), ("step_count", "step_count")):
-            setattr(s, f, getattr(state, name))
-        c = wp.launch(self._ki.implicit_step, dim=m.num_worlds,
-                      inputs=[self._model_arrays, self._substep_options(num_substeps), state.external_force,
-                              control.anchor_target, s, self.scratch],
-                      device=m.device, record_cmd=True)
-        _put_bounded(self._cmds, key, (state, control, c), 2 * MAX_GRAPHS)  # a graph holds the command it replays
-        return c
-
     def run_substeps(self, state: State, num_substeps: int, control: Control | None = None) -> State:
         """Advance every world by ``num_substeps`` solver substeps under the magnetic force already in
         ``state.external_force`` (no wrench or pose update: for checks of the solver alone)."""
-        self._world_cmd(state, control or self.control, int(num_substeps)).launch()
+        self.solver.step(state, control or self.control, int(num_substeps))
         return state
 
     def _one_step(self, state: State, control: Control, moment: wp.array) -> None:
         if self.magnet_every_substep:
-            cmd = self._world_cmd(state, control, 1)
+            cmd = self.solver.command(state, control, 1)
             for _ in range(self.substeps):
                 self._wrench(state, control, moment)
                 cmd.launch()
         else:
             self._wrench(state, control, moment)
-            self._world_cmd(state, control, self.substeps).launch()
+            self.solver.command(state, control, self.substeps).launch()
 
     # ------------------------------------------------------------------------------------------------------------
     def step(self, state: State, num_steps: int = 1, control: Control | None = None, *, epm: bool = True) -> State:
@@ -360,10 +279,10 @@ class Simulator:
                         raise
                     self.use_graph = False
                     return self.step(state, n, control, epm=epm)
-                # the graph keeps the recorded substep command it replays alive, whatever _cmds drops
+                # the graph keeps the recorded substep command it replays alive, whatever the solver drops
                 g = (state, control, capture.graph, control.revision,
-                     self._world_cmd(state, control, 1 if self.magnet_every_substep else self.substeps))
-                _put_bounded(self._graphs, key, g, MAX_GRAPHS)
+                     self.solver.command(state, control, 1 if self.magnet_every_substep else self.substeps))
+                put_bounded(self._graphs, key, g, MAX_GRAPHS)
             for _ in range(n):
                 wp.capture_launch(g[2])
             return state
@@ -459,7 +378,7 @@ class Simulator:
             "anchor_force": anchor_force.astype(np.float32),
             "contact": state.contact.numpy().astype(bool),
             "unstable": state.unstable.numpy().astype(bool),
-            "crumpled": state.unstable.numpy() == int(self._ki.WORLD_CRUMPLED),
+            "crumpled": state.unstable.numpy() == WORLD_CRUMPLED,
             "time": (state.step_count.numpy().astype(np.float64) * self.dt_sub),
         }
 

@@ -1,0 +1,698 @@
+"""The implicit-Euler substep's physics, once: the Warp structs and ``@wp.func``s both launch layouts call.
+
+A substep of length dt finds the x minimising ½ |x − x̃|²_M / dt² + E(x) (x̃ the inertial prediction; E the bars,
+hinges with their fold barrier and panel contact, anchors) by Newton steps with the floor's contacts and friction
+updated between them (docs/dynamics.md, "The solver"). Everything here is per vertex or per element, so the band
+layout (:mod:`.implicit_euler`, one thread per world, element loops) and the tile layout (:mod:`.implicit_tile`, a
+block of threads per world, one row per thread) assemble the same numbers in the same order. The element adders
+take a ``row``: :data:`~.band_cholesky.ALL_ROWS` adds the whole element, a vertex index only what lands in that
+vertex's row of the gradient and of the lower block band. Per-vertex phases take (``first``, ``stride``): the band
+layout passes (0, 1), the tile layout (lane, block_dim). float32, SI units.
+"""
+
+from __future__ import annotations
+
+import warp as wp
+
+from warpworm import ids
+
+from .band_cholesky import ALL_ROWS, band_add_block, band_add_gauss_newton3, band_add_gauss_newton4
+from .common import (crease_at_substep_end, dihedral_angle_gradient_and_normals, fold_range, pw,
+                     wing_contact_of_normal, wrap_angle)
+
+CONTACT_FREE = wp.constant(0)
+CONTACT_SLIDING = wp.constant(1)  # on the floor, kinetic friction
+CONTACT_STUCK = wp.constant(2)  # on the floor, static friction (regularised: a stiff viscous force)
+CONTACT_FIXED = wp.constant(3)  # a vertex of infinite mass (never moves; reported as free)
+CONTACTS_CHANGED = wp.constant(1)  # update_contacts: a vertex changed its contact status
+CONTACTS_LANDED = wp.constant(2)  # update_contacts: a free vertex landed (its position moved)
+WORLD_CRUMPLED = wp.constant(ids.WORLD_CRUMPLED)  # ``unstable`` flag of a crumpled world (ids: the statuses)
+RELEASED_LET_GO = wp.constant(1)  # bit 0 of ``released``: the vertex let go of the floor in this substep
+RELEASED_SWITCH = wp.constant(2)  # the count of its stick/slip switches in this substep, in the bits above
+MAX_STICK_SLIP_SWITCHES = wp.constant(6)
+"""Stick/slip switches a vertex may make in one substep; past them it is held (stuck) for the rest of it."""
+
+
+@wp.struct
+class BarHingeModel:
+    """The model arrays the substep reads, named as :class:`warpworm.sim.model.Model`'s ("(R, ...)": R = 1 shared or
+    W rows, read at row ``world % R``)."""
+
+    inv_mass: wp.array2d(dtype=float)  # (R, V) [1/kg]
+    gravity: wp.array(dtype=float)  # (R,) [m/s²] along −z
+    damping: wp.array(dtype=float)  # (R,) linear velocity damping [1/s]
+    edges: wp.array2d(dtype=wp.int32)  # (E, 2)
+    rest_length: wp.array2d(dtype=float)  # (R, E) [m]
+    bar_stiffness: wp.array2d(dtype=float)  # (R, E) EA [N]
+    bar_stop_strain: wp.array2d(dtype=wp.vec2)  # (R, E) (shortened, stretched) stop strains
+    bar_stop_stiffness: wp.array2d(dtype=float)  # (R, E) EA of the stop [N]
+    hinges: wp.array2d(dtype=wp.int32)  # (H, 4)
+    hinge_rest_angle: wp.array2d(dtype=float)  # (R, H) [rad]
+    hinge_length: wp.array2d(dtype=float)  # (R, H) [m]
+    hinge_label: wp.array(dtype=wp.int32)  # (H,)
+    hinge_stiffness: wp.array(dtype=float)  # (R,) k_α per metre of hinge [N·m/rad/m]
+    hinge_damping: wp.array(dtype=float)  # (R,) c_α per metre of hinge [N·m·s/rad/m]
+    fold_limit_stiffness: wp.array(dtype=float)  # (R,) NoFoldThrough barrier per metre [N·m/rad/m]
+    anchor_vertex: wp.array(dtype=wp.int32)  # (A,)
+    anchor_stiffness: wp.array2d(dtype=float)  # (R, A) [N/m]
+    floor_incline: wp.array(dtype=float)  # (R,) [rad] about +y
+    mu_static: wp.array(dtype=float)  # (R,)
+    mu_kinetic: wp.array(dtype=float)  # (R,)
+    friction_backward_ratio: wp.array(dtype=float)  # (R,) μ tail-ward over μ head-ward (1: isotropic)
+
+
+@wp.struct
+class SubstepOptions:
+    """The solver's settings (:class:`warpworm.sim.solver.SubstepSettings`)."""
+
+    dt: float  # substep [s]
+    num_substeps: int  # substeps per launch
+    newton: int  # Newton steps per substep at most (>= 2)
+    newton_tol: float  # [m] a Newton step (the second or later) moving no vertex farther than this ends the substep
+    refactor: int  # 1: assemble and factor the Hessian at every Newton step; 0: chord steps (band layout only)
+    slip_speed: float  # static-friction regularisation ε [m/s]
+    strain_limit: wp.array(dtype=float)  # (E,) |strain| beyond which a world explodes
+    speed_limit: float  # [m/s] beyond which (or non-finite) a world explodes
+    fold_tolerance: float  # [rad] beyond a hinge's range: the world crumpled
+
+
+@wp.struct
+class BarHingeState:
+    """The physical state the substep advances (:class:`warpworm.sim.model.State`'s arrays)."""
+
+    x: wp.array2d(dtype=wp.vec3)  # (W, V) [m] positions
+    v: wp.array2d(dtype=wp.vec3)  # (W, V) [m/s] velocities
+    floor_force: wp.array2d(dtype=wp.vec3)  # (W, V) [N] the floor's force in the last substep
+    bar_strain: wp.array2d(dtype=float)  # (W, E)
+    crease_angle: wp.array2d(dtype=float)  # (W, H) [rad] every hinge's fold angle, unwrapped
+    contact: wp.array2d(dtype=wp.int32)  # (W, V) CONTACT_*
+    unstable: wp.array(dtype=wp.int32)  # (W,) 0, 1 exploded, 2 crumpled
+    step_count: wp.array(dtype=wp.int32)  # (W,) substeps since t = 0
+
+
+@wp.struct
+class NewtonScratch:
+    """The solver's own scratch (its values mean nothing between launches, except ``delta``, zero there, and the
+    counters)."""
+
+    x_prev: wp.array2d(dtype=wp.vec3)  # (W, V) positions at the start of the substep [m]
+    delta: wp.array2d(dtype=wp.vec3)  # (W, V) x − x̃ [m]
+    hess: wp.array3d(dtype=wp.mat33)  # (W, V, B + 1) lower block band of the Newton matrix
+    grad: wp.array2d(dtype=wp.vec3)  # (W, V) right-hand side, then the Newton step
+    released: wp.array2d(dtype=wp.int32)  # (W, V) bit 0: let go of the floor this substep; above: stick/slip switches
+    newton_steps: wp.array(dtype=wp.int32)  # (W,) Newton steps taken, summed over substeps (band layout)
+    newton_capped: wp.array(dtype=wp.int32)  # (W,) substeps that took every step without meeting the tolerance
+    newton_factors: wp.array(dtype=wp.int32)  # (W,) Newton steps that assembled and factored the Hessian
+
+
+@wp.struct
+class WorldCoefficients:
+    """One world's parameter rows and scalars, read once per launch (an integer division per bar and Newton step
+    cost ~1 µs per step); the scalars named as :class:`BarHingeModel`'s fields."""
+
+    im_row: int
+    rl_row: int
+    ea_row: int
+    hr_row: int
+    hl_row: int
+    ak_row: int
+    ss_row: int  # bar_stop_strain's
+    sk_row: int  # bar_stop_stiffness's
+    gravity: wp.vec3  # [m/s²]
+    damp: float  # 1 / (1 + c dt): the velocity carried over, damped
+    hinge_stiffness: float
+    hinge_damping: float
+    fold_limit_stiffness: float
+    floor_n: wp.vec3  # the floor's unit normal
+    mu_static: float
+    mu_kinetic: float
+    friction_backward_ratio: float
+    floor_fwd: wp.vec3  # the floor's tangent along the worm's rest axis (+x tilted with the floor): head-ward
+    dt: float
+    inv_dt: float
+    inv_dt2: float
+
+
+@wp.func
+def world_coefficients(m: BarHingeModel, world: int, dt: float) -> WorldCoefficients:
+    c = WorldCoefficients()
+    c.im_row = world % m.inv_mass.shape[0]
+    c.rl_row = world % m.rest_length.shape[0]
+    c.ea_row = world % m.bar_stiffness.shape[0]
+    c.hr_row = world % m.hinge_rest_angle.shape[0]
+    c.hl_row = world % m.hinge_length.shape[0]
+    c.ak_row = world % m.anchor_stiffness.shape[0]
+    c.ss_row = world % m.bar_stop_strain.shape[0]
+    c.sk_row = world % m.bar_stop_stiffness.shape[0]
+    c.gravity = wp.vec3(0.0, 0.0, -pw(m.gravity, world))
+    c.damp = 1.0 / (1.0 + pw(m.damping, world) * dt)
+    c.hinge_stiffness = pw(m.hinge_stiffness, world)
+    c.hinge_damping = pw(m.hinge_damping, world)
+    c.fold_limit_stiffness = pw(m.fold_limit_stiffness, world)
+    beta = pw(m.floor_incline, world)
+    c.floor_n = wp.vec3(-wp.sin(beta), 0.0, wp.cos(beta))
+    c.mu_static = pw(m.mu_static, world)
+    c.mu_kinetic = pw(m.mu_kinetic, world)
+    c.friction_backward_ratio = pw(m.friction_backward_ratio, world)
+    c.floor_fwd = wp.vec3(wp.cos(beta), 0.0, wp.sin(beta))
+    c.dt = dt
+    c.inv_dt = 1.0 / dt
+    c.inv_dt2 = c.inv_dt * c.inv_dt
+    return c
+
+
+@wp.func
+def in_row(row: int, u: int) -> bool:
+    """Whether an element adder with ``row`` writes vertex ``u``'s gradient (every vertex with ALL_ROWS)."""
+    return row == ALL_ROWS or row == u
+
+
+# ------------------------------------------------------------------------------------------------------------------
+# the floor: contact statuses and friction
+
+
+@wp.func
+def mass_over_dt2(w_inv: float, inv_dt2: float) -> float:
+    """m / dt² [N/m] of a vertex of inverse mass ``w_inv`` (1 for a vertex of infinite mass: it only keeps the
+    Newton matrix definite)."""
+    if w_inv > 0.0:
+        return inv_dt2 / w_inv
+    return 1.0
+
+
+@wp.func
+def floor_landing(p0: wp.vec3, vel: wp.vec3, n: wp.vec3, mu_static: float, mu_kinetic: float, dt: float):
+    """Position-level contact and friction (eq. 8 of the paper) of a free vertex that reached the floor (normal
+    ``n``, through the origin) only in the last Newton step: from ``p0`` at velocity ``vel`` (kept apart so that a
+    ~2e-8 m penetration is not lost in a ~0.1 m position's float32 rounding), the depth d removed along n, the
+    tangential motion cancelled if at most mu_s d (stuck), else reduced by mu_k d / dt. Returns (p, vel, status,
+    d), status CONTACT_FREE when it did not touch."""
+    depth = wp.max(-(wp.dot(p0, n) + dt * wp.dot(vel, n)), 0.0)
+    out = CONTACT_FREE
+    if depth > 0.0:
+        vel = vel + n * (depth / dt)
+        vn = wp.dot(vel, n)
+        vt = vel - n * vn
+        vt_len = wp.length(vt)
+        if vt_len * dt <= mu_static * depth:
+            vel = n * vn  # stick: tangentially back to exactly where the substep started
+            out = CONTACT_STUCK
+        else:
+            vel = vel - vt * (mu_kinetic * depth / (dt * vt_len))
+            out = CONTACT_SLIDING
+    return p0 + vel * dt, vel, out, depth
+
+
+@wp.func
+def newton_start(status: int, vel: wp.vec3, v_old: wp.vec3, h0: float, n: wp.vec3, inv_dt: float) -> wp.vec3:
+    """The velocity the Newton iteration starts from (x = x_n + dt · this): the velocity ``v_old`` a free vertex
+    carries over (not x̃'s ``vel``: a warm start, fewer Newton steps; docs/dynamics.md, "Newton convergence"), no
+    lower than the floor from height ``h0``; a vertex on the floor along it (only an inertial velocity into the floor
+    moves it, to the floor at most); a fixed one keeps ``vel`` (zero)."""
+    if status == CONTACT_FIXED:
+        return vel
+    if status == CONTACT_FREE:
+        gn = wp.dot(v_old, n)
+        return v_old + n * (wp.max(gn, -h0 * inv_dt) - gn)
+    start = n * wp.max(wp.min(wp.dot(vel, n), 0.0), -h0 * inv_dt)
+    if status == CONTACT_SLIDING:
+        start = start + (v_old - n * wp.dot(v_old, n))
+    return start
+
+
+@wp.func
+def starting_contact(w_inv: float, was: int, vel: wp.vec3, v_old: wp.vec3, h0: float, n: wp.vec3, dt: float,
+                     slip_speed: float) -> int:
+    """A vertex's contact status at the start of a substep: FIXED for infinite mass; on the floor if it was (status
+    ``was``) and is not pulled off (``vel`` into the floor, or ``v_old`` not lifting it faster than ``slip_speed``),
+    or if free and ``v_old`` takes it below the floor within ``dt``: then sliding or stuck by the speed along the
+    floor it carries; else FREE. ``v_old``, not ``vel``, because the iteration starts from it (docs/dynamics.md,
+    "Newton convergence": predicting from ``vel`` made vertices land and let go every substep)."""
+    if not (w_inv > 0.0):
+        return CONTACT_FIXED
+    # on the floor, it stays if its inertial velocity presses it in or the velocity it carries does not lift it off
+    stays = wp.dot(vel, n) < 0.0 or wp.dot(v_old, n) <= slip_speed
+    if (was != CONTACT_FREE and stays) or (was == CONTACT_FREE and h0 + dt * wp.dot(v_old, n) < 0.0):
+        vt_old = v_old - n * wp.dot(v_old, n)
+        return wp.where(wp.length(vt_old) > slip_speed, CONTACT_SLIDING, CONTACT_STUCK)
+    return CONTACT_FREE
+
+
+@wp.func
+def landing_floor_force(h0: float, vel: wp.vec3, n: wp.vec3, dt: float, w_inv: float, inv_dt2: float) -> wp.vec3:
+    """The floor's first estimate of its normal force on a vertex that lands this substep: m/dt² times the depth
+    its inertial velocity ``vel`` would take it below the floor from height ``h0``."""
+    return n * (-(h0 + dt * wp.dot(vel, n)) * mass_over_dt2(w_inv, inv_dt2))
+
+
+@wp.func
+def skin_profile(u: wp.vec3, fwd: wp.vec3, n: wp.vec3, friction_backward_ratio: float):
+    """The direction profile g(θ) of a skin whose friction differs by direction, g'(θ), g''(θ) and e_θ = n × u, for
+    the unit tangential direction ``u`` at angle θ from the head-ward tangent ``fwd`` (``n`` the floor normal):
+    g = 1 + (r − 1) S(w), S(w) = 3w² − 2w³, w = (1 − cos θ) / 2, r = ``friction_backward_ratio``: 1 head-ward,
+    (1 + r) / 2 sideways, r tail-ward. A cubic in cos θ, so |v| g and |v|² g are convex for every r > 0 and the
+    friction of :func:`friction_force` is monotone with a symmetric PSD stiffness."""
+    lat = wp.cross(n, fwd)
+    a = wp.dot(u, fwd)  # cos θ
+    b = wp.dot(u, lat)  # sin θ
+    w = 0.5 * (1.0 - a)
+    s1 = 6.0 * w * (1.0 - w)
+    d = friction_backward_ratio - 1.0
+    g = 1.0 + d * w * w * (3.0 - 2.0 * w)
+    return g, d * s1 * 0.5 * b, d * ((6.0 - 12.0 * w) * 0.25 * b * b + s1 * 0.5 * a), lat * a - fwd * b
+
+
+@wp.func
+def skin_scale(v: wp.vec3, fwd: wp.vec3, n: wp.vec3, friction_backward_ratio: float) -> float:
+    """g(θ) of :func:`skin_profile` for the tangential part of ``v`` (1 without one, or for isotropic friction): the
+    factor on both coefficients where a landing's friction is applied at position level."""
+    if friction_backward_ratio == 1.0:
+        return 1.0
+    vt = v - n * wp.dot(v, n)
+    speed = wp.length(vt)
+    if not (speed > 0.0):
+        return 1.0
+    g, g1, g2, e = skin_profile(vt / speed, fwd, n, friction_backward_ratio)
+    return g
+
+
+@wp.func
+def friction_force(status: int, vt: wp.vec3, normal_force: float, mu_static: float, mu_kinetic: float,
+                   friction_backward_ratio: float, fwd: wp.vec3, n: wp.vec3, slip_speed: float):
+    """The floor's friction on a vertex moving at tangential velocity ``vt`` [m/s] under ``normal_force`` [N].
+    Returns (force [N]; a scalar stiffness −∂f/∂v [N·s/m] on the tangent plane less the unit direction t it returns
+    next (sliding; zero when stuck); the rest of the stiffness as a symmetric PSD matrix, zero when isotropic).
+
+    Isotropic (ratio 1): stuck, f = −(mu_s F_n / ε) v_t, a stiff viscous force reaching mu_s F_n at ε =
+    ``slip_speed``; sliding, f = −mu_k F_n v_t / |v_t|. Otherwise f = −∇D of the convex dissipation D = mu_k F_n |v|
+    g(θ) sliding, (mu_s F_n / 2ε) |v|² g(θ) stuck (:func:`skin_profile`), with D's Hessian as its stiffness, so the
+    Newton matrix stays symmetric and exact."""
+    if not (normal_force > 0.0):
+        return wp.vec3(0.0), 0.0, wp.vec3(0.0), wp.mat33(0.0)
+    speed = wp.length(vt)
+    if friction_backward_ratio == 1.0:
+        if status == CONTACT_STUCK:
+            c = mu_static * normal_force / slip_speed
+            return vt * (-c), c, wp.vec3(0.0), wp.mat33(0.0)
+        if speed > 0.0:
+            c = mu_kinetic * normal_force / speed
+            return vt * (-c), c, vt / speed, wp.mat33(0.0)
+        return wp.vec3(0.0), 0.0, wp.vec3(0.0), wp.mat33(0.0)
+    if not (speed > 0.0):
+        if status == CONTACT_STUCK:
+            # D's Hessian has no value at v = 0 (it depends on the direction): the mean of head-ward and tail-ward
+            return wp.vec3(0.0), 0.0, wp.vec3(0.0), (wp.identity(n=3, dtype=float) - wp.outer(n, n)) * (
+                mu_static * normal_force / slip_speed * 0.5 * (1.0 + friction_backward_ratio))
+        return wp.vec3(0.0), 0.0, wp.vec3(0.0), wp.mat33(0.0)
+    u = vt / speed
+    g, g1, g2, e = skin_profile(u, fwd, n, friction_backward_ratio)
+    if status == CONTACT_STUCK:
+        c0 = mu_static * normal_force / slip_speed
+        f = (vt * g + e * (0.5 * g1 * speed)) * (-c0)
+        k = (wp.outer(u, u) * g + (wp.outer(u, e) + wp.outer(e, u)) * (0.5 * g1) + wp.outer(e, e) * (g + 0.5 * g2))
+        return f, 0.0, wp.vec3(0.0), k * c0
+    cn = mu_kinetic * normal_force
+    return (u * g + e * g1) * (-cn), 0.0, wp.vec3(0.0), wp.outer(e, e) * (cn / speed * wp.max(g + g2, 0.0))
+
+
+@wp.func
+def world_friction(c: WorldCoefficients, status: int, vt: wp.vec3, normal_force: float, slip_speed: float):
+    """:func:`friction_force` with world ``c``'s coefficients and floor."""
+    return friction_force(status, vt, normal_force, c.mu_static, c.mu_kinetic, c.friction_backward_ratio,
+                          c.floor_fwd, c.floor_n, slip_speed)
+
+
+@wp.func
+def dof_projector(status: int, n: wp.vec3) -> wp.mat33:
+    """The directions a vertex may move in a constrained Newton step: all (free), along the floor (on it), none
+    (infinite mass)."""
+    if status == CONTACT_FIXED:
+        return wp.mat33(0.0)
+    if status == CONTACT_SLIDING or status == CONTACT_STUCK:
+        return wp.identity(n=3, dtype=float) - wp.outer(n, n)
+    return wp.identity(n=3, dtype=float)
+
+
+@wp.func
+def stick_slip_status(st: int, vt: wp.vec3, ff: wp.vec3, fn: float, n: wp.vec3, slip_speed: float, released: int):
+    """Between Newton steps: a stuck vertex whose viscous static friction exceeds what mu_s F_n (``fn``, now known)
+    can hold broke loose; a sliding one whose motion reversed against its last floor force ``ff`` or fell below half
+    the slip speed sticks. After MAX_STICK_SLIP_SWITCHES switches in a substep it is held (stuck): neighbours taking
+    turns would keep the iteration from converging (docs/dynamics.md). Returns (status, released)."""
+    vt_len = wp.length(vt)
+    new_st = st
+    if st == CONTACT_STUCK and vt_len * wp.dot(ff, n) > slip_speed * fn:
+        new_st = CONTACT_SLIDING
+    elif st == CONTACT_SLIDING and (wp.dot(vt, ff) > 0.0 or vt_len < 0.5 * slip_speed):
+        new_st = CONTACT_STUCK
+    if new_st != st:
+        if released / RELEASED_SWITCH >= MAX_STICK_SLIP_SWITCHES:
+            new_st = CONTACT_STUCK
+        else:
+            released = released + RELEASED_SWITCH
+    return new_st, released
+
+
+# ------------------------------------------------------------------------------------------------------------------
+# per-vertex phases of a substep: vertices first, first + stride, ...
+
+
+@wp.func
+def predict(world: int, first: int, stride: int, c: WorldCoefficients, m: BarHingeModel, slip_speed: float,
+            f_ext: wp.array2d(dtype=wp.vec3), s: BarHingeState, w: NewtonScratch) -> int:
+    """Predict x̃ (gravity, the step's force ``f_ext``, damping of the velocity carried over) and start the Newton
+    iteration at :func:`newton_start`, a vertex on the floor (:func:`starting_contact`) stuck or sliding on it.
+    Returns 1 if a vertex changed its contact status."""
+    dt = c.dt
+    changed = int(0)
+    for i in range(first, s.x.shape[1], stride):
+        w_inv = m.inv_mass[c.im_row, i]
+        vel = wp.vec3(0.0)
+        v_old = s.v[world, i]
+        if w_inv > 0.0:
+            # damping on the velocity carried over, not on this substep's forces (that would lower a hanging worm's
+            # weight on its anchors by 1 / (1 + c dt))
+            vel = v_old * c.damp + dt * (c.gravity + f_ext[world, i] * w_inv)
+        p = s.x[world, i]
+        w.x_prev[world, i] = p
+        w.released[world, i] = 0
+        s.v[world, i] = vel
+        h0 = wp.dot(p, c.floor_n)
+        st = starting_contact(w_inv, s.contact[world, i], vel, v_old, h0, c.floor_n, dt, slip_speed)
+        if (st == CONTACT_STUCK or st == CONTACT_SLIDING) and s.contact[world, i] == CONTACT_FREE:
+            s.floor_force[world, i] = landing_floor_force(h0, vel, c.floor_n, dt, w_inv, c.inv_dt2)
+        start = newton_start(st, vel, v_old, h0, c.floor_n, c.inv_dt)
+        if st != s.contact[world, i]:
+            changed = 1
+        s.contact[world, i] = st
+        s.x[world, i] = p + dt * start
+        w.delta[world, i] = (start - vel) * dt
+    return changed
+
+
+@wp.func
+def update_contact(world: int, i: int, c: WorldCoefficients, m: BarHingeModel, slip_speed: float,
+                   s: BarHingeState, w: NewtonScratch) -> int:
+    """Vertex ``i`` between Newton steps (``w.grad`` holds ∂Φ/∂x): the floor's normal force is n · ∂Φ/∂x; a contact
+    the floor would have to pull lets go (once per substep: after that it is held without normal force, so it cannot
+    cycle); stick / slip (:func:`stick_slip_status`); a free vertex the last step put below the floor lands.
+    Returns CONTACTS_LANDED (x moved), CONTACTS_CHANGED or 0."""
+    dt = c.dt
+    st = s.contact[world, i]
+    if st == CONTACT_FIXED:
+        return 0
+    vel0 = s.v[world, i]
+    vel = vel0 + w.delta[world, i] * c.inv_dt
+    vn = wp.dot(vel, c.floor_n)
+    if st == CONTACT_FREE:
+        depth = -(wp.dot(w.x_prev[world, i], c.floor_n) + dt * vn)
+        if depth > 0.0:
+            vel = vel + c.floor_n * (depth * c.inv_dt)
+            s.x[world, i] = w.x_prev[world, i] + vel * dt
+            w.delta[world, i] = (vel - vel0) * dt
+            # stuck: it lets go at the next update if static friction cannot hold it
+            s.contact[world, i] = CONTACT_STUCK
+            s.floor_force[world, i] = c.floor_n * (depth * mass_over_dt2(m.inv_mass[c.im_row, i], c.inv_dt2))
+            return CONTACTS_LANDED
+        return 0
+    fn = wp.dot(w.grad[world, i], c.floor_n)  # friction is tangential: not in the normal balance
+    if not (fn > 0.0):
+        if (w.released[world, i] & RELEASED_LET_GO) == 0:
+            s.contact[world, i] = CONTACT_FREE
+            s.floor_force[world, i] = wp.vec3(0.0)
+            w.released[world, i] = w.released[world, i] | RELEASED_LET_GO
+            return CONTACTS_CHANGED
+        fn = 0.0  # it let go once already: held on the floor, without normal force (nor friction)
+    vt = vel - c.floor_n * vn
+    new_st, rel = stick_slip_status(st, vt, s.floor_force[world, i], fn, c.floor_n, slip_speed, w.released[world, i])
+    s.contact[world, i] = new_st
+    w.released[world, i] = rel
+    f, kf, t, k_skin = world_friction(c, new_st, vt, fn, slip_speed)
+    s.floor_force[world, i] = c.floor_n * fn + f
+    if new_st != st:
+        return CONTACTS_CHANGED
+    return 0
+
+
+@wp.func
+def update_contacts(world: int, first: int, stride: int, c: WorldCoefficients, m: BarHingeModel,
+                    slip_speed: float, s: BarHingeState, w: NewtonScratch) -> int:
+    """:func:`update_contact` of vertices first, first + stride, ...: the largest code."""
+    changed = int(0)
+    for i in range(first, s.x.shape[1], stride):
+        changed = wp.max(changed, update_contact(world, i, c, m, slip_speed, s, w))
+    return changed
+
+
+@wp.func
+def finish_vertices(world: int, first: int, stride: int, c: WorldCoefficients, m: BarHingeModel,
+                    opt: SubstepOptions, s: BarHingeState, w: NewtonScratch):
+    """The floor once more (a vertex that reached it in the last step: :func:`floor_landing`) and v = v' + (x − x̃)
+    / dt. Returns (1 if a vertex is faster than ``speed_limit`` or non-finite; 1 if one changed its contact status)."""
+    dt = c.dt
+    bad = int(0)
+    changed = int(0)
+    for i in range(first, s.x.shape[1], stride):
+        # v = v' + (x − x̃) / dt with x − x̃ summed at its own precision (see floor_landing)
+        vel = s.v[world, i] + w.delta[world, i] * c.inv_dt
+        w.delta[world, i] = wp.vec3(0.0)
+        p0 = w.x_prev[world, i]
+        st = s.contact[world, i]
+        if st == CONTACT_FREE:
+            k_dir = skin_scale(vel, c.floor_fwd, c.floor_n, c.friction_backward_ratio)
+            p, vel, st, depth = floor_landing(p0, vel, c.floor_n, c.mu_static * k_dir, c.mu_kinetic * k_dir, dt)
+            s.floor_force[world, i] = c.floor_n * (depth * mass_over_dt2(m.inv_mass[c.im_row, i], c.inv_dt2))
+        elif st == CONTACT_STUCK or st == CONTACT_SLIDING:
+            vn = wp.dot(vel, c.floor_n)
+            vel = vel + c.floor_n * (wp.max(vn, -wp.dot(p0, c.floor_n) * c.inv_dt) - vn)
+            vt = vel - c.floor_n * wp.dot(vel, c.floor_n)
+            fn = wp.dot(s.floor_force[world, i], c.floor_n)
+            f, kf, t, k_skin = world_friction(c, st, vt, fn, opt.slip_speed)
+            s.floor_force[world, i] = c.floor_n * fn + f
+        else:
+            vel = wp.vec3(0.0)  # infinite mass
+            st = CONTACT_FREE
+        if not (wp.length(vel) < opt.speed_limit):  # NaN fails every comparison
+            bad = 1
+        s.x[world, i] = p0 + vel * dt
+        s.v[world, i] = vel
+        if st != s.contact[world, i]:
+            changed = 1
+        s.contact[world, i] = st
+    return bad, changed
+
+
+@wp.func
+def update_hinge_angles(world: int, first: int, stride: int, m: BarHingeModel, fold_tolerance: float,
+                        s: BarHingeState) -> int:
+    """Unwrap hinges first, first + stride, ...'s angles to the end of the substep. Returns 1 if one left its
+    NoFoldThrough range by more than ``fold_tolerance`` or a wing collapsed (:func:`~.common.crease_at_substep_end`):
+    the sheet crumpled."""
+    crumpled = int(0)
+    for h in range(first, m.hinges.shape[0], stride):
+        phi, flagged = crease_at_substep_end(s.crease_angle[world, h], s.x[world, m.hinges[h, 0]],
+                                             s.x[world, m.hinges[h, 1]], s.x[world, m.hinges[h, 2]],
+                                             s.x[world, m.hinges[h, 3]], m.hinge_label[h], fold_tolerance)
+        s.crease_angle[world, h] = phi
+        if flagged:
+            crumpled = 1
+    return crumpled
+
+
+@wp.func
+def apply_step(world: int, i: int, dx: wp.vec3, s: BarHingeState, w: NewtonScratch):
+    """x += dx and (x − x̃) += dx for vertex ``i``."""
+    s.x[world, i] = s.x[world, i] + dx
+    w.delta[world, i] = w.delta[world, i] + dx
+
+
+# ------------------------------------------------------------------------------------------------------------------
+# the Newton system, row by row or element by element (``row``: ALL_ROWS or a vertex)
+
+
+@wp.func
+def inertia_row(world: int, i: int, c: WorldCoefficients, m: BarHingeModel, with_hessian: bool, w: NewtonScratch):
+    """Start vertex ``i``'s row of ``grad`` (and of the band) with the inertia term M (x − x̃) / dt²; m/dt² on the
+    diagonal in every direction, the fixed ones too (keeps the matrix definite; the projection decouples them)."""
+    m_dt2 = mass_over_dt2(m.inv_mass[c.im_row, i], c.inv_dt2)
+    w.grad[world, i] = w.delta[world, i] * m_dt2  # delta is 0 for a vertex of infinite mass
+    if with_hessian:
+        w.hess[world, i, 0] = wp.identity(n=3, dtype=float) * m_dt2
+        for k in range(1, w.hess.shape[2]):
+            w.hess[world, i, k] = wp.mat33(0.0)
+
+
+@wp.func
+def bar_terms(e: int, d: wp.vec3, c: WorldCoefficients, m: BarHingeModel):
+    """Bar ``e``'s spring ½ (EA / L0)(L − L0)² at bar vector ``d`` = x_a − x_b [m], and a waist bar's stop past
+    |ε| = ε_s (a soft bar standing for panel bending turns rigid: the panels bend only so far). Returns (strain, f
+    on a [N], unit direction, axial and transverse stiffness [N/m]); the compressive geometric stiffness is dropped
+    (keeps the matrix positive definite)."""
+    length = wp.length(d)
+    l0 = m.rest_length[c.rl_row, e]
+    strain = (length - l0) / l0
+    n = d / length
+    ka = m.bar_stiffness[c.ea_row, e] / l0
+    f = n * (ka * (length - l0))
+    k_axial = ka
+    stops = m.bar_stop_strain[c.ss_row, e]
+    stop = wp.where(strain < 0.0, -stops[0], stops[1])
+    l_stop = l0 * (1.0 + stop)
+    k_trans = ka * wp.max(0.0, 1.0 - l0 / length)
+    if wp.where(strain < 0.0, strain < stop, strain > stop):
+        ks = m.bar_stop_stiffness[c.sk_row, e] / l0
+        f = f + n * (ks * (length - l_stop))
+        k_axial = k_axial + ks
+        k_trans = k_trans + ks * wp.max(0.0, 1.0 - l_stop / length)  # the stop's tension, as the bar's
+    return strain, f, n, k_axial, k_trans
+
+
+@wp.func
+def add_bar(world: int, e: int, row: int, c: WorldCoefficients, m: BarHingeModel, opt: SubstepOptions,
+            with_hessian: bool, s: BarHingeState, w: NewtonScratch) -> int:
+    """Add bar ``e`` (:func:`bar_terms`) to the rows ``row`` selects and record its strain (its first vertex's row).
+    Returns 1 if it is strained beyond its ``strain_limit`` (or non-finite), else 0."""
+    a = m.edges[e, 0]
+    b = m.edges[e, 1]
+    strain, f, n, k_axial, k_trans = bar_terms(e, s.x[world, a] - s.x[world, b], c, m)
+    if in_row(row, a):
+        s.bar_strain[world, e] = strain
+        if not (wp.abs(strain) < opt.strain_limit[e]):  # also catches NaN
+            return 1
+        w.grad[world, a] = w.grad[world, a] + f
+    if in_row(row, b):
+        w.grad[world, b] = w.grad[world, b] - f
+    if with_hessian:
+        nn = wp.outer(n, n)
+        kb = k_axial * nn + k_trans * (wp.identity(n=3, dtype=float) - nn)
+        if in_row(row, a):
+            band_add_block(world, w.hess, a, a, kb)
+        if in_row(row, b):
+            band_add_block(world, w.hess, b, b, kb)
+        if in_row(row, wp.max(a, b)):
+            band_add_block(world, w.hess, a, b, -kb)
+    return 0
+
+
+@wp.func
+def hinge_torque(phi: float, prev: float, h: int, c: WorldCoefficients, m: BarHingeModel):
+    """Hinge ``h``'s ∂E/∂φ [N·m] and Gauss–Newton stiffness [N·m/rad] at unwrapped angle ``phi`` (``prev`` at the
+    start of the substep): spring ½ k_α L (φ − φ0)², damping as the implicit dissipation ½ (c_α L / dt)(φ − φ_n)²,
+    and the NoFoldThrough barrier k_lim L beyond the range (a material constant of its own: a barrier scaling with
+    k_α would soften with the hinge). Returns (torque, stiffness, L)."""
+    lh = m.hinge_length[c.hl_row, h]
+    torque = lh * (c.hinge_stiffness * (phi - m.hinge_rest_angle[c.hr_row, h]) + c.hinge_damping * c.inv_dt * (
+        phi - prev))
+    stiff = lh * (c.hinge_stiffness + c.hinge_damping * c.inv_dt)
+    lo, hi = fold_range(m.hinge_label[h])
+    if phi < lo or phi > hi:
+        torque += c.fold_limit_stiffness * lh * (phi - wp.where(phi < lo, lo, hi))
+        stiff += c.fold_limit_stiffness * lh
+    return torque, stiff, lh
+
+
+@wp.func
+def add_wing(world: int, row: int, n: wp.vec3, len2: float, p0: wp.vec3, p1: wp.vec3, p2: wp.vec3, a: int, b: int,
+             cc: int, lh: float, with_hessian: bool, w: NewtonScratch):
+    """Add a hinge wing's panel contact barrier (:func:`~.common.wing_contact_of_normal`: tip ``a`` at ``p0``, hinge
+    ``b``–``cc``, ``n`` the wing's normal, ``len2`` the hinge's squared length) to the rows ``row`` selects."""
+    f, ga, gb, gc, kappa = wing_contact_of_normal(n, len2, p0, p1, p2, lh)
+    if kappa > 0.0:
+        if in_row(row, a):
+            w.grad[world, a] = w.grad[world, a] + ga * f
+        if in_row(row, b):
+            w.grad[world, b] = w.grad[world, b] + gb * f
+        if in_row(row, cc):
+            w.grad[world, cc] = w.grad[world, cc] + gc * f
+        if with_hessian:
+            band_add_gauss_newton3(world, w.hess, row, kappa, a, b, cc, ga, gb, gc)
+
+
+@wp.func
+def add_hinge(world: int, h: int, row: int, c: WorldCoefficients, m: BarHingeModel, with_hessian: bool,
+              s: BarHingeState, w: NewtonScratch):
+    """Add hinge ``h`` (:func:`hinge_torque` along the dihedral's gradient, Gauss–Newton: the angle's curvature
+    dropped) and its two wings' panel contact (:func:`add_wing`) to the rows ``row`` selects (``crease_angle`` holds
+    the angles at the start of the substep: damping, unwrapping)."""
+    i0 = m.hinges[h, 0]
+    i1 = m.hinges[h, 1]
+    i2 = m.hinges[h, 2]
+    i3 = m.hinges[h, 3]
+    x0 = s.x[world, i0]
+    x1 = s.x[world, i1]
+    x2 = s.x[world, i2]
+    x3 = s.x[world, i3]
+    psi, g0, g1, g2, g3, n1, n2, len2 = dihedral_angle_gradient_and_normals(x0, x1, x2, x3)
+    prev = s.crease_angle[world, h]
+    torque, stiff, lh = hinge_torque(prev + wrap_angle(psi - prev), prev, h, c, m)
+    if in_row(row, i0):
+        w.grad[world, i0] = w.grad[world, i0] + g0 * torque
+    if in_row(row, i1):
+        w.grad[world, i1] = w.grad[world, i1] + g1 * torque
+    if in_row(row, i2):
+        w.grad[world, i2] = w.grad[world, i2] + g2 * torque
+    if in_row(row, i3):
+        w.grad[world, i3] = w.grad[world, i3] + g3 * torque
+    if with_hessian:
+        band_add_gauss_newton4(world, w.hess, row, stiff, i0, i1, i2, i3, g0, g1, g2, g3)
+    # the wings' normals are the dihedral's own: n1 = (x1 − x0) × (x2 − x0), n2 = (x2 − x3) × (x1 − x3)
+    add_wing(world, row, n1, len2, x0, x1, x2, i0, i1, i2, lh, with_hessian, w)
+    add_wing(world, row, n2, len2, x3, x2, x1, i3, i2, i1, lh, with_hessian, w)
+
+
+@wp.func
+def add_anchors(world: int, row: int, c: WorldCoefficients, m: BarHingeModel,
+                anchor_target: wp.array2d(dtype=wp.vec3), with_hessian: bool, s: BarHingeState, w: NewtonScratch):
+    """Add every anchor's spring ½ k |x − target|² to the rows ``row`` selects."""
+    for an in range(m.anchor_vertex.shape[0]):
+        pv = m.anchor_vertex[an]
+        if in_row(row, pv):
+            ka = m.anchor_stiffness[c.ak_row, an]
+            if ka > 0.0:
+                w.grad[world, pv] = w.grad[world, pv] + (s.x[world, pv] - anchor_target[world, an]) * ka
+                if with_hessian:
+                    band_add_block(world, w.hess, pv, pv, wp.identity(n=3, dtype=float) * ka)
+
+
+@wp.func
+def friction_row(world: int, i: int, c: WorldCoefficients, slip_speed: float, with_hessian: bool,
+                 s: BarHingeState, w: NewtonScratch):
+    """Add vertex ``i``'s floor friction (:func:`friction_force` at its Newton iterate's velocity v' + (x − x̃)/dt and
+    the normal force of ``floor_force``) to ``grad`` and its stiffness / dt to the diagonal block. Friction depends
+    on the contacts, so it is added after they are updated."""
+    st = s.contact[world, i]
+    if st == CONTACT_SLIDING or st == CONTACT_STUCK:
+        vel = s.v[world, i] + w.delta[world, i] * c.inv_dt
+        vt = vel - c.floor_n * wp.dot(vel, c.floor_n)
+        f, kf, t, k_skin = world_friction(c, st, vt, wp.dot(s.floor_force[world, i], c.floor_n), slip_speed)
+        w.grad[world, i] = w.grad[world, i] - f
+        if with_hessian:
+            w.hess[world, i, 0] = w.hess[world, i, 0] + (
+                wp.identity(n=3, dtype=float) - wp.outer(c.floor_n, c.floor_n) - wp.outer(t, t)) * (
+                kf * c.inv_dt) + k_skin * c.inv_dt
+
+
+@wp.func
+def project_row(world: int, u: int, c: WorldCoefficients, m: BarHingeModel, s: BarHingeState, w: NewtonScratch):
+    """Row ``u`` of the Newton matrix restricted to the vertices' allowed directions: block (u, v) -> P_u B P_v; the
+    removed directions of the diagonal block get m/dt² back (keeps the matrix definite; their update is zero)."""
+    su = s.contact[world, u]
+    for band in range(w.hess.shape[2]):
+        vv = u - band
+        if vv >= 0:
+            sv = s.contact[world, vv]
+            if su != CONTACT_FREE or sv != CONTACT_FREE:
+                pu = dof_projector(su, c.floor_n)
+                blk = pu * w.hess[world, u, band] * dof_projector(sv, c.floor_n)
+                if band == 0:
+                    blk = blk + (wp.identity(n=3, dtype=float) - pu) * mass_over_dt2(m.inv_mass[c.im_row, u],
+                                                                                    c.inv_dt2)
+                w.hess[world, u, band] = blk
+
+
+@wp.func
+def project_rhs(world: int, i: int, c: WorldCoefficients, s: BarHingeState, w: NewtonScratch):
+    """Vertex ``i``'s right-hand side restricted to its allowed directions."""
+    st = s.contact[world, i]
+    if st != CONTACT_FREE:
+        w.grad[world, i] = dof_projector(st, c.floor_n) * w.grad[world, i]
