@@ -26,6 +26,8 @@ COMMANDS = {
     "export-bop": "export_bop",
     "export-usd": "export_usd",
     "export-coco": "export_coco",
+    "export-yolo": "export_yolo",
+    "export-webdataset": "export_webdataset",
     "verify": "verify",
     "report": "report",
     "track": "track",

@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from warpworm.data import export_json as strict_json
+from warpworm.data.export_webdataset import rle_uncompressed
 from warpworm import ids
 
 HELP = "Export a dataset folder to COCO keypoints (images/*.png + annotations/keypoints.json)."
@@ -51,17 +52,6 @@ def skeleton(names: list[str]) -> list[list[int]]:
     for end in ("tail", "head"):
         pairs += [(f"{end}_{c}", end) for c in ("top", "left", "right")]
     return [[idx[a], idx[b]] for a, b in pairs if a in idx and b in idx]
-
-
-def rle_uncompressed(mask: np.ndarray) -> dict:
-    """COCO uncompressed RLE of a (H, W) boolean mask: run lengths in column-major order, starting with zeros."""
-    flat = np.asarray(mask, bool).flatten(order="F")
-    change = np.flatnonzero(np.diff(flat.astype(np.int8))) + 1
-    bounds = np.concatenate([[0], change, [flat.size]])
-    counts = np.diff(bounds).tolist()
-    if flat.size and flat[0]:
-        counts = [0] + counts
-    return {"size": [int(mask.shape[0]), int(mask.shape[1])], "counts": [int(c) for c in counts]}
 
 
 def export_coco(src, out, limit: int | None = None, overwrite: bool = False) -> dict:

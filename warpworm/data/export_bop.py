@@ -133,6 +133,55 @@ def write_models(reader, out: Path) -> dict:
     return info
 
 
+IMAGE_KEYS = ("rgb", "depth", "segmentation", "labels/worm_mask", "camera/K", "camera/R", "camera/t", "poses/body",
+              "poses/ipm", "poses/epm")
+
+
+def image_records(reader, idx, block: int = 256):
+    """Yield (j, sample index, record) for samples ``idx``: the BOP annotations of one image, ``camera``
+    (scene_camera entry), ``gt`` and ``gt_info`` (lists over :data:`OBJECTS`), ``mask`` / ``mask_visib`` (5, H, W)
+    bool, ``rgb`` (H, W, 3) uint8 RGB, ``depth`` (H, W) uint16 [depth_scale mm]. Read in blocks (random access is
+    per shard anyway; memory stays flat)."""
+    for b0 in range(0, len(idx), block):
+        blk = np.asarray(idx[b0:b0 + block])
+        data = {k: reader.read(k, blk) for k in IMAGE_KEYS}
+        for j, i in enumerate(blk):
+            R, t, K = data["camera/R"][j], data["camera/t"][j], data["camera/K"][j]
+            dmm = data["depth"][j].astype(np.float64) * 1000.0 / DEPTH_SCALE
+            poses = [data["poses/body"][j], *data["poses/ipm"][j], data["poses/epm"][j]]
+            seg = data["segmentation"][j]
+            gl, il, full_m, vis_m = [], [], [], []
+            for obj_id, (_, seg_ids) in OBJECTS.items():
+                T = poses[obj_id - 1]
+                gl.append({"obj_id": obj_id, "cam_R_m2c": (R @ T[:3, :3]).reshape(-1).tolist(),
+                           "cam_t_m2c": ((R @ T[:3, 3] + t) * 1000.0).tolist()})
+                visib = np.isin(seg, seg_ids)
+                full = (data["labels/worm_mask"][j] > 0 if obj_id == 1 else visib) | visib
+                na, nv = int(full.sum()), int(visib.sum())
+                il.append({"bbox_obj": _bbox(full), "bbox_visib": _bbox(visib), "px_count_all": na,
+                           "px_count_valid": na, "px_count_visib": nv,
+                           "visib_fract": float(nv / na) if na else 0.0})
+                full_m.append(full)
+                vis_m.append(visib)
+            yield j, int(i), {
+                "camera": {"cam_K": K.reshape(-1).tolist(), "cam_R_w2c": R.reshape(-1).tolist(),
+                           "cam_t_w2c": (t * 1000.0).tolist(), "depth_scale": DEPTH_SCALE},
+                "gt": gl, "gt_info": il, "mask": np.stack(full_m), "mask_visib": np.stack(vis_m),
+                "rgb": np.ascontiguousarray(data["rgb"][j]),
+                "depth": np.clip(np.rint(dmm), 0, 65535).astype(np.uint16)}
+
+
+def write_model_files(reader, out: Path) -> None:
+    """``models/`` and the root ``models_info.json`` (names, segmentation ids, notes) of an export to ``out``."""
+    models = write_models(reader, out)
+    _write_json(out / "models_info.json", {
+        str(k): {**models[str(k)], "name": v[0], "segmentation_ids": list(v[1]),
+                 "note": ("rest shape of the deformable worm in its body frame, sample 0's a, b, l0; nearly "
+                          "symmetric under a half turn about z (head <-> tail)" if k == 1 else
+                          "mask = visible mask and visib_fract = 1 if visible: no unoccluded render is stored")}
+        for k, v in OBJECTS.items()})
+
+
 def export_bop(src, out, *, split: str = "train_pbr", limit: int | None = None) -> dict:
     """Write the BOP layout of dataset ``src`` to ``out``; returns {"images": n, "scenes": k}."""
     import cv2
@@ -148,13 +197,7 @@ def export_bop(src, out, *, split: str = "train_pbr", limit: int | None = None) 
     _write_json(out / "camera.json", {"cx": float(K0[0, 2]), "cy": float(K0[1, 2]), "fx": float(K0[0, 0]),
                                       "fy": float(K0[1, 1]), "width": int(W), "height": int(H),
                                       "depth_scale": DEPTH_SCALE})
-    models = write_models(reader, out)
-    _write_json(out / "models_info.json", {
-        str(k): {**models[str(k)], "name": v[0], "segmentation_ids": list(v[1]),
-                 "note": ("rest shape of the deformable worm in its body frame, sample 0's a, b, l0; nearly "
-                          "symmetric under a half turn about z (head <-> tail)" if k == 1 else
-                          "mask = visible mask and visib_fract = 1 if visible: no unoccluded render is stored")}
-        for k, v in OBJECTS.items()})
+    write_model_files(reader, out)
     scenes = 0
     for s0 in range(0, n, SCENE_SIZE):
         idx = np.arange(s0, min(n, s0 + SCENE_SIZE))
@@ -162,37 +205,15 @@ def export_bop(src, out, *, split: str = "train_pbr", limit: int | None = None) 
         for sub in ("rgb", "depth", "mask", "mask_visib"):
             (sdir / sub).mkdir(parents=True, exist_ok=True)
         cams, gts, infos = {}, {}, {}
-        # read in blocks: random access is per shard anyway, and this keeps memory flat
-        for b0 in range(0, len(idx), 256):
-            blk = idx[b0:b0 + 256]
-            data = {k: reader.read(k, blk) for k in ("rgb", "depth", "segmentation", "labels/worm_mask", "camera/K",
-                                                     "camera/R", "camera/t", "poses/body", "poses/ipm", "poses/epm")}
-            for j, i in enumerate(blk):
-                im = int(i - s0)
-                R, t, K = data["camera/R"][j], data["camera/t"][j], data["camera/K"][j]
-                cv2.imwrite(str(sdir / "rgb" / f"{im:06d}.png"), data["rgb"][j][..., ::-1])
-                dmm = data["depth"][j].astype(np.float64) * 1000.0 / DEPTH_SCALE
-                cv2.imwrite(str(sdir / "depth" / f"{im:06d}.png"), np.clip(np.rint(dmm), 0, 65535).astype(np.uint16))
-                cams[str(im)] = {"cam_K": K.reshape(-1).tolist(), "cam_R_w2c": R.reshape(-1).tolist(),
-                                 "cam_t_w2c": (t * 1000.0).tolist(), "depth_scale": DEPTH_SCALE}
-                poses = [data["poses/body"][j], *data["poses/ipm"][j], data["poses/epm"][j]]
-                seg = data["segmentation"][j]
-                gl, il = [], []
-                for gt, (obj_id, (_, ids)) in enumerate(OBJECTS.items()):
-                    T = poses[obj_id - 1]
-                    gl.append({"obj_id": obj_id, "cam_R_m2c": (R @ T[:3, :3]).reshape(-1).tolist(),
-                               "cam_t_m2c": ((R @ T[:3, 3] + t) * 1000.0).tolist()})
-                    visib = np.isin(seg, ids)
-                    full = data["labels/worm_mask"][j] > 0 if obj_id == 1 else visib
-                    full = full | visib
-                    cv2.imwrite(str(sdir / "mask" / f"{im:06d}_{gt:06d}.png"), full.astype(np.uint8) * 255)
-                    cv2.imwrite(str(sdir / "mask_visib" / f"{im:06d}_{gt:06d}.png"), visib.astype(np.uint8) * 255)
-                    na, nv = int(full.sum()), int(visib.sum())
-                    il.append({"bbox_obj": _bbox(full), "bbox_visib": _bbox(visib), "px_count_all": na,
-                               "px_count_valid": na, "px_count_visib": nv,
-                               "visib_fract": float(nv / na) if na else 0.0})
-                gts[str(im)] = gl
-                infos[str(im)] = il
+        for j, i, rec in image_records(reader, idx):
+            im = int(i - s0)
+            cv2.imwrite(str(sdir / "rgb" / f"{im:06d}.png"), rec["rgb"][..., ::-1])
+            cv2.imwrite(str(sdir / "depth" / f"{im:06d}.png"), rec["depth"])
+            for gt in range(len(OBJECTS)):
+                cv2.imwrite(str(sdir / "mask" / f"{im:06d}_{gt:06d}.png"), rec["mask"][gt].astype(np.uint8) * 255)
+                cv2.imwrite(str(sdir / "mask_visib" / f"{im:06d}_{gt:06d}.png"),
+                            rec["mask_visib"][gt].astype(np.uint8) * 255)
+            cams[str(im)], gts[str(im)], infos[str(im)] = rec["camera"], rec["gt"], rec["gt_info"]
         _write_json(sdir / "scene_camera.json", cams)
         _write_json(sdir / "scene_gt.json", gts)
         _write_json(sdir / "scene_gt_info.json", infos)

@@ -1,0 +1,39 @@
+"""``warpworm export-yolo DIR OUT``: an Ultralytics YOLO pose dataset (warpworm.data.export_yolo)."""
+
+from __future__ import annotations
+
+import argparse
+
+HELP = ("Export a dataset folder for Ultralytics YOLO pose: images/ and labels/ (train/val by trajectory) and "
+        "dataset.yaml with kpt_shape, flip_idx and OKS sigmas.")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("dir", help="dataset folder written by 'warpworm generate'")
+    parser.add_argument("out", help="output folder (new or empty, unless --overwrite)")
+    parser.add_argument("--limit", type=int, default=None, help="export only the first N samples")
+    parser.add_argument("--val-fraction", type=float, default=0.1,
+                        help="share of the trajectories held out for validation (default 0.1)")
+    parser.add_argument("--overwrite", action="store_true", help="write into a non-empty OUT")
+
+
+def main(args: argparse.Namespace) -> int:
+    from warpworm.commands.common import check_minimum, dataset_folder, output_folder, refuse
+
+    try:
+        dataset_folder(args.dir)
+        output_folder(args.out, overwrite=args.overwrite)
+        check_minimum(limit=(args.limit, 1))
+        if not 0 <= args.val_fraction < 1:
+            raise ValueError(f"--val-fraction: got {args.val_fraction}; expected a fraction in [0, 1)")
+    except ValueError as exc:
+        return refuse(exc)
+    from warpworm.data.export_yolo import export_yolo
+
+    try:
+        r = export_yolo(args.dir, args.out, limit=args.limit, val_fraction=args.val_fraction)
+    except (ValueError, OSError) as exc:
+        return refuse(exc)
+    print(f"wrote {r['train']} train and {r['val']} val images ({r['labels']} with a worm) and {r['yaml']}; train "
+          f"with: yolo pose train data={r['yaml']} model=yolo11n-pose.yaml")
+    return 0
