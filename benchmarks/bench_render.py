@@ -110,8 +110,49 @@ def run(quick: bool = False, device=None, threads=(1, 2)) -> list[dict]:
                 "raycast_img_s": N / (t_c + t_build), "raycast_ms": (t_c + t_build) * 1e3,
                 "speedup": (t_c + t_build) / t_r, "depth_agree": agree, "gauge_ns": gauge,
             })
-    return rows
+    return rows + feature_rows(quick, dev)
 
+
+FEATURES = (
+    ("off (before)", [], {}),
+    ("plate_pose", ["render.plate_pose=true"], {}),
+    ("lights: random [1, 4]", ["render.lights=random"], {}),
+    ("plate_pose + lights: random", ["render.plate_pose=true", "render.lights=random"], {}),
+    ("shadows (sun + lamp, 128 px maps)", [], {"shadows": True}),
+    ("shadows, 256 px maps", [], {"shadows": True, "shadow_map": 256}),
+    ("shadows + lights: random [1, 4]", ["render.plate_pose=true", "render.lights=random"], {"shadows": True}),
+)
+"""(name, config overrides, Renderer options) of the issue-24 rows: each realism option on its own and together."""
+
+
+def feature_rows(quick: bool, dev) -> list[dict]:
+    """Images/s at the dataset's 128 x 96 with each issue-24 option on and off (posed worms with magnets, the
+    config's looks and lights; 16 worlds x 8 cameras, quick 8 x 8; one thread)."""
+    from warpworm.data.config import load_config
+    from warpworm.data.sampling import sample_appearance
+    from warpworm.render import Renderer, build_scene, sample_cameras
+    from warpworm.render.demo import default_pattern, posed_worm_states
+
+    W, C, repeats = (8, 8, 3) if quick else (16, 8, 5)
+    pattern = default_pattern()
+    states = posed_worm_states(np.arange(W), pattern)
+    N = W * C
+    cams = sample_cameras(np.arange(N), states["positions"], width=128, height=96, world_index=np.arange(N) % W)
+    rows, base = [], None
+    for name, overrides, opts in FEATURES:
+        app = sample_appearance(load_config("default", overrides), np.arange(W))
+        scene = build_scene(states["positions"], pattern.triangles, pattern.triangle_segment,
+                            magnet_pos=states["magnet_pos"], magnet_rot=states["magnet_rot"],
+                            worm_texcoords=pattern.vertices, appearance=app)
+        renderer = Renderer(128, 96, device=dev, **opts)
+        renderer.render(scene, cams)  # warm-up
+        gauge = _machine_ns_per_element(dev)
+        t, c = _best_time(lambda: renderer.render(scene, cams), repeats, cpu=True)
+        base = t if base is None else base
+        rows.append({"device": dev.alias, "feature": name, "size": "128x96", "images": N,
+                     "point_lights": int(app.light_pos.shape[1]), "raster_img_s": N / t, "raster_ms": t * 1e3,
+                     "raster_img_cpu_s": N / c, "cost_x": t / base, "gauge_ns": gauge})
+    return rows
 
 
 def headline(device=None, quick: bool = False) -> dict:

@@ -321,6 +321,9 @@ def light_visibility(L: Lights, m: int, p: wp.vec3, n: wp.vec3) -> float:
     z = pc[2] - texel
     size = L.map_light_size[m]
     search = wp.clamp(size * k[0] / z, 1.0, 8.0)
+    side = float(L.map_side)
+    if u < -search - 1.0 or v < -search - 1.0 or u > side + search or v > side + search:
+        return 1.0  # outside the map, which covers every caster: nothing between the point and the light
     blk = pcf_taps(L, m, u, v, z, search)
     if blk[0] == 0.0:
         return 1.0
@@ -340,6 +343,13 @@ def point_light(L: Lights, wl: int, i: int, p: wp.vec3, n: wp.vec3):
     inv_r = 1.0 / wp.sqrt(r2)
     ldir = to_lamp * inv_r
     return ldir, L.power[wl, i] * (inv_r * inv_r), wp.max(wp.dot(n, ldir), 0.0)
+
+
+@wp.func
+def is_dark(L: Lights, wl: int, i: int) -> bool:
+    """Point light ``i`` of world row ``wl`` has zero power (a pad): skipping it adds exactly nothing."""
+    pw = L.power[wl, i]
+    return pw[0] == 0.0 and pw[1] == 0.0 and pw[2] == 0.0
 
 
 @wp.func
@@ -378,6 +388,8 @@ def light_surface(albedo: wp.vec3, spec: wp.vec2, p: wp.vec3, n: wp.vec3, to_eye
     ndl = wp.max(wp.dot(n, sd), 0.0)
     irr = L.ambient[w % L.ambient.shape[0]] + sc * shadow_factor(L, first, 0, ndl, p, n)
     for i in range(L.pos.shape[1]):
+        if is_dark(L, wl, i):
+            continue
         ldir, lpow, ndp = point_light(L, wl, i, p, n)
         irr = irr + lpow * shadow_factor(L, first, 1 + i, ndp, p, n)
     color = wp.cw_mul(albedo, irr)
@@ -387,6 +399,8 @@ def light_surface(albedo: wp.vec3, spec: wp.vec2, p: wp.vec3, n: wp.vec3, to_eye
         if ndl > 0.0:
             color = color + sc * (spec[0] * spec_power(hs, spec[1]) * shadow_factor(L, first, 0, 1.0, p, n))
         for i in range(L.pos.shape[1]):
+            if is_dark(L, wl, i):
+                continue
             ldir, lpow, ndp = point_light(L, wl, i, p, n)
             hl = wp.max(wp.dot(n, wp.normalize(ldir + v)), 0.0)
             if ndp > 0.0:
@@ -543,6 +557,8 @@ def shade_floor(look: Look, L: Lights, w: int, first: int, mat: wp.vec3, p: wp.v
     irr = L.ambient[w % L.ambient.shape[0]] + sc * shadow_factor(L, first, 0, ndl, p, fn)
     wl = w % L.pos.shape[0]
     for i in range(L.pos.shape[1]):
+        if is_dark(L, wl, i):
+            continue
         to_lamp = L.pos[wl, i] - p
         inv_r2 = 1.0 / wp.max(wp.dot(to_lamp, to_lamp), 1.0e-6)
         ndp = wp.max(wp.dot(fn, to_lamp), 0.0) * wp.sqrt(inv_r2)

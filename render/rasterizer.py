@@ -63,7 +63,7 @@ class Renderer:
     """Off-screen z-buffer rasterizer for batches of (world, camera) images, on any Warp device."""
 
     def __init__(self, width: int, height: int, *, device=None, near: float = 1e-3,
-                 max_chunk_pixels: int = 1 << 23, threads: int = 1, shadows: bool = False, shadow_map: int = 256):
+                 max_chunk_pixels: int = 1 << 23, threads: int = 1, shadows: bool = False, shadow_map: int = 0):
         """
         Args:
             width, height: image size [px].
@@ -73,6 +73,8 @@ class Renderer:
             threads: CPU only: render this many chunks concurrently (one core each); ignored on CUDA.
             shadows: shadows from the sun and every point light (a ``shadow_map`` x ``shadow_map`` depth map per
                 light and world, rasterized by the same pass; soft by percentage-closer filtering).
+            shadow_map: side [px] of each shadow map; 0: ``max(width, height)`` (the map fits the shadow casters,
+                so a texel is then about a pixel of an image framing the worm).
         """
         wp.init()
         self.width = int(width)
@@ -83,9 +85,9 @@ class Renderer:
         self.threads = max(1, int(threads)) if self.device.is_cpu else 1
         self.max_chunk_pixels = int(max_chunk_pixels)
         self.shadows = bool(shadows)
-        self.shadow_map = int(shadow_map)
-        if self.shadow_map < 1:
-            raise ValueError(f"shadow_map: got {shadow_map}; expected a positive side [px]")
+        if int(shadow_map) < 0:
+            raise ValueError(f"shadow_map: got {shadow_map}; expected a side [px] >= 1, or 0 for the image's")
+        self.shadow_map = int(shadow_map) or max(self.width, self.height)
         self._buffers: dict = {}
         # load the kernels once here: concurrent first launches from several threads would race to load them
         wp.load_module(rk, device=self.device)
@@ -281,21 +283,26 @@ class Renderer:
 
 def shadow_cameras(scene: SceneBatch, worlds: np.ndarray, side: int) -> dict:
     """Pinhole cameras of the shadow maps of ``worlds`` (M = len(worlds) * (1 + L) maps, world-major: the sun, then
-    point light 0..L-1), each looking from its light at the centre of the world's meshes and just covering their
-    bounding sphere (radius r). The directional sun is a point light ``max(100 r, 1 m)`` away along ``sun_dir`` (its
+    point light 0..L-1), each looking from its light at the centre of the world's meshes above the floor plane and
+    just covering their bounding sphere (radius r). The directional sun is a point light ``max(100 r, 1 m)`` away along ``sun_dir`` (its
     rays then within r / 100 rad of parallel), of radius ``sun_size`` (angular, rad) times that distance.
 
     Returns dict: ``world`` (M,), ``R`` (M, 3, 3), ``t`` (M, 3), ``intr`` (M, 4) = (fx, fy, cx, cy) [px], ``size``
-    (M,) light radius [m]. A light inside the sphere gets a 160 degree field of view (its map sees what it can).
+    (M,) light radius [m]. A light inside the sphere gets a 160 degree field of view (its map sees what it can); a
+    dark point light (zero power) gets zero intrinsics (its map stays empty and is never read).
     """
     from warpworm.render.camera import look_at
 
     a = scene.appearance
     worlds = np.asarray(worlds, dtype=np.int64)
     v = scene.vertices[worlds].astype(np.float64)  # (n, V, 3)
-    lo, hi = v.min(axis=1), v.max(axis=1)
+    # casters: what is above the floor plane (the opaque floor hides the rest and what it could shade), else all
+    above = np.einsum("nvk,nk->nv", v, scene.floor_normal[worlds]) > -1e-4
+    above |= ~above.any(axis=1, keepdims=True)
+    big = np.where(above[..., None], 0.0, np.inf)
+    lo, hi = (v + big).min(axis=1), (v - big).max(axis=1)
     centre = 0.5 * (lo + hi)
-    radius = np.maximum(np.linalg.norm(v - centre[:, None], axis=2).max(axis=1), 1e-4)
+    radius = np.maximum(np.where(above, np.linalg.norm(v - centre[:, None], axis=2), 0.0).max(axis=1), 1e-4)
     L = a.light_pos.shape[1]
     sun_d = np.maximum(100.0 * radius, 1.0)
     sun = a.sun_dir[worlds % a.sun_dir.shape[0]]
@@ -310,5 +317,9 @@ def shadow_cameras(scene: SceneBatch, worlds: np.ndarray, side: int) -> dict:
     R, t = look_at(eye.reshape(-1, 3), tgt.reshape(-1, 3))
     f = 0.5 * side / np.tan(half.reshape(-1))
     c = np.full_like(f, (side - 1) / 2)
+    # a dark light (zero power: a pad) gets a null camera: every triangle projects to a point and is skipped
+    dark = np.concatenate([np.zeros((len(worlds), 1), bool),
+                           np.all(a.light_power[worlds % a.light_power.shape[0]] == 0, axis=2)], axis=1).reshape(-1)
+    f, c = np.where(dark, 0.0, f), np.where(dark, 0.0, c)
     return {"world": np.repeat(worlds, 1 + L), "R": R, "t": t, "intr": np.stack([f, f, c, c], axis=1),
             "size": size.reshape(-1)}

@@ -362,8 +362,8 @@ class RenderConfig:
     shadows: Bool = False
     """Shadows from every light (the directional light and each point light): a depth map of the scene's meshes
     rendered from the light by the same rasterizer, soft by percentage-closer filtering (docs/render.md)."""
-    shadow_map: Annotated[Int, Field(ge=16, le=4096)] = 256
-    """Side [px] of each light's shadow map."""
+    shadow_map: Annotated[Int, Field(ge=0, le=4096)] = 0
+    """Side [px] of each light's shadow map; 0: the image's larger side (a texel about a pixel at the worm)."""
     # -- issue 24: the path-traced engine (warpworm.render.pathtrace, the `pathtrace` extra); labels stay the raster's
     engine: Annotated[Literal["raster", "pathtraced"], AfterValidator(_check_engine)] = "raster"
     """'raster': every image from the rasterizer; 'pathtraced': every image path-traced by Mitsuba 3 (same meshes,
