@@ -104,3 +104,28 @@ if __name__ == "__main__":
     import json
 
     print(json.dumps(run(quick=True), indent=1, default=str))
+
+
+def headline(device: str = "cpu", quick: bool = False) -> dict:
+    """One row for the summary table of ``benchmarks/run.py``: the ``dataset`` row's job (default config, its short
+    physics, 128x96, W = 16 on the CPU, 4 on ``quick``, 1024 on CUDA) rendered by 4 cameras per frame."""
+    import bench_dataset as bd
+
+    from warpworm.data.job import generate
+
+    W = 1024 if str(device).startswith("cuda") else (4 if quick else 16)
+    K, F = 4, 4
+    tmp = Path(tempfile.mkdtemp(prefix="ww-views-headline-"))
+    try:
+        generate(bd._cfg([f"sim.device={device}", "sim.worlds=2", "shard_size=8", "render.width=32",
+                          "render.height=24"], num_samples=8), tmp / "warm", progress=False, log=lambda m: None)
+        cfg = bd._cfg([f"sim.device={device}", f"sim.worlds={W}", f"shard_size={W * F * K}",
+                       f"render.views_per_frame={K}"], num_samples=W * F * K)
+        t0 = time.perf_counter()
+        generate(cfg, tmp / "d", progress=False, log=lambda m: None)
+        total = time.perf_counter() - t0
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return {"system": f"warpworm generate, render.views_per_frame {K}", "device": str(device), "W": W,
+            "rate": W * F * K / total, "unit": "samples/s", "time_base": "wall",
+            "note": f"the row above's job, {K} cameras per simulated frame"}

@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Profile of a gait run's dynamics: time per kernel launch of :meth:`warpworm.sim.simulator.Simulator.step`.
 
-The run is what ``warpworm simulate --magnet-model analytic`` does (peristaltic preset, ``gaits.DEFAULT_DT`` with
+The run is what ``warpworm simulate --magnet-model analytic`` does (the peristaltic preset, or ``--gait``'s, ``gaits.DEFAULT_DT`` with
 ``gaits.DEFAULT_SUBSTEPS``: 4 ms steps of two 2 ms substeps): build, settle (EPM parked), then the gait, without
 frame snapshots. Every ``wp.launch`` and every recorded-command launch (the substeps' one ``implicit_step``) is
 timed by the wall clock around it with a device synchronize after it (a CPU launch runs synchronously anyway), keyed
@@ -15,7 +15,8 @@ Two extra measurements give the candidate levers a size:
 
 Usage::
 
-    python benchmarks/profile_step.py [--worlds 1 64] [--duration 1.0] [--out benchmarks/results/profile_step.json]
+    python benchmarks/profile_step.py [--worlds 1 64] [--gait peristaltic omega inchworm] [--duration 1.0]
+        [--out benchmarks/results/profile_step.json]
 
 Prints one table per world count and writes the JSON (rows + metadata).
 """
@@ -85,14 +86,15 @@ def launch_timers():
         wp.launch, wp.Launch.launch = orig_launch, orig_cmd
 
 
-def _build(W: int, magnet_model: str, device: str, newton: int | None = None, newton_tol: float | None = None):
-    """The peristaltic gait's model and simulator; no CUDA graph (each launch must be seen to be timed: the
+def _build(W: int, magnet_model: str, device: str, newton: int | None = None, newton_tol: float | None = None,
+           gait: str = "peristaltic"):
+    """The gait preset's model and simulator (default peristaltic); no CUDA graph (each launch must be seen to be timed: the
     profile's whole-run figures on CUDA are therefore without graph replay, see ``benchmarks/run.py`` for those)."""
     from warpworm.physics import gaits
     from warpworm.sim.model import Model
     from warpworm.sim.simulator import Simulator
 
-    model = Model.from_params(gaits.preset_params("peristaltic", magnet_model=magnet_model), W, device)
+    model = Model.from_params(gaits.preset_params(gait, magnet_model=magnet_model), W, device)
     kw = {} if newton is None else {"newton": newton}
     if newton_tol is not None:
         kw["newton_tol"] = newton_tol
@@ -101,8 +103,8 @@ def _build(W: int, magnet_model: str, device: str, newton: int | None = None, ne
 
 
 def profile_run(W: int, *, duration: float, settle: float, skip: float = 1.0, magnet_model: str = "analytic",
-                device: str = "cpu") -> dict:
-    """Settle, ``skip`` [s] of the peristaltic gait untimed (its first cycle, where the worm is pulled in to the
+                device: str = "cpu", gait: str = "peristaltic") -> dict:
+    """Settle, ``skip`` [s] of the ``gait`` preset untimed (its first cycle, where the worm is pulled in to the
     EPM's line and the Newton iteration is at its easiest), then ``duration`` [s] with every launch timed.
 
     Returns ``{"W", "steps", "wall_s", "cpu_s", "us_per_world_step", "worm_substeps_per_s", "sim_s_per_wall_s",
@@ -113,7 +115,7 @@ def profile_run(W: int, *, duration: float, settle: float, skip: float = 1.0, ma
     """
     import warp as wp
 
-    model, sim = _build(W, magnet_model, device)
+    model, sim = _build(W, magnet_model, device, gait=gait)
     state = sim.initial_state()
     sim.step(state, 1, epm=False)  # compile every kernel before anything is timed
     sim.settle(state, settle)
@@ -145,7 +147,7 @@ def profile_run(W: int, *, duration: float, settle: float, skip: float = 1.0, ma
     stages.append({"stage": "host (zeroing, Python)", "kernel": "-", "calls_per_step": "-",
                    "us_per_step": 1e6 * host / n_steps, "us_per_world_step": 1e6 * host / n_steps / W,
                    "share": host / total, "wall_us_per_step": 1e6 * max(0.0, wall - timed_wall) / n_steps})
-    return {"W": W, "magnets": magnet_model, "device": str(model.device), "steps": n_steps, "dt_s": sim.dt,
+    return {"W": W, "gait": gait, "magnets": magnet_model, "device": str(model.device), "steps": n_steps, "dt_s": sim.dt,
             "substeps": sim.substeps, "newton": sim.newton, "newton_steps_per_substep": mean_newton,
             "newton_factors_per_substep": mean_factors,
             "wall_s": wall, "cpu_s": cpu,
@@ -216,6 +218,8 @@ def main(argv=None) -> int:
     ap.add_argument("--skip", type=float, default=1.0, help="gait time run untimed first [s] (default 1.0: the first "
                     "cycle)")
     ap.add_argument("--magnet-model", choices=["analytic", "dipoles"], default="analytic")
+    ap.add_argument("--gait", nargs="+", choices=["peristaltic", "omega", "inchworm"], default=["peristaltic"],
+                    help="gait presets profiled, each at every --worlds (default peristaltic)")
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--no-levers", action="store_true", help="skip the Newton-count and launch-floor measurements")
     ap.add_argument("--out", default=str(HERE / "results" / "profile_step.json"), help="JSON path")
@@ -235,11 +239,11 @@ def main(argv=None) -> int:
     wp.init()
     device = "cuda:0" if args.device == "cuda" else args.device
     runs = []
-    for W in args.worlds:
+    for gait, W in [(g, w) for g in args.gait for w in args.worlds]:
         r = profile_run(W, duration=args.duration, settle=args.settle, skip=args.skip, magnet_model=args.magnet_model,
-                        device=device)
+                        device=device, gait=gait)
         runs.append(r)
-        print(f"\n== {args.magnet_model} magnets, peristaltic, W = {W}, {r['steps']} steps of {1e3 * r['dt_s']:g} ms "
+        print(f"\n== {args.magnet_model} magnets, {gait}, W = {W}, {r['steps']} steps of {1e3 * r['dt_s']:g} ms "
               f"({r['substeps']} substeps, <= {r['newton']} Newton, {r['newton_steps_per_substep']:.2f} on average, "
               f"{r['newton_factors_per_substep']:.2f} of them factored) "
               f"on {device}: {r['wall_s']:.2f} s wall, "

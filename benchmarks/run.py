@@ -4,7 +4,7 @@
 ``python benchmarks/run.py [--quick] [--device DEV] [--out DIR]`` (no names): the summary, ONE table measured in one
 run: warpworm's gait step and substep rates beside the NumPy reference of the substep (``numpy_substep.py``) and
 Newton on the same mesh (a "not installed" row unless the optional ``newton`` package is importable), then the
-renderer's images/s and the dataset pipeline's samples/s. On ``--device cuda`` the dynamics rows are at 1k, 16k and
+renderer's images/s and the dataset pipeline's samples/s (one and four camera views per frame). On ``--device cuda`` the dynamics rows are at 1k, 16k and
 64k worlds. Written to ``DIR/summary.json``.
 
 ``python benchmarks/run.py NAME [NAME ...] | all [--quick] [--device DEV] [--out DIR]``: the named
@@ -100,7 +100,8 @@ def summary(quick: bool, device: str):
     dyn = load("dynamics", modules["dynamics"])
     rows += [{**r, "unit": "worm-substeps/s"} for r in dyn.compare(device, quick=quick)]
     yield rows
-    for name, label in (("render", "warpworm rasterizer"), ("dataset", "warpworm generate")):
+    for name, label in (("render", "warpworm rasterizer"), ("dataset", "warpworm generate"),
+                        ("views", "warpworm generate, views")):
         try:
             rows.append(load(name, modules[name]).headline(device, quick=quick))
         except Exception as exc:  # report, keep the table
