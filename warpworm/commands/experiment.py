@@ -28,8 +28,8 @@ def add_arguments(parser) -> None:
                         help="compression / flexure only: fit k_α to a measured curve, a CSV with columns "
                              "displacement_m,force_n (header line optional); writes <name>-fit.json / .png")
     parser.add_argument("--workers", type=int, default=None,
-                        help="processes to split the worlds over (default: every core; results equal one "
-                             "process's; each worker pays ~2-4 s of start-up)")
+                        help="threads to split the worlds over (default: every core; results equal one "
+                             "thread's)")
     parser.add_argument("--advance", action="store_true",
                         help="force-plate only: let the EPM advance w per cycle as in locomotion (it then leaves the "
                              "tied worm behind) instead of repeating its first pass in place every cycle")

@@ -22,7 +22,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--cycles", type=int, default=3, help="EPM cycles per world (default 3)")
     parser.add_argument("--material", default=None, help="sheet material (warpworm.physics.materials; default the worm's)")
     parser.add_argument("--magnet-model", choices=["dipoles", "analytic"], default="dipoles")
-    parser.add_argument("--workers", type=int, default=None, help="processes (default: every core)")
+    parser.add_argument("--workers", type=int, default=None, help="threads (default: every core)")
     parser.add_argument("--out", default="search_out", help="output folder for the CSV and the heat map")
     parser.add_argument("--top", type=int, default=10, help="rows of the ranking to print")
     parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
@@ -131,7 +131,7 @@ def main(args) -> int:
         return refuse(e)
     workers = args.workers or os.cpu_count() or 1
     print(f"search-gait {args.gait}{' backward' if args.backward else ''}: {n} grid points x {args.cycles} cycles "
-          f"on {min(workers, n)} process(es)")
+          f"on {min(workers, n)} thread(s)")
     t0 = time.perf_counter()
     res = search_gait(params, grid, args.cycles, workers=workers, max_ratio=args.max_ratio)
     wall = time.perf_counter() - t0

@@ -38,7 +38,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--fps", type=float, default=30.0, help="trajectory / preview frame rate [1/s]")
     parser.add_argument("--seed", type=int, default=0, help="seed of --randomize")
     parser.add_argument("--workers", type=int, default=None,
-                        help="processes to split the worlds over (default: every core; results equal one process's)")
+                        help="threads to split the worlds over (default: every core; results equal one thread's)")
     parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                         help="override a WormParams field of every world (after --randomize), e.g. --set "
                              "friction_backward_ratio=2 --set wavelength=0.006")
