@@ -343,3 +343,26 @@ def overhead_camera(centre=(0.045, 0.0, 0.0), distance=0.25, width=320, height=2
     f = float(focal_from_fov(np.radians(fov_deg), height))
     K = np.array([[f, 0, (width - 1) / 2], [0, f, (height - 1) / 2], [0, 0, 1.0]])
     return CameraModel(K=K, R=R, t=t)
+
+
+def write_meta(path, cam: CameraModel, width: int, height: int, height_m: float, fps: float, ref: int) -> None:
+    """The track's camera and plane next to its CSV (``track.json`` for ``track.csv``): what ``warpworm fit-track``
+    needs to look at the simulation through the same camera."""
+    d = {k: np.asarray(v).tolist() for k, v in asdict(cam).items()}
+    d.update(width=int(width), height=int(height), height_m=float(height_m), fps=float(fps), ref=int(ref))
+    Path(path).write_text(json.dumps(d, indent=1))
+
+
+def read_meta(path) -> dict:
+    """:func:`write_meta`'s file back: ``camera`` (CameraModel), ``width``, ``height``, ``height_m``, ``fps``, ``ref``."""
+    d = json.loads(Path(path).read_text())
+    cam = CameraModel(K=np.asarray(d["K"], np.float64), R=np.asarray(d["R"], np.float64),
+                      t=np.asarray(d["t"], np.float64), dist=np.asarray(d.get("dist", np.zeros(5)), np.float64),
+                      floor_incline=float(d.get("floor_incline", 0.0)))
+    return {"camera": cam, "width": int(d["width"]), "height": int(d["height"]), "height_m": float(d["height_m"]),
+            "fps": float(d["fps"]), "ref": int(d["ref"])}
+
+
+def meta_path(csv_path) -> Path:
+    """Where :func:`write_meta` puts the camera of ``csv_path`` (same name, ``.json``)."""
+    return Path(csv_path).with_suffix(".json")

@@ -3,7 +3,9 @@ as four deformation ratios and the displacement per frame (:mod:`warpworm.analys
 
 CAMERA.json: ``K`` (3x3) [px], ``R`` (3x3) and ``t`` (3) [m] (world -> camera, OpenCV), optionally ``dist`` (OpenCV
 distortion) and ``floor_incline`` [rad]: a dataset sample's ``camera/K``, ``camera/R``, ``camera/t``. The CSV has one
-row per frame (:data:`warpworm.analysis.track.CSV_COLUMNS`); a band not seen leaves its cells empty.
+row per frame (:data:`warpworm.analysis.track.CSV_COLUMNS`); a band not seen leaves its cells empty. Next to it,
+``<out>.json`` keeps the camera, image size and plane height: ``warpworm fit-track`` looks at the simulation through
+the same camera.
 """
 
 from __future__ import annotations
@@ -85,12 +87,13 @@ def main(args) -> int:
     except ValueError as exc:
         return refuse(exc)
     T.write_csv(args.out, tr)
+    T.write_meta(T.meta_path(args.out), cam, frames[0].shape[1], frames[0].shape[0], height, fps, tr["ref"])
     seen = tr["seen"]
     summary = {"frames": int(len(frames)), "fps": fps, "height_m": height, "frames_all_bands": int(seen.all(1).sum()),
                "unseen_per_band": (len(seen) - seen.sum(0)).astype(int).tolist(),
                "ratio_min": np.nanmin(tr["ratios"], axis=0).tolist(), "ratio_max": np.nanmax(tr["ratios"], axis=0).tolist(),
                "displacement_end_m": float(tr["displacement"][-1]) if np.isfinite(tr["displacement"][-1]) else None,
-               "out": str(args.out)}
+               "out": str(args.out), "meta": str(T.meta_path(args.out))}
     if args.json:
         print(json.dumps(summary))
         return 0

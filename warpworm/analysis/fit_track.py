@@ -1,0 +1,302 @@
+"""Fit worm parameters to a band track (``warpworm track``'s ratios and displacement): every candidate one world of
+one batched simulation, searched with CMA-ES (the ``cma`` package), then the fit's local curvature for per-parameter
+uncertainty and the combinations the track cannot pin down.
+
+The simulated observable is the tracked one: each candidate world is run with the existing batched Simulator
+(:func:`warpworm.analysis.gait_runs.run_gait`), its frames interpolated to the track's times and, when the track
+came with its camera, rendered through that camera (band pixel centroids from the segmentation, then the same
+back-projection onto the same plane as the tracker), so parallax of a lifted worm part is the same in both; without a
+camera the band centres seen from above (:func:`warpworm.render.labels.band_centres`) are used. Parameters are
+searched in log space within a factor ``spread`` of the gait preset's values. Residuals are scaled by the tracker's
+accuracy (``SIGMA_RATIO``, ``SIGMA_DISP``), so the cost is a mean squared z-score.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import fields, replace
+
+import numpy as np
+
+PATH_KEYS = {"w": "wavelength", "a": "amplitude", "h": "closest_approach"}
+SIGMA_RATIO = 0.01
+"""Tracker accuracy of a deformation ratio (tests/test_track.py), the residual's scale."""
+SIGMA_DISP = 5e-4
+"""Tracker accuracy of the displacement [m], the residual's scale."""
+PIN_REL = 0.05
+"""A parameter is pinned down when its 1-sigma relative uncertainty is below this."""
+
+
+def fittable_fields() -> tuple[str, ...]:
+    """Scalar positive WormParams fields a track may fit."""
+    from warpworm.physics.params import WormParams
+
+    p = WormParams()
+    return tuple(f.name for f in fields(WormParams) if isinstance(getattr(p, f.name), float) and getattr(p, f.name) > 0
+                 and f.name not in ("n_units",))
+
+
+def parse_path(text: str | None) -> dict:
+    """``"w=0.024,a=0.045,h=0.005"`` [m] -> WormParams path fields; None -> {}."""
+    out = {}
+    for item in filter(None, (text or "").split(",")):
+        k, _, v = item.partition("=")
+        if k.strip() not in PATH_KEYS:
+            raise ValueError(f"--path {item!r}: unknown key {k!r}; expected w=, a=, h= (wavelength, amplitude, "
+                             "closest approach [m])")
+        try:
+            val = float(v)
+        except ValueError:
+            raise ValueError(f"--path {item!r}: got {v!r}; expected a length [m]") from None
+        if not (np.isfinite(val) and val >= 0):
+            raise ValueError(f"--path {item!r}: got {val}; expected a length >= 0 [m]")
+        out[PATH_KEYS[k.strip()]] = val
+    return out
+
+
+def parse_fit(text: str) -> list[str]:
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    ok = fittable_fields()
+    bad = [n for n in names if n not in ok]
+    if not names or bad or len(set(names)) != len(names):
+        raise ValueError(f"--fit: got {text!r}; expected distinct WormParams fields, e.g. hinge_stiffness,"
+                         f"valley_bar_stiffness,mu_static,epm_moment (one of {ok})")
+    return names
+
+
+def candidate_params(base, names, values: np.ndarray):
+    """``base`` WormParams with ``names`` set per world to ``values`` (W, p); mu_kinetic follows mu_static at the
+    base's kinetic/static ratio."""
+    v = np.asarray(values, np.float64)
+    over = {n: v[:, i].copy() for i, n in enumerate(names)}
+    if "mu_static" in over and "mu_kinetic" not in over:
+        over["mu_kinetic"] = over["mu_static"] * float(base.mu_kinetic) / float(base.mu_static)
+    return replace(base, **over)
+
+
+def _interp(times_src, values, times):
+    """values (F, W, ...) at times_src (F,) linearly interpolated at times (T,) -> (T, W, ...)."""
+    j = np.clip(np.searchsorted(times_src, times, side="right"), 1, len(times_src) - 1)
+    t0, t1 = times_src[j - 1], times_src[j]
+    a = ((times - t0) / np.where(t1 > t0, t1 - t0, 1.0)).reshape((-1,) + (1,) * (values.ndim - 1))
+    return (1 - a) * values[j - 1] + a * values[j]
+
+
+def simulate_frames(params, num_worlds: int, times, *, settle=0.2, device="cpu") -> dict:
+    """Run the batch and return its frames at ``times`` (T,) [s after settling]: ``positions`` (T, W, V, 3),
+    ``magnet_pos``, ``magnet_rot``, ``unstable`` (W,), ``model``."""
+    from warpworm.analysis.gait_runs import run_gait
+    from warpworm.physics import gaits
+
+    dt = gaits.DEFAULT_DT
+    period = float(np.max(np.asarray(params.cycle_period)))
+    r = run_gait(params, num_worlds, (float(np.max(times)) + 4 * dt) / period, device=device, settle=settle,
+                 fps=1.0 / (2 * dt), save_worlds=num_worlds)
+    fr = r["frames"]
+    t = np.asarray(fr["time"], np.float64)
+    out = {k: _interp(t, np.asarray(fr[k], np.float64), times) for k in ("positions", "magnet_pos", "magnet_rot")}
+    bad = np.asarray(r["unstable"]) | ~np.isfinite(out["positions"]).all(axis=(0, 2, 3))
+    out.update(unstable=bad, model=r["model"])
+    return out
+
+
+def band_pixels_from_render(frames: dict, model, cam, width: int, height: int, scale=0.5, chunk=64,
+                            device="cpu") -> np.ndarray:
+    """Band pixel centroids (T, W, 5, 2) [px of ``cam``] of every frame and world as ``cam`` (no distortion) sees
+    them, from the renderer's segmentation at ``scale`` times the resolution; NaN where a band is unseen."""
+    from warpworm.render import Renderer, make_cameras
+    from warpworm.render.scene import build_scene
+    from warpworm.ids import SEG_WORM_FIRST
+
+    T_, W = frames["positions"].shape[:2]
+    w_s, h_s = max(8, int(round(width * scale))), max(8, int(round(height * scale)))
+    sx, sy = w_s / width, h_s / height
+    K = cam.K.copy()
+    K[0] *= sx
+    K[1] *= sy
+    K[0, 2], K[1, 2] = sx * (cam.K[0, 2] + 0.5) - 0.5, sy * (cam.K[1, 2] + 0.5) - 0.5
+    renderer = Renderer(w_s, h_s, device=device)
+    p = model.params
+    pos = frames["positions"].reshape(T_ * W, -1, 3)
+    rest = np.asarray(model.rest_positions_host)
+    rest = np.broadcast_to(rest, (W,) + rest.shape[-2:])
+    out = np.full((T_ * W, 5, 2), np.nan)
+    v, u = np.mgrid[0:h_s, 0:w_s].astype(np.float64)
+    for lo in range(0, T_ * W, chunk):
+        idx = np.arange(lo, min(lo + chunk, T_ * W))
+        wi = idx % W
+        one = lambda a: np.broadcast_to(np.asarray(a, np.float64), (W,))[wi]  # noqa: E731
+        scene = build_scene(pos[idx], model.pattern.triangles, model.pattern.triangle_segment,
+                            magnet_pos=frames["magnet_pos"].reshape(T_ * W, 4, 3)[idx],
+                            magnet_rot=frames["magnet_rot"].reshape(T_ * W, 4, 3, 3)[idx], worm_texcoords=rest[wi],
+                            ipm_diameter=one(p.ipm_diameter), ipm_thickness=one(p.ipm_thickness),
+                            floor_incline=one(p.floor_incline), show_epm=False)
+        n = len(idx)
+        cams = make_cameras(K, np.broadcast_to(cam.R, (n, 3, 3)), np.broadcast_to(cam.t, (n, 3)), np.arange(n),
+                            w_s, h_s)
+        seg = renderer.render(scene, cams)["seg"]
+        for b in range(5):
+            m = seg == SEG_WORM_FIRST + b
+            c = m.sum(axis=(1, 2))
+            with np.errstate(invalid="ignore", divide="ignore"):
+                out[idx, b, 0] = ((m * u).sum(axis=(1, 2)) / c + 0.5) / sx - 0.5
+                out[idx, b, 1] = ((m * v).sum(axis=(1, 2)) / c + 0.5) / sy - 0.5
+            out[idx[c < 3], b] = np.nan
+    return out.reshape(T_, W, 5, 2)
+
+
+def observe(params, num_worlds: int, times, ref: int, meta: dict | None, *, render_scale=0.5, device="cpu") -> dict:
+    """The simulated track of every world: ``ratios`` (W, T, 4), ``displacement`` (W, T) [m], ``unstable`` (W,),
+    ``centres`` (W, T, 5, 3). ``meta``: the track's camera (``camera`` CameraModel, ``width``, ``height``,
+    ``height_m``) or None (band centres seen from above)."""
+    from warpworm.analysis.track import back_project, ratios_and_displacement
+    from warpworm.render.labels import band_centres
+
+    fr = simulate_frames(params, num_worlds, np.asarray(times, np.float64), device=device)
+    model = fr["model"]
+    if meta is not None and meta.get("camera") is not None:
+        cam = meta["camera"]
+        uv = band_pixels_from_render(fr, model, cam, meta["width"], meta["height"], render_scale, device=device)
+        cam0 = replace(cam, dist=np.zeros(5))
+        centres = back_project(uv, cam0, meta["height_m"])
+    else:
+        centres = band_centres(fr["positions"], model.pattern.triangles, model.pattern.triangle_segment)
+    centres = np.moveaxis(centres, 0, 1)  # (W, T, 5, 3)
+    r, d = zip(*(ratios_and_displacement(c, ref) for c in centres))
+    return {"ratios": np.stack(r), "displacement": np.stack(d), "unstable": fr["unstable"], "centres": centres}
+
+
+def residuals(obs: dict, track: dict) -> np.ndarray:
+    """Scaled residuals (W, n) of every world against the track's finite ratios and displacements (z-scores)."""
+    mr, md = track["ratios"], track["displacement"]
+    okr, okd = np.isfinite(mr), np.isfinite(md)
+    rr = (obs["ratios"][:, okr] - mr[okr]) / SIGMA_RATIO
+    rd = (obs["displacement"][:, okd] - md[okd]) / SIGMA_DISP
+    res = np.concatenate([rr, rd], axis=1)
+    return np.where(np.isfinite(res) & ~obs["unstable"][:, None], res, 1e3)
+
+
+def _evaluate(base, names, theta0, X, track, ref, meta, **kw):
+    vals = theta0[None] * np.exp(np.asarray(X, np.float64))
+    obs = observe(candidate_params(base, names, vals), len(vals), track["time"], ref, meta, **kw)
+    res = residuals(obs, track)
+    return np.mean(res ** 2, axis=1), res, obs
+
+
+def fit(track: dict, base, names, *, budget: int = 96, popsize: int | None = None, spread: float = 3.0, seed: int = 0,
+        meta: dict | None = None, step: float = 0.05, log=None, **kw) -> dict:
+    """CMA-ES over log(names / base) within ±log(spread), each generation one batch of ``popsize`` worlds, until
+    ``budget`` worlds; then one batch of 2p + 1 worlds for the curvature at the best point (central differences of
+    step ``step`` in log). Returns a dict: names, base, value (p,), cost, rms_ratio, rms_disp_m, sigma_rel (p,),
+    pinned (p,) bool, weakest (p,) (the least pinned combination of log-parameters) and weakest_sigma, obs (the
+    best world's simulated track), history (list of (worlds, best cost)), worlds, wall_s."""
+    import cma
+
+    t0 = time.perf_counter()
+    p = len(names)
+    theta0 = np.array([float(np.ravel(getattr(base, n))[0]) for n in names])
+    ref = int(track.get("ref", 0))
+    pop = int(popsize or max(4 + int(3 * np.log(p)), 8))
+    lim = float(np.log(spread))
+    es = cma.CMAEvolutionStrategy(np.zeros(p), lim / 3, {"bounds": [-lim, lim], "popsize": pop, "seed": seed + 1,
+                                                         "verbose": -9})
+    best = (np.inf, np.zeros(p))
+    history, worlds = [], 0
+    while worlds + pop <= max(budget, pop):
+        X = np.array(es.ask())
+        cost = _evaluate(base, names, theta0, X, track, ref, meta, **kw)[0]
+        es.tell(list(X), cost.tolist())
+        worlds += pop
+        if cost.min() < best[0]:
+            best = (float(cost.min()), X[int(np.argmin(cost))].copy())
+        history.append((worlds, best[0]))
+        if log:
+            log(f"  {worlds:4d} worlds: best cost {best[0]:.4g}  " + "  ".join(
+                f"{n}={v:.4g}" for n, v in zip(names, theta0 * np.exp(best[1]))))
+    xb = best[1]
+    stencil = np.concatenate([xb[None], xb + step * np.eye(p), xb - step * np.eye(p)])
+    cost, res, obs = _evaluate(base, names, theta0, stencil, track, ref, meta, **kw)
+    worlds += len(stencil)
+    if cost[0] > best[0] + 1e-12:  # the best point again (deterministic per world): keep what it gave
+        pass
+    J = (res[1:1 + p] - res[1 + p:]).T / (2 * step)  # (n, p)
+    n_res = res.shape[1]
+    chi2 = float(np.sum(res[0] ** 2) / max(1, n_res - p))
+    jtj = J.T @ J
+    evals, evecs = np.linalg.eigh(jtj)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cov = np.linalg.pinv(jtj) * max(1.0, chi2)
+        sigma = np.sqrt(np.clip(np.diag(cov), 0, None))
+        weakest_sigma = float(np.sqrt(max(1.0, chi2) / evals[0])) if evals[0] > 0 else np.inf
+    sigma = np.where(np.diag(jtj) > 0, sigma, np.inf)
+    r0 = res[0]
+    nr = int(np.isfinite(track["ratios"]).sum())
+    return {
+        "names": list(names), "base": theta0, "value": theta0 * np.exp(xb), "x": xb, "cost": float(cost[0]),
+        "rms_ratio": float(np.sqrt(np.mean(r0[:nr] ** 2)) * SIGMA_RATIO),
+        "rms_disp_m": float(np.sqrt(np.mean(r0[nr:] ** 2)) * SIGMA_DISP), "chi2_red": chi2,
+        "sigma_rel": sigma, "pinned": sigma < PIN_REL, "weakest": evecs[:, 0], "weakest_sigma": weakest_sigma,
+        "obs": {k: v[0] for k, v in obs.items()}, "history": history, "worlds": worlds,
+        "wall_s": time.perf_counter() - t0,
+    }
+
+
+def report_lines(result: dict) -> list[str]:
+    """The fit as text: value, 1-sigma, pinned or not, the weakest combination."""
+    out = [f"{'parameter':24s} {'preset':>11s} {'fitted':>11s} {'1-sigma':>9s}  pinned by this track?"]
+    for n, b, v, s, ok in zip(result["names"], result["base"], result["value"], result["sigma_rel"],
+                              result["pinned"]):
+        out.append(f"{n:24s} {b:11.5g} {v:11.5g} {100 * s:8.2f}%  {'yes' if ok else 'NO (not identifiable)'}")
+    out.append(f"residual: ratios {result['rms_ratio']:.4f} rms, displacement {1e3 * result['rms_disp_m']:.3f} mm "
+               f"rms (reduced chi2 {result['chi2_red']:.3g} at the tracker's accuracy)")
+    w = result["weakest"]
+    combo = " ".join(f"{c:+.2f}*log({n})" for c, n in zip(w, result["names"]) if abs(c) > 0.05)
+    out.append(f"least pinned combination: {combo}  (1-sigma {100 * result['weakest_sigma']:.2f}%)")
+    return out
+
+
+def write_fragment(path, gait: str, backward: bool, path_fields: dict, result: dict) -> str:
+    """The fitted parameters as a YAML config fragment (``randomize.worm.*``: merge into a dataset config, or pass
+    each as ``generate ... randomize.worm.NAME=VALUE`` / ``simulate --set NAME=VALUE``); returns the text."""
+    vals = dict(zip(result["names"], (float(v) for v in result["value"])))
+    if "mu_static" in vals and "mu_kinetic" not in vals:
+        from warpworm.physics.params import WormParams
+
+        vals["mu_kinetic"] = vals["mu_static"] * WormParams().mu_kinetic / WormParams().mu_static
+    worm = {"gait": gait, "backward": bool(backward), **path_fields, **vals}
+    lines = ["# warpworm fit-track: fitted worm parameters (a config fragment)",
+             "# simulate: " + " ".join(f"--set {k}={v:.6g}" for k, v in {**path_fields, **vals}.items()),
+             "randomize:", "  worm:"]
+    for k, v in worm.items():
+        lines.append(f"    {k}: {str(v).lower() if isinstance(v, bool) else (v if isinstance(v, str) else f'{v:.6g}')}")
+    text = "\n".join(lines) + "\n"
+    with open(path, "w") as f:
+        f.write(text)
+    return text
+
+
+def plot_fit(path, track: dict, result: dict, title: str = "") -> None:
+    """A Fig. 11-like picture: the four ratios and the displacement over time, measured (red) vs fitted (blue)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    t = track["time"]
+    fig, ax = plt.subplots(1, 5, figsize=(17, 3.2))
+    names = ("blue-pink", "pink-white", "white-green", "green-red")
+    for i in range(4):
+        ax[i].plot(t, track["ratios"][:, i], "r.-", label="measured")
+        ax[i].plot(t, result["obs"]["ratios"][:, i], "b-", label="fitted")
+        ax[i].set_title(names[i])
+        ax[i].set_xlabel("time [s]")
+    ax[0].set_ylabel("deformation ratio")
+    ax[4].plot(t, 1e3 * track["displacement"], "r.-", label="measured")
+    ax[4].plot(t, 1e3 * result["obs"]["displacement"], "b-", label="fitted")
+    ax[4].set_title("displacement [mm]")
+    ax[4].set_xlabel("time [s]")
+    ax[4].legend()
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)

@@ -1,0 +1,143 @@
+"""``warpworm fit-track track.csv --gait G [--backward] --path w=,a=,h= --fit NAMES [--budget WORLDS]``: fit worm
+parameters to a band track (:mod:`warpworm.analysis.fit_track`): CMA-ES, every candidate a world of one batch.
+
+Prints the fit, the residual, each parameter's 1-sigma (the fit's local curvature) and which ones the track cannot pin
+down; writes ``fit.png`` (Fig. 11-like: measured vs fitted ratios and displacement), ``fit.yaml`` (the fitted
+parameters as a config fragment; the ``simulate --set`` form in its header) and ``fit.json`` into ``--out``.
+"""
+
+from __future__ import annotations
+
+import json
+
+HELP = "fit worm parameters (k_alpha, friction, EPM moment, ...) to a band track from 'warpworm track' (CMA-ES, batched)"
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("track", metavar="TRACK.csv", help="a track written by 'warpworm track'")
+    parser.add_argument("--gait", choices=["peristaltic", "omega", "inchworm"], required=True)
+    parser.add_argument("--backward", action="store_true", help="the worm was driven toward -x")
+    parser.add_argument("--path", default=None, metavar="w=…,a=…,h=…",
+                        help="the EPM path of the video [m]: wavelength, amplitude, closest approach (default: the "
+                             "gait preset's)")
+    parser.add_argument("--fit", default="hinge_stiffness,valley_bar_stiffness,mu_static,epm_moment",
+                        help="WormParams fields to fit, comma-separated (default: %(default)s)")
+    parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
+                        help="a known WormParams value (e.g. a measured a, l0, or the magnet moment from calibrate)")
+    parser.add_argument("--budget", type=int, default=96, help="simulated worlds for the search (default 96)")
+    parser.add_argument("--popsize", type=int, default=None, help="worlds per CMA-ES generation (default 8+)")
+    parser.add_argument("--spread", type=float, default=3.0,
+                        help="search within preset / spread .. preset * spread (default 3)")
+    parser.add_argument("--magnet-model", choices=["dipoles", "analytic"], default="dipoles")
+    parser.add_argument("--camera", default=None, metavar="CAMERA.json",
+                        help="the track's camera (default: TRACK.json written by 'warpworm track' next to the CSV; "
+                             "'none': band centres seen from above)")
+    parser.add_argument("--render-scale", type=float, default=0.5,
+                        help="resolution of the simulation's renders relative to the camera's (default 0.5)")
+    parser.add_argument("--seed", type=int, default=0, help="CMA-ES seed")
+    parser.add_argument("--device", default="cpu", help="Warp device (default cpu)")
+    parser.add_argument("--out", default="fit_out", help="output folder (default ./fit_out)")
+    parser.add_argument("--json", action="store_true", help="print a JSON summary only")
+
+
+def _base_params(args, path_fields):
+    """The gait preset with the video's path, magnet model and known values (checked by the config's rules)."""
+    from dataclasses import replace
+
+    from warpworm.physics import gaits
+    from warpworm.physics.params import WormParams
+
+    base = gaits.preset_params(args.gait, args.backward, **path_fields)
+    base = replace(base, magnet_model=args.magnet_model)
+    known = {}
+    names = {f for f in WormParams.__dataclass_fields__}
+    for item in args.set:
+        k, _, v = item.partition("=")
+        if k not in names:
+            raise ValueError(f"--set {item!r}: unknown field {k!r}; expected a WormParams field")
+        try:
+            known[k] = float(v)
+        except ValueError:
+            raise ValueError(f"--set {item!r}: got {v!r}; expected a number") from None
+    base = replace(base, **known)
+    from warpworm.data.config import check_worm_params
+
+    check_worm_params(base)
+    return base, known
+
+
+def main(args) -> int:
+    from pathlib import Path
+
+    import numpy as np
+
+    from warpworm.analysis import fit_track as FT
+    from warpworm.analysis import track as T
+    from warpworm.commands.common import refuse
+    from warpworm.data.config import ConfigError
+
+    try:
+        if not Path(args.track).is_file():
+            raise ValueError(f"TRACK: got {args.track!r}; expected a track.csv written by 'warpworm track'")
+        if args.budget < 1 or (args.popsize is not None and args.popsize < 2):
+            raise ValueError(f"--budget/--popsize: got {args.budget}/{args.popsize}; expected >= 1 / >= 2")
+        if not args.spread > 1 or not 0 < args.render_scale <= 1:
+            raise ValueError(f"--spread/--render-scale: got {args.spread}/{args.render_scale}; expected > 1 / (0, 1]")
+        try:
+            import cma  # noqa: F401
+        except ImportError:
+            raise ValueError("fit-track: the cma package is missing; expected it installed (pip install "
+                             "'warpworm[calibrate]')") from None
+        path_fields = FT.parse_path(args.path)
+        names = FT.parse_fit(args.fit)
+        track = T.read_csv(args.track)
+        if int(track["seen"].all(axis=1).sum()) < 3:
+            raise ValueError(f"TRACK {args.track}: fewer than 3 frames with all bands; expected a longer track")
+        meta = None
+        cam_arg = args.camera or (str(T.meta_path(args.track)) if T.meta_path(args.track).is_file() else "none")
+        if cam_arg != "none":
+            meta = T.read_meta(cam_arg) if "height_m" in Path(cam_arg).read_text() else None
+            if meta is None:
+                raise ValueError(f"--camera {cam_arg}: expected the TRACK.json that 'warpworm track' wrote (camera, "
+                                 "image size, plane height)")
+            track["ref"] = meta["ref"]
+        else:
+            track["ref"] = int(np.nonzero(track["seen"].all(axis=1))[0][0])
+        base, known = _base_params(args, path_fields)
+    except (ValueError, ConfigError) as exc:
+        return refuse(exc)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    log = None if args.json else print
+    if log:
+        log(f"fitting {names} to {len(track['time'])} frames of {args.gait}{' backward' if args.backward else ''} "
+            f"({'through the track camera' if meta else 'band centres from above'}), budget {args.budget} worlds")
+    res = FT.fit(track, base, names, budget=args.budget, popsize=args.popsize, spread=args.spread, seed=args.seed,
+                 meta=meta, log=log, render_scale=args.render_scale, device=args.device)
+    frag = FT.write_fragment(out / "fit.yaml", args.gait, args.backward, {**path_fields, **known}, res)
+    plot_note = ""
+    try:
+        FT.plot_fit(out / "fit.png", track, res, title=f"{args.gait}: measured (red) vs fitted (blue)")
+    except ImportError:
+        plot_note = " (no fit.png: install the plots extra, pip install 'warpworm[plots]')"
+    summary = {"names": names, "value": res["value"].tolist(), "preset": res["base"].tolist(),
+               "sigma_rel": [_num(s) for s in res["sigma_rel"]], "pinned": res["pinned"].tolist(),
+               "cost": _num(res["cost"]), "rms_ratio": _num(res["rms_ratio"]), "rms_displacement_m": _num(res["rms_disp_m"]),
+               "weakest": res["weakest"].tolist(), "weakest_sigma": _num(res["weakest_sigma"]), "worlds": res["worlds"],
+               "wall_s": res["wall_s"], "files": [str(out / f) for f in ("fit.yaml", "fit.png", "fit.json")]}
+    (out / "fit.json").write_text(json.dumps(summary, indent=1, allow_nan=False))
+    if args.json:
+        print(json.dumps(summary))
+        return 0
+    print("\n".join(FT.report_lines(res)))
+    print(f"{res['worlds']} worlds in {res['wall_s']:.1f} s; wrote {out}/fit.yaml, fit.json, fit.png{plot_note}")
+    print(frag.splitlines()[1])
+    return 0
+
+
+def _num(x):
+    """A finite float, or None (JSON has no inf)."""
+    import math
+
+    x = float(x)
+    return x if math.isfinite(x) else None
