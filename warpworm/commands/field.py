@@ -20,7 +20,17 @@ def main(args) -> int:
     from warpworm.physics import magnets as mg
     from warpworm.analysis.field_plot import render_field_picture
 
+    from warpworm.commands.common import check_positive, refuse
+
     out = Path(args.out)
+    try:
+        check_positive(densities=min(args.densities))
+        if not np.isfinite(args.moment):
+            raise ValueError(f"--moment: got {args.moment}; expected a finite moment [A*m^2]")
+        if out.exists() and not out.is_dir():
+            raise ValueError(f"--out: got '{out}'; expected a folder (it is a file)")
+    except ValueError as exc:
+        return refuse(exc)
     dens = tuple(d * 1e6 for d in args.densities)
     path = render_field_picture(out / "field.png", moment=args.moment, densities=dens)
     # a few numbers beside the picture: error of the dipole model on the bar's axis and beside it
