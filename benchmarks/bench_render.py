@@ -121,6 +121,8 @@ FEATURES = (
     ("shadows (sun + lamp, 128 px maps)", [], {"shadows": True}),
     ("shadows, 256 px maps", [], {"shadows": True, "shadow_map": 256}),
     ("shadows + lights: random [1, 4]", ["render.plate_pose=true", "render.lights=random"], {"shadows": True}),
+    ("supersample 2 (4 RGB samples per pixel)", [], {"supersample": 2}),
+    ("supersample 3 (9 RGB samples per pixel)", [], {"supersample": 3}),
 )
 """(name, config overrides, Renderer options) of the issue-24 rows: each realism option on its own and together."""
 

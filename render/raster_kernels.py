@@ -686,3 +686,32 @@ def resolve_shade(
         rgb[img, row + x] = wp.vec3ub(to_srgb8(color[0]), to_srgb8(color[1]), to_srgb8(color[2]))
         depth[img, row + x] = best_z
         seg[img, row + x] = wp.uint8(label)
+
+
+@wp.kernel
+def downsample_rgb(
+    fine: wp.array2d(dtype=wp.vec3ub),
+    sub: int,
+    width: int,
+    # Data out:
+    rgb: wp.array2d(dtype=wp.vec3ub),
+):
+    """Supersampling's resolve: pixel (x, y) of image ``img`` is the mean, in linear RGB (display gamma 2), of the
+    ``sub`` x ``sub`` block of ``fine`` pixels (sub x, sub y) .. (sub x + sub - 1, sub y + sub - 1).
+
+    Args:
+        fine: (N, sub H * sub W) 8-bit pixels of the images rendered ``sub`` times larger.
+        sub: samples per pixel side. width: W [px] of the output.
+        rgb: (N, H * W) output pixels.
+    """
+    img, y, x = wp.tid()
+    fw = width * sub
+    acc = wp.vec3(0.0)
+    for j in range(sub):
+        row = (y * sub + j) * fw + x * sub
+        for i in range(sub):
+            p = fine[img, row + i]
+            c = wp.vec3(float(p[0]), float(p[1]), float(p[2])) * (1.0 / 255.0)
+            acc = acc + wp.cw_mul(c, c)
+    acc = acc * (1.0 / float(sub * sub))
+    rgb[img, y * width + x] = wp.vec3ub(to_srgb8(acc[0]), to_srgb8(acc[1]), to_srgb8(acc[2]))

@@ -63,7 +63,8 @@ class Renderer:
     """Off-screen z-buffer rasterizer for batches of (world, camera) images, on any Warp device."""
 
     def __init__(self, width: int, height: int, *, device=None, near: float = 1e-3,
-                 max_chunk_pixels: int = 1 << 23, threads: int = 1, shadows: bool = False, shadow_map: int = 0):
+                 max_chunk_pixels: int = 1 << 23, threads: int = 1, shadows: bool = False, shadow_map: int = 0,
+                 supersample: int = 1):
         """
         Args:
             width, height: image size [px].
@@ -73,6 +74,9 @@ class Renderer:
             threads: CPU only: render this many chunks concurrently (one core each); ignored on CUDA.
             shadows: shadows from the sun and every point light (a ``shadow_map`` x ``shadow_map`` depth map per
                 light and world, rasterized by the same pass; soft by percentage-closer filtering).
+            supersample: s > 1 anti-aliases RGB: each pixel is the mean (in linear RGB) of s x s samples on a regular
+                grid over its square, rendered as one image s times larger; depth, segmentation, the worm mask and
+                normals still come from one sample at the pixel centre (the s = 1 pass, bit for bit).
             shadow_map: side [px] of each shadow map; 0: ``max(width, height)`` (the map fits the shadow casters,
                 so a texel is then about a pixel of an image framing the worm).
         """
@@ -88,6 +92,10 @@ class Renderer:
         if int(shadow_map) < 0:
             raise ValueError(f"shadow_map: got {shadow_map}; expected a side [px] >= 1, or 0 for the image's")
         self.shadow_map = int(shadow_map) or max(self.width, self.height)
+        if int(supersample) < 1:
+            raise ValueError(f"supersample: got {supersample}; expected samples per pixel side >= 1")
+        self.supersample = int(supersample)
+        self._fine = None
         self._buffers: dict = {}
         # load the kernels once here: concurrent first launches from several threads would race to load them
         wp.load_module(rk, device=self.device)
@@ -212,6 +220,8 @@ class Renderer:
             out["normals"] = np.empty((N, H, W, 3), np.float32)
         if N == 0:
             return out
+        if self.supersample > 1:
+            out["rgb"] = self._supersampled_rgb(scene, cameras)
         s = self._upload_scene(scene)
         T = min(self.threads, N)
         chunk = min(-(-N // T), self.max_chunk_images)
@@ -226,7 +236,8 @@ class Renderer:
             for start, stop in pieces[slot::T]:
                 res = self._render_chunk(s, cameras, start, stop, chunk, normals, slot)
                 for k, v in res.items():
-                    out[k][start:stop] = v
+                    if k != "rgb" or self.supersample == 1:  # supersampled RGB came from the fine pass
+                        out[k][start:stop] = v
 
         if T == 1:
             stream(0)
@@ -235,6 +246,34 @@ class Renderer:
                 for f in [pool.submit(stream, slot) for slot in range(T)]:
                     f.result()
         return out
+
+    def _supersampled_rgb(self, scene: SceneBatch, cameras: Cameras) -> np.ndarray:
+        """RGB (N, H, W, 3) uint8 of s x s samples per pixel: pixel (x, y) averages, in linear RGB (display gamma 2),
+        the samples at ``(x + (i + 0.5) / s - 0.5, y + (j + 0.5) / s - 0.5)``, i, j < s: pixel ``(s x + i, s y + j)``
+        of an image s times larger with ``fx' = s fx``, ``cx' = s cx + (s - 1) / 2`` (likewise y). Rendered in groups
+        of images of at most ``max_chunk_pixels`` fine pixels."""
+        import dataclasses
+
+        sub, H, W = self.supersample, self.height, self.width
+        if self._fine is None:
+            self._fine = Renderer(W * sub, H * sub, device=self.device, near=self.near,
+                                  max_chunk_pixels=self.max_chunk_pixels, threads=self.threads, shadows=self.shadows,
+                                  shadow_map=self.shadow_map)
+        K = cameras.K.copy()
+        K[:, :2, :2] *= sub
+        K[:, :2, 2] = sub * K[:, :2, 2] + (sub - 1) / 2
+        fine = dataclasses.replace(cameras, K=K, width=W * sub, height=H * sub)
+        N = len(cameras)
+        rgb = np.empty((N, H, W, 3), np.uint8)
+        group = max(1, self.max_chunk_pixels // (H * W * sub * sub))
+        for a in range(0, N, group):
+            b = min(N, a + group)
+            img = self._fine.render(scene, fine.take(slice(a, b)))["rgb"]
+            src = wp.array(img.reshape(b - a, -1, 3), dtype=wp.vec3ub, device=self.device)
+            dst = wp.empty((b - a, H * W), dtype=wp.vec3ub, device=self.device)
+            wp.launch(rk.downsample_rgb, dim=(b - a, H, W), inputs=[src, sub, W], outputs=[dst], device=self.device)
+            rgb[a:b] = dst.numpy().reshape(b - a, H, W, 3)
+        return rgb
 
     def _render_chunk(self, s: dict, cameras: Cameras, start: int, stop: int, chunk: int, normals: bool,
                       slot: int = 0) -> dict:

@@ -364,6 +364,9 @@ class RenderConfig:
     rendered from the light by the same rasterizer, soft by percentage-closer filtering (docs/render.md)."""
     shadow_map: Annotated[Int, Field(ge=0, le=4096)] = 0
     """Side [px] of each light's shadow map; 0: the image's larger side (a texel about a pixel at the worm)."""
+    supersample: Annotated[Int, Field(ge=1, le=8)] = 1
+    """Anti-aliased RGB: s x s samples per pixel averaged in linear RGB (s = 1: one sample at the centre). Depth,
+    segmentation, masks and keypoint visibility stay exact at pixel centres (docs/render.md)."""
     # -- issue 24: the path-traced engine (warpworm.render.pathtrace, the `pathtrace` extra); labels stay the raster's
     engine: Annotated[Literal["raster", "pathtraced"], AfterValidator(_check_engine)] = "raster"
     """'raster': every image from the rasterizer; 'pathtraced': every image path-traced by Mitsuba 3 (same meshes,
@@ -378,7 +381,7 @@ class RenderConfig:
 RENDER_OFF_GROUPS = {"plate_pose": ("plate_offset",),
                      "lights": ("light_count", "light_distance", "light_elevation", "light_size", "light_irradiance",
                                 "light_warmth"),
-                     "shadows": ("shadow_map",),
+                     "shadows": ("shadow_map",), "supersample": (),
                      "engine": ("pathtraced_fraction", "pathtraced_spp")}
 """render switch -> the keys it enables: a group whose switch and keys are all at their defaults (OFF) is left out
 of ``to_dict`` (so the files' config_yaml stays that of before the option)."""

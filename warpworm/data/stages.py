@@ -168,11 +168,13 @@ class WarpStages:
     def _renderer(self, cfg):
         from warpworm.render import Renderer
 
-        key = (cfg.render.width, cfg.render.height, cfg.sim.device, cfg.render.shadows, cfg.render.shadow_map)
+        key = (cfg.render.width, cfg.render.height, cfg.sim.device, cfg.render.shadows, cfg.render.shadow_map,
+               cfg.render.supersample)
         r = self._renderers.get(key)
         if r is None:
             r = self._renderers[key] = Renderer(cfg.render.width, cfg.render.height, device=cfg.sim.device,
-                                                shadows=cfg.render.shadows, shadow_map=cfg.render.shadow_map)
+                                                shadows=cfg.render.shadows, shadow_map=cfg.render.shadow_map,
+                                                supersample=cfg.render.supersample)
         return r
 
     def render_batch(self, frame, params, cameras, appearance, seeds, cfg):
