@@ -28,6 +28,40 @@ def remove_preview_temporaries(out) -> None:
         (Path(out) / name).unlink(missing_ok=True)
 
 
+def legend(width: int) -> np.ndarray:
+    """A key under the contact sheet (RGB uint8, ``width`` px wide): what the third column's colours and marks mean."""
+    import cv2
+
+    from warpworm.render.contact_sheet import _kp_color
+    from warpworm.render.labels import KEYPOINT_NAMES
+
+    groups: dict = {}  # the sheet's own colours, grouped: each colour once, with the keypoints drawn in it
+    for name in KEYPOINT_NAMES:
+        groups.setdefault(tuple(_kp_color(name)), []).append(name)
+
+    def label(names):
+        if all(n.startswith("seg") for n in names):
+            return f"{names[0]}-{names[-1][3:]}" if len(names) > 1 else names[0]
+        if all(n.startswith("ipm") for n in names):
+            return "IPM centres"
+        base = [n for n in names if "_" not in n]
+        return (base[0] if base else names[0]) + (" + end corners" if len(names) > 1 else "")
+
+    font, items = cv2.FONT_HERSHEY_SIMPLEX, [(label(v), k) for k, v in groups.items()]
+    lines = [items, ["keypoints: filled = visible, hollow = occluded (none: outside the image)",
+                     "boxes: thin = projected worm, thick = visible worm pixels; axes: body x red, y green, z blue "
+                     "(1 cm)", "'vis 0.90': the fraction of the worm's pixels that are visible"]]
+    rows = [np.zeros((18, width, 3), np.uint8) for _ in range(1 + len(lines[1]))]
+    x = 6
+    for name, colour in lines[0]:
+        cv2.circle(rows[0], (x + 5, 9), 4, tuple(int(c) for c in colour), -1, cv2.LINE_AA)
+        cv2.putText(rows[0], name, (x + 14, 13), font, 0.38, (255, 255, 255), 1, cv2.LINE_AA)
+        x += 30 + cv2.getTextSize(name, font, 0.38, 1)[0][0]
+    for r, text in zip(rows[1:], lines[1]):
+        cv2.putText(r, text, (6, 13), font, 0.36, (255, 255, 255), 1, cv2.LINE_AA)
+    return np.concatenate(rows, axis=0)
+
+
 def write_previews(cfg: DatasetConfig, out, stages=DEFAULT_STAGES, max_rows: int = 8) -> list[Path]:
     """``preview.png``: the renderer's contact sheet (:func:`warpworm.render.contact_sheet.contact_sheet`) of the
     first samples; ``preview.mp4``: trajectory 0 resimulated at 20 fps over ``sim.frame_times`` with the same draws,
@@ -47,7 +81,8 @@ def write_previews(cfg: DatasetConfig, out, stages=DEFAULT_STAGES, max_rows: int
         samples = [reader[i] for i in range(n)]
         stacked = {k: np.stack([smp[k] for smp in samples]) for k in samples[0] if not k.startswith("params/")}
         # written under a temporary name and renamed: an interrupted preview leaves no half-written file
-        save_png(out / ".preview.tmp.png", contact_sheet(stacked, max_rows=n, scale=2))
+        sheet = contact_sheet(stacked, max_rows=n, scale=2)
+        save_png(out / ".preview.tmp.png", np.concatenate([sheet, legend(sheet.shape[1])], axis=0))
         os.replace(out / ".preview.tmp.png", out / "preview.png")
         paths.append(out / "preview.png")
         cam = {k: reader.read(f"camera/{k}", [0]) for k in ("K", "R", "t")}
