@@ -36,6 +36,9 @@ class Cameras:
     draws: dict | None = None
     """Sampler only: the kept draw of each image, (N,) arrays: ``distance`` [m], ``elevation_deg``,
     ``azimuth_deg``, ``roll_deg``, ``fov_deg`` (along ``fov_axis``), and ``lookat`` (N, 3) [m]."""
+    dist: np.ndarray | None = None
+    """Lens distortion (k1, k2, p1, p2, k3) of each image, OpenCV's model (:mod:`warpworm.render.distortion`),
+    shape (N, 5); None: pinhole. :meth:`project` and the renderer apply it."""
 
     def __len__(self) -> int:
         return self.K.shape[0]
@@ -62,13 +65,18 @@ class Cameras:
         Args:
             points_world: (N, P, 3) points [m] (already gathered per image).
         Returns:
-            uv (N, P, 2) pixels, float64; and points in the camera frame (N, P, 3) [m].
+            uv (N, P, 2) pixels, float64 (through ``dist`` when set: ``cv2.projectPoints`` with it); and points in
+            the camera frame (N, P, 3) [m].
         """
         pc = np.einsum("nij,npj->npi", self.R, points_world) + self.t[:, None]
         z = pc[..., 2]
         with np.errstate(divide="ignore", invalid="ignore"):
             x = pc[..., 0] / z
             y = pc[..., 1] / z
+        if self.dist is not None:
+            from warpworm.render.distortion import distort
+
+            x, y = distort(x, y, np.asarray(self.dist, dtype=np.float64)[:, None, :])
         u = self.K[:, None, 0, 0] * x + self.K[:, None, 0, 1] * y + self.K[:, None, 0, 2]
         v = self.K[:, None, 1, 1] * y + self.K[:, None, 1, 2]
         return np.stack([u, v], axis=-1), pc

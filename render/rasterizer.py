@@ -96,6 +96,7 @@ class Renderer:
             raise ValueError(f"supersample: got {supersample}; expected samples per pixel side >= 1")
         self.supersample = int(supersample)
         self._fine = None
+        self._wide = {}
         self._buffers: dict = {}
         # load the kernels once here: concurrent first launches from several threads would race to load them
         wp.load_module(rk, device=self.device)
@@ -208,6 +209,8 @@ class Renderer:
             raise ValueError(f"cameras.world must index the scene's {scene.num_worlds} worlds")
         if np.any(np.abs(cameras.K[:, 0, 1]) > 0):
             raise ValueError("skewed intrinsics (K[0, 1] != 0) are not supported")
+        if cameras.dist is not None and np.any(np.asarray(cameras.dist) != 0):
+            return self._render_distorted(scene, cameras, normals)
         N = len(cameras)
         H, W = self.height, self.width
         out = {
@@ -246,6 +249,44 @@ class Renderer:
                 for f in [pool.submit(stream, slot) for slot in range(T)]:
                     f.result()
         return out
+
+    def _render_distorted(self, scene: SceneBatch, cameras: Cameras, normals: bool) -> dict:
+        """Images through ``cameras.dist`` (OpenCV's lens model, :mod:`warpworm.render.distortion`): a pinhole
+        render with the same K, widened by margins so that it holds the ray of every distorted pixel centre, warped:
+        RGB bilinearly (``cv2.remap``), depth, segmentation, the worm mask and normals from the nearest pinhole pixel
+        centre (within half a pixel of the exact ray)."""
+        import dataclasses
+
+        import cv2
+
+        from warpworm.render.distortion import undistort_maps
+
+        H, W, N = self.height, self.width, len(cameras)
+        maps = undistort_maps(cameras.K, np.asarray(cameras.dist, dtype=np.float64), W, H)  # (N, H, W, 2)
+        lo = np.floor(maps.reshape(-1, 2).min(axis=0)) - 1
+        hi = np.ceil(maps.reshape(-1, 2).max(axis=0)) + 1
+        ml, mt = int(max(0, -lo[0])), int(max(0, -lo[1]))
+        Wp, Hp = W + ml + int(max(0, hi[0] - (W - 1))), H + mt + int(max(0, hi[1] - (H - 1)))
+        wide = self._wide.get((Wp, Hp))
+        if wide is None:
+            wide = self._wide[(Wp, Hp)] = Renderer(
+                Wp, Hp, device=self.device, near=self.near, max_chunk_pixels=self.max_chunk_pixels,
+                threads=self.threads, shadows=self.shadows, shadow_map=self.shadow_map or max(W, H),
+                supersample=self.supersample)
+        K = cameras.K.copy()
+        K[:, 0, 2] += ml
+        K[:, 1, 2] += mt
+        pin = wide.render(scene, dataclasses.replace(cameras, K=K, dist=None, width=Wp, height=Hp), normals=normals)
+        mx = (maps[..., 0] + ml).astype(np.float32)
+        my = (maps[..., 1] + mt).astype(np.float32)
+        ix = np.clip(np.floor(mx + 0.5).astype(np.int64), 0, Wp - 1)
+        iy = np.clip(np.floor(my + 0.5).astype(np.int64), 0, Hp - 1)
+        n = np.arange(N)[:, None, None]
+        out = {k: v[n, iy, ix] for k, v in pin.items() if k != "rgb"}
+        out["rgb"] = np.stack([cv2.remap(pin["rgb"][i], mx[i], my[i], cv2.INTER_LINEAR,
+                                         borderMode=cv2.BORDER_REPLICATE) for i in range(N)]) if N else \
+            np.empty((0, H, W, 3), np.uint8)
+        return {k: out[k] for k in pin}
 
     def _supersampled_rgb(self, scene: SceneBatch, cameras: Cameras) -> np.ndarray:
         """RGB (N, H, W, 3) uint8 of s x s samples per pixel: pixel (x, y) averages, in linear RGB (display gamma 2),

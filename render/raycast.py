@@ -26,17 +26,21 @@ def cast_rays(
     cam_rot: wp.array(dtype=wp.mat33),
     cam_trans: wp.array(dtype=wp.vec3),
     cam_intr: wp.array(dtype=wp.vec4),
+    directions: wp.array3d(dtype=wp.vec3),
     # Data out:
     depth: wp.array3d(dtype=float),
     seg: wp.array3d(dtype=wp.uint8),
 ):
-    """Nearest hit of the ray through pixel centre (x, y) of image ``img``: camera z [m] (0: miss) and its label."""
+    """Nearest hit of the ray through pixel centre (x, y) of image ``img`` (or along ``directions[img, y, x]``,
+    camera frame with z = 1, when given: shape (N, H, W), else (1, 1, 1)): camera z [m] (0: miss) and its label."""
     img, y, x = wp.tid()
     w = image_world[img]
     R = cam_rot[img]
     t = cam_trans[img]
     k = cam_intr[img]
     d_cam = wp.vec3((float(x) - k[2]) / k[0], (float(y) - k[3]) / k[1], 1.0)
+    if directions.shape[0] > 1:
+        d_cam = directions[img, y, x]
     Rt = wp.transpose(R)
     eye = -(Rt * t)
     length = wp.length(d_cam)
@@ -73,8 +77,10 @@ class RayCaster:
                              device=self.device)
         self._labels = wp.array(np.stack(labels), dtype=wp.int32, device=self.device)
 
-    def render(self, scene: SceneBatch | None, cameras: Cameras) -> dict:
-        """``depth`` (N, H, W) float32 [m] (0 = miss) and ``seg`` (N, H, W) uint8; ``scene`` None reuses the BVHs."""
+    def render(self, scene: SceneBatch | None, cameras: Cameras, directions=None) -> dict:
+        """``depth`` (N, H, W) float32 [m] (0 = miss) and ``seg`` (N, H, W) uint8; ``scene`` None reuses the BVHs.
+        ``directions``: each pixel's ray (N, H, W, 3) in the camera frame with z = 1 (e.g. through a lens
+        distortion) instead of the pinhole ray through its centre."""
         if scene is not None:
             self.build(scene)
         d = self.device
@@ -85,7 +91,8 @@ class RayCaster:
         seg = wp.empty((N, self.height, self.width), dtype=wp.uint8, device=d)
         wp.launch(cast_rays, dim=(N, self.height, self.width), device=d,
                   inputs=[self._ids, self._labels, wp.array(cameras.world.astype(np.int32), dtype=wp.int32, device=d),
-                          _vec(cameras.R, wp.mat33, d), _vec(cameras.t, wp.vec3, d), _vec(intr, wp.vec4, d)],
+                          _vec(cameras.R, wp.mat33, d), _vec(cameras.t, wp.vec3, d), _vec(intr, wp.vec4, d),
+                          _vec(np.zeros((1, 1, 1, 3)) if directions is None else directions, wp.vec3, d)],
                   outputs=[depth, seg])
         return {"depth": depth.numpy(), "seg": seg.numpy()}
 

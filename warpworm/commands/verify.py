@@ -96,8 +96,13 @@ def check_labels(d: dict, H: int, W: int) -> list[str]:
         out.append(f"keypoints/camera != R keypoints/world + t (max error {e:.3g} m)")
     z = kc[..., 2]
     with np.errstate(divide="ignore", invalid="ignore"):
-        u = K[:, None, 0, 0] * kc[..., 0] / z + K[:, None, 0, 1] * kc[..., 1] / z + K[:, None, 0, 2]
-        v = K[:, None, 1, 1] * kc[..., 1] / z + K[:, None, 1, 2]
+        xn, yn = kc[..., 0] / z, kc[..., 1] / z
+        if "camera/dist" in d:  # lens distortion (render.distortion): OpenCV's model, warpworm.render.distortion
+            from warpworm.render.distortion import distort
+
+            xn, yn = distort(xn, yn, d["camera/dist"][:, None, :])
+        u = K[:, None, 0, 0] * xn + K[:, None, 0, 1] * yn + K[:, None, 0, 2]
+        v = K[:, None, 1, 1] * yn + K[:, None, 1, 2]
     uv = np.stack([u, v], -1)
     front = z > 0
     e = np.abs(uv - d["keypoints/pixel"])[front].max(initial=0)
@@ -204,6 +209,8 @@ def verify_dataset(root, max_problems: int = 50) -> tuple[list[str], dict]:
                 if names is None:
                     names = pnames
                 if len(data) == len(ds.FIELDS):
+                    if "camera/dist" in f:  # written only with render.distortion
+                        data["camera/dist"] = f["camera/dist"][...]
                     problems += [f"{path}: {p}" for p in check_labels(data, dims["H"], dims["W"])]
                 samples += N
         except (OSError, KeyError, ValueError) as exc:

@@ -312,6 +312,12 @@ def _check_pathtraced_fraction(frac: float, info: ValidationInfo) -> float:
     return frac
 
 
+def _check_signed_range(r: list) -> list:
+    if r[0] > r[1]:
+        raise _problem(f"got {r}; expected [lo, hi] with lo <= hi")
+    return r
+
+
 @dataclass
 class RenderConfig:
     """The images."""
@@ -367,6 +373,22 @@ class RenderConfig:
     supersample: Annotated[Int, Field(ge=1, le=8)] = 1
     """Anti-aliased RGB: s x s samples per pixel averaged in linear RGB (s = 1: one sample at the centre). Depth,
     segmentation, masks and keypoint visibility stay exact at pixel centres (docs/render.md)."""
+    distortion: Bool = False
+    """Lens distortion drawn per camera (OpenCV's k1, k2, p1, p2, k3, each uniform in its range below), stored as
+    camera/dist: images are warped through it; keypoints/pixel (= cv2.projectPoints with it), labels/bbox_obj and
+    visibility follow it (docs/render.md)."""
+    distortion_k1: Annotated[list[Num], Field(strict=True, min_length=2, max_length=2),
+                             AfterValidator(_check_signed_range)] = field(default_factory=lambda: [-0.25, 0.05])
+    """[lo, hi]: radial k1 (negative: barrel)."""
+    distortion_k2: Annotated[list[Num], Field(strict=True, min_length=2, max_length=2),
+                             AfterValidator(_check_signed_range)] = field(default_factory=lambda: [-0.02, 0.08])
+    """[lo, hi]: radial k2."""
+    distortion_p: Annotated[list[Num], Field(strict=True, min_length=2, max_length=2),
+                            AfterValidator(_check_signed_range)] = field(default_factory=lambda: [-0.002, 0.002])
+    """[lo, hi]: tangential p1 and p2 (each drawn)."""
+    distortion_k3: Annotated[list[Num], Field(strict=True, min_length=2, max_length=2),
+                             AfterValidator(_check_signed_range)] = field(default_factory=lambda: [0.0, 0.0])
+    """[lo, hi]: radial k3."""
     # -- issue 24: the path-traced engine (warpworm.render.pathtrace, the `pathtrace` extra); labels stay the raster's
     engine: Annotated[Literal["raster", "pathtraced"], AfterValidator(_check_engine)] = "raster"
     """'raster': every image from the rasterizer; 'pathtraced': every image path-traced by Mitsuba 3 (same meshes,
@@ -382,6 +404,7 @@ RENDER_OFF_GROUPS = {"plate_pose": ("plate_offset",),
                      "lights": ("light_count", "light_distance", "light_elevation", "light_size", "light_irradiance",
                                 "light_warmth"),
                      "shadows": ("shadow_map",), "supersample": (),
+                     "distortion": ("distortion_k1", "distortion_k2", "distortion_p", "distortion_k3"),
                      "engine": ("pathtraced_fraction", "pathtraced_spp")}
 """render switch -> the keys it enables: a group whose switch and keys are all at their defaults (OFF) is left out
 of ``to_dict`` (so the files' config_yaml stays that of before the option)."""

@@ -126,6 +126,9 @@ SCHEMA["view"] = ("int32", "", "() which of the trajectory's render.views_per_fr
                   "(written only when views_per_frame > 1; sample = (trajectory K + view) F + frame)")
 SCHEMA["engine"] = ("uint8", "", "() renderer of this sample's rgb: 0 raster, 1 path-traced (warpworm.render.pathtrace; "
                     "written only with render.engine pathtraced or render.pathtraced_fraction > 0; labels are raster)")
+SCHEMA["camera/dist"] = ("float64", "", "(5,) lens distortion (k1, k2, p1, p2, k3), OpenCV's model: rgb, depth, "
+                         "segmentation and keypoints/pixel (= cv2.projectPoints with it) go through it; written only "
+                         "with render.distortion")
 
 SCHEMA_TABLE_BEGIN = "<!-- schema table: generated from warpworm.data.dataset.FIELDS by schema_markdown(); do not edit -->"
 SCHEMA_TABLE_END = "<!-- end of schema table -->"

@@ -238,6 +238,10 @@ def dataset_cameras(cfg, index: np.ndarray, worm_points: np.ndarray, view: np.nd
         roll_deg=deg("roll"), fov_deg=deg("fov_y"), fov_axis="y", lookat_jitter=_range(c["lookat_jitter"])[0],
         aspect_jitter=0.0, principal_jitter=0.0, min_in_frame=_range(c["min_in_frame"])[0],
         max_tries=int(_range(c["max_tries"])[0]))
+    if cfg.render.distortion:  # issue 24: lens distortion per camera, from the camera's seed (stored as camera/dist)
+        from warpworm.render.distortion import draw_distortion
+
+        cams.dist = draw_distortion(cfg.render, seeds)
     d = cams.draws
     n = len(index)
     values = {

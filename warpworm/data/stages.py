@@ -206,6 +206,8 @@ class WarpStages:
         out = {"rgb": rgb, "depth": img["depth"], "segmentation": img["seg"], **labels}
         if engine is not None:
             out["engine"] = engine.astype(np.uint8)
+        if cams.dist is not None:  # render.distortion: the lens the image and keypoints/pixel went through
+            out["camera/dist"] = np.asarray(cams.dist, dtype=np.float64)
         return out
 
 
