@@ -167,7 +167,7 @@ def test_output_folder_checks(tmp_path):
         with pytest.raises(ConfigError, match="holds other files, e.g. x, and no manifest.json"):
             check_output_dir(tmp_path / "full", resume=resume)
     (tmp_path / "full" / "manifest.json").write_text("{}")
-    with pytest.raises(ConfigError, match="holds a warpworm dataset; use --resume"):
+    with pytest.raises(ConfigError, match="it is not empty: it holds a warpworm dataset; use --resume"):
         check_output_dir(tmp_path / "full", resume=False)
     check_output_dir(tmp_path / "full", resume=True)
     (tmp_path / "killed").mkdir()  # a job killed before its manifest: only its hidden lock / temporaries

@@ -828,8 +828,8 @@ def check_output_dir(out: str | os.PathLike, resume: bool) -> None:
             raise ConfigError([f"--out: got '{out}'; expected {what} (it holds other files, e.g. {visible[0]}, and "
                                "no manifest.json or shard-*.h5 of a warpworm dataset)"])
         if not resume and names:
-            raise ConfigError([f"--out: got '{out}'; expected an empty or new folder (it holds a warpworm dataset; "
-                               "use --resume to continue its job, or another --out)"])
+            raise ConfigError([f"--out: got '{out}'; expected an empty or new folder (it is not empty: it holds a "
+                               "warpworm dataset; use --resume to continue its job, or another --out)"])
         probe_dir = out
     else:
         probe_dir = out.parent
