@@ -12,6 +12,7 @@ process (CPU time of all its threads): what one dedicated core would deliver, mu
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
@@ -123,6 +124,8 @@ FEATURES = (
     ("shadows + lights: random [1, 4]", ["render.plate_pose=true", "render.lights=random"], {"shadows": True}),
     ("supersample 2 (4 RGB samples per pixel)", [], {"supersample": 2}),
     ("supersample 3 (9 RGB samples per pixel)", [], {"supersample": 3}),
+    ("exposure + white balance (gains per image)", [], {"gain": True}),
+    ("distortion (k1 -0.25, k2 0.08)", [], {"dist": (-0.25, 0.08, 0.002, -0.002, 0.0)}),
 )
 """(name, config overrides, Renderer options) of the issue-24 rows: each realism option on its own and together."""
 
@@ -146,10 +149,16 @@ def feature_rows(quick: bool, dev) -> list[dict]:
         scene = build_scene(states["positions"], pattern.triangles, pattern.triangle_segment,
                             magnet_pos=states["magnet_pos"], magnet_rot=states["magnet_rot"],
                             worm_texcoords=pattern.vertices, appearance=app)
+        opts = dict(opts)
+        view = cams
+        if opts.pop("gain", False):
+            view = dataclasses.replace(cams, gain=np.tile([[1.4, 1.0, 0.8]], (N, 1)))
+        if "dist" in opts:
+            view = dataclasses.replace(cams, dist=np.tile([opts.pop("dist")], (N, 1)))
         renderer = Renderer(128, 96, device=dev, **opts)
-        renderer.render(scene, cams)  # warm-up
+        renderer.render(scene, view)  # warm-up
         gauge = _machine_ns_per_element(dev)
-        t, c = _best_time(lambda: renderer.render(scene, cams), repeats, cpu=True)
+        t, c = _best_time(lambda: renderer.render(scene, view), repeats, cpu=True)
         base = t if base is None else base
         rows.append({"device": dev.alias, "feature": name, "size": "128x96", "images": N,
                      "point_lights": int(app.light_pos.shape[1]), "raster_img_s": N / t, "raster_ms": t * 1e3,

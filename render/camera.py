@@ -39,6 +39,9 @@ class Cameras:
     dist: np.ndarray | None = None
     """Lens distortion (k1, k2, p1, p2, k3) of each image, OpenCV's model (:mod:`warpworm.render.distortion`),
     shape (N, 5); None: pinhole. :meth:`project` and the renderer apply it."""
+    gain: np.ndarray | None = None
+    """Linear RGB gain of each image, (N, 3): exposure (2^EV) times white balance, applied by the renderer before the
+    display encoding, as a camera's processing does; None: 1."""
 
     def __len__(self) -> int:
         return self.K.shape[0]

@@ -625,6 +625,7 @@ def resolve_shade(
     height: int,
     span: int,
     write_normals: int,
+    cam_gain: wp.array(dtype=wp.vec3),
     # Data out:
     rgb: wp.array2d(dtype=wp.vec3ub),
     depth: wp.array2d(dtype=float),
@@ -643,6 +644,8 @@ def resolve_shade(
         zkey: keys written by the raster pass, shape (N, H * W).
         span: pixels per thread along a row.
         write_normals: 1 to write camera-frame unit normals (facing the camera; 0 for background), 0 to skip.
+        cam_gain: linear RGB gain of every image (exposure x white balance, applied before the display encoding),
+            shape (N,).
         rgb: (N, H * W) vec3ub. depth: camera z [m], 0 for background, (N, H * W). seg: ids, (N, H * W).
         normals: (N, H * W) vec3, or a 1-element dummy when write_normals is 0.
     """
@@ -663,6 +666,7 @@ def resolve_shade(
     if lights.shadows != 0:
         first = lights.map_first[w]
     row = y * width
+    gain = cam_gain[img]
     # along a row the world ray is affine in x: d(x) = d0 + x * dx, and so are its dot products with the floor axes
     d0 = Rt * wp.vec3(-k[2] / k[0], (py - k[3]) / k[1], 1.0)
     dx = Rt * wp.vec3(1.0 / k[0], 0.0, 0.0)
@@ -683,6 +687,7 @@ def resolve_shade(
                 normals[img, row + x] = wp.vec3(0.0)
             else:
                 normals[img, row + x] = R * nrm
+        color = wp.cw_mul(color, gain)
         rgb[img, row + x] = wp.vec3ub(to_srgb8(color[0]), to_srgb8(color[1]), to_srgb8(color[2]))
         depth[img, row + x] = best_z
         seg[img, row + x] = wp.uint8(label)

@@ -152,6 +152,7 @@ class Renderer:
                 "cam_rot": wp.empty(n, dtype=wp.mat33, device=d),
                 "cam_trans": wp.empty(n, dtype=wp.vec3, device=d),
                 "cam_intr": wp.empty(n, dtype=wp.vec4, device=d),
+                "cam_gain": wp.empty(n, dtype=wp.vec3, device=d),
             }
         return self._buffers[key]
 
@@ -329,7 +330,11 @@ class Renderer:
         trans[:n] = cameras.t[start:stop]
         world = np.zeros(chunk, np.int32)
         world[:n] = cameras.world[start:stop]
+        gain = np.ones((chunk, 3), np.float32)
+        if cameras.gain is not None:
+            gain[:n] = cameras.gain[start:stop]
         b["cam_intr"].assign(intr)
+        b["cam_gain"].assign(gain)
         b["cam_rot"].assign(rot)
         b["cam_trans"].assign(trans)
         b["image_world"].assign(world)
@@ -347,7 +352,7 @@ class Renderer:
         span = self.width if d.is_cpu else 1
         wp.launch(rk.resolve_shade, dim=(n, self.height, (self.width + span - 1) // span), device=d,
                   inputs=[s["triangles"], s["tri_label"], s["look"], lights, s["vertices"], s["texcoords"], *common,
-                          b["zkey"], self.width, self.height, span, int(normals)],
+                          b["zkey"], self.width, self.height, span, int(normals), b["cam_gain"]],
                   outputs=[b["rgb"], b["depth"], b["seg"], b["normals"]])
         H, W = self.height, self.width
         res = {

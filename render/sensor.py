@@ -106,3 +106,21 @@ def apply_sensor(rgb: np.ndarray, seeds, config: SensorConfig | None = None, *, 
             img8 = cv2.imdecode(buf, cv2.IMREAD_COLOR)[..., ::-1]
         out[i] = img8
     return out
+
+
+def exposure_gains(render_cfg, seeds) -> tuple[np.ndarray, dict] | None:
+    """Per-sample exposure and white balance (``render.exposure``, ``render.white_balance``) from each sample's seed
+    (stream 0xE7905): linear RGB gains (n, 3) = 2^EV x (red gain, 1, blue gain) for :attr:`Cameras.gain`, and the
+    drawn values by name (``sensor.exposure`` [stops], ``sensor.wb_red``, ``sensor.wb_blue``), each (n,). None
+    when both are off ([0, 0] stops, gains [1, 1])."""
+    ev_lo, ev_hi = render_cfg.exposure
+    wb_lo, wb_hi = render_cfg.white_balance
+    if ev_lo == ev_hi == 0.0 and wb_lo == wb_hi == 1.0:
+        return None
+    from warpworm.data.randomize import seed_uniforms
+
+    u = seed_uniforms(np.asarray(seeds).reshape(-1), 0xE7905, 3)
+    ev = ev_lo + (ev_hi - ev_lo) * u[:, 0]
+    red, blue = wb_lo + (wb_hi - wb_lo) * u[:, 1], wb_lo + (wb_hi - wb_lo) * u[:, 2]
+    gain = np.exp2(ev)[:, None] * np.stack([red, np.ones_like(red), blue], axis=1)
+    return gain, {"sensor.exposure": ev, "sensor.wb_red": red, "sensor.wb_blue": blue}

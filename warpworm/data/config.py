@@ -389,6 +389,14 @@ class RenderConfig:
     distortion_k3: Annotated[list[Num], Field(strict=True, min_length=2, max_length=2),
                              AfterValidator(_check_signed_range)] = field(default_factory=lambda: [0.0, 0.0])
     """[lo, hi]: radial k3."""
+    exposure: Annotated[list[Num], Field(strict=True, min_length=2, max_length=2),
+                        AfterValidator(_check_signed_range)] = field(default_factory=lambda: [0.0, 0.0])
+    """[lo, hi] [stops]: per-sample exposure, uniform: the image's linear light times 2^EV before the display
+    encoding (highlights clip), stored as params/sensor.exposure. [0, 0]: off."""
+    white_balance: Annotated[list[Num], Field(strict=True, min_length=2, max_length=2),
+                             AfterValidator(_check_range)] = field(default_factory=lambda: [1.0, 1.0])
+    """[lo, hi]: per-sample red and blue gains over green in linear light (a white-balance error), each uniform,
+    stored as params/sensor.wb_red, params/sensor.wb_blue. [1, 1]: off."""
     # -- issue 24: the path-traced engine (warpworm.render.pathtrace, the `pathtrace` extra); labels stay the raster's
     engine: Annotated[Literal["raster", "pathtraced"], AfterValidator(_check_engine)] = "raster"
     """'raster': every image from the rasterizer; 'pathtraced': every image path-traced by Mitsuba 3 (same meshes,
@@ -405,6 +413,7 @@ RENDER_OFF_GROUPS = {"plate_pose": ("plate_offset",),
                                 "light_warmth"),
                      "shadows": ("shadow_map",), "supersample": (),
                      "distortion": ("distortion_k1", "distortion_k2", "distortion_p", "distortion_k3"),
+                     "exposure": (), "white_balance": (),
                      "engine": ("pathtraced_fraction", "pathtraced_spp")}
 """render switch -> the keys it enables: a group whose switch and keys are all at their defaults (OFF) is left out
 of ``to_dict`` (so the files' config_yaml stays that of before the option)."""

@@ -191,6 +191,11 @@ class WarpStages:
         from warpworm.render.sensor import apply_sensor
 
         cams = dataclasses.replace(cameras, world=np.arange(B, dtype=np.int32))
+        from warpworm.render.sensor import exposure_gains
+
+        gains = exposure_gains(cfg.render, seeds)  # render.exposure / white_balance: None when off
+        if gains is not None:
+            cams.gain = gains[0]
         img = self._renderer(cfg).render(scene, cams)
         engine = pathtraced_samples(cfg, seeds)  # None: the option is off (nothing more is written)
         rgb = img["rgb"]
@@ -208,6 +213,8 @@ class WarpStages:
             out["engine"] = engine.astype(np.uint8)
         if cams.dist is not None:  # render.distortion: the lens the image and keypoints/pixel went through
             out["camera/dist"] = np.asarray(cams.dist, dtype=np.float64)
+        if gains is not None:
+            out.update({f"params/{k}": v for k, v in gains[1].items()})
         return out
 
 
