@@ -1,5 +1,5 @@
-"""Shared ``@wp.func`` helpers and constants of the dynamics kernels (:mod:`warpworm.kernels.implicit_euler`,
-:mod:`warpworm.kernels.magnet_pose`): per-world parameters, angle wrapping, crease fold ranges, freezing a diverging
+"""Shared ``@wp.func`` helpers and constants of the dynamics kernels (:mod:`warpworm.kernels.substep`,
+:mod:`warpworm.kernels.magnet_pose`): per-world parameters, angle wrapping, hinge fold ranges, freezing a diverging
 world, and the dihedral angle of a hinge with its gradient.
 
 Per-world parameters are read as ``p[world % p.shape[0]]`` so that an array of one value (shared) or one value per
@@ -35,7 +35,7 @@ def wrap_angle(a: float) -> float:
 
 @wp.func
 def fold_range(label: int):
-    """NoFoldThrough range (lo, hi) [rad] of a crease's signed angle: mountain [−π, 0], valley [0, π], flat [−π, π]."""
+    """NoFoldThrough range (lo, hi) [rad] of a hinge's signed angle: mountain [−π, 0], valley [0, π], flat [−π, π]."""
     lo = -PI
     hi = PI
     if label == LABEL_MOUNTAIN:
@@ -66,7 +66,7 @@ HALF_PI = wp.constant(1.57079632679489662)
 @wp.func
 def atan2_f32(y: float, x: float) -> float:
     """atan2(y, x) [rad] in (−π, π], inline: within 2.8e-7 rad of the float64 value (libm's float32 atan2f: 2.5e-7,
-    its rounding near π), without libm's call, which was ~1/4 of the crease gradient's cost. Octant reduction to
+    its rounding near π), without libm's call, which was ~1/4 of the hinge gradient's cost. Octant reduction to
     a = min/max in [0, 1], then a ≤ tan(π/8) directly, else π/4 + atan((a − 1)/(a + 1)), with Cephes' atanf
     minimax polynomial on [0, tan(π/8)]. atan2(±0, x < 0) = π (the sign of a zero y is not kept)."""
     ax = wp.abs(x)
@@ -130,7 +130,7 @@ def dihedral_angle_gradient_and_normals(xi: wp.vec3, xj: wp.vec3, xk: wp.vec3, x
 SLIVER_ALTITUDE = wp.constant(0.005)
 """A hinge wing whose altitude over the hinge is below this fraction of the hinge's length has collapsed: the
 sheet crumpled. The worm's wings rest at 0.17 or more and the gait presets keep them above 0.16 of their rest
-altitude (≥ 0.028); a collapsing wing makes the crease gradient (∝ 1 / altitude) and so the Newton matrix
+altitude (≥ 0.028); a collapsing wing makes the hinge gradient (∝ 1 / altitude) and so the Newton matrix
 singular, which otherwise shows as an explosion one step later."""
 
 
@@ -163,9 +163,9 @@ def wing_contact(p0: wp.vec3, p1: wp.vec3, p2: wp.vec3, lh: float):
 @wp.func
 def wing_contact_of_normal(n: wp.vec3, len2: float, p0: wp.vec3, p1: wp.vec3, p2: wp.vec3, lh: float):
     """:func:`wing_contact` given the wing's normal n = (p1 − p0) × (p2 − p0) and the hinge's |p1 − p2|² ``len2``,
-    which the crease's own angle computes anyway (:func:`dihedral_angle_gradient_and_normals`): a clear wing, the
+    which the hinge's own angle computes anyway (:func:`dihedral_angle_gradient_and_normals`): a clear wing, the
     usual case, then costs one comparison (|n|² against (A L²)², no square root) instead of a cross product and a
-    length per wing and Newton step (~15 % of the crease gradient)."""
+    length per wing and Newton step (~15 % of the hinge gradient)."""
     nn = wp.dot(n, n)
     clear = PANEL_CONTACT_ALTITUDE * len2
     if nn >= clear * clear:
@@ -191,10 +191,10 @@ def wings_collapsed(n1: wp.vec3, n2: wp.vec3, len2: float) -> bool:
 
 
 @wp.func
-def crease_at_substep_end(prev: float, xi: wp.vec3, xj: wp.vec3, xk: wp.vec3, xl: wp.vec3, label: int,
+def hinge_angle_at_substep_end(prev: float, xi: wp.vec3, xj: wp.vec3, xk: wp.vec3, xl: wp.vec3, label: int,
                           fold_tolerance: float):
-    """A crease's angle at the end of a substep, unwrapped from its angle ``prev`` [rad] at the start, and whether
-    the sheet crumpled there: the angle more than ``fold_tolerance`` [rad] outside the crease's NoFoldThrough range,
+    """A hinge's angle at the end of a substep, unwrapped from its angle ``prev`` [rad] at the start, and whether
+    the sheet crumpled there: the angle more than ``fold_tolerance`` [rad] outside the hinge's NoFoldThrough range,
     or a wing collapsed (:func:`wings_collapsed`). Returns (phi, crumpled); shared by the band and tile kernels."""
     n1, n2, r_kj, len2, length, psi = dihedral_angle_and_normals(xi, xj, xk, xl)
     phi = prev + wrap_angle(psi - prev)

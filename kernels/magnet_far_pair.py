@@ -13,18 +13,11 @@ azimuthal moment at |m| = nphi, which sets the accuracy at a given distance (:fu
 Such a rule exists (a positive measure on s ≥ 0) for disks up to height / diameter ≈ 0.23; a thicker cylinder keeps
 the closed form at every distance.
 
-Why: the closed-form cylinder field needs complete elliptic integrals at each of ~100 surface-charge points; the
-IPM–IPM pairs of a worm (disks 10 × 1 mm, 20–80 mm apart) were ~60 % of the analytic wrench. The ring rule costs
-(2·nphi)² float32 dipole pairs (~4.5 µs per IPM pair against 14.5 µs for the closed form) and agrees with
-the closed form to 8e-6 of the largest force and torque where it is used
-(``tests/test_magnets_far_pair.py``; docs/magnets.md has the table).
-
-A cuboid (the EPM) and a cylinder at least 2.5 of the cylinder's circumscribing radii apart take the same rule for
-the cylinder alone: the cuboid's face charges integrated in the ring points' field
-(:func:`cuboid_faces_in_ring_field`, ~32 face points against ~24 dipoles), and the cylinder's wrench from the
-cuboid's by reciprocity. It replaces the closed-form cuboid field at the ~96 points of the cylinder's caps, the
-EPM → IPM pairs that were two-thirds of the world wrench once the IPM pairs took the rule: 20.9 → 8.8 µs per pair
-at 5 radii, within 5.1e-6 of the closed form.
+Why: the closed-form cylinder field needs elliptic integrals at ~100 surface-charge points per pair; the ring rule is
+~3× cheaper for the worm's IPM–IPM pairs and agrees with the closed form to 8e-6 of the largest force and torque
+where it is used (``tests/test_magnets_far_pair.py``). A cuboid (the EPM) and a cylinder at least 2.5 circumscribing
+radii apart take the same rule for the cylinder alone: the cuboid's face charges in the ring points' field
+(:func:`cuboid_faces_in_ring_field`), the cylinder's wrench by reciprocity. Timings: docs/magnets.md.
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ Two families:
 
 - **Point dipoles** (float32): the field of a point dipole and the force / torque between two point dipoles. This is
   the d -> 0 limit of the paper's pair of ±q charges d = 1 µm apart; the charge-pair form cancels catastrophically
-  in float32 (DESIGN-NOTES), the limit form is accurate to ~2e-7 relative.
+  in float32 (docs/magnets.md), the limit form is accurate to ~2e-7 relative.
 - **Closed-form fields of uniformly magnetized solids** (float64 inside): cuboid (Yang 1990 / Engel-Herbert 2005,
   evaluated in the "bottom quadrant" after Cichon 2019 to avoid indeterminate logs on edge extensions), axially
   magnetized cylinder (Derby 2010, Bulirsch's ``cel``) and diametrally magnetized cylinder (Caciagli 2018 with the
@@ -580,16 +580,8 @@ def atan2_sum8(n: wp.vec4d, d: wp.vec4d, sign: wp.vec4d, n2: wp.vec4d, d2: wp.ve
 
 
 @wp.func
-def cuboid_field(J: wp.vec3d, dim: wp.vec3d, p: wp.vec3d) -> wp.vec3d:
-    """B [T] at ``p`` [m] (cuboid frame, centre at origin) of a cuboid with extents ``dim`` [m], polarization ``J`` [T].
-
-    Surface-charge closed form (Yang 1990, Engel-Herbert 2005), valid inside and outside. The observer is first
-    reflected into the octant x >= 0, y <= 0, z <= 0, where no log argument can vanish off the magnet's edges
-    (Cichon 2019, as magpylib); the reflection S = diag(sx, sy, sz) acts as B(p) = S B'(S p) with J' = S J.
-    """
-    a = F64_HALF * dim[0]
-    b = F64_HALF * dim[1]
-    c = F64_HALF * dim[2]
+def octant_reflection(p: wp.vec3d):
+    """``p`` reflected into the octant x >= 0, y <= 0, z <= 0 and the signs (sx, sy, sz) of the reflection."""
     x = p[0]
     y = p[1]
     z = p[2]
@@ -605,6 +597,27 @@ def cuboid_field(J: wp.vec3d, dim: wp.vec3d, p: wp.vec3d) -> wp.vec3d:
     if z > F64_0:
         z = -z
         sz = -F64_1
+    return wp.vec3d(x, y, z), wp.vec3d(sx, sy, sz)
+
+
+@wp.func
+def cuboid_field(J: wp.vec3d, dim: wp.vec3d, p: wp.vec3d) -> wp.vec3d:
+    """B [T] at ``p`` [m] (cuboid frame, centre at origin) of a cuboid with extents ``dim`` [m], polarization ``J`` [T].
+
+    Surface-charge closed form (Yang 1990, Engel-Herbert 2005), valid inside and outside. The observer is first
+    reflected into the octant x >= 0, y <= 0, z <= 0, where no log argument can vanish off the magnet's edges
+    (Cichon 2019, as magpylib); the reflection S = diag(sx, sy, sz) acts as B(p) = S B'(S p) with J' = S J.
+    """
+    a = F64_HALF * dim[0]
+    b = F64_HALF * dim[1]
+    c = F64_HALF * dim[2]
+    q, sgn = octant_reflection(p)
+    x = q[0]
+    y = q[1]
+    z = q[2]
+    sx = sgn[0]
+    sy = sgn[1]
+    sz = sgn[2]
     jx = J[0] * sx
     jy = J[1] * sy
     jz = J[2] * sz
@@ -708,6 +721,110 @@ def cylinder_axial_field_rz(z0: wp.float64, r: wp.float64, z: wp.float64):
 
 
 @wp.func
+def diametral_field_near_axis(zp: wp.float64, zm: wp.float64, zp2: wp.float64, zm2: wp.float64, r: wp.float64,
+                              r2: wp.float64, phi: wp.float64) -> wp.vec3d:
+    """:func:`cylinder_diametral_field_cyl` for r < 0.05, where the general form loses digits: its 5th-order Taylor
+    series in r."""
+    zpp = zp2 + F64_1
+    zmm = zm2 + F64_1
+    sqrt_p = wp.sqrt(zpp)
+    sqrt_m = wp.sqrt(zmm)
+    frac1 = zp / sqrt_p
+    frac2 = zm / sqrt_m
+    r3 = r2 * r
+    r4 = r3 * r
+    r5 = r4 * r
+    term1 = frac1 - frac2
+    term2 = (frac1 / (zpp * zpp) - frac2 / (zmm * zmm)) * r2 / wp.float64(8.0)
+    zpp4 = zpp * zpp * zpp * zpp
+    zmm4 = zmm * zmm * zmm * zmm
+    term3 = (
+        ((wp.float64(3.0) - F64_4 * zp2) * frac1 / zpp4 - (wp.float64(3.0) - F64_4 * zm2) * frac2 / zmm4)
+        / wp.float64(64.0)
+        * r4
+    )
+    hr = -wp.cos(phi) / F64_4 * (term1 + wp.float64(9.0) * term2 + wp.float64(25.0) * term3)
+    hphi = wp.sin(phi) / F64_4 * (term1 + wp.float64(3.0) * term2 + wp.float64(5.0) * term3)
+    zpp3 = zpp * zpp * zpp
+    zmm3 = zmm * zmm * zmm
+    zpp5 = zpp3 * zpp * zpp
+    zmm5 = zmm3 * zmm * zmm
+    hz = (
+        -wp.cos(phi)
+        / F64_4
+        * (
+            r * (F64_1 / zpp / sqrt_p - F64_1 / zmm / sqrt_m)
+            + wp.float64(0.375)
+            * r3
+            * ((F64_1 - F64_4 * zp2) / zpp3 / sqrt_p - (F64_1 - F64_4 * zm2) / zmm3 / sqrt_m)
+            + wp.float64(0.234375)
+            * r5
+            * (
+                (F64_1 - wp.float64(12.0) * zp2 + wp.float64(8.0) * zp2 * zp2) / zpp5 / sqrt_p
+                - (F64_1 - wp.float64(12.0) * zm2 + wp.float64(8.0) * zm2 * zm2) / zmm5 / sqrt_m
+            )
+        )
+    )
+    return wp.vec3d(hr, hphi, hz)
+
+
+@wp.func
+def diametral_field_general(zp: wp.float64, zm: wp.float64, zp2: wp.float64, zm2: wp.float64, r: wp.float64,
+                            r2: wp.float64, phi: wp.float64) -> wp.vec3d:
+    """:func:`cylinder_diametral_field_cyl` off the axis (Caciagli 2018), with complete elliptic integrals."""
+    rp = r + F64_1
+    rm = r - F64_1
+    rp2 = rp * rp
+    rm2 = rm * rm
+    ap2 = zp2 + rm2
+    am2 = zm2 + rm2
+    ap = wp.sqrt(ap2)
+    am = wp.sqrt(am2)
+    argp = -F64_4 * r / ap2
+    argm = -F64_4 * r / am2
+    argc = wp.float64(1.0e16)
+    one_over_rm = F64_0
+    if rm != F64_0:
+        argc = -F64_4 * r / rm2
+        one_over_rm = F64_1 / rm
+    kcp = wp.sqrt(F64_1 - argp)
+    kcm = wp.sqrt(F64_1 - argm)
+    elle_p, ellk_p = cel2(kcp, F64_1, F64_1, F64_1 - argp, F64_1, F64_1, F64_1)
+    elle_m, ellk_m = cel2(kcm, F64_1, F64_1, F64_1 - argm, F64_1, F64_1, F64_1)
+    ellpi_p = cel(kcp, F64_1 - argc, F64_1, F64_1)
+    ellpi_m = cel(kcm, F64_1 - argc, F64_1, F64_1)
+    hr = (
+        -wp.cos(phi)
+        / (F64_4 * F64_PI * r2)
+        * (
+            -zm * am * elle_m
+            + zp * ap * elle_p
+            + zm / am * (F64_2 + zm2) * ellk_m
+            - zp / ap * (F64_2 + zp2) * ellk_p
+            + (zm / am * ellpi_m - zp / ap * ellpi_p) * rp * (r2 + F64_1) * one_over_rm
+        )
+    )
+    hphi = (
+        wp.sin(phi)
+        / (F64_4 * F64_PI * r2)
+        * (
+            zm * am * elle_m
+            - zp * ap * elle_p
+            - zm / am * (F64_2 + zm2 + F64_2 * r2) * ellk_m
+            + zp / ap * (F64_2 + zp2 + F64_2 * r2) * ellk_p
+            + zm / am * rp2 * ellpi_m
+            - zp / ap * rp2 * ellpi_p
+        )
+    )
+    hz = (
+        -wp.cos(phi)
+        / (F64_2 * F64_PI * r)
+        * (am * elle_m - ap * elle_p - (F64_1 + zm2 + r2) / am * ellk_m + (F64_1 + zp2 + r2) / ap * ellk_p)
+    )
+    return wp.vec3d(hr, hphi, hz)
+
+
+@wp.func
 def cylinder_diametral_field_cyl(z0: wp.float64, r: wp.float64, z: wp.float64, phi: wp.float64) -> wp.vec3d:
     """(H_r, H_phi, H_z) for unit diametral magnetization along phi = 0 (Caciagli 2018; small-r Taylor branch from
     magpylib); lengths in units of the radius, z0 = half height. Multiply by |J_perp| for B outside the magnet."""
@@ -716,102 +833,9 @@ def cylinder_diametral_field_cyl(z0: wp.float64, r: wp.float64, z: wp.float64, p
     zp2 = zp * zp
     zm2 = zm * zm
     r2 = r * r
-    hr = F64_0
-    hphi = F64_0
-    hz = F64_0
     if r < wp.float64(0.05):
-        # the general form loses digits near the axis; 5th-order Taylor series in r
-        zpp = zp2 + F64_1
-        zmm = zm2 + F64_1
-        sqrt_p = wp.sqrt(zpp)
-        sqrt_m = wp.sqrt(zmm)
-        frac1 = zp / sqrt_p
-        frac2 = zm / sqrt_m
-        r3 = r2 * r
-        r4 = r3 * r
-        r5 = r4 * r
-        term1 = frac1 - frac2
-        term2 = (frac1 / (zpp * zpp) - frac2 / (zmm * zmm)) * r2 / wp.float64(8.0)
-        zpp4 = zpp * zpp * zpp * zpp
-        zmm4 = zmm * zmm * zmm * zmm
-        term3 = (
-            ((wp.float64(3.0) - F64_4 * zp2) * frac1 / zpp4 - (wp.float64(3.0) - F64_4 * zm2) * frac2 / zmm4)
-            / wp.float64(64.0)
-            * r4
-        )
-        hr = -wp.cos(phi) / F64_4 * (term1 + wp.float64(9.0) * term2 + wp.float64(25.0) * term3)
-        hphi = wp.sin(phi) / F64_4 * (term1 + wp.float64(3.0) * term2 + wp.float64(5.0) * term3)
-        zpp3 = zpp * zpp * zpp
-        zmm3 = zmm * zmm * zmm
-        zpp5 = zpp3 * zpp * zpp
-        zmm5 = zmm3 * zmm * zmm
-        hz = (
-            -wp.cos(phi)
-            / F64_4
-            * (
-                r * (F64_1 / zpp / sqrt_p - F64_1 / zmm / sqrt_m)
-                + wp.float64(0.375)
-                * r3
-                * ((F64_1 - F64_4 * zp2) / zpp3 / sqrt_p - (F64_1 - F64_4 * zm2) / zmm3 / sqrt_m)
-                + wp.float64(0.234375)
-                * r5
-                * (
-                    (F64_1 - wp.float64(12.0) * zp2 + wp.float64(8.0) * zp2 * zp2) / zpp5 / sqrt_p
-                    - (F64_1 - wp.float64(12.0) * zm2 + wp.float64(8.0) * zm2 * zm2) / zmm5 / sqrt_m
-                )
-            )
-        )
-    else:
-        rp = r + F64_1
-        rm = r - F64_1
-        rp2 = rp * rp
-        rm2 = rm * rm
-        ap2 = zp2 + rm2
-        am2 = zm2 + rm2
-        ap = wp.sqrt(ap2)
-        am = wp.sqrt(am2)
-        argp = -F64_4 * r / ap2
-        argm = -F64_4 * r / am2
-        argc = wp.float64(1.0e16)
-        one_over_rm = F64_0
-        if rm != F64_0:
-            argc = -F64_4 * r / rm2
-            one_over_rm = F64_1 / rm
-        kcp = wp.sqrt(F64_1 - argp)
-        kcm = wp.sqrt(F64_1 - argm)
-        elle_p, ellk_p = cel2(kcp, F64_1, F64_1, F64_1 - argp, F64_1, F64_1, F64_1)
-        elle_m, ellk_m = cel2(kcm, F64_1, F64_1, F64_1 - argm, F64_1, F64_1, F64_1)
-        ellpi_p = cel(kcp, F64_1 - argc, F64_1, F64_1)
-        ellpi_m = cel(kcm, F64_1 - argc, F64_1, F64_1)
-        hr = (
-            -wp.cos(phi)
-            / (F64_4 * F64_PI * r2)
-            * (
-                -zm * am * elle_m
-                + zp * ap * elle_p
-                + zm / am * (F64_2 + zm2) * ellk_m
-                - zp / ap * (F64_2 + zp2) * ellk_p
-                + (zm / am * ellpi_m - zp / ap * ellpi_p) * rp * (r2 + F64_1) * one_over_rm
-            )
-        )
-        hphi = (
-            wp.sin(phi)
-            / (F64_4 * F64_PI * r2)
-            * (
-                zm * am * elle_m
-                - zp * ap * elle_p
-                - zm / am * (F64_2 + zm2 + F64_2 * r2) * ellk_m
-                + zp / ap * (F64_2 + zp2 + F64_2 * r2) * ellk_p
-                + zm / am * rp2 * ellpi_m
-                - zp / ap * rp2 * ellpi_p
-            )
-        )
-        hz = (
-            -wp.cos(phi)
-            / (F64_2 * F64_PI * r)
-            * (am * elle_m - ap * elle_p - (F64_1 + zm2 + r2) / am * ellk_m + (F64_1 + zp2 + r2) / ap * ellk_p)
-        )
-    return wp.vec3d(hr, hphi, hz)
+        return diametral_field_near_axis(zp, zm, zp2, zm2, r, r2, phi)
+    return diametral_field_general(zp, zm, zp2, zm2, r, r2, phi)
 
 
 @wp.func
@@ -888,6 +912,115 @@ def col(m: wp.mat33d, k: int) -> wp.vec3d:
 
 
 @wp.func
+def cuboid_faces_wrench(force: wp.vec3d, torque: wp.vec3d, k: int, s_shape: int, s_size: wp.vec3d, s_J: wp.vec3d,
+                        s_half: wp.vec3d, t_size: wp.vec3d, mk: wp.float64, r_rel: wp.mat33d, t_rel: wp.vec3d,
+                        gl_x: wp.array(dtype=wp.float64), gl_w: wp.array(dtype=wp.float64), max_panels: int):
+    """``force``, ``torque`` plus the wrench on a cuboid target's two faces normal to its axis ``k`` (charge ±``mk``),
+    composite Gauss-Legendre on each (:func:`analytic_pair_wrench`)."""
+    nq = gl_x.shape[0]
+    u = (k + 1) % 3
+    v = (k + 2) % 3
+    ek = col(r_rel, k)
+    eu = col(r_rel, u)
+    ev = col(r_rel, v)
+    lu = t_size[u]
+    lv = t_size[v]
+    half_diag = F64_HALF * wp.sqrt(lu * lu + lv * lv)
+    for side in range(2):
+        sign = F64_1
+        if side == 1:
+            sign = -F64_1
+        sigma = sign * mk
+        centre = ek * (sign * F64_HALF * t_size[k])
+        gap = box_gap(s_half, t_rel + centre) - half_diag
+        nu = panel_count(lu, gap, max_panels)
+        nv = panel_count(lv, gap, max_panels)
+        du = lu / wp.float64(nu)
+        dv = lv / wp.float64(nv)
+        for pu in range(nu):
+            for pv in range(nv):
+                cu = -F64_HALF * lu + (wp.float64(pu) + F64_HALF) * du
+                cv = -F64_HALF * lv + (wp.float64(pv) + F64_HALF) * dv
+                for a in range(nq):
+                    for b in range(nq):
+                        lever = centre + eu * (cu + F64_HALF * du * gl_x[a]) + ev * (cv + F64_HALF * dv * gl_x[b])
+                        w = sigma * gl_w[a] * gl_w[b] * F64_HALF * du * F64_HALF * dv
+                        f = magnet_field_local(s_shape, s_size, s_J, t_rel + lever) * w
+                        force = force + f
+                        torque = torque + wp.cross(lever, f)
+    return force, torque
+
+
+@wp.func
+def cylinder_caps_wrench(force: wp.vec3d, torque: wp.vec3d, s_shape: int, s_size: wp.vec3d, s_J: wp.vec3d,
+                         s_half: wp.vec3d, t_size: wp.vec3d, mz: wp.float64, r_rel: wp.mat33d, t_rel: wp.vec3d,
+                         gl_x: wp.array(dtype=wp.float64), gl_w: wp.array(dtype=wp.float64), max_panels: int):
+    """``force``, ``torque`` plus the wrench on a cylinder target's end caps (charge ±``mz``): radial Gauss-Legendre
+    × trapezoidal azimuth."""
+    nq = gl_x.shape[0]
+    radius = F64_HALF * t_size[0]
+    ex = col(r_rel, 0)
+    ey = col(r_rel, 1)
+    ez = col(r_rel, 2)
+    for side in range(2):
+        sign = F64_1
+        if side == 1:
+            sign = -F64_1
+        sigma = sign * mz
+        centre = ez * (sign * F64_HALF * t_size[2])
+        gap = box_gap(s_half, t_rel + centre) - radius
+        nr = panel_count(radius, gap, max_panels)
+        nphi = AZIMUTH_PER_GL * nq * panel_count(F64_2 * radius, gap, max_panels)
+        dr = radius / wp.float64(nr)
+        dphi = F64_2 * F64_PI / wp.float64(nphi)
+        for ip in range(nphi):
+            phi = (wp.float64(ip) + F64_HALF) * dphi
+            dirv = ex * wp.cos(phi) + ey * wp.sin(phi)
+            for pr in range(nr):
+                for a in range(nq):
+                    rr = (wp.float64(pr) + F64_HALF + F64_HALF * gl_x[a]) * dr
+                    lever = centre + dirv * rr
+                    w = sigma * gl_w[a] * F64_HALF * dr * rr * dphi
+                    f = magnet_field_local(s_shape, s_size, s_J, t_rel + lever) * w
+                    force = force + f
+                    torque = torque + wp.cross(lever, f)
+    return force, torque
+
+
+@wp.func
+def cylinder_side_wrench(force: wp.vec3d, torque: wp.vec3d, s_shape: int, s_size: wp.vec3d, s_J: wp.vec3d,
+                         s_half: wp.vec3d, t_size: wp.vec3d, t_M: wp.vec3d, r_rel: wp.mat33d, t_rel: wp.vec3d,
+                         gl_x: wp.array(dtype=wp.float64), gl_w: wp.array(dtype=wp.float64), max_panels: int):
+    """``force``, ``torque`` plus the wrench on a cylinder target's lateral face, charge M_x cos(phi) + M_y sin(phi)."""
+    nq = gl_x.shape[0]
+    radius = F64_HALF * t_size[0]
+    height = t_size[2]
+    ex = col(r_rel, 0)
+    ey = col(r_rel, 1)
+    ez = col(r_rel, 2)
+    gap = box_gap(s_half, t_rel) - wp.sqrt(radius * radius + F64_HALF * F64_HALF * height * height)
+    nz = panel_count(height, gap, max_panels)
+    nphi = AZIMUTH_PER_GL * nq * panel_count(F64_2 * radius, gap, max_panels)
+    dz = height / wp.float64(nz)
+    dphi = F64_2 * F64_PI / wp.float64(nphi)
+    for ip in range(nphi):
+        phi = (wp.float64(ip) + F64_HALF) * dphi
+        cphi = wp.cos(phi)
+        sphi = wp.sin(phi)
+        sigma = t_M[0] * cphi + t_M[1] * sphi
+        dirv = (ex * cphi + ey * sphi) * radius
+        for pz in range(nz):
+            for a in range(nq):
+                zz = -F64_HALF * height + (wp.float64(pz) + F64_HALF + F64_HALF * gl_x[a]) * dz
+                lever = dirv + ez * zz
+                w = sigma * gl_w[a] * F64_HALF * dz * radius * dphi
+                f = magnet_field_local(s_shape, s_size, s_J, t_rel + lever) * w
+                force = force + f
+                torque = torque + wp.cross(lever, f)
+    return force, torque
+
+
+@wp.func
 def analytic_pair_wrench(
     s_shape: int,
     s_size: wp.vec3d,
@@ -914,100 +1047,21 @@ def analytic_pair_wrench(
     Frames: everything in the source's frame, as in :func:`dipoles_pair_wrench`. ``s_J`` is the source
     polarization [T], ``t_M`` the target magnetization [A/m] in the target's frame.
     """
-    nq = gl_x.shape[0]
     s_half = F64_HALF * s_size
     if s_shape == SHAPE_CYLINDER:
         s_half = wp.vec3d(F64_HALF * s_size[0], F64_HALF * s_size[0], F64_HALF * s_size[2])
     force = wp.vec3d(F64_0, F64_0, F64_0)
     torque = wp.vec3d(F64_0, F64_0, F64_0)
-
     if t_shape == SHAPE_CUBOID:
         for k in range(3):
-            mk = t_M[k]
-            if mk != F64_0:
-                u = (k + 1) % 3
-                v = (k + 2) % 3
-                ek = col(r_rel, k)
-                eu = col(r_rel, u)
-                ev = col(r_rel, v)
-                lu = t_size[u]
-                lv = t_size[v]
-                half_diag = F64_HALF * wp.sqrt(lu * lu + lv * lv)
-                for side in range(2):
-                    sign = F64_1
-                    if side == 1:
-                        sign = -F64_1
-                    sigma = sign * mk
-                    centre = ek * (sign * F64_HALF * t_size[k])
-                    gap = box_gap(s_half, t_rel + centre) - half_diag
-                    nu = panel_count(lu, gap, max_panels)
-                    nv = panel_count(lv, gap, max_panels)
-                    du = lu / wp.float64(nu)
-                    dv = lv / wp.float64(nv)
-                    for pu in range(nu):
-                        for pv in range(nv):
-                            cu = -F64_HALF * lu + (wp.float64(pu) + F64_HALF) * du
-                            cv = -F64_HALF * lv + (wp.float64(pv) + F64_HALF) * dv
-                            for a in range(nq):
-                                for b in range(nq):
-                                    lever = (
-                                        centre
-                                        + eu * (cu + F64_HALF * du * gl_x[a])
-                                        + ev * (cv + F64_HALF * dv * gl_x[b])
-                                    )
-                                    w = sigma * gl_w[a] * gl_w[b] * F64_HALF * du * F64_HALF * dv
-                                    f = magnet_field_local(s_shape, s_size, s_J, t_rel + lever) * w
-                                    force = force + f
-                                    torque = torque + wp.cross(lever, f)
+            if t_M[k] != F64_0:
+                force, torque = cuboid_faces_wrench(force, torque, k, s_shape, s_size, s_J, s_half, t_size, t_M[k],
+                                                    r_rel, t_rel, gl_x, gl_w, max_panels)
     else:
-        radius = F64_HALF * t_size[0]
-        height = t_size[2]
-        ex = col(r_rel, 0)
-        ey = col(r_rel, 1)
-        ez = col(r_rel, 2)
-        # end caps: sigma = ±M_z
         if t_M[2] != F64_0:
-            for side in range(2):
-                sign = F64_1
-                if side == 1:
-                    sign = -F64_1
-                sigma = sign * t_M[2]
-                centre = ez * (sign * F64_HALF * height)
-                gap = box_gap(s_half, t_rel + centre) - radius
-                nr = panel_count(radius, gap, max_panels)
-                nphi = AZIMUTH_PER_GL * nq * panel_count(F64_2 * radius, gap, max_panels)
-                dr = radius / wp.float64(nr)
-                dphi = F64_2 * F64_PI / wp.float64(nphi)
-                for ip in range(nphi):
-                    phi = (wp.float64(ip) + F64_HALF) * dphi
-                    dirv = ex * wp.cos(phi) + ey * wp.sin(phi)
-                    for pr in range(nr):
-                        for a in range(nq):
-                            rr = (wp.float64(pr) + F64_HALF + F64_HALF * gl_x[a]) * dr
-                            lever = centre + dirv * rr
-                            w = sigma * gl_w[a] * F64_HALF * dr * rr * dphi
-                            f = magnet_field_local(s_shape, s_size, s_J, t_rel + lever) * w
-                            force = force + f
-                            torque = torque + wp.cross(lever, f)
-        # lateral face: sigma = M_x cos(phi) + M_y sin(phi)
+            force, torque = cylinder_caps_wrench(force, torque, s_shape, s_size, s_J, s_half, t_size, t_M[2], r_rel,
+                                                 t_rel, gl_x, gl_w, max_panels)
         if t_M[0] != F64_0 or t_M[1] != F64_0:
-            gap = box_gap(s_half, t_rel) - wp.sqrt(radius * radius + F64_HALF * F64_HALF * height * height)
-            nz = panel_count(height, gap, max_panels)
-            nphi = AZIMUTH_PER_GL * nq * panel_count(F64_2 * radius, gap, max_panels)
-            dz = height / wp.float64(nz)
-            dphi = F64_2 * F64_PI / wp.float64(nphi)
-            for ip in range(nphi):
-                phi = (wp.float64(ip) + F64_HALF) * dphi
-                cphi = wp.cos(phi)
-                sphi = wp.sin(phi)
-                sigma = t_M[0] * cphi + t_M[1] * sphi
-                dirv = (ex * cphi + ey * sphi) * radius
-                for pz in range(nz):
-                    for a in range(nq):
-                        zz = -F64_HALF * height + (wp.float64(pz) + F64_HALF + F64_HALF * gl_x[a]) * dz
-                        lever = dirv + ez * zz
-                        w = sigma * gl_w[a] * F64_HALF * dz * radius * dphi
-                        f = magnet_field_local(s_shape, s_size, s_J, t_rel + lever) * w
-                        force = force + f
-                        torque = torque + wp.cross(lever, f)
+            force, torque = cylinder_side_wrench(force, torque, s_shape, s_size, s_J, s_half, t_size, t_M, r_rel,
+                                                 t_rel, gl_x, gl_w, max_panels)
     return force, torque

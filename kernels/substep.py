@@ -17,7 +17,7 @@ import warp as wp
 from warpworm import ids
 
 from .band_cholesky import ALL_ROWS, band_add_block, band_add_gauss_newton3, band_add_gauss_newton4
-from .common import (crease_at_substep_end, dihedral_angle_gradient_and_normals, fold_range, pw,
+from .common import (hinge_angle_at_substep_end, dihedral_angle_gradient_and_normals, fold_range, pw,
                      wing_contact_of_normal, wrap_angle)
 
 CONTACT_FREE = wp.constant(0)
@@ -165,6 +165,13 @@ def world_coefficients(m: BarHingeModel, world: int, dt: float) -> WorldCoeffici
 def in_row(row: int, u: int) -> bool:
     """Whether an element adder with ``row`` writes vertex ``u``'s gradient (every vertex with ALL_ROWS)."""
     return row == ALL_ROWS or row == u
+
+
+@wp.func
+def add_to_row(world: int, row: int, u: int, g: wp.vec3, w: NewtonScratch):
+    """``grad[world, u] += g`` if ``row`` selects u."""
+    if in_row(row, u):
+        w.grad[world, u] = w.grad[world, u] + g
 
 
 # ------------------------------------------------------------------------------------------------------------------
@@ -486,11 +493,11 @@ def finish_vertices(world: int, first: int, stride: int, c: WorldCoefficients, m
 def update_hinge_angles(world: int, first: int, stride: int, m: BarHingeModel, fold_tolerance: float,
                         s: BarHingeState) -> int:
     """Unwrap hinges first, first + stride, ...'s angles to the end of the substep. Returns 1 if one left its
-    NoFoldThrough range by more than ``fold_tolerance`` or a wing collapsed (:func:`~.common.crease_at_substep_end`):
+    NoFoldThrough range by more than ``fold_tolerance`` or a wing collapsed (:func:`~.common.hinge_angle_at_substep_end`):
     the sheet crumpled."""
     crumpled = int(0)
     for h in range(first, m.hinges.shape[0], stride):
-        phi, flagged = crease_at_substep_end(s.crease_angle[world, h], s.x[world, m.hinges[h, 0]],
+        phi, flagged = hinge_angle_at_substep_end(s.crease_angle[world, h], s.x[world, m.hinges[h, 0]],
                                              s.x[world, m.hinges[h, 1]], s.x[world, m.hinges[h, 2]],
                                              s.x[world, m.hinges[h, 3]], m.hinge_label[h], fold_tolerance)
         s.crease_angle[world, h] = phi
@@ -560,8 +567,7 @@ def add_bar(world: int, e: int, row: int, c: WorldCoefficients, m: BarHingeModel
         if not (wp.abs(strain) < opt.strain_limit[e]):  # also catches NaN
             return 1
         w.grad[world, a] = w.grad[world, a] + f
-    if in_row(row, b):
-        w.grad[world, b] = w.grad[world, b] - f
+    add_to_row(world, row, b, -f, w)
     if with_hessian:
         nn = wp.outer(n, n)
         kb = k_axial * nn + k_trans * (wp.identity(n=3, dtype=float) - nn)
@@ -598,12 +604,9 @@ def add_wing(world: int, row: int, n: wp.vec3, len2: float, p0: wp.vec3, p1: wp.
     ``b``–``cc``, ``n`` the wing's normal, ``len2`` the hinge's squared length) to the rows ``row`` selects."""
     f, ga, gb, gc, kappa = wing_contact_of_normal(n, len2, p0, p1, p2, lh)
     if kappa > 0.0:
-        if in_row(row, a):
-            w.grad[world, a] = w.grad[world, a] + ga * f
-        if in_row(row, b):
-            w.grad[world, b] = w.grad[world, b] + gb * f
-        if in_row(row, cc):
-            w.grad[world, cc] = w.grad[world, cc] + gc * f
+        add_to_row(world, row, a, ga * f, w)
+        add_to_row(world, row, b, gb * f, w)
+        add_to_row(world, row, cc, gc * f, w)
         if with_hessian:
             band_add_gauss_newton3(world, w.hess, row, kappa, a, b, cc, ga, gb, gc)
 
@@ -625,14 +628,10 @@ def add_hinge(world: int, h: int, row: int, c: WorldCoefficients, m: BarHingeMod
     psi, g0, g1, g2, g3, n1, n2, len2 = dihedral_angle_gradient_and_normals(x0, x1, x2, x3)
     prev = s.crease_angle[world, h]
     torque, stiff, lh = hinge_torque(prev + wrap_angle(psi - prev), prev, h, c, m)
-    if in_row(row, i0):
-        w.grad[world, i0] = w.grad[world, i0] + g0 * torque
-    if in_row(row, i1):
-        w.grad[world, i1] = w.grad[world, i1] + g1 * torque
-    if in_row(row, i2):
-        w.grad[world, i2] = w.grad[world, i2] + g2 * torque
-    if in_row(row, i3):
-        w.grad[world, i3] = w.grad[world, i3] + g3 * torque
+    add_to_row(world, row, i0, g0 * torque, w)
+    add_to_row(world, row, i1, g1 * torque, w)
+    add_to_row(world, row, i2, g2 * torque, w)
+    add_to_row(world, row, i3, g3 * torque, w)
     if with_hessian:
         band_add_gauss_newton4(world, w.hess, row, stiff, i0, i1, i2, i3, g0, g1, g2, g3)
     # the wings' normals are the dihedral's own: n1 = (x1 − x0) × (x2 − x0), n2 = (x2 − x3) × (x1 − x3)

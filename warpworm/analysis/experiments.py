@@ -58,7 +58,7 @@ NO_MAGNETS = dict(ipm_moment=np.zeros(3), epm_moment=0.0)
 
 def _dt_substeps(dt, substeps):
     return (getattr(gaits, "DEFAULT_DT", 4.0e-3) if dt is None else float(dt),
-            getattr(gaits, "DEFAULT_SUBSTEPS", 32) if substeps is None else int(substeps))
+            gaits.DEFAULT_SUBSTEPS if substeps is None else int(substeps))
 
 
 

@@ -2,7 +2,7 @@
 
 Every per-world field is either one float (shared by all worlds) or an array of shape ``(num_worlds,)``;
 :func:`per_world` broadcasts either to ``(num_worlds,)``. Vector fields take ``(3,)`` or ``(num_worlds, 3)``.
-Defaults follow the paper (Swaminathan et al., RA-L 2021) and ``shared/DESIGN-NOTES.md``. SI units.
+Defaults follow the paper (Swaminathan et al., RA-L 2021) and the calibrations in docs/. SI units.
 
 Frames: world z is up, the floor is z = 0 (tilted by ``floor_incline`` about world y), the worm lies along +x with
 its tail at the smaller x. Magnet slots in every world: 0 = EPM, 1 = tail IPM, 2 = centre IPM, 3 = head IPM.
@@ -17,7 +17,7 @@ import numpy as np
 from warpworm.ids import MAGNET_MODELS
 
 N52_MOMENT_PER_VOLUME = 0.9e6
-"""Fitted magnetization of the paper's N52 magnets: 0.9 A·m² per cm³ = 0.9e6 A/m (DESIGN-NOTES)."""
+"""Fitted magnetization of the paper's N52 magnets: 0.9 A·m² per cm³ = 0.9e6 A/m (the paper's fit)."""
 
 MAGNET_SLOTS = ("epm", "ipm_tail", "ipm_centre", "ipm_head")
 EPM, IPM_TAIL, IPM_CENTRE, IPM_HEAD = range(4)
@@ -86,7 +86,7 @@ class WormParams:
     plane), shape () or (W,): 1 (default) is the paper's isotropic friction; > 1 a skin that grips against sliding
     backward (setae, scales, a sheet's cut edges), < 1 against sliding forward. In between the factor follows the
     direction smoothly ((1 + ratio) / 2 sideways), and the friction is the gradient of a convex dissipation
-    (``kernels.implicit_euler.skin_profile``, ``friction_force``)."""
+    (``kernels.substep.skin_profile``, ``friction_force``)."""
     floor_incline: float | np.ndarray = 0.0
     """Floor slope about world +y [rad]; positive raises the floor toward +x (the worm climbs going forward)."""
     support_thickness: float | np.ndarray = 0.003

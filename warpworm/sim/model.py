@@ -85,11 +85,17 @@ class State:
     the floor); also the next substep's first estimate of the normal force."""
 
 
-class Control:
-    """The inputs of a run (device arrays): the EPM path of every world and the anchor targets.
+def default_epm_path(model: "Model") -> "gaits.EpmPath":
+    """The EPM path a :class:`Control` carries unless given another: the params' sinusoid placed on each world's
+    IPMs at rest (:func:`warpworm.physics.gaits.sine_path`)."""
+    return gaits.sine_path(model.params, model.ipm_rest_pos_host[:, :, 0], num_worlds=model.num_worlds)
 
-    ``path`` is a :class:`warpworm.physics.gaits.EpmPath`, sinusoidal or keyframed; ``sine`` / ``keyframes`` are its device
-    form (named fields, :class:`warpworm.kernels.magnet_pose.SinePath` / ``KeyframePath``)."""
+
+class Control:
+    """The inputs of a run: the EPM path of every world (``path``; default :func:`default_epm_path`) and the anchor
+    targets. Attributes: ``path`` (host :class:`warpworm.physics.gaits.EpmPath`, sinusoidal or keyframed) and its
+    device form, ``sine`` (:class:`warpworm.kernels.magnet_pose.SinePath`, each field (W,) or (1,)) or ``keyframes``
+    (``KeyframePath``); ``anchor_target`` [m] (W, A) vec3; ``revision`` (int, bumped by :meth:`set_path`)."""
 
     def __init__(self, model: "Model", path: "gaits.EpmPath | None" = None):
         from warpworm.kernels import magnet_pose
@@ -104,7 +110,7 @@ class Control:
         """Anchor target points [m], shape (W, A), vec3 (A may be 0)."""
         self.revision = -1
         """Bumped by every :meth:`set_path` (new device arrays): a step graph captured at an older revision is stale."""
-        self.set_path(model.default_path if path is None else path)
+        self.set_path(default_epm_path(model) if path is None else path)
 
     def set_path(self, path: "gaits.EpmPath") -> None:
         """Set the EPM path (sinusoidal or keyframed) of every world; takes effect at the next step."""
@@ -154,9 +160,10 @@ class ModelBuilder:
         anchors: vertex indices (A,) pinned to a target by a spring (force plate); default none.
         anchor_stiffness: anchor strength [N/m], scalar, (A,) or (W, A).
 
-    The worm's bottom face is laid on its (possibly inclined) floor with the tail at x = 0.
-    Each ``add_*`` step fills ``self.host`` (name -> (NumPy array, Warp dtype)) and ``self.info`` (host-only
-    attributes of the model); finalize copies both onto the device.
+    The worm's bottom face is laid on its (possibly inclined) floor with the tail at x = 0. Each ``add_*`` step fills
+    ``self.host`` (name -> (NumPy array, Warp dtype), device arrays to be) and ``self.info`` (host attributes);
+    :meth:`finalize` sets them on the :class:`Model`, which declares every one (a name it does not declare is an
+    error).
     """
 
     def __init__(self, params: WormParams | None = None, num_worlds: int = 1, *, anchors=None,
@@ -186,7 +193,7 @@ class ModelBuilder:
         self.add_topology()
         self.add_material()
         self.add_magnets()
-        self.add_path()
+        self.add_mount_rest_poses()
 
     def _put(self, name: str, value, dtype) -> None:
         self.host[name] = (np.asarray(value), dtype)
@@ -322,54 +329,136 @@ class ModelBuilder:
         self._put("magnet_moment", moment.astype(np.float32), wp.vec3)
         self._put("magnet_moment_parked", moment_parked.astype(np.float32), wp.vec3)
 
-    def add_path(self) -> None:
-        """The default EPM path: the params' sinusoid placed on each world's IPMs at rest."""
-        pat, W = self.info["pattern"], self.num_worlds
-        mpos_all, _ = crease.mount_poses(pat, self.x_w)
-        mpos_world = np.einsum("wij,wmj->wmi", self.R_floor, mpos_all)
-        self.info["ipm_rest_pos_host"] = mpos_world
-        self.info["default_path"] = gaits.sine_path(self.params, mpos_world[:, :, 0], num_worlds=W)
+    def add_mount_rest_poses(self) -> None:
+        """Each world's IPM centres at rest (where its default EPM path is placed: :func:`default_epm_path`)."""
+        mpos_all, _ = crease.mount_poses(self.info["pattern"], self.x_w)
+        self.info["ipm_rest_pos_host"] = np.einsum("wij,wmj->wmi", self.R_floor, mpos_all)
+        # the params' path must be placeable (e.g. an EPM gap inside the support plate is refused) before any device
+        # work: built here to check it, kept by the Control that carries it
+        gaits.sine_path(self.params, self.info["ipm_rest_pos_host"][:, :, 0], num_worlds=self.num_worlds)
 
     # ------------------------------------------------------------------------------------------------------------
     def finalize(self, device=None) -> "Model":
         """The device model (immutable)."""
-        m = object.__new__(Model)
         dev = wp.get_device(device)
-        d = m.__dict__
-        d["device"] = dev
-        d.update(self.info)
-        for name, (value, dtype) in self.host.items():
-            d[name] = wp.array(value, dtype=dtype, device=dev)
+        values = {"device": dev, **self.info}
+        values.update({name: wp.array(value, dtype=dtype, device=dev) for name, (value, dtype) in self.host.items()})
+        declared = set(Model.__annotations__)
+        if set(values) != declared:
+            raise RuntimeError(f"ModelBuilder: built but not declared by Model: {sorted(set(values) - declared)}; "
+                               f"declared but not built: {sorted(declared - set(values))}")
+        m = object.__new__(Model)
+        for name, value in values.items():
+            object.__setattr__(m, name, value)
         return m
 
 
 class Model:
-    """Shared topology and per-world parameters of a batch of worm worlds; immutable once built.
+    """Shared topology and per-world parameters of a batch of worm worlds; immutable once built
+    (:meth:`from_params` or :meth:`ModelBuilder.finalize`). Warp arrays on ``device`` unless noted "host" (NumPy);
+    "(R, ...)": R = 1 (shared by every world) or W rows, read at row ``world % R``."""
 
-    Attributes are Warp arrays on ``device`` unless noted; "(R, ...)" means R = 1 (shared) or W rows.
-
-    Geometry: ``rest_length (R, E)`` bar rest lengths [m]; ``hinge_rest_angle (R, H)`` rest fold angles [rad]
-    (+alpha valley, -alpha mountain, corners their built angle, 0 flat); ``hinge_length (R, H)`` crease lengths [m]
-    (a hinge's stiffness is k_alpha times this); ``inv_mass (R, V)`` [1/kg].
-    Topology (shared): ``edges (E, 2)``, ``hinges (H, 4)`` (i, j, k, l; shared edge j-k), ``hinge_label (H,)``
-    (0 flat, 1 mountain, 2 valley), ``mount_vertices (3, K)`` (tail, centre, head), ``mount_local_pos (1, 3)`` [m] and
-    ``mount_local_rot (1, 3)`` (mat33, magnet -> mount frame), ``anchor_vertex (A,)``, ``anchor_stiffness (R, A)``
-    [N/m]; ``vertex_bandwidth`` (int) the Newton matrix's half-bandwidth in vertex blocks.
-    Material (R,): ``bar_stiffness (R, E)`` EA [N] (valley-ring bars: ``valley_bar_stiffness``),
-    ``bar_stop_strain (R, E)`` vec2 (shortened, stretched) stop strains of the waist bars (1e3: none),
-    ``bar_stop_stiffness (R, E)`` [N]; ``hinge_stiffness`` k_alpha per metre of crease [N·m/rad/m],
-    ``hinge_damping`` [N·m·s/rad/m], ``fold_limit_stiffness`` [N·m/rad/m] (independent of k_alpha), ``damping``
-    [1/s], ``mu_static``, ``mu_kinetic``, ``friction_backward_ratio`` (tail-ward over head-ward friction),
-    ``floor_incline`` [rad] about +y, ``gravity`` [m/s²] along −z,
-    ``dipole_density`` [1/m³].
-    Magnets: ``magnet_model (1,)`` (0 dipoles, 1 analytic), ``magnet_shape (1, 4)`` (0 cuboid, 1 cylinder),
-    ``magnet_size (W, 4)`` vec3 [m] (cuboid extents or cylinder (d, d, h)), ``magnet_moment (W, 4)`` vec3 [A·m²]
-    along each magnet's own +z, ``magnet_moment_parked`` the same with the EPM absent (settling).
-    Host (NumPy): ``params``, ``pattern`` (world 0's crease pattern), ``rest_positions_host (W, V, 3)``,
-    ``vertex_mass_host (R, V)``, ``sheet_mass_host (R,)``, ``ipm_mass_host (W,)``, ``hinge_rest_angle_host``,
-    ``magnet_size_host``, ``magnet_moment_host``, ``ipm_rest_pos_host (W, 3, 3)`` (tail, centre, head),
-    ``default_path`` (the params' EPM path, :class:`warpworm.physics.gaits.EpmPath`).
-    """
+    device: wp.context.Device
+    """The device of every array."""
+    params: WormParams
+    """The parameters the model was built from (host)."""
+    num_worlds: int
+    """W."""
+    num_vertices: int
+    """V, shared topology."""
+    num_edges: int
+    """E, bars."""
+    num_hinges: int
+    """H, hinges (the creases and the facets' diagonals)."""
+    num_anchors: int
+    """A, anchored vertices (0 without a force plate)."""
+    pattern: crease.CreasePattern
+    """World 0's crease pattern (host; topology shared by every world)."""
+    vertex_bandwidth: int
+    """Half-bandwidth of the Newton matrix in vertex blocks (:func:`vertex_bandwidth`)."""
+    # --- geometry and mass
+    rest_length: wp.array
+    """Bar rest lengths [m], shape (R, E), float."""
+    hinge_rest_angle: wp.array
+    """Hinge rest fold angles [rad], shape (R, H), float: +alpha valley, -alpha mountain, corners their built angle,
+    0 flat."""
+    hinge_length: wp.array
+    """Hinge lengths [m], shape (R, H), float (a hinge's stiffness is k_alpha times this)."""
+    inv_mass: wp.array
+    """Inverse vertex masses [1/kg], shape (R, V), float (0: infinite mass)."""
+    rest_positions_host: np.ndarray
+    """Rest positions laid on each world's floor [m], shape (W, V, 3) (host)."""
+    hinge_rest_angle_host: np.ndarray
+    """:attr:`hinge_rest_angle` [rad], shape (R, H), float64 (host)."""
+    vertex_mass_host: np.ndarray
+    """Vertex masses, sheet and IPMs [kg], shape (R, V) (host)."""
+    sheet_mass_host: np.ndarray
+    """Sheet mass [kg], shape (R,) (host)."""
+    ipm_mass_host: np.ndarray
+    """Mass of one IPM [kg], shape (W,) (host)."""
+    ipm_rest_pos_host: np.ndarray
+    """IPM centres at rest [m], shape (W, 3, 3): (tail, centre, head), xyz (host)."""
+    # --- topology (shared)
+    edges: wp.array
+    """Bars, shape (E, 2), int32 vertex indices."""
+    hinges: wp.array
+    """Hinge stencils (i, j, k, l), shared edge j-k, shape (H, 4), int32."""
+    hinge_label: wp.array
+    """0 flat, 1 mountain, 2 valley (:mod:`warpworm.ids`), shape (H,), int32."""
+    mount_vertices: wp.array
+    """Each IPM mount's vertices (tail, centre, head), shape (3, K), int32."""
+    mount_local_pos: wp.array
+    """IPM centre in its mount's frame [m], shape (1, 3), vec3."""
+    mount_local_rot: wp.array
+    """IPM orientation in its mount's frame (magnet -> mount), shape (1, 3), mat33."""
+    anchor_vertex: wp.array
+    """Anchored vertices, shape (A,), int32."""
+    anchor_stiffness: wp.array
+    """Anchor springs [N/m], shape (R, A), float."""
+    # --- material, floor
+    bar_stiffness: wp.array
+    """Axial rigidity EA [N], shape (R, E), float (the valley rings: ``valley_bar_stiffness``)."""
+    bar_stop_strain: wp.array
+    """(shortened, stretched) strain magnitudes of the waist bars' stops, shape (R, E), vec2 (1e3: none)."""
+    bar_stop_stiffness: wp.array
+    """EA of a waist bar past its stop [N], shape (R, E), float (0 for the other bars)."""
+    hinge_stiffness: wp.array
+    """k_alpha per metre of hinge [N·m/rad/m], shape (R,), float."""
+    hinge_damping: wp.array
+    """c_alpha per metre of hinge [N·m·s/rad/m], shape (R,), float."""
+    fold_limit_stiffness: wp.array
+    """NoFoldThrough barrier per metre of hinge [N·m/rad/m], shape (R,), float."""
+    damping: wp.array
+    """Linear velocity damping [1/s], shape (R,), float."""
+    mu_static: wp.array
+    """Static friction coefficient, shape (R,), float."""
+    mu_kinetic: wp.array
+    """Kinetic friction coefficient, shape (R,), float."""
+    friction_backward_ratio: wp.array
+    """Both friction coefficients tail-ward over head-ward, shape (R,), float (1: isotropic)."""
+    floor_incline: wp.array
+    """Floor slope about +y [rad], shape (R,), float."""
+    gravity: wp.array
+    """Gravitational acceleration along −z [m/s²], shape (R,), float."""
+    dipole_density: wp.array
+    """Dipoles per volume of the 'dipoles' magnet model [1/m³], shape (R,), float."""
+    # --- magnets: slot 0 EPM (cuboid), 1 tail, 2 centre, 3 head IPM (cylinders)
+    magnet_model: wp.array
+    """0 dipoles, 1 analytic (index in :data:`~warpworm.physics.params.MAGNET_MODELS`), shape (1,), int32."""
+    magnet_model_name: str
+    """'dipoles' or 'analytic' (host)."""
+    magnet_shape: wp.array
+    """0 cuboid, 1 cylinder, shape (1, 4), int32."""
+    magnet_size: wp.array
+    """Cuboid extents or cylinder (d, d, h) [m], shape (W, 4), vec3."""
+    magnet_moment: wp.array
+    """Moments along each magnet's own +z [A·m²], shape (W, 4), vec3."""
+    magnet_moment_parked: wp.array
+    """:attr:`magnet_moment` with the EPM's zeroed (absent, as while settling) [A·m²], shape (W, 4), vec3."""
+    magnet_size_host: np.ndarray
+    """:attr:`magnet_size` [m], shape (W, 4, 3), float64 (host)."""
+    magnet_moment_host: np.ndarray
+    """:attr:`magnet_moment` [A·m²], shape (W, 4, 3), float64 (host)."""
 
     def __init__(self):
         raise TypeError("use Model.from_params(params, num_worlds, device) or ModelBuilder(...).finalize(device)")
@@ -383,6 +472,11 @@ class Model:
                     anchor_stiffness=1.0e4) -> "Model":
         """``ModelBuilder(params, num_worlds, anchors=..., anchor_stiffness=...).finalize(device)``."""
         return ModelBuilder(params, num_worlds, anchors=anchors, anchor_stiffness=anchor_stiffness).finalize(device)
+
+    @property
+    def default_path(self) -> "gaits.EpmPath":
+        """The params' EPM path placed on each world's IPMs at rest (:func:`default_epm_path`), host."""
+        return default_epm_path(self)
 
     # ------------------------------------------------------------------------------------------------------------
     def control(self, path: "gaits.EpmPath | None" = None) -> Control:

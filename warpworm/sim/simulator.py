@@ -1,26 +1,19 @@
-"""Batched simulator of magnetically actuated origami worms (host orchestration of :mod:`warpworm.kernels`).
+"""Batched simulator of magnetically actuated origami worms: the host loop around :mod:`warpworm.kernels`.
 
 One :meth:`Simulator.step` = one magnetic-wrench evaluation (EPM pose from its path, IPM poses from their mounts,
-net force and torque on every magnet from :func:`warpworm.physics.magnets.launch_world_wrenches`, distributed onto the
-mount vertices) followed by ``substeps`` substeps: by default implicit Euler with Newton steps on a per-world
-banded direct solve, one launch for all substeps of all worlds (:mod:`warpworm.kernels.implicit_euler`; the magnet
-poses and the wrench distribution: :mod:`warpworm.kernels.magnet_pose`). All worlds are in every launch; nothing loops
-over worlds on the host.
-
-The wrench is held constant over a step's substeps: it varies on the time scale of the magnets' motion (ms), not
-of the substep, and it is the most expensive kernel (see ``docs/dynamics.md`` for the profile and the dt study).
-Pass ``magnet_every_substep=True`` to evaluate it every substep instead.
-
-Typical use::
+net wrench on every magnet by :func:`warpworm.physics.magnets.launch_world_wrenches`, distributed onto the mount
+vertices) and ``substeps`` substeps in one launch by the solver (:mod:`warpworm.sim.solver`). The wrench is held over
+a step's substeps (it varies on the magnets' ms time scale; ``magnet_every_substep=True`` for dt studies). All
+worlds are in every launch. Typical use::
 
     model = Model.from_params(gaits.preset_params("peristaltic"), num_worlds=16, device="cpu")
-    sim = Simulator(model, dt=2e-3, substeps=40)
+    sim = Simulator(model, dt=4e-3, substeps=2)
     state = sim.initial_state()
-    sim.settle(state, 0.3)            # EPM absent, worm settles under gravity; resets t to 0
+    sim.settle(state, 0.3)               # EPM absent, the worm settles under gravity; t restarts at 0
     frames = sim.run(state, [0.5, 1.0])  # snapshots (dicts of NumPy arrays) at t = 0.5 s and 1 s
 
-The inputs of a run (the EPM path, the anchor targets) are a :class:`~warpworm.sim.model.Control`: ``sim.control`` by
-default, or one passed to :meth:`step` / :meth:`run`. The solver's scratch belongs to the simulator.
+The inputs of a run (EPM path, anchor targets) are a :class:`~warpworm.sim.model.Control`: ``sim.control`` by
+default, or one passed to :meth:`~Simulator.step` / :meth:`~Simulator.run`.
 """
 
 from __future__ import annotations
@@ -82,44 +75,28 @@ class Simulator:
     Args:
         model: the batch.
         dt: step [s]: the magnetic wrench and the EPM pose are refreshed once per step.
-        substeps: substeps per step; the substep is ``dt / substeps`` (2 ms, the gaits' default, is accurate for them).
+        substeps: substeps per step (``dt / substeps`` the substep; 2 ms, the gaits' default, is accurate for them).
         magnet_every_substep: re-evaluate the magnetic wrench every substep (slower; for dt studies).
-        strain_limit: a bar strained beyond this |ΔL/L0| flags its world unstable (the soft VALLEY waist bars, which
-            stand for panel bending, at ``max(strain_limit, 0.9)``: only a waist that collapses or triples fails).
+        strain_limit: a bar strained beyond |ΔL/L0| this flags its world unstable (the soft waist bars at
+            ``max(strain_limit, 0.9)``).
         speed_limit: a vertex faster than this [m/s] (or non-finite) flags its world unstable.
-        fold_tolerance: a crease more than this [rad] outside its NoFoldThrough range (mountain [−π, 0], valley
-            [0, π]) means the sheet crumpled: the world is frozen and flagged (``State.unstable`` = 2; 1 is an
-            explosion). Default 5°.
-        use_graph: capture a step as a graph and replay it (default: on CUDA, and on the CPU with Warp 1.19 or
-            later, where a failing capture falls back to plain launches): a CUDA graph on a GPU; on the CPU, Warp's
-            recorded launches replayed in C++, which saves the per-launch Python cost (a gait step at one world
-            24 % faster, 15 % at 16; the same trajectory bit for bit, tested). A graph is captured per (state,
-            control, EPM on/off) and again after ``control.set_path``.
-        newton: Newton steps per substep at most (at least 2; contacts and friction are updated from the floor's
-            force before every step after the first). Default 24: at the gaits' 2 ms a stick–slip transition can
-            take 15–25 (7 of peristalsis's 2600 substeps in 5 cycles went past 12); none reaches 24 there.
-        newton_tol: a Newton step (the second or later) that changes no vertex's velocity by more than this [m/s]
-            (moves none farther than ``newton_tol · dt_sub``) ends the substep: converged. Default 1e-4 m/s (2e-7 m
-            at the gaits' 2 ms substeps), 2.5–4.0 steps on average there (the iteration is warm-started:
-            :func:`warpworm.kernels.implicit_euler.newton_start`); 0 takes every step.
-            A fixed 3 steps (this solver's first default) is not converged through a snap-through: there the
-            omega and inchworm gaits' outcome depended on the step count (docs/dynamics.md, "Newton convergence").
-        chord: chord Newton steps: the Hessian is assembled and factored at the first step of every other
-            substep of a launch (the substep after a factored one starts on its factor if no contact changed status
-            in between) and again after a contact changed; the other steps reuse the last factor with a fresh
-            gradient. A chord step that would not halve the last step is not taken (the next step refactors at the
-            same x), so a stale factor never moves a world, and one ends a substep only with its error estimate
-            θ/(1 − θ)·step below 0.1 of the tolerance. About half the cost of a full step (no Hessian assembly, no
-            factorization), linear convergence: at the old presets 2.7 / 4.7 / 2.9 steps per substep (peristaltic /
-            omega / inchworm), 0.7 / 1.5 / 0.8 of them factored (docs/dynamics.md, "Newton convergence"). Default
-            (None): on for the band solver, which alone has them; the tile solvers take full steps.
-        slip_speed: regularisation speed ε of static friction [m/s]: below it friction is a stiff
-            viscous force reaching mu_s F_n at ε, so a worm held by friction creeps at most ~ε (1e-5 m/s: < 0.02 mm
-            in 2 s).
-        solver: how each world's Newton system is solved: ``"band"`` one thread per world, block-band Cholesky
-            (:mod:`warpworm.kernels.implicit_euler`); ``"tile-band"`` a block of threads per world, the same band
-            factored column-parallel (bit-identical to "band"); ``"tile-dense"`` a block per world, a dense tile
-            Cholesky in shared memory (:mod:`warpworm.sim.tile_solver`; the GPU paths, designed for occupancy).
+        fold_tolerance: a hinge this far [rad] outside its NoFoldThrough range means the sheet crumpled: the world
+            is frozen and flagged (``State.unstable`` 2; 1 is an explosion). Default 5°.
+        use_graph: capture a step as a graph and replay it (default: on CUDA, and on the CPU from Warp 1.19, where
+            a failing capture falls back to plain launches); the same trajectory bit for bit, less launch cost. A
+            graph is captured per (state, control, EPM on/off) and again after ``control.set_path``.
+        newton: Newton steps per substep at most (>= 2; the contacts are updated before every step after the
+            first). 24: a stick–slip transition can take 15–25 at 2 ms substeps.
+        newton_tol: a Newton step (the second or later) changing no vertex's velocity by more than this [m/s] ends
+            the substep (default 1e-4; 0 takes every step). A fixed step count is not converged through a
+            snap-through (docs/dynamics.md, "Newton convergence").
+        chord: chord Newton steps (reuse the last factor; :mod:`warpworm.kernels.implicit_euler`); default on for
+            the band solver, which alone has them.
+        slip_speed: static friction's regularisation speed ε [m/s]: a worm held by friction creeps at most ~ε.
+        solver: one of :data:`SOLVERS`: ``"band"`` one thread per world (:class:`~warpworm.sim.solver.BandSolver`);
+            ``"tile-band"`` / ``"tile-dense"`` a block of threads per world, the band factored column-parallel
+            (bit-identical to "band") or a dense tile Cholesky in shared memory
+            (:class:`~warpworm.sim.tile_solver.TileSolver`; the GPU layouts).
     """
 
     def __init__(
