@@ -147,7 +147,7 @@ def test_unstable_worlds_are_replaced_deterministically_and_counted(tmp_path):
 
 def test_non_empty_folder_refused_and_config_change_refused_on_resume(tmp_path):
     run(tiny(), tmp_path / "d")
-    with pytest.raises(ConfigError, match="not empty"):
+    with pytest.raises(ConfigError, match="expected an empty or new folder"):
         run(tiny(), tmp_path / "d")
     with pytest.raises(ConfigError, match="seed"):
         run(tiny(seed=99), tmp_path / "d", resume=True)
