@@ -259,3 +259,26 @@ def test_generate_report_and_every_json_is_strict(data_dir, tmp_path):
     assert rep["folders"][0]["samples"] == 8
     with pytest.raises(ValueError):
         loads_strict('{"a": NaN}')
+
+
+def test_bop_toolkit_reads_the_exports(data_dir, tmp_path):
+    """bop_toolkit's own loaders, where bop_toolkit_lib is importable (it is not on PyPI: install it from its
+    repository). Checked by hand on 2026-12-03 with its source: the same reads hold."""
+    inout = pytest.importorskip("bop_toolkit_lib.inout")
+    misc = pytest.importorskip("bop_toolkit_lib.misc")
+    bop_webdataset = pytest.importorskip("bop_toolkit_lib.dataset.bop_webdataset")
+    out, wdir = tmp_path / "bop", tmp_path / "wds"
+    assert _warpworm("export-bop", data_dir, out).returncode == 0
+    assert _warpworm("export-webdataset", data_dir, wdir).returncode == 0
+    info = inout.load_json(str(out / "models" / "models_info.json"), keys_to_int=True)
+    n_sym = {k: len(misc.get_symmetry_transformations(m, max_sym_disc_step=0.01)) for k, m in info.items()}
+    assert n_sym[1] == 2 and n_sym[5] == 6  # identity + the half turn; the EPM's 6
+    for k in info:
+        assert len(inout.load_ply(str(out / "models" / f"obj_{k:06d}.ply"))["pts"]) > 0
+    gts = inout.load_scene_gt(str(out / "train_pbr" / "000000" / "scene_gt.json"))
+    rd = ds.open(data_dir)
+    T = rd[0]["poses/body"]
+    assert np.allclose(gts[0][0]["cam_t_m2c"].ravel(), 1e3 * (rd[0]["camera/R"] @ T[:3, 3] + rd[0]["camera/t"]))
+    s = bop_webdataset.load_image_data(str(wdir / "shard-000000.tar"), "000000_000000", load_gt=True,
+                                       rgb_suffix=".png")
+    assert np.array_equal(s["im_rgb"], rd[0]["rgb"]) and len(s["gt"]) == 5
