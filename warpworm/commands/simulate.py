@@ -241,15 +241,16 @@ def main(args) -> int:
     if m is not None:
         for w in range(min(args.worlds, 8)):
             print(f"  world {w:4d}: ratios min {np.round(m['deformation_ratio_min'][w], 3).tolist()}, crease swing "
-                  f"{m['crease_angle_range_deg'][w]:.1f} deg, tail {1e3 * m['tail_displacement_m'][w]:+.1f} mm, head "
+                  f"{m['crease_angle_range_deg'][w]:.1f} deg, fold violation {m['max_fold_violation_deg'][w]:.1f} deg\n"
+                  f"  world {w:4d}: tail {1e3 * m['tail_displacement_m'][w]:+.1f} mm, head "
                   f"{1e3 * m['head_displacement_m'][w]:+.1f} mm, centre lift {1e3 * m['centre_ipm_max_lift_m'][w]:.1f} "
-                  f"mm, fold violation {m['max_fold_violation_deg'][w]:.1f} deg, lateral drift "
-                  f"{1e3 * m['lateral_displacement_m'][w]:+.1f} mm (max {1e3 * m['lateral_drift_max_m'][w]:.1f})")
+                  f"mm, lateral drift {1e3 * m['lateral_displacement_m'][w]:+.1f} mm (max "
+                  f"{1e3 * m['lateral_drift_max_m'][w]:.1f})")
             if m["approach_placement"].shape[1]:
                 print(f"  world {w:4d}: per cycle: smallest ratio "
                       f"{np.round(m['cycle_ratio_min'][w].min(axis=-1), 3).tolist()}, end hold "
-                      f"{np.round(m['end_hold_ratio'][w], 2).tolist()}, EPM placement at closest approach (0 centre "
-                      f"IPM, 1 head IPM) {np.round(m['approach_placement'][w], 2).tolist()}")
+                      f"{np.round(m['end_hold_ratio'][w], 2).tolist()}\n  world {w:4d}: per cycle: EPM placement at "
+                      f"closest approach (0 centre IPM, 1 head IPM) {np.round(m['approach_placement'][w], 2).tolist()}")
     for p in paths:
         print(f"  wrote {p}")
     return 0
