@@ -194,10 +194,28 @@ def render_pathtraced(scene: SceneBatch, cameras: Cameras, *, spp: int = 16, see
                       linear: bool = False) -> np.ndarray:
     """Path-trace every camera's image of its world: (N, H, W, 3) uint8 (display gamma 2, as the rasterizer), or
     linear float32 with ``linear``. Image i uses ``seeds[i]`` (default i) for Mitsuba's sampler; objects are
-    composited over the rasterizer's background gradient by their coverage (alpha)."""
-    mi = mitsuba()
+    composited over the rasterizer's background gradient by their coverage (alpha). As the rasterizer: the camera's
+    ``gain`` (exposure x white balance) scales the linear light, and a camera with lens distortion (``dist``) is
+    rendered as a widened pinhole image warped through it (:func:`_distorted`)."""
     N, H, W = len(cameras), int(cameras.height), int(cameras.width)
     seeds = np.arange(N) if seeds is None else np.asarray(seeds).reshape(-1)
+    dist = getattr(cameras, "dist", None)
+    if dist is not None and np.any(np.asarray(dist) != 0):
+        out = _distorted(scene, cameras, spp, seeds)
+    else:
+        out = _trace(scene, cameras, spp, seeds)
+    gain = getattr(cameras, "gain", None)
+    if gain is not None:
+        out = out * np.asarray(gain, np.float32)[:, None, None, :]
+    if linear:
+        return out
+    return (np.sqrt(np.clip(out, 0.0, 1.0)) * 255.0 + 0.5).astype(np.uint8)
+
+
+def _trace(scene: SceneBatch, cameras: Cameras, spp: int, seeds: np.ndarray) -> np.ndarray:
+    """Pinhole images, linear RGB over the background, (N, H, W, 3) float32 (``cameras.dist`` and ``gain`` ignored)."""
+    mi = mitsuba()
+    N, H, W = len(cameras), int(cameras.height), int(cameras.width)
     out = np.zeros((N, H, W, 3), np.float32)
     loaded: dict[int, object] = {}
     for i in range(N):
@@ -209,9 +227,33 @@ def render_pathtraced(scene: SceneBatch, cameras: Cameras, *, spp: int = 16, see
         img = np.asarray(mi.render(loaded[w], sensor=sensor, spp=int(spp), seed=int(seeds[i]) % (2**31 - 1)))
         alpha = np.clip(img[..., 3:4], 0.0, 1.0)
         out[i] = img[..., :3] + (1.0 - alpha) * _background(scene, w, H, W)
-    if linear:
-        return out
-    return (np.sqrt(np.clip(out, 0.0, 1.0)) * 255.0 + 0.5).astype(np.uint8)
+    return out
+
+
+def _distorted(scene: SceneBatch, cameras: Cameras, spp: int, seeds: np.ndarray) -> np.ndarray:
+    """Images through ``cameras.dist`` the way the rasterizer makes them (``Renderer._render_distorted``): a pinhole
+    image with the same K widened by margins that hold the ray of every distorted pixel centre, warped bilinearly
+    (``cv2.remap``) by :func:`warpworm.render.distortion.undistort_maps`. Linear (N, H, W, 3) float32."""
+    import dataclasses
+
+    import cv2
+
+    from warpworm.render.distortion import undistort_maps
+
+    N, H, W = len(cameras), int(cameras.height), int(cameras.width)
+    maps = undistort_maps(cameras.K, np.asarray(cameras.dist, dtype=np.float64), W, H)  # (N, H, W, 2)
+    lo = np.floor(maps.reshape(-1, 2).min(axis=0)) - 1
+    hi = np.ceil(maps.reshape(-1, 2).max(axis=0)) + 1
+    ml, mt = int(max(0, -lo[0])), int(max(0, -lo[1]))
+    Wp, Hp = W + ml + int(max(0, hi[0] - (W - 1))), H + mt + int(max(0, hi[1] - (H - 1)))
+    K = cameras.K.copy()
+    K[:, 0, 2] += ml
+    K[:, 1, 2] += mt
+    pin = _trace(scene, dataclasses.replace(cameras, K=K, dist=None, width=Wp, height=Hp), spp, seeds)
+    mx = (maps[..., 0] + ml).astype(np.float32)
+    my = (maps[..., 1] + mt).astype(np.float32)
+    return np.stack([cv2.remap(pin[i], mx[i], my[i], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+                     for i in range(N)]).reshape(N, H, W, 3)
 
 
 def pixel_centre_seg(scene: SceneBatch, cameras: Cameras) -> np.ndarray:

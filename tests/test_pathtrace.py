@@ -58,12 +58,7 @@ def test_worm_masks_agree(scenes):
 def test_picture_shows_the_scene_where_the_rasterizer_does():
     """A red worm on a blue floor: the path-traced picture is red inside the rasterizer's (eroded) worm mask and blue
     on the floor away from it (shadows darken the floor but keep its hue)."""
-    app = default_appearance(2)
-    app.albedo[:, 2:7] = (0.8, 0.05, 0.05)
-    app.albedo[:, 1] = (0.05, 0.1, 0.6)
-    app.floor_tex[:, 1:3] = 0.0  # plain floor
-    app.paper_tex[:] = 0.0
-    scene, st = _scene(app, worlds=2, seed=7)
+    scene, st = _red_worm_blue_floor()
     cams = sample_cameras(31 + np.arange(2), st["positions"], width=W_IMG, height=H_IMG, world_index=np.arange(2),
                           aspect_jitter=0.0, distance=(0.12, 0.14))
     seg = Renderer(W_IMG, H_IMG, device="cpu").render(scene, cams)["seg"]
@@ -76,6 +71,43 @@ def test_picture_shows_the_scene_where_the_rasterizer_does():
         assert inner.sum() > 5 and floor.sum() > 100
         red = rgb[i][..., 0] > rgb[i][..., 2]
         assert red[inner].mean() >= 0.95 and (~red[floor]).mean() >= 0.99
+
+
+def _red_worm_blue_floor(worlds=2, seed=7):
+    app = default_appearance(worlds)
+    app.albedo[:, 2:7] = (0.8, 0.05, 0.05)
+    app.albedo[:, 1] = (0.05, 0.1, 0.6)
+    app.floor_tex[:, 1:3] = 0.0  # plain floor
+    app.paper_tex[:] = 0.0
+    return _scene(app, worlds=worlds, seed=seed)
+
+
+def test_lens_distortion_and_gain_as_the_rasterizer():
+    """A camera with strong lens distortion (OpenCV k1, k2, p1, p2, k3) is path-traced through the same lens: the red
+    pixels of the picture overlap the rasterizer's distorted worm mask better than those of the pinhole picture
+    (measured IoU 0.88 / 0.90 against 0.83 / 0.84; anti-aliased edges and shading keep it below 1), and are red
+    inside its eroded mask; the camera's gain (exposure x white balance) scales the linear light exactly."""
+    import dataclasses
+
+    scene, st = _red_worm_blue_floor()
+    cams = sample_cameras(51 + np.arange(2), st["positions"], width=W_IMG, height=H_IMG, world_index=np.arange(2),
+                          aspect_jitter=0.0, distance=(0.09, 0.1), min_in_frame=0.5)
+    lens = dataclasses.replace(cams, dist=np.array([[-0.5, 0.2, 0.004, -0.004, 0.0]] * 2))
+    seg = Renderer(W_IMG, H_IMG, device="cpu").render(scene, lens)["seg"]
+    rgb = pt.render_pathtraced(scene, lens, spp=8, linear=True)
+    pinhole = pt.render_pathtraced(scene, cams, spp=8, linear=True)
+    k = np.ones((3, 3), np.uint8)
+    for i in range(2):
+        worm = _worm(seg[i])
+        red, red_pin = rgb[i][..., 0] > rgb[i][..., 2], pinhole[i][..., 0] > pinhole[i][..., 2]
+        iou, iou_pin = ((worm & red).sum() / (worm | red).sum(), (worm & red_pin).sum() / (worm | red_pin).sum())
+        assert iou >= 0.85 and iou >= iou_pin + 0.03, (iou, iou_pin)
+        inner = cv2.erode(worm.astype(np.uint8), k).astype(bool)
+        assert inner.sum() > 50 and red[inner].mean() >= 0.98
+    gain = np.array([[2.0, 1.0, 0.5], [0.7, 0.7, 0.7]])
+    a = pt.render_pathtraced(scene, cams, spp=4, linear=True)
+    b = pt.render_pathtraced(scene, dataclasses.replace(cams, gain=gain), spp=4, linear=True)
+    assert np.allclose(b, a * gain[:, None, None, :].astype(np.float32), rtol=1e-6, atol=1e-7)
 
 
 def test_light_units_match_the_rasterizer():
