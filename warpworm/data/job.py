@@ -55,13 +55,15 @@ class Summary:
         return self.new_samples / self.wall_s if self.wall_s > 0 else float("nan")
 
     def text(self) -> str:
+        compiled = " (compiled: first run)" if self.kernels_s > KERNEL_NOTICE_S else ""
         return (f"wrote {self.shards_written} shard(s) ({self.new_samples} samples; {self.shards_done_before} shard(s) "
-                f"were already complete) to {self.out} in {self.wall_s:.1f} s = {self.samples_per_s:.1f} samples/s "
-                f"with {self.workers} worker(s) [{self.engine}]; unstable worlds dropped and replaced: "
-                f"{self.replaced_worlds}; cameras below camera.min_in_frame after max_tries: {self.cameras_below_min}; "
-                f"kernels {self.kernels_s:.1f} s{' (compiled: first run)' if self.kernels_s > KERNEL_NOTICE_S else ''}"
-                f"; stage time (all workers): sim {self.sim_s:.1f} s, render {self.render_s:.1f} s, "
-                f"write {self.write_s:.1f} s")
+                f"were already complete) to {self.out}\n"
+                f"  {self.wall_s:.1f} s = {self.samples_per_s:.1f} samples/s with {self.workers} worker(s) "
+                f"[{self.engine}]; kernels {self.kernels_s:.1f} s{compiled}\n"
+                f"  stage time (all workers): sim {self.sim_s:.1f} s, render {self.render_s:.1f} s, "
+                f"write {self.write_s:.1f} s\n"
+                f"  unstable worlds dropped and replaced: {self.replaced_worlds}; cameras below "
+                f"camera.min_in_frame after max_tries: {self.cameras_below_min}")
 
 
 @functools.lru_cache(maxsize=None)
