@@ -720,3 +720,42 @@ def downsample_rgb(
             acc = acc + wp.cw_mul(c, c)
     acc = acc * (1.0 / float(sub * sub))
     rgb[img, y * width + x] = wp.vec3ub(to_srgb8(acc[0]), to_srgb8(acc[1]), to_srgb8(acc[2]))
+
+
+@wp.kernel
+def undistort_pixels(
+    intr: wp.array(dtype=wp.vec4d),
+    dist: wp.array2d(dtype=wp.float64),
+    iterations: int,
+    # Data out:
+    pinhole: wp.array3d(dtype=wp.vec2d),
+):
+    """For pixel centre (x, y) of distorted image ``img``: the pinhole pixel (same intrinsics ``intr`` = (fx, fy, cx,
+    cy)) whose ray it sees, by ``iterations`` Newton steps on OpenCV's lens map with ``dist`` (k1, k2, p1, p2, k3)
+    (float64; the NumPy twin is :func:`warpworm.render.distortion.undistort`). ``pinhole``: (N, H, W)."""
+    img, y, x = wp.tid()
+    k = intr[img]
+    xd = (wp.float64(x) - k[2]) / k[0]
+    yd = (wp.float64(y) - k[3]) / k[1]
+    k1 = dist[img, 0]
+    k2 = dist[img, 1]
+    p1 = dist[img, 2]
+    p2 = dist[img, 3]
+    k3 = dist[img, 4]
+    one = wp.float64(1.0)
+    two = wp.float64(2.0)
+    u = xd
+    v = yd
+    for _it in range(iterations):
+        r2 = u * u + v * v
+        radial = one + r2 * (k1 + r2 * (k2 + r2 * k3))
+        drad = two * (k1 + r2 * (two * k2 + wp.float64(3.0) * k3 * r2))
+        fx = u * radial + two * p1 * u * v + p2 * (r2 + two * u * u) - xd
+        fy = v * radial + p1 * (r2 + two * v * v) + two * p2 * u * v - yd
+        a = radial + u * u * drad + two * p1 * v + wp.float64(6.0) * p2 * u
+        b = u * v * drad + two * p1 * u + two * p2 * v
+        d = radial + v * v * drad + wp.float64(6.0) * p1 * v + two * p2 * u
+        det = a * d - b * b
+        u = u - (d * fx - b * fy) / det
+        v = v - (a * fy - b * fx) / det
+    pinhole[img, y, x] = wp.vec2d(k[0] * u + k[2], k[1] * v + k[3])

@@ -263,7 +263,7 @@ class Renderer:
         from warpworm.render.distortion import undistort_maps
 
         H, W, N = self.height, self.width, len(cameras)
-        maps = undistort_maps(cameras.K, np.asarray(cameras.dist, dtype=np.float64), W, H)  # (N, H, W, 2)
+        maps = undistort_maps(cameras.K, np.asarray(cameras.dist, dtype=np.float64), W, H, self.device)  # (N, H, W, 2)
         lo = np.floor(maps.reshape(-1, 2).min(axis=0)) - 1
         hi = np.ceil(maps.reshape(-1, 2).max(axis=0)) + 1
         ml, mt = int(max(0, -lo[0])), int(max(0, -lo[1]))
