@@ -7,6 +7,7 @@ exit code 2 (:data:`EXIT_USAGE`), and writes nothing.
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
 EXIT_USAGE = 2
 """Bad arguments, a missing or wrong file, an unavailable device: refused before any work, nothing written."""
@@ -82,3 +83,24 @@ def output_folder(path, option: str = "OUT", *, overwrite: bool = False):
         raise ValueError(f"{option}: got '{path}'; expected a new or empty folder (it is not empty: add --overwrite "
                          "to write over it)")
     return p
+
+
+def first_run_notice(modules=("warpworm.kernels.implicit_euler", "warpworm.kernels.magnet_wrench")) -> bool:
+    """Say on stderr, before a command's first kernel launch, that the Warp kernels compile now when none of
+    ``modules`` has ever been built into Warp's kernel cache (a fresh machine or cache: ~20-60 s of silence
+    otherwise). Returns whether it said so. A changed kernel source on an existing cache is not detected (rare)."""
+    import warp as wp
+
+    from warpworm import quiet_warp
+
+    quiet_warp()
+    root = wp.config.kernel_cache_dir
+    if not root or not Path(root).is_dir():
+        cold = True
+    else:
+        names = [p.name for p in Path(root).iterdir()]
+        cold = not all(any(n.startswith(f"wp_{m}_") for n in names) for m in modules)
+    if cold:
+        print("note: first run here: compiling Warp kernels (about 20-60 s on a CPU; cached for later runs)",
+              file=sys.stderr, flush=True)
+    return cold

@@ -54,6 +54,9 @@ def main(args) -> int:
             raise ValueError(f"--out: got '{out}'; expected a folder (it is a file)")
     except ValueError as exc:
         return refuse(exc)
+    from warpworm.commands.common import first_run_notice
+
+    first_run_notice(("warpworm.kernels.magnet_wrench",))
     out.mkdir(parents=True, exist_ok=True)
     pattern, mags, pos, rot = demo_scene(args.height)
     results = {}

@@ -171,6 +171,9 @@ def main(args) -> int:
             raise ValueError(f"--out: got '{args.out}'; expected a folder (it is a file)")
     except ValueError as exc:
         return refuse(exc)
+    from warpworm.commands.common import first_run_notice
+
+    first_run_notice()
     if args.fit is not None:
         return _fit(args, base)
     out = Path(args.out)

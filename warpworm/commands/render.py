@@ -86,6 +86,9 @@ def main(args) -> int:
             raise ValueError(f"--out: got '{out}'; expected a folder (it is a file)")
     except ValueError as exc:
         return refuse(exc)
+    from warpworm.commands.common import first_run_notice
+
+    first_run_notice(("warpworm.kernels.implicit_euler", "warpworm.render.raster_kernels"))
     out.mkdir(parents=True, exist_ok=True)
     W, C, S = int(args.worlds), int(args.cameras), int(args.size)
     t0 = time.perf_counter()

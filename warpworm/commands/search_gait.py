@@ -129,6 +129,9 @@ def main(args) -> int:
         grid, params, n = _check(args)
     except ValueError as e:
         return refuse(e)
+    from warpworm.commands.common import first_run_notice
+
+    first_run_notice()
     workers = args.workers or os.cpu_count() or 1
     print(f"search-gait {args.gait}{' backward' if args.backward else ''}: {n} grid points x {args.cycles} cycles "
           f"on {min(workers, n)} thread(s)")

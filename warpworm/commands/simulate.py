@@ -209,6 +209,9 @@ def main(args) -> int:
     if args.worlds > 1 and not args.randomize:
         print(f"note: the {args.worlds} worlds are identical (one parameter set); add --randomize to draw each "
               "world's material, magnets and EPM path from the default dataset config", file=sys.stderr)
+    from warpworm.commands.common import first_run_notice
+
+    first_run_notice()
     # one process per core on the CPU; a GPU runs every world in one batch
     workers = args.workers if device == "cpu" else 1
     result = run_gait_split(params, args.worlds, args.cycles, workers=workers, device=device, dt=args.dt,
