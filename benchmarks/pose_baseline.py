@@ -1,0 +1,343 @@
+"""Learnability benchmark (issue 24): does what a small network learns from our images transfer to another renderer?
+
+Trains a small CNN (keypoints by soft-argmax heatmaps, crease angles, the four deformation ratios) for a fixed budget
+on one dataset, then reports on a held-out set of another seed with a shifted camera and light, rendered twice: by
+the rasterizer (in-domain) and by the path-traced engine (``render.engine: pathtraced``: the same scenes, cameras,
+colours and lights, the same labels). Reads the HDF5 shards with h5py only; torch (CPU) is the ``torch`` extra.
+
+Metrics per test set: keypoint error [px] on visible keypoints, PCK@5, head/tail swap rate (the prediction is nearer
+the ground truth turned half a turn about the body's vertical axis), the head/tail-agnostic keypoint error (the
+better of the two), body rotation error by PnP (cv2.solvePnP of the predicted pixels against the training mean of
+``keypoints/body``; median), crease-angle and deformation-ratio MAE against predicting the training mean. Goals
+(issue 24): cross-engine agnostic keypoint error <= 1.5x in-domain; swap rate equal within 5 points; crease MAE
+<= 0.6x the mean baseline in-domain.
+
+    pip install torch  # CPU wheel is enough
+    python benchmarks/pose_baseline.py --config default --train-num 768 --test-num 192 --size 128 --budget-s 180
+    python benchmarks/pose_baseline.py --data out/pose_bench --skip-generate     # reuse generated datasets
+
+Writes benchmarks/results/pose_baseline.json and prints a table (docs/dataset.md, "Learnability benchmark").
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+TEST_SHIFT = ["randomize.camera.distance={uniform: [0.16, 0.24]}", "randomize.light.intensity={uniform: [0.4, 0.7]}",
+              "randomize.light.ambient={uniform: [0.1, 0.25]}"]
+"""The held-out set's shift: cameras farther (default 0.12-0.2 m), light dimmer (0.6-1.0, ambient 0.15-0.35)."""
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# data
+def generate_sets(a) -> dict[str, Path]:
+    """train (seed a.seed), test (seed a.seed + 1000, shifted) and test_pt (the same scenes path-traced)."""
+    root = Path(a.data)
+    size = [f"render.width={a.size}", f"render.height={a.size}", "output.preview=false"] + list(a.set or [])
+    sets = {"train": (a.seed, a.train_num, []),
+            "test": (a.seed + 1000, a.test_num, TEST_SHIFT),
+            "test_pt": (a.seed + 1000, a.test_num, TEST_SHIFT + ["render.engine=pathtraced",
+                                                                 f"render.pathtraced_spp={a.spp}"])}
+    out = {}
+    for name, (seed, num, extra) in sets.items():
+        out[name] = root / name
+        if a.skip_generate:
+            continue
+        cmd = [sys.executable, "-m", "warpworm", "generate", a.config, "--out", str(out[name]), "--num", str(num),
+               "--seed", str(seed), "--workers", str(a.workers), *size, *extra]
+        t0 = time.perf_counter()
+        subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+        print(f"generated {name}: {num} samples in {time.perf_counter() - t0:.0f} s", flush=True)
+    return out
+
+
+def load(root: Path) -> dict[str, np.ndarray]:
+    """Every array the benchmark needs, concatenated over the shards (h5py only)."""
+    import h5py
+
+    keys = ("rgb", "keypoints/pixel", "keypoints/visibility", "keypoints/body", "camera/K", "camera/R", "camera/t",
+            "poses/body", "creases/angle", "labels/deformation", "sample_id")
+    parts: dict[str, list] = {k: [] for k in keys}
+    names = None
+    for p in sorted(root.glob("shard-*.h5")):
+        with h5py.File(p, "r") as f:
+            names = json.loads(f.attrs["keypoint_names"])
+            for k in keys:
+                parts[k].append(f[k][...])
+    d = {k: np.concatenate(v) for k, v in parts.items()}
+    d["names"] = names
+    return d
+
+
+def flip_permutation(names: list[str]) -> np.ndarray:
+    """Keypoint index under the half turn about the body's vertical axis: head <-> tail, left <-> right."""
+    def turned(n: str) -> str:
+        if n.startswith("seg"):
+            return f"seg{4 - int(n[3:])}"
+        n = n.replace("tail", "#").replace("head", "tail").replace("#", "head")
+        return n.replace("left", "#").replace("right", "left").replace("#", "right")
+    return np.array([names.index(turned(n)) for n in names])
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# model
+def build_model(num_kp: int, num_reg: int, size: int, net_size: int | None = None):
+    import torch
+    from torch import nn
+
+    def block(cin, cout, stride):
+        return nn.Sequential(nn.Conv2d(cin, cout, 3, stride, 1, bias=False), nn.BatchNorm2d(cout), nn.ReLU(inplace=True),
+                             nn.Conv2d(cout, cout, 3, 1, 1, bias=False), nn.BatchNorm2d(cout), nn.ReLU(inplace=True))
+
+    class Net(nn.Module):
+        """Stride-4 feature map -> keypoint heatmaps (soft-argmax to pixels); pooled features -> creases + ratios."""
+
+        def __init__(self):
+            super().__init__()
+            # a 4x4 patch stem (stride 4: a quarter of the MACs of two stride-2 blocks; CPU-sized), then 3x3 blocks
+            stem = nn.Sequential(nn.Conv2d(3, 32, 4, 4, bias=False), nn.BatchNorm2d(32), nn.ReLU(inplace=True))
+            self.body = nn.Sequential(stem, block(32, 48, 1))
+            self.deep = nn.Sequential(block(48, 64, 2), block(64, 96, 2), nn.AdaptiveAvgPool2d(1), nn.Flatten())
+            self.heat = nn.Conv2d(48, num_kp, 1)
+            self.reg = nn.Sequential(nn.Linear(96, 128), nn.ReLU(inplace=True), nn.Linear(128, num_reg))
+            self.pool = max(1, size // (net_size or size))  # the network sees size / pool pixels (area average)
+            self.stride = self.pool * 4.0  # native pixels per heatmap cell
+
+        def forward(self, x):
+            if self.pool > 1:
+                x = nn.functional.avg_pool2d(x, self.pool)
+            f = self.body(x)
+            h = self.heat(f)
+            n, k, hh, ww = h.shape
+            logp = torch.log_softmax(h.reshape(n, k, -1), dim=-1)
+            p = logp.exp().reshape(n, k, hh, ww)
+            xs = (torch.arange(ww, dtype=x.dtype) + 0.5) * self.stride - 0.5  # feature cell centre in pixels
+            ys = (torch.arange(hh, dtype=x.dtype) + 0.5) * self.stride - 0.5
+            uv = torch.stack([(p.sum(2) * xs).sum(-1), (p.sum(3) * ys).sum(-1)], dim=-1)
+            self.cells = (xs, ys)
+            return uv, self.reg(self.deep(f)), logp
+
+    return Net()
+
+
+def _targets(d: dict, stats: dict):
+    creases = (d["creases/angle"] - stats["crease_mean"]) / stats["crease_std"]
+    ratios = (d["labels/deformation"] - stats["ratio_mean"]) / stats["ratio_std"]
+    return np.concatenate([creases, ratios], axis=1).astype(np.float32)
+
+
+def heatmap_ce(logp, kp, xs, ys, sigma: float):
+    """Cross-entropy of the predicted cell distribution ``logp`` (n, k, cells) against a Gaussian of ``sigma`` [px]
+    around each true keypoint ``kp`` (n, k, 2) [px] on the cell centres ``xs``, ``ys``: (n, k). Supervises every cell
+    directly (faster to learn from scratch than the soft-argmax's coordinate alone)."""
+    import torch
+
+    d2 = (xs[None, None, None, :] - kp[..., 0, None, None]) ** 2 + (ys[None, None, :, None] - kp[..., 1, None, None]) ** 2
+    t = torch.softmax(-d2.reshape(*kp.shape[:2], -1) / (2 * sigma**2), dim=-1)
+    return -(t * logp).sum(-1)
+
+
+def train(d: dict, a) -> tuple[object, dict, dict]:
+    """AdamW until the time budget ends: heatmap cross-entropy + L1 of the soft-argmax pixels (/ 16) on in-image
+    keypoints, + L1 on the normalized creases and ratios."""
+    import torch
+
+    torch.manual_seed(a.seed)
+    torch.set_num_threads(a.threads)
+    stats = {"crease_mean": d["creases/angle"].mean(0), "crease_std": d["creases/angle"].std(0) + 1e-6,
+             "ratio_mean": d["labels/deformation"].mean(0), "ratio_std": d["labels/deformation"].std(0) + 1e-6}
+    x = torch.from_numpy(d["rgb"]).permute(0, 3, 1, 2).contiguous()  # uint8, normalized per batch
+    kp = torch.from_numpy(d["keypoints/pixel"].astype(np.float32))
+    w = torch.from_numpy((d["keypoints/visibility"] > 0).astype(np.float32))
+    reg = torch.from_numpy(_targets(d, stats))
+    model = build_model(kp.shape[1], reg.shape[1], a.size, a.net_size)
+    opt = torch.optim.AdamW(model.parameters(), lr=2e-3, weight_decay=1e-4)
+    rng = np.random.default_rng(a.seed)
+    t0, steps, epochs, log = time.perf_counter(), 0, 0, []
+    while time.perf_counter() - t0 < a.budget_s:
+        model.train()
+        for idx in np.array_split(rng.permutation(len(x)), max(1, len(x) // a.batch)):
+            uv, r, logp = model(x[idx].float() / 127.5 - 1.0)
+            l_kp = ((uv - kp[idx]).abs().sum(-1) * w[idx]).sum() / w[idx].sum().clamp(min=1) / 8.0
+            l_heat = (heatmap_ce(logp, kp[idx], *model.cells, model.stride) * w[idx]).sum() / w[idx].sum().clamp(min=1)
+            l_reg = (r - reg[idx]).abs().mean()
+            loss = l_heat + 0.5 * l_kp + l_reg
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            steps += 1
+            if time.perf_counter() - t0 >= a.budget_s:
+                break
+        epochs += 1
+        log.append({"epoch": epochs, "s": round(time.perf_counter() - t0, 1), "kp_loss_px": float(l_kp.detach()) * 8,
+                    "reg_loss": float(l_reg.detach())})
+        print(f"epoch {epochs}: {log[-1]['s']} s, keypoint L1 {log[-1]['kp_loss_px']:.2f} px, "
+              f"creases+ratios L1 {log[-1]['reg_loss']:.3f} (normalized)", flush=True)
+    return model, stats, {"steps": steps, "epochs": epochs, "train_s": round(time.perf_counter() - t0, 1),
+                          "log": log}
+
+
+def predict(model, d: dict, stats: dict):
+    import torch
+
+    model.eval()
+    uvs, regs = [], []
+    with torch.no_grad():
+        for i in range(0, len(d["rgb"]), 64):
+            x = torch.from_numpy(d["rgb"][i:i + 64]).permute(0, 3, 1, 2).float() / 127.5 - 1.0
+            uv, r, _ = model(x)
+            uvs.append(uv.numpy())
+            regs.append(r.numpy())
+    uv, r = np.concatenate(uvs).astype(np.float64), np.concatenate(regs).astype(np.float64)
+    C = len(stats["crease_mean"])
+    creases = r[:, :C] * stats["crease_std"] + stats["crease_mean"]
+    ratios = r[:, C:] * stats["ratio_std"] + stats["ratio_mean"]
+    return uv, creases, ratios
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# metrics
+def pnp_rotation_errors(uv: np.ndarray, d: dict, body_model: np.ndarray) -> np.ndarray:
+    """Angle [deg] between the body rotation in the camera frame from cv2.solvePnP (predicted pixels of in-image
+    keypoints, 3-D points = the training mean of keypoints/body) and the true one; NaN where PnP fails."""
+    import cv2
+
+    out = np.full(len(uv), np.nan)
+    for i in range(len(uv)):
+        m = d["keypoints/visibility"][i] > 0
+        if m.sum() < 6:
+            continue
+        ok = False
+        for flags in (cv2.SOLVEPNP_SQPNP, cv2.SOLVEPNP_EPNP):  # SQPnP refuses clustered points: EPnP then
+            try:  # object points in mm (the rotation does not depend on the scale)
+                ok, rvec, _ = cv2.solvePnP(1e3 * body_model[m], uv[i][m], d["camera/K"][i], None, flags=flags)
+            except cv2.error:
+                ok = False
+            if ok:
+                break
+        if not ok:
+            continue
+        R_pred = cv2.Rodrigues(rvec)[0]
+        R_true = d["camera/R"][i] @ d["poses/body"][i][:3, :3]
+        c = (np.trace(R_pred.T @ R_true) - 1.0) / 2.0
+        out[i] = np.degrees(np.arccos(np.clip(c, -1.0, 1.0)))
+    return out
+
+
+def evaluate(uv, creases, ratios, d: dict, flip: np.ndarray, train_stats: dict, body_model: np.ndarray) -> dict:
+    vis = d["keypoints/visibility"] == 2
+    gt = d["keypoints/pixel"]
+    err = np.linalg.norm(uv - gt, axis=-1)
+    err_flip = np.linalg.norm(uv - gt[:, flip], axis=-1)
+    nv = vis.sum(1)
+    ok = nv >= 4
+    per = (err * vis).sum(1) / np.maximum(nv, 1)
+    per_flip = (err_flip * vis).sum(1) / np.maximum(nv, 1)
+    swapped = per_flip < per
+    agnostic = np.where(swapped[:, None], err_flip, err)
+    rot = pnp_rotation_errors(uv, d, body_model)
+    c_err = np.degrees(np.abs(creases - d["creases/angle"])).mean()
+    c_base = np.degrees(np.abs(train_stats["crease_mean"] - d["creases/angle"])).mean()
+    r_err = np.abs(ratios - d["labels/deformation"]).mean()
+    r_base = np.abs(train_stats["ratio_mean"] - d["labels/deformation"]).mean()
+    mean_pos = np.linalg.norm(train_stats["kp_mean"][None] - gt, axis=-1)
+    return {
+        "images": int(len(uv)), "kp_err_px": float(err[vis].mean()), "kp_err_agnostic_px": float(agnostic[vis].mean()),
+        "kp_err_mean_position_px": float(mean_pos[vis].mean()), "pck5": float((err[vis] <= 5.0).mean()),
+        "swap_rate": float(swapped[ok].mean()), "pnp_rot_median_deg": float(np.nanmedian(rot)),
+        "pnp_failed": int(np.isnan(rot).sum()), "crease_mae_deg": float(c_err), "crease_mae_mean_baseline_deg":
+        float(c_base), "ratio_mae": float(r_err), "ratio_mae_mean_baseline": float(r_base)}
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+def table(res: dict) -> str:
+    rows = [("keypoint error, visible [px]", "kp_err_px", "{:.2f}"),
+            ("  head/tail-agnostic [px]", "kp_err_agnostic_px", "{:.2f}"),
+            ("  mean-position baseline [px]", "kp_err_mean_position_px", "{:.2f}"),
+            ("PCK@5", "pck5", "{:.3f}"), ("head/tail swapped", "swap_rate", "{:.1%}"),
+            ("body rotation by PnP, median [deg]", "pnp_rot_median_deg", "{:.1f}"),
+            ("crease MAE [deg]", "crease_mae_deg", "{:.2f}"),
+            ("  training-mean baseline [deg]", "crease_mae_mean_baseline_deg", "{:.2f}"),
+            ("deformation-ratio MAE", "ratio_mae", "{:.4f}"),
+            ("  training-mean baseline", "ratio_mae_mean_baseline", "{:.4f}")]
+    sets = [k for k in ("test", "test_pt") if k in res]
+    head = "| metric | " + " | ".join({"test": "rasterized (in-domain)", "test_pt": "path-traced"}[s] for s in sets)
+    lines = [head + " |", "|---" * (len(sets) + 1) + "|"]
+    for label, key, fmt in rows:
+        lines.append(f"| {label} | " + " | ".join(fmt.format(res[s][key]) for s in sets) + " |")
+    return "\n".join(lines)
+
+
+def goals(res: dict) -> dict:
+    t, p = res["test"], res.get("test_pt")
+    g = {"crease_mae_ratio_to_baseline": t["crease_mae_deg"] / t["crease_mae_mean_baseline_deg"]}
+    g["crease_goal_met (<= 0.6)"] = bool(g["crease_mae_ratio_to_baseline"] <= 0.6)
+    if p is not None:
+        g["cross_engine_kp_ratio"] = p["kp_err_agnostic_px"] / t["kp_err_agnostic_px"]
+        g["cross_engine_goal_met (<= 1.5)"] = bool(g["cross_engine_kp_ratio"] <= 1.5)
+        g["swap_rate_difference_points"] = 100 * abs(p["swap_rate"] - t["swap_rate"])
+        g["swap_goal_met (<= 5 points)"] = bool(g["swap_rate_difference_points"] <= 5)
+    return g
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--config", default="default")
+    ap.add_argument("--set", action="append", help="extra KEY=VALUE for every generated set (repeatable)")
+    ap.add_argument("--data", default="out/pose_bench", help="folder of the train / test / test_pt datasets")
+    ap.add_argument("--skip-generate", action="store_true", help="use the datasets already in --data")
+    ap.add_argument("--train-num", type=int, default=1024)
+    ap.add_argument("--test-num", type=int, default=256)
+    ap.add_argument("--size", type=int, default=128, help="square image side [px]")
+    ap.add_argument("--net-size", type=int, default=64,
+                    help="side the network sees [px] (images area-averaged down to it; keypoints stay native px)")
+    ap.add_argument("--spp", type=int, default=16, help="path-traced samples per pixel")
+    ap.add_argument("--no-pathtraced", action="store_true", help="skip the path-traced test set")
+    ap.add_argument("--budget-s", type=float, default=180.0, help="training time budget [s]")
+    ap.add_argument("--batch", type=int, default=16)
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "pose_baseline.json"))
+    a = ap.parse_args(argv)
+    try:
+        import torch  # noqa: F401
+    except ImportError:
+        print("error: the benchmark needs torch: pip install torch (the CPU wheel is enough)", file=sys.stderr)
+        return 2
+    paths = generate_sets(a)
+    if a.no_pathtraced:
+        paths.pop("test_pt")
+    tr = load(paths["train"])
+    model, stats, info = train(tr, a)
+    stats["kp_mean"] = tr["keypoints/pixel"].mean(0)
+    body_model = tr["keypoints/body"].mean(0)
+    flip = flip_permutation(tr["names"])
+    res = {}
+    for name in [k for k in ("test", "test_pt") if k in paths]:
+        d = load(paths[name])
+        res[name] = evaluate(*predict(model, d, stats), d, flip, stats, body_model)
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                            cwd=Path(__file__).parent).stdout.strip()
+    dirty = bool(subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], capture_output=True,
+                                text=True, cwd=Path(__file__).parent).stdout.strip())
+    report = {"args": vars(a), "commit": commit, "worktree_modified": dirty,
+              "pythonpath": os.environ.get("PYTHONPATH", ""), "train": info, **res,
+              "goals": goals(res)}
+    print(table(res))
+    print(json.dumps(report["goals"], indent=1))
+    Path(a.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(a.out).write_text(json.dumps(report, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
