@@ -282,3 +282,26 @@ def test_bop_toolkit_reads_the_exports(data_dir, tmp_path):
     s = bop_webdataset.load_image_data(str(wdir / "shard-000000.tar"), "000000_000000", load_gt=True,
                                        rgb_suffix=".png")
     assert np.array_equal(s["im_rgb"], rd[0]["rgb"]) and len(s["gt"]) == 5
+
+
+def test_every_other_json_we_write_is_strict(data_dir, tmp_path, capfd, monkeypatch):
+    """search.json, experiment JSON, COCO, the JSON schema and the commands' --json lines: strict JSON (run in this
+    process through the CLI to stay fast)."""
+    from warpworm.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    assert main(["search-gait", "--gait", "omega", "--grid", "w=0.02", "--cycles", "1", "--magnet-model", "analytic",
+                 "--out", "sg"]) == 0
+    s = loads_strict((tmp_path / "sg" / "search.json").read_text())
+    assert set(s["best"] or {}) <= {"wavelength", "amplitude", "closest_approach"}
+    assert main(["experiment", "force-distance", "--quick", "--no-plot", "--out", "ex"]) == 0
+    assert main(["export-coco", str(data_dir), "coco"]) == 0
+    assert main(["config-schema", "--out", "schema.json"]) == 0
+    assert _strict_json_files(tmp_path) >= 4
+    capfd.readouterr()
+    assert main(["simulate", "--cycles", "1", "--settle", "0.02", "--magnet-model", "analytic", "--json",
+                 "--no-output"]) == 0
+    assert main(["render", "--worlds", "1", "--cameras", "1", "--size", "32", "--source", "posed", "--json",
+                 "--out", "r"]) == 0
+    for line in capfd.readouterr().out.strip().splitlines():
+        loads_strict(line)
