@@ -26,6 +26,8 @@ def add_arguments(parser) -> None:
                         help="a known WormParams value (e.g. a measured a, l0, or the magnet moment from calibrate)")
     parser.add_argument("--budget", type=int, default=96, help="simulated worlds for the search (default 96)")
     parser.add_argument("--popsize", type=int, default=None, help="worlds per CMA-ES generation (default 8+)")
+    parser.add_argument("--refine", type=int, default=4,
+                        help="Levenberg-Marquardt steps after the search, one batch of 2p+1 worlds each (default 4)")
     parser.add_argument("--spread", type=float, default=3.0,
                         help="search within preset / spread .. preset * spread (default 3)")
     parser.add_argument("--magnet-model", choices=["dipoles", "analytic"], default="dipoles")
@@ -79,12 +81,13 @@ def main(args) -> int:
     try:
         if not Path(args.track).is_file():
             raise ValueError(f"TRACK: got {args.track!r}; expected a track.csv written by 'warpworm track'")
-        if args.budget < 1 or (args.popsize is not None and args.popsize < 2):
-            raise ValueError(f"--budget/--popsize: got {args.budget}/{args.popsize}; expected >= 1 / >= 2")
+        if args.budget < 1 or (args.popsize is not None and args.popsize < 2) or args.refine < 0:
+            raise ValueError(f"--budget/--popsize/--refine: got {args.budget}/{args.popsize}/{args.refine}; expected "
+                             ">= 1 / >= 2 / >= 0")
         if not args.spread > 1 or not 0 < args.render_scale <= 1:
             raise ValueError(f"--spread/--render-scale: got {args.spread}/{args.render_scale}; expected > 1 / (0, 1]")
         try:
-            import cma  # noqa: F401
+            import cma  # noqa: F401  (checked before any work)
         except ImportError:
             raise ValueError("fit-track: the cma package is missing; expected it installed (pip install "
                              "'warpworm[calibrate]')") from None
@@ -113,7 +116,7 @@ def main(args) -> int:
         log(f"fitting {names} to {len(track['time'])} frames of {args.gait}{' backward' if args.backward else ''} "
             f"({'through the track camera' if meta else 'band centres from above'}), budget {args.budget} worlds")
     res = FT.fit(track, base, names, budget=args.budget, popsize=args.popsize, spread=args.spread, seed=args.seed,
-                 meta=meta, log=log, render_scale=args.render_scale, device=args.device)
+                 meta=meta, log=log, refine=args.refine, render_scale=args.render_scale, device=args.device)
     frag = FT.write_fragment(out / "fit.yaml", args.gait, args.backward, {**path_fields, **known}, res)
     plot_note = ""
     try:
