@@ -33,8 +33,27 @@ GEN = ["--num", "8", "--no-progress", "--no-preview", "sim.worlds=2", "shard_siz
 
 
 def _warpworm(*args, timeout=300, cwd=None):
+    """``warpworm ARGS`` in a subprocess (the console entry point, as a user runs it)."""
     return subprocess.run([sys.executable, "-m", "warpworm", *map(str, args)], capture_output=True, text=True,
                           timeout=timeout, cwd=cwd)
+
+
+def _cli(*args):
+    """``warpworm ARGS`` in this process (fast: no interpreter and Warp start-up per call); returncode, stdout,
+    stderr as a subprocess's. Not for ``generate``, which takes over the process's signal handlers."""
+    from contextlib import redirect_stderr, redirect_stdout
+    from io import StringIO
+    from types import SimpleNamespace
+
+    from warpworm.cli import main
+
+    out, err = StringIO(), StringIO()
+    with redirect_stdout(out), redirect_stderr(err):
+        try:
+            code = main([str(a) for a in args])
+        except SystemExit as exc:
+            code = exc.code
+    return SimpleNamespace(returncode=code, stdout=out.getvalue(), stderr=err.getvalue())
 
 
 @pytest.fixture(scope="module")
@@ -57,7 +76,7 @@ def test_bop_export_follows_the_spec(data_dir, tmp_path):
     import trimesh
 
     out = tmp_path / "bop"
-    r = _warpworm("export-bop", data_dir, out)
+    r = _cli("export-bop", data_dir, out)
     assert r.returncode == 0, r.stderr
     rd = ds.open(data_dir)
     N = len(rd)
@@ -105,9 +124,9 @@ def test_bop_export_follows_the_spec(data_dir, tmp_path):
             assert (scene / "mask_visib" / f"{i:06d}_{k:06d}.png").is_file()
     assert _strict_json_files(out) >= 6
     # OUT exists now: refused without --overwrite, accepted with it
-    r = _warpworm("export-bop", data_dir, out, "--limit", "2")
+    r = _cli("export-bop", data_dir, out, "--limit", "2")
     assert r.returncode == 2 and "--overwrite" in r.stderr and r.stderr.count("\n") == 1
-    assert _warpworm("export-bop", data_dir, out, "--limit", "2", "--overwrite").returncode == 0
+    assert _cli("export-bop", data_dir, out, "--limit", "2", "--overwrite").returncode == 0
 
 
 def test_webdataset_round_trip(data_dir, tmp_path):
@@ -117,7 +136,7 @@ def test_webdataset_round_trip(data_dir, tmp_path):
     from warpworm.data.export_webdataset import decode_png
 
     out = tmp_path / "wds"
-    r = _warpworm("export-webdataset", data_dir, out, "--shard-size", "3")
+    r = _cli("export-webdataset", data_dir, out, "--shard-size", "3")
     assert r.returncode == 0, r.stderr
     shards = sorted(out.glob("shard-*.tar"))
     assert len(shards) == 3  # 8 images, 3 per shard
@@ -191,7 +210,7 @@ def test_yolo_export_in_ultralytics_format(data_dir, tmp_path):
     from warpworm.data import export_keypoints as ek
 
     out = tmp_path / "yolo"
-    r = _warpworm("export-yolo", data_dir, out, "--val-fraction", "0.5")
+    r = _cli("export-yolo", data_dir, out, "--val-fraction", "0.5")
     assert r.returncode == 0, r.stderr
     cfg = yaml.safe_load((out / "dataset.yaml").read_text())
     assert cfg["kpt_shape"] == [16, 3] and cfg["names"] == {0: "worm"}
@@ -244,7 +263,7 @@ def test_simulate_trajectory_to_usd(tmp_path):
     assert "check: passed" in r.stdout
     times, pts = read_points(tmp_path / "t.usda")
     assert np.allclose(times, traj["times"]) and np.array_equal(pts, traj["positions"][:, 0])
-    r = _warpworm("export-usd", tmp_path / "sim" / "trajectory.npz", "--out", tmp_path / "u.usda", "--worlds", "3")
+    r = _cli("export-usd", tmp_path / "sim" / "trajectory.npz", "--out", tmp_path / "u.usda", "--worlds", "3")
     assert r.returncode == 2 and "--worlds" in r.stderr and not (tmp_path / "u.usda").exists()
 
 
@@ -253,7 +272,7 @@ def test_generate_report_and_every_json_is_strict(data_dir, tmp_path):
     null where a value is absent; report re-reads the dataset."""
     manifest = loads_strict((data_dir / "manifest.json").read_text())
     assert manifest["config"]["randomize"]["worm"]["orientation"] is None  # NaN = the preset's: null, not NaN
-    r = _warpworm("report", data_dir, "--out", tmp_path / "rep")
+    r = _cli("report", data_dir, "--out", tmp_path / "rep")
     assert r.returncode == 0, r.stderr
     rep = loads_strict((tmp_path / "rep.json").read_text())
     assert rep["folders"][0]["samples"] == 8
@@ -268,8 +287,8 @@ def test_bop_toolkit_reads_the_exports(data_dir, tmp_path):
     misc = pytest.importorskip("bop_toolkit_lib.misc")
     bop_webdataset = pytest.importorskip("bop_toolkit_lib.dataset.bop_webdataset")
     out, wdir = tmp_path / "bop", tmp_path / "wds"
-    assert _warpworm("export-bop", data_dir, out).returncode == 0
-    assert _warpworm("export-webdataset", data_dir, wdir).returncode == 0
+    assert _cli("export-bop", data_dir, out).returncode == 0
+    assert _cli("export-webdataset", data_dir, wdir).returncode == 0
     info = inout.load_json(str(out / "models" / "models_info.json"), keys_to_int=True)
     n_sym = {k: len(misc.get_symmetry_transformations(m, max_sym_disc_step=0.01)) for k, m in info.items()}
     assert n_sym[1] == 2 and n_sym[5] == 6  # identity + the half turn; the EPM's 6
