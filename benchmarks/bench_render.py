@@ -125,6 +125,7 @@ FEATURES = (
     ("supersample 2 (4 RGB samples per pixel)", [], {"supersample": 2}),
     ("supersample 3 (9 RGB samples per pixel)", [], {"supersample": 3}),
     ("exposure + white balance (gains per image)", [], {"gain": True}),
+    ("distractors [3, 6]", ["render.distractors=[3, 6]"], {}),
     ("distortion (k1 -0.25, k2 0.08)", [], {"dist": (-0.25, 0.08, 0.002, -0.002, 0.0)}),
 )
 """(name, config overrides, Renderer options) of the issue-24 rows: each realism option on its own and together."""
@@ -134,9 +135,10 @@ def feature_rows(quick: bool, dev) -> list[dict]:
     """Images/s at the dataset's 128 x 96 with each issue-24 option on and off (posed worms with magnets, the
     config's looks and lights; 16 worlds x 8 cameras, quick 8 x 8; one thread)."""
     from warpworm.data.config import load_config
-    from warpworm.data.sampling import sample_appearance
+    from warpworm.data.sampling import appearance_draws, sample_appearance
     from warpworm.render import Renderer, build_scene, sample_cameras
     from warpworm.render.demo import default_pattern, posed_worm_states
+    from warpworm.render.placement import distractor_mesh
 
     W, C, repeats = (8, 8, 3) if quick else (16, 8, 5)
     pattern = default_pattern()
@@ -145,10 +147,12 @@ def feature_rows(quick: bool, dev) -> list[dict]:
     cams = sample_cameras(np.arange(N), states["positions"], width=128, height=96, world_index=np.arange(N) % W)
     rows, base = [], None
     for name, overrides, opts in FEATURES:
-        app = sample_appearance(load_config("default", overrides), np.arange(W))
+        cfg = load_config("default", overrides)
+        app = sample_appearance(cfg, np.arange(W))
         scene = build_scene(states["positions"], pattern.triangles, pattern.triangle_segment,
                             magnet_pos=states["magnet_pos"], magnet_rot=states["magnet_rot"],
-                            worm_texcoords=pattern.vertices, appearance=app)
+                            worm_texcoords=pattern.vertices, appearance=app,
+                            extra_mesh=distractor_mesh(appearance_draws(cfg, np.arange(W)), W))
         opts = dict(opts)
         view = cams
         if opts.pop("gain", False):

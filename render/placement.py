@@ -47,6 +47,18 @@ def placement_draws(render_cfg, keys: np.ndarray) -> dict[str, np.ndarray]:
         out["plate.yaw"] = 2 * np.pi * rnd.uniform01(keys, "plate", 0)
         out["plate.offset_u"] = r * np.cos(ang)
         out["plate.offset_v"] = r * np.sin(ang)
+    lo, hi = getattr(render_cfg, "distractors", (0, 0))
+    if hi > 0:
+        count = np.minimum(lo + np.floor(rnd.uniform01(keys, "distractors", 0) * (hi - lo + 1)), hi)
+        out["distractors.count"] = count.astype(np.float64)
+        for i in range(hi):
+            for k, name in enumerate(DISTRACTOR_DRAWS):
+                u = rnd.uniform01(keys, f"distractors.{i}", k)
+                out[f"distractors.{i}.{name}"] = np.floor(u * len(KINDS)) if name == "kind" else u
+            g = {k: out[f"distractors.{i}.{k}"] for k in ("kind", "size", "aspect")}
+            xy = _off_the_worm(_dims(g["kind"].astype(int), g["size"], g["aspect"])[1],
+                               np.stack([rnd.uniform01(keys, f"distractors.{i}.place", k) for k in range(16)], 1))
+            out[f"distractors.{i}.x"], out[f"distractors.{i}.y"] = xy[:, 0], xy[:, 1]
     if render_cfg.lights == "random":
         lo, hi = render_cfg.light_count
         count = np.minimum(lo + np.floor(rnd.uniform01(keys, "lights", 0) * (hi - lo + 1)), hi)
@@ -58,6 +70,127 @@ def placement_draws(render_cfg, keys: np.ndarray) -> dict[str, np.ndarray]:
             for k, name in enumerate(LIGHT_DRAWS):
                 out[f"lights.{i}.{name}"] = _between(rnd.uniform01(keys, f"lights.{i}", k), ranges[name])
     return out
+
+
+KINDS = ("paper", "cube", "cylinder", "ruler")
+"""Distractor objects: a paper scrap (15-40 x 10-30 x 0.2 mm), a cube (8-20 mm), a cylinder (radius 4-12 mm, height
+10-45 mm: a cap, a pen holder), a ruler (150 x 20 x 1.5 mm)."""
+DISTRACTOR_DRAWS = ("kind", "size", "aspect", "yaw", "hue", "saturation", "value")
+"""Drawn values of each distractor ``i`` (``params/distractors.<i>.<name>``): kind (index into :data:`KINDS`), the
+rest uniforms in [0, 1) mapped by :func:`distractor_mesh`; also stored: ``x``, ``y`` [m], its centre on the floor
+(:func:`_off_the_worm`)."""
+WORM_REGION = (-0.03, 0.11, 0.015)
+"""(x from, x to, radius) [m]: the capsule on the floor where a trajectory's worm lies (it starts with its tail at
+the origin heading +x, 8 cm long and 2 cm wide, and crawls a few cm either way); no distractor reaches into it."""
+PLACE_BOX = (0.04, 0.13, 0.06)
+"""(x of the centre, half-length, half-width) [m] of the floor box distractor centres are drawn in (symmetric under
+the worm's half turn about its middle, so no object placement tells head from tail); the first half of the
+candidates come from a box :data:`NEAR_SCALE` times as large, so that objects stand close to the worm (and in front
+of it from some views) more often."""
+NEAR_SCALE = (0.7, 0.45)
+"""Scale of :data:`PLACE_BOX`'s half-length and half-width for the first half of the candidates."""
+
+
+def _dims(kind: np.ndarray, size: np.ndarray, aspect: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Extents (n, 3) [m] of distractors (box sides, or a cylinder's (radius, radius, height)) and their footprint
+    radius (n,) [m] (circumradius on the floor)."""
+    n = len(kind)
+    dims = np.select([(kind == 0)[:, None], (kind == 1)[:, None], (kind == 2)[:, None]], [
+        np.stack([0.015 + 0.025 * size, 0.010 + 0.020 * aspect, np.full(n, 0.0002)], 1),
+        np.stack([0.008 + 0.012 * size] * 3, 1),
+        np.stack([0.004 + 0.008 * size, 0.004 + 0.008 * size, 0.010 + 0.035 * aspect], 1)],
+        np.tile([0.150, 0.020, 0.0015], (n, 1)))
+    return dims, np.where(kind == 2, dims[:, 0], 0.5 * np.hypot(dims[:, 0], dims[:, 1]))
+
+
+def _off_the_worm(foot: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Floor centres (n, 2) [m]: the first of the candidates (uniforms u (n, 2k)) in :data:`PLACE_BOX` whose
+    footprint (radius ``foot``) stays out of :data:`WORM_REGION`'s capsule; if none, the first pushed out along its
+    normal to the capsule until it does."""
+    cx, hx, hy = PLACE_BOX
+    x0, x1, r = WORM_REGION
+    k = u.shape[1] // 2
+    sx = np.where(np.arange(k) < k // 2, NEAR_SCALE[0], 1.0) * hx
+    sy = np.where(np.arange(k) < k // 2, NEAR_SCALE[1], 1.0) * hy
+    cand = np.stack([cx + sx * (2 * u[:, 0::2] - 1), sy * (2 * u[:, 1::2] - 1)], axis=-1)  # (n, k, 2)
+    near = np.stack([np.clip(cand[..., 0], x0, x1), np.zeros(cand.shape[:2])], axis=-1)
+    dist = np.linalg.norm(cand - near, axis=-1)
+    ok = dist > r + foot[:, None]
+    pick = np.argmax(ok, axis=1)
+    rows = np.arange(len(foot))
+    out, d, q = cand[rows, pick], dist[rows, pick], near[rows, pick]
+    bad = ~ok[rows, pick]
+    away = np.where(d[:, None] > 1e-9, (out - q) / np.maximum(d, 1e-9)[:, None], [0.0, 1.0])
+    out[bad] = q[bad] + away[bad] * (r + foot[bad] + 1e-4)[:, None]
+    return out
+
+
+def distractor_mesh(draws: dict, num_worlds: int, floor_incline=0.0, segments: int = 12):
+    """The distractor objects of :func:`placement_draws` as an extra mesh for
+    :func:`warpworm.render.scene.build_scene` (``extra_mesh``), or None when the draws hold none.
+
+    Every slot carries a box and a cylinder (one topology for all worlds); the kind drawn keeps its shape and the
+    other (and every slot beyond the count) collapses to a point, which the rasterizer skips. Object ``i`` is
+    labelled ``SEG_EPM + 1 + i`` (its own albedo row, :func:`place`; the floor's id in the segmentation). It lies on
+    the floor plane (incline about y) centred at its drawn floor point (x, y) (outside the worm's capsule,
+    :func:`_off_the_worm`), turned by ``2π yaw`` about the floor normal.
+    Returns (vertices (W, Vd, 3), triangles (Td, 3), labels (Td,), texcoords (W, Vd, 3)) [m]."""
+    from warpworm.ids import SEG_EPM
+    from warpworm.render.scene import box_mesh, disk_mesh, floor_frame
+
+    if "distractors.count" not in draws:
+        return None
+    n = max(int(k.split(".")[1]) + 1 for k in draws if k.startswith("distractors.") and k != "distractors.count")
+    W = num_worlds
+    g = lambda i, name: np.broadcast_to(np.asarray(draws[f"distractors.{i}.{name}"], np.float64), (W,))  # noqa
+    count = np.broadcast_to(np.asarray(draws["distractors.count"]), (W,))
+    normal, axis = floor_frame(floor_incline, W)
+    side = np.cross(normal, axis)
+    bv, bt = box_mesh()
+    cv, ct = disk_mesh(segments)
+    verts, tris, labels, texs, off = [], [], [], [], 0
+    for i in range(n):
+        kind = g(i, "kind").astype(int)
+        dims, _ = _dims(kind, g(i, "size"), g(i, "aspect"))  # (W, 3): box extents, or cylinder (r, r, height)
+        cu, cvv = g(i, "x"), g(i, "y")
+        yaw = 2 * np.pi * g(i, "yaw")
+        ex = np.cos(yaw)[:, None] * axis + np.sin(yaw)[:, None] * side  # object x on the floor
+        ey = np.cross(normal, ex)
+        centre = cu[:, None] * axis + cvv[:, None] * side + (0.5 * dims[:, 2:3] + 1e-5) * normal
+        on = i < count
+        for shape_v, shape_t, is_shape in ((bv, bt, kind != 2), (cv, ct, kind == 2)):
+            local = shape_v[None] * dims[:, None]  # unit cube / unit cylinder -> extents (radius, radius, height)
+            world = (centre[:, None] + local[..., :1] * ex[:, None] + local[..., 1:2] * ey[:, None]
+                     + local[..., 2:3] * normal[:, None])
+            keep = (on & is_shape)[:, None, None]
+            verts.append(np.where(keep, world, centre[:, None]))
+            texs.append(np.where(keep, local, 0.0))
+            tris.append(shape_t + off)
+            labels.append(np.full(len(shape_t), SEG_EPM + 1 + i, np.int32))
+            off += len(shape_v)
+    return (np.concatenate(verts, 1), np.concatenate(tris), np.concatenate(labels), np.concatenate(texs, 1))
+
+
+def _distractor_looks(a: Appearance, draws: dict) -> None:
+    """Albedo and specular rows of the distractors (label SEG_EPM + 1 + i): paper and rulers light and matte, cubes
+    and cylinders any hue, a little gloss."""
+    from warpworm.render.scene import hsv_to_rgb
+
+    n = max(int(k.split(".")[1]) + 1 for k in draws if k.startswith("distractors.") and k != "distractors.count")
+    B = a.num_worlds
+    alb = np.broadcast_to(a.albedo, (B,) + a.albedo.shape[1:])
+    spec = np.broadcast_to(a.specular, (B,) + a.specular.shape[1:])
+    rows_a, rows_s = [], []
+    for i in range(n):
+        g = {k: np.broadcast_to(np.asarray(draws[f"distractors.{i}.{k}"], np.float64), (B,))
+             for k in ("kind", "hue", "saturation", "value")}
+        flat = (g["kind"] == 0) | (g["kind"] == 3)
+        sat = np.where(flat, 0.15 * g["saturation"], 0.2 + 0.6 * g["saturation"])
+        val = np.where(flat, 0.7 + 0.25 * g["value"], 0.3 + 0.6 * g["value"])
+        rows_a.append(hsv_to_rgb(g["hue"], sat, val) ** 2)  # display colour -> linear albedo
+        rows_s.append(np.stack([np.where(flat, 0.0, 0.3), np.full(B, 30.0)], 1))
+    a.albedo = np.concatenate([alb, np.stack(rows_a, 1)], axis=1)
+    a.specular = np.concatenate([spec, np.stack(rows_s, 1)], axis=1)
 
 
 def _yaw(v: np.ndarray, yaw: np.ndarray) -> np.ndarray:
@@ -72,6 +205,8 @@ def place(a: Appearance, draws: dict) -> Appearance:
     """``a`` (B worlds) with the drawn point lights and plate pose of :func:`placement_draws` applied (in place and
     returned); draws of an option that is off are absent, and ``a`` keeps what it had for it."""
     B = a.num_worlds
+    if "distractors.count" in draws:
+        _distractor_looks(a, draws)
     if "lights.count" in draws:
         n = max(1, max((int(k.split(".")[1]) + 1 for k in draws if k.startswith("lights.") and k != "lights.count"),
                        default=0))
@@ -101,4 +236,5 @@ def place(a: Appearance, draws: dict) -> Appearance:
     return a
 
 
-__all__ = ["COOL", "LIGHT_DRAWS", "WARM", "placement_draws", "place", "DEFAULT_LAMP_POS"]
+__all__ = ["COOL", "DISTRACTOR_DRAWS", "KINDS", "LIGHT_DRAWS", "WARM", "WORM_REGION", "distractor_mesh",
+           "placement_draws", "place"]

@@ -690,6 +690,8 @@ def resolve_shade(
         color = wp.cw_mul(color, gain)
         rgb[img, row + x] = wp.vec3ub(to_srgb8(color[0]), to_srgb8(color[1]), to_srgb8(color[2]))
         depth[img, row + x] = best_z
+        if label > SEG_EPM:
+            label = SEG_FLOOR  # a distractor object (its own albedo row): static scene, the floor's id
         seg[img, row + x] = wp.uint8(label)
 
 

@@ -338,6 +338,7 @@ def build_scene(
     appearance: Appearance | None = None,
     disk_segments: int = 16,
     show_epm: bool = True,
+    extra_mesh: tuple | None = None,
 ) -> SceneBatch:
     """Assemble the W worlds: worm sheet (ids 2..6 by segment), three IPM disks (7, 8, 9), EPM bar (10).
 
@@ -352,6 +353,9 @@ def build_scene(
         floor_incline: [rad], () or (W,). floor_half: half side of the floor square [m].
         appearance: per-world look (default :func:`default_appearance`).
         disk_segments: facets around each disk. show_epm: False leaves the EPM out of the picture.
+        extra_mesh: more objects, (vertices (W, Ve, 3) [m], triangles (Te, 3) indexing them, labels (Te,),
+            texcoords (W, Ve, 3)) (e.g. :func:`warpworm.render.placement.distractor_mesh`); a label above
+            ``SEG_EPM`` shades with its own albedo row and is written to the segmentation as the floor's id.
     """
     P = np.asarray(worm_positions, dtype=np.float64)
     W, V, _ = P.shape
@@ -387,6 +391,13 @@ def build_scene(
             tris.append(bt + offset)
             labels.append(np.full(len(bt), SEG_EPM, dtype=np.int32))
             offset += bv.shape[0]
+    if extra_mesh is not None:
+        ev, et, el, etc = extra_mesh
+        verts.append(np.broadcast_to(np.asarray(ev, dtype=np.float64), (W,) + np.shape(ev)[1:]))
+        texs.append(np.broadcast_to(np.asarray(etc, dtype=np.float64), (W,) + np.shape(etc)[1:]))
+        tris.append(np.asarray(et, dtype=np.int32) + offset)
+        labels.append(np.asarray(el, dtype=np.int32))
+        offset += verts[-1].shape[1]
     scene = SceneBatch.from_mesh(np.concatenate(verts, axis=1), np.concatenate(tris), np.concatenate(labels),
                                  texcoords=np.concatenate(texs, axis=1), floor_incline=floor_incline,
                                  floor_half=floor_half, appearance=appearance)

@@ -14,7 +14,7 @@ from warpworm.data.sampling import appearance_draws, dataset_cameras, sample_app
 from warpworm.render import Renderer, build_scene, default_appearance, make_cameras
 from warpworm.render.camera import intrinsics, look_at
 from warpworm.render.demo import _bend, default_pattern
-from warpworm.render.placement import place
+from warpworm.render.placement import distractor_mesh, place
 from warpworm.render.raycast import RayCaster
 
 quiet_warp()
@@ -50,7 +50,8 @@ def head_tail_differences(overrides, n: int = 256, shadows: bool = False) -> np.
     x, mp, mr, tail, head = dataset_like_worms(n)
     ids = np.arange(n)
     scene = build_scene(x, PATTERN.triangles, PATTERN.triangle_segment, magnet_pos=mp, magnet_rot=mr,
-                        worm_texcoords=PATTERN.vertices, appearance=sample_appearance(cfg, ids))
+                        worm_texcoords=PATTERN.vertices, appearance=sample_appearance(cfg, ids),
+                        extra_mesh=distractor_mesh(appearance_draws(cfg, ids), n))
     cams, _ = dataset_cameras(cfg, ids, x)
     cams.world = ids.astype(np.int32)
     out = Renderer(cfg.render.width, cfg.render.height, shadows=shadows).render(scene, cams)
@@ -84,12 +85,12 @@ def test_fixed_lamp_tells_head_from_tail():
     assert z[0] < -10 and abs(z[1]) > 4, z
 
 
-@pytest.mark.parametrize("shadows", [False, True])
-def test_posed_plate_and_random_lights_hide_head_and_tail(shadows):
-    d = head_tail_differences(ON, shadows=shadows)
+@pytest.mark.parametrize("shadows,more", [(False, []), (True, []), (False, ["render.distractors=[2, 5]"])])
+def test_posed_plate_and_random_lights_hide_head_and_tail(shadows, more):
+    d = head_tail_differences(ON + more, shadows=shadows)
     assert len(d) > 200
     z = z_scores(d)
-    assert np.all(np.abs(z) < 3), z  # measured: |z| < 2 for both statistics, with and without shadows
+    assert np.all(np.abs(z) < 3), z  # measured: |z| < 2 for both statistics, with and without shadows, distractors
 
 
 def test_draws_keyed_by_trajectory_and_recorded():

@@ -389,6 +389,11 @@ class RenderConfig:
     distortion_k3: Annotated[list[Num], Field(strict=True, min_length=2, max_length=2),
                              AfterValidator(_check_signed_range)] = field(default_factory=lambda: [0.0, 0.0])
     """[lo, hi]: radial k3."""
+    distractors: Annotated[list[Int], Field(strict=True, min_length=2, max_length=2),
+                           AfterValidator(_check_range)] = field(default_factory=lambda: [0, 0])
+    """[lo, hi]: distractor objects on the plate per trajectory (paper scraps, cubes, cylinders, rulers), around the
+    worm's region and sometimes in front of it: occlusion shows in keypoints/visibility and labels/visib_fract; they
+    are segmented as the floor (id 1). [0, 0]: none."""
     exposure: Annotated[list[Num], Field(strict=True, min_length=2, max_length=2),
                         AfterValidator(_check_signed_range)] = field(default_factory=lambda: [0.0, 0.0])
     """[lo, hi] [stops]: per-sample exposure, uniform: the image's linear light times 2^EV before the display
@@ -413,7 +418,7 @@ RENDER_OFF_GROUPS = {"plate_pose": ("plate_offset",),
                                 "light_warmth"),
                      "shadows": ("shadow_map",), "supersample": (),
                      "distortion": ("distortion_k1", "distortion_k2", "distortion_p", "distortion_k3"),
-                     "exposure": (), "white_balance": (),
+                     "exposure": (), "white_balance": (), "distractors": (),
                      "engine": ("pathtraced_fraction", "pathtraced_spp")}
 """render switch -> the keys it enables: a group whose switch and keys are all at their defaults (OFF) is left out
 of ``to_dict`` (so the files' config_yaml stays that of before the option)."""

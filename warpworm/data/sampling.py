@@ -123,7 +123,7 @@ def appearance_draws(cfg, traj: np.ndarray) -> dict[str, np.ndarray]:
     for g in APPEARANCE_GROUPS:
         app.update(draw_group(cfg, g, traj).values)
     app["texture.seed"] = rnd.derived_seed(rnd.sample_keys(cfg.seed, traj), "texture") % (2**31 - 1)
-    if cfg.render.plate_pose or cfg.render.lights != "fixed":  # issue 24: the plate's pose, the lights (per trajectory)
+    if cfg.render.plate_pose or cfg.render.lights != "fixed" or cfg.render.distractors[1] > 0:  # issue 24 (per traj.)
         from warpworm.render.placement import placement_draws
 
         app.update(placement_draws(cfg.render, rnd.sample_keys(cfg.seed, traj)))
@@ -165,7 +165,7 @@ def appearance_from_draws(app: dict, seeds: np.ndarray):
     a.ambient = app["light.ambient"][:, None] * np.ones(3)
     bg = app["color.background_value"][:, None] * np.ones(3)
     a.bg_top, a.bg_bottom = bg, 0.6 * bg
-    if any(k.startswith(("plate.", "lights.")) for k in app):  # drawn by appearance_draws when the config asks
+    if any(k.startswith(("plate.", "lights.", "distractors.")) for k in app):  # drawn when the config asks
         from warpworm.render.placement import place
 
         a = place(a, app)

@@ -179,6 +179,7 @@ class WarpStages:
 
     def render_batch(self, frame, params, cameras, appearance, seeds, cfg):
         from warpworm import render
+        from warpworm.render.placement import distractor_mesh
 
         B = len(seeds)
         pattern = self._pattern(cfg.sim.n_units)
@@ -186,7 +187,8 @@ class WarpStages:
             frame["positions"], pattern.triangles, pattern.triangle_segment, magnet_pos=frame["magnet_pos"],
             magnet_rot=frame["magnet_rot"], worm_texcoords=pattern.vertices, ipm_diameter=params.ipm_diameter,
             ipm_thickness=params.ipm_thickness, epm_size=params.epm_size, floor_incline=params.floor_incline,
-            appearance=appearance_from_draws(appearance, seeds))
+            appearance=appearance_from_draws(appearance, seeds),
+            extra_mesh=distractor_mesh(appearance, B, params.floor_incline))  # render.distractors (None: off)
         from warpworm.render.labels import schema_labels
         from warpworm.render.sensor import apply_sensor
 
