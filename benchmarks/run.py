@@ -23,6 +23,7 @@ import json
 import os
 import platform
 import sys
+import textwrap
 import time
 from pathlib import Path
 
@@ -148,7 +149,7 @@ def main(argv=None) -> int:
             path = _write(out_dir, "summary", _meta("summary", args.quick, device, elapsed), rows, SUMMARY_NOTES)
         print(f"\n== summary on {device} ({'quick' if args.quick else 'full'}, {elapsed:.1f} s) ==")
         print(table(rows, SUMMARY_COLUMNS))
-        print(SUMMARY_NOTES)
+        print(textwrap.fill(SUMMARY_NOTES, 118))  # one line was 291 characters (issue 25)
         print(f"wrote {path}")
         return 0
     for name in names:
