@@ -55,27 +55,32 @@ def main() -> None:
     ap.add_argument("--fit", default=",".join(PLANT))
     ap.add_argument("--budget", type=int, default=64)
     ap.add_argument("--refine", type=int, default=5)
+    ap.add_argument("--popsize", type=int, default=None)
     ap.add_argument("--cycles", type=float, default=1.0)
     ap.add_argument("--true-model", default="analytic", choices=["analytic", "dipoles"])
     ap.add_argument("--fit-model", default="analytic", choices=["analytic", "dipoles"])
+    ap.add_argument("--known", default="", help="planted parameters given to the fit as known (calibration steps "
+                    "1-2: e.g. epm_moment from a force-gap table), not fitted")
     ap.add_argument("--json", default=None, help="write the results here")
     args = ap.parse_args()
     from warpworm import quiet_warp
     from warpworm.analysis import fit_track as FT
 
     quiet_warp()
-    names = args.fit.split(",")
+    known = [n for n in args.known.split(",") if n]
+    names = [n for n in args.fit.split(",") if n not in known]
     rows = []
     for gait in args.gaits.split(","):
         t0 = time.perf_counter()
-        tr, meta, base, truth = planted_track(gait, names, PLANT, args.true_model, args.cycles)
+        tr, meta, base, truth_all = planted_track(gait, names + known, PLANT, args.true_model, args.cycles)
+        truth = truth_all[:len(names)]
         from dataclasses import replace
 
-        res = FT.fit(tr, replace(base, magnet_model=args.fit_model), names, budget=args.budget, meta=meta,
-                     refine=args.refine)
+        base = replace(base, magnet_model=args.fit_model, **dict(zip(known, truth_all[len(names):])))
+        res = FT.fit(tr, base, names, budget=args.budget, meta=meta, refine=args.refine, popsize=args.popsize)
         err = res["value"] / truth - 1
         print(f"\n{gait} ({args.true_model} -> {args.fit_model}, {args.cycles:g} cycle, {len(tr['time'])} frames, "
-              f"{res['worlds']} worlds, {time.perf_counter() - t0:.0f} s)")
+              f"{res['worlds']} worlds, {time.perf_counter() - t0:.0f} s; known: {known or 'none'})")
         print("\n".join(FT.report_lines(res)))
         for n, tv, e in zip(names, truth, err):
             print(f"  {n:24s} planted {tv:.5g}  error {100 * e:+.2f} %")

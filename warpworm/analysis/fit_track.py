@@ -222,8 +222,10 @@ def _uncertainty(J, xb, cb, chi2, n_res, lim, base, names, theta0, track, ref, m
     extent = float(inside.max()) if inside.size else 0.0
     if extent >= max(abs(scan)):
         extent = np.inf  # flat over the whole scan
-    share = np.where(np.abs(v) > 0.05, np.abs(v), 0.0)  # parameters taking part in the combination
-    sigma = np.maximum(sigma, np.where(share > 0, share * extent, 0.0))
+    part = np.abs(v) > 0.05  # parameters taking part in the combination
+    lift = np.zeros_like(sigma)
+    lift[part] = np.abs(v[part]) * extent
+    sigma = np.maximum(sigma, lift)
     X_all = np.concatenate([x for x, _ in kw["seen"]])
     c_all = np.concatenate([c for _, c in kw["seen"]])
     far = np.abs(X_all[(c_all - cb) * n_res / max(1.0, chi2) <= 1.0] - xb[None]).max(axis=0)
@@ -235,12 +237,10 @@ def fit(track: dict, base, names, *, budget: int = 96, popsize: int | None = Non
         meta: dict | None = None, step: float = 0.05, refine: int = 4, log=None, **kw) -> dict:
     """CMA-ES over log(names / base) within ±log(spread), each generation one batch of ``popsize`` worlds, until
     ``budget`` worlds; then ``refine`` Levenberg-Marquardt steps from the best point, each one batch of 2p + 1 worlds
-    (the step and its central differences of ``step`` in log), whose last accepted Jacobian gives the curvature; then one batch scanning the cost along the least pinned
-    combination (:data:`SCAN_STEPS`): a parameter's 1-sigma is the larger of the curvature's and its share of the
-    scan's chi-square-rise-of-1 extent, and at least
-    the farthest of all evaluated points within that rise (a curved valley). Returns a dict: names, base, value (p,), cost, rms_ratio, rms_disp_m, sigma_rel (p,),
-    pinned (p,) bool, weakest (p,) (the least pinned combination of log-parameters) and weakest_sigma, obs (the
-    best world's simulated track), history (list of (worlds, best cost)), worlds, wall_s."""
+    (the step and its central differences of ``step`` in log); then the 1-sigma of :func:`_uncertainty` (one more
+    batch). Returns a dict: names, base, value (p,), cost, rms_ratio, rms_disp_m, chi2_red, sigma_rel (p,), pinned
+    (p,) bool, weakest (p,) (the least pinned combination of log-parameters) and weakest_sigma, obs (the best world's
+    simulated track), history (list of (worlds, best cost)), worlds, wall_s, scan."""
     import cma
 
     t0 = time.perf_counter()
@@ -312,8 +312,8 @@ def report_lines(result: dict) -> list[str]:
     w = result["weakest"]
     combo = " ".join(f"{c:+.2f}*log({n})" for c, n in zip(w, result["names"]) if abs(c) > 0.05)
     ws = result["weakest_sigma"]
-    out.append(f"least pinned combination: {combo}  (1-sigma " + (f"{100 * ws:.2f}%)" if np.isfinite(ws) else
-                                                                   f"beyond the scan's ±{100 * max(SCAN_STEPS):.0f}%)"))
+    tail = f"{100 * ws:.2f}%" if np.isfinite(ws) else f"beyond the scan's ±{100 * max(SCAN_STEPS):.0f}%"
+    out.append(f"least pinned combination: {combo}  (1-sigma {tail})")
     return out
 
 

@@ -8,16 +8,17 @@ above the floor along its normal: the height of the band centres seen from above
 (:func:`default_band_height`). A worm part that lifts off the floor is seen displaced (parallax): the same camera
 model must then be used for the simulation it is compared with (``warpworm fit-track`` does so).
 
-Thresholds (OpenCV HSV: H in [0, 180), S and V in [0, 255]) follow from the band colours (:meth:`Thresholds.from_colors`,
-the colours' own hue H_b, saturation S_b and value V_b): a pixel goes to the coloured band of nearest hue if that
-hue is within ``hue_tol`` (25, i.e. 50 degrees), its saturation >= ``sat_frac`` S_b and its value >= ``val_frac``
-V_b; to the white (low-saturation) band if its saturation is below ``sat_frac`` times that of the colour of nearest hue
-and its value >= ``val_frac`` V_white (both fractions 0.5). Splitting at the midpoints (nearest hue, half the
-saturation, half the value) divides a pixel that mixes a band with its neighbour, the floor or a magnet (blur,
-JPEG's halved chroma) evenly, so no centroid is pulled. Of each mask only the largest 8-connected blob and the blobs
-near it (centroid within ``blob_reach`` times its size) are kept: a band is one patch of paint, a grey magnet or
-noise elsewhere is not. A band with fewer than ``min_pixels`` pixels is *unseen* in that frame: its centre is NaN,
-and so are the ratios and the displacement that need it. A dark, unsaturated floor keeps the white band clean.
+Thresholds (OpenCV HSV: H in [0, 180), S and V in [0, 255]) follow from the band colours
+(:meth:`Thresholds.from_colors`, the colours' own hue H_b, saturation S_b and value V_b): a pixel goes to the
+coloured band of nearest hue if that hue is within ``hue_tol`` (25, i.e. 50 degrees), its saturation >= ``sat_frac``
+S_b and its value >= ``val_frac`` V_b; to the white (low-saturation) band if its saturation is below ``sat_frac``
+times that of the colour of nearest hue and its value >= ``val_frac`` V_white (both fractions 0.5). Splitting at the
+midpoints (nearest hue, half the saturation, half the value) divides a pixel that mixes a band with its neighbour,
+the floor or a magnet (blur, JPEG's halved chroma) evenly, so no centroid is pulled. Of each mask only the largest
+8-connected blob and the blobs near it (centroid within ``blob_reach`` times its size) are kept: a band is one patch
+of paint, a grey magnet or noise elsewhere is not. A band with fewer than ``min_pixels`` pixels is *unseen* in that
+frame: its centre is NaN, and so are the ratios and the displacement that need it. A dark, unsaturated floor keeps
+the white band clean.
 """
 
 from __future__ import annotations
@@ -315,7 +316,8 @@ def render_band_video(frames: dict, model, cam: CameraModel, width: int, height:
     app = band_appearance(app, colors).take(np.zeros(F, np.int64))
     p = model.params
     one = lambda v: float(np.ravel(v)[world % np.size(v)])  # noqa: E731
-    scene = scene_from_snapshot(snap, model.pattern, None, appearance=app, rest_vertices=model.rest_positions_host[world],
+    scene = scene_from_snapshot(snap, model.pattern, None, appearance=app,
+                                rest_vertices=model.rest_positions_host[world],
                                 ipm_diameter=one(p.ipm_diameter), ipm_thickness=one(p.ipm_thickness),
                                 epm_size=np.asarray(p.epm_size, np.float64).reshape(-1, 3)[0],
                                 floor_incline=one(p.floor_incline))
@@ -354,7 +356,8 @@ def write_meta(path, cam: CameraModel, width: int, height: int, height_m: float,
 
 
 def read_meta(path) -> dict:
-    """:func:`write_meta`'s file back: ``camera`` (CameraModel), ``width``, ``height``, ``height_m``, ``fps``, ``ref``."""
+    """:func:`write_meta`'s file back: ``camera`` (CameraModel), ``width``, ``height``, ``height_m``, ``fps``,
+    ``ref``."""
     d = json.loads(Path(path).read_text())
     cam = CameraModel(K=np.asarray(d["K"], np.float64), R=np.asarray(d["R"], np.float64),
                       t=np.asarray(d["t"], np.float64), dist=np.asarray(d.get("dist", np.zeros(5)), np.float64),

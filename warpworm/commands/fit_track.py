@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import json
 
-HELP = "fit worm parameters (k_alpha, friction, EPM moment, ...) to a band track from 'warpworm track' (CMA-ES, batched)"
+HELP = "fit worm parameters (k_alpha, friction, EPM moment, ...) to a band track from 'warpworm track' (batched CMA-ES)"
 
 
 def add_arguments(parser) -> None:
@@ -125,7 +125,8 @@ def main(args) -> int:
         plot_note = " (no fit.png: install the plots extra, pip install 'warpworm[plots]')"
     summary = {"names": names, "value": res["value"].tolist(), "preset": res["base"].tolist(),
                "sigma_rel": [_num(s) for s in res["sigma_rel"]], "pinned": res["pinned"].tolist(),
-               "cost": _num(res["cost"]), "rms_ratio": _num(res["rms_ratio"]), "rms_displacement_m": _num(res["rms_disp_m"]),
+               "cost": _num(res["cost"]), "rms_ratio": _num(res["rms_ratio"]),
+               "rms_displacement_m": _num(res["rms_disp_m"]),
                "weakest": res["weakest"].tolist(), "weakest_sigma": _num(res["weakest_sigma"]), "worlds": res["worlds"],
                "wall_s": res["wall_s"], "files": [str(out / f) for f in ("fit.yaml", "fit.png", "fit.json")]}
     (out / "fit.json").write_text(json.dumps(summary, indent=1, allow_nan=False))

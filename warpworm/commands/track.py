@@ -91,7 +91,8 @@ def main(args) -> int:
     seen = tr["seen"]
     summary = {"frames": int(len(frames)), "fps": fps, "height_m": height, "frames_all_bands": int(seen.all(1).sum()),
                "unseen_per_band": (len(seen) - seen.sum(0)).astype(int).tolist(),
-               "ratio_min": np.nanmin(tr["ratios"], axis=0).tolist(), "ratio_max": np.nanmax(tr["ratios"], axis=0).tolist(),
+               "ratio_min": np.nanmin(tr["ratios"], axis=0).tolist(),
+               "ratio_max": np.nanmax(tr["ratios"], axis=0).tolist(),
                "displacement_end_m": float(tr["displacement"][-1]) if np.isfinite(tr["displacement"][-1]) else None,
                "out": str(args.out), "meta": str(T.meta_path(args.out))}
     if args.json:
