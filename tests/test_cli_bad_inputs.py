@@ -28,8 +28,8 @@ BAD = [
     ("generate default --out o sim.device=cuda:99", "sim.device"),
     ("generate default --out o --num 0", "num_samples"),
     ("generate default --out o --workers 0", "--workers"),
-    ("generate default --out junk", "no manifest.json"),
-    ("generate default --out junk --resume", "no manifest.json"),
+    ("generate default --out junk", "no warpworm dataset"),
+    ("generate default --out junk --resume", "no warpworm dataset"),
     ("generate default --out notes.txt", "it is a file"),
     ("generate default", "--out"),
     # simulate: the same rules as generate's for the same values

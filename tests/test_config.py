@@ -164,12 +164,16 @@ def test_output_folder_checks(tmp_path):
     (tmp_path / "full" / "x").write_text("1")
     # a folder of someone else's files is refused, with or without --resume (issue 25: --resume wrote next to them)
     for resume in (False, True):
-        with pytest.raises(ConfigError, match="holds other files, e.g. x, and no manifest.json"):
+        with pytest.raises(ConfigError, match="holds other files, e.g. x, and no warpworm dataset"):
             check_output_dir(tmp_path / "full", resume=resume)
-    (tmp_path / "full" / "manifest.json").write_text("{}")
+    (tmp_path / "full" / "manifest.json").write_text('{"format": "warpworm-dataset"}')
     with pytest.raises(ConfigError, match="it is not empty: it holds a warpworm dataset; use --resume"):
         check_output_dir(tmp_path / "full", resume=False)
     check_output_dir(tmp_path / "full", resume=True)
+    (tmp_path / "other").mkdir()  # another tool's manifest.json does not make a folder a warpworm dataset
+    (tmp_path / "other" / "manifest.json").write_text('{"name": "something else"}')
+    with pytest.raises(ConfigError, match="no warpworm dataset"):
+        check_output_dir(tmp_path / "other", resume=True)
     (tmp_path / "killed").mkdir()  # a job killed before its manifest: only its hidden lock / temporaries
     (tmp_path / "killed" / ".warpworm.lock").write_text("")
     check_output_dir(tmp_path / "killed", resume=True)

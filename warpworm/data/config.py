@@ -823,6 +823,16 @@ def load_config(source, overrides: list[str] = (), **top_level) -> DatasetConfig
     return config_from_dict(raw)
 
 
+def _is_warpworm_manifest(path: Path) -> bool:
+    """Whether ``path`` is a warpworm dataset's manifest (another tool's manifest.json is not)."""
+    import json
+
+    try:
+        return json.loads(path.read_text()).get("format") == "warpworm-dataset"
+    except (OSError, ValueError, AttributeError, UnicodeDecodeError):
+        return False
+
+
 def check_output_dir(out: str | os.PathLike, resume: bool) -> None:
     """Refuse an unwritable output folder, or a non-empty one without ``resume``; writes nothing that stays.
 
@@ -835,12 +845,13 @@ def check_output_dir(out: str | os.PathLike, resume: bool) -> None:
         raise ConfigError([f"--out: got '{out}'; expected a folder (it is a file)"])
     if out.is_dir():
         names = sorted(p.name for p in out.iterdir())
-        ours = [n for n in names if n == "manifest.json" or re.fullmatch(r"shard-\d+\.h5", n)]
+        ours = [n for n in names if re.fullmatch(r"shard-\d+\.h5", n)
+                or (n == "manifest.json" and _is_warpworm_manifest(out / n))]
         visible = [n for n in names if not n.startswith(".")]  # hidden: a killed job's lock and temporaries
         if visible and not ours:  # not a warpworm dataset: never write next to someone else's files
             what = "an empty or new folder" + (" or a dataset to resume" if resume else "")
             raise ConfigError([f"--out: got '{out}'; expected {what} (it holds other files, e.g. {visible[0]}, and "
-                               "no manifest.json or shard-*.h5 of a warpworm dataset)"])
+                               "no warpworm dataset: no shard-*.h5, no manifest.json of format warpworm-dataset)"])
         if not resume and names:
             raise ConfigError([f"--out: got '{out}'; expected an empty or new folder (it is not empty: it holds a "
                                "warpworm dataset; use --resume to continue its job, or another --out)"])
