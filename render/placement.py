@@ -47,6 +47,12 @@ def placement_draws(render_cfg, keys: np.ndarray) -> dict[str, np.ndarray]:
         out["plate.yaw"] = 2 * np.pi * rnd.uniform01(keys, "plate", 0)
         out["plate.offset_u"] = r * np.cos(ang)
         out["plate.offset_v"] = r * np.sin(ang)
+    materials = list(getattr(render_cfg, "plate_materials", ["matte"]))
+    if materials != ["matte"]:
+        pick = np.minimum(np.floor(rnd.uniform01(keys, "plate.material", 0) * len(materials)), len(materials) - 1)
+        out["plate.material"] = np.asarray(materials, dtype=object)[pick.astype(int)]  # text, as choice draws
+        out["plate.gloss"] = rnd.uniform01(keys, "plate.material", 1)
+        out["plate.clarity"] = rnd.uniform01(keys, "plate.material", 2)
     lo, hi = getattr(render_cfg, "distractors", (0, 0))
     if hi > 0:
         count = np.minimum(lo + np.floor(rnd.uniform01(keys, "distractors", 0) * (hi - lo + 1)), hi)
@@ -171,6 +177,25 @@ def distractor_mesh(draws: dict, num_worlds: int, floor_incline=0.0, segments: i
     return (np.concatenate(verts, 1), np.concatenate(tris), np.concatenate(labels), np.concatenate(texs, 1))
 
 
+MATERIALS = ("matte", "glossy", "acrylic")
+"""Plate materials: matte (as before), glossy (Blinn-Phong strength 0.2-0.6, exponent 30-150 from ``plate.gloss``)
+and clear acrylic (as glossy, and ``floor_transmit`` 0.3-0.6 from ``plate.clarity``: the EPM under it shows)."""
+
+
+def _plate_material(a: Appearance, draws: dict) -> None:
+    """The floor's specular row and transmittance from the drawn ``plate.material``, ``plate.gloss``,
+    ``plate.clarity`` (B,)."""
+    B = a.num_worlds
+    kind = np.asarray(draws["plate.material"]).astype(str)
+    gloss = np.asarray(draws["plate.gloss"], dtype=np.float64)
+    shiny = kind != "matte"
+    a.specular = np.broadcast_to(a.specular, (B,) + a.specular.shape[1:]).copy()
+    a.specular[:, 1] = np.where(shiny[:, None], np.stack([0.2 + 0.4 * gloss, 30.0 + 120.0 * gloss], 1),
+                                a.specular[:, 1])
+    clear = 0.3 + 0.3 * np.asarray(draws["plate.clarity"], dtype=np.float64)
+    a.floor_transmit = np.where(kind == "acrylic", clear, 0.0)
+
+
 def _distractor_looks(a: Appearance, draws: dict) -> None:
     """Albedo and specular rows of the distractors (label SEG_EPM + 1 + i): paper and rulers light and matte, cubes
     and cylinders any hue, a little gloss."""
@@ -205,6 +230,8 @@ def place(a: Appearance, draws: dict) -> Appearance:
     """``a`` (B worlds) with the drawn point lights and plate pose of :func:`placement_draws` applied (in place and
     returned); draws of an option that is off are absent, and ``a`` keeps what it had for it."""
     B = a.num_worlds
+    if "plate.material" in draws:
+        _plate_material(a, draws)
     if "distractors.count" in draws:
         _distractor_looks(a, draws)
     if "lights.count" in draws:
@@ -236,5 +263,5 @@ def place(a: Appearance, draws: dict) -> Appearance:
     return a
 
 
-__all__ = ["COOL", "DISTRACTOR_DRAWS", "KINDS", "LIGHT_DRAWS", "WARM", "WORM_REGION", "distractor_mesh",
+__all__ = ["COOL", "DISTRACTOR_DRAWS", "KINDS", "LIGHT_DRAWS", "MATERIALS", "WARM", "WORM_REGION", "distractor_mesh",
            "placement_draws", "place"]

@@ -514,7 +514,8 @@ class Look:
     (strength, Blinn exponent) per segmentation id, (Wa, 11); the floor square: unit ``floor_normal``, in-plane
     ``floor_axis`` (+u), centre ``floor_origin`` [m], ``floor_half`` [m]; ``floor_tex`` (tile [m], checker contrast,
     grain amplitude, grain frequency [1/m]); ``floor_color2``; ``paper_tex`` (fibre, mottle amplitudes);
-    ``tex_seed`` (offsets the shared ``noise`` texture per world); background gradient ``bg_top``, ``bg_bottom``."""
+    ``tex_seed`` (offsets the shared ``noise`` texture per world); background gradient ``bg_top``, ``bg_bottom``;
+    ``floor_transmit``: the fraction of the light from meshes under the floor that shows through it (a clear plate)."""
 
     albedo: wp.array2d(dtype=wp.vec3)
     specular: wp.array2d(dtype=wp.vec2)
@@ -529,6 +530,7 @@ class Look:
     bg_top: wp.array(dtype=wp.vec3)
     bg_bottom: wp.array(dtype=wp.vec3)
     noise: wp.array2d(dtype=float)
+    floor_transmit: wp.array(dtype=float)
 
 
 @wp.func
@@ -539,8 +541,9 @@ def noise_offset(look: Look, w: int) -> wp.vec2:
 
 
 @wp.func
-def shade_floor(look: Look, L: Lights, w: int, first: int, mat: wp.vec3, p: wp.vec3) -> wp.vec3:
-    """Checker + grain in floor coordinates [m] (``mat``); matte: ambient + sun + every point light at ``p``."""
+def shade_floor(look: Look, L: Lights, w: int, first: int, mat: wp.vec3, p: wp.vec3, to_eye: wp.vec3) -> wp.vec3:
+    """Checker + grain in floor coordinates [m] (``mat``): ambient + sun + every point light at ``p``, and, for a
+    glossy plate (floor specular strength > 0), their highlights seen along ``to_eye``."""
     fn = look.floor_normal[w % look.floor_normal.shape[0]]
     ft = look.floor_tex[w % look.floor_tex.shape[0]]
     off = noise_offset(look, w)
@@ -563,7 +566,34 @@ def shade_floor(look: Look, L: Lights, w: int, first: int, mat: wp.vec3, p: wp.v
         inv_r2 = 1.0 / wp.max(wp.dot(to_lamp, to_lamp), 1.0e-6)
         ndp = wp.max(wp.dot(fn, to_lamp), 0.0) * wp.sqrt(inv_r2)
         irr = irr + L.power[wl, i] * (shadow_factor(L, first, 1 + i, ndp, p, fn) * inv_r2)
-    return wp.cw_mul(albedo, irr)
+    color = wp.cw_mul(albedo, irr)
+    spec = look.specular[w % look.specular.shape[0], SEG_FLOOR]
+    if spec[0] > 0.0:  # a glossy plate (render.plate_materials): Blinn-Phong highlights of every light
+        color = color + floor_highlights(L, w, first, spec, p, fn, to_eye)
+    return color
+
+
+@wp.func
+def floor_highlights(L: Lights, w: int, first: int, spec: wp.vec2, p: wp.vec3, fn: wp.vec3, to_eye: wp.vec3
+                     ) -> wp.vec3:
+    """Blinn-Phong highlights (strength, exponent ``spec``) of the sun and every point light on the floor at ``p``
+    seen along ``to_eye``, shadowed like the diffuse term."""
+    v = wp.normalize(to_eye)
+    sd = L.sun_dir[w % L.sun_dir.shape[0]]
+    out = wp.vec3(0.0)
+    if wp.dot(fn, sd) > 0.0:
+        hs = wp.max(wp.dot(fn, wp.normalize(sd + v)), 0.0)
+        out = L.sun_color[w % L.sun_color.shape[0]] * (spec[0] * spec_power(hs, spec[1]) *
+                                                       shadow_factor(L, first, 0, 1.0, p, fn))
+    wl = w % L.pos.shape[0]
+    for i in range(L.pos.shape[1]):
+        if is_dark(L, wl, i):
+            continue
+        ldir, lpow, ndp = point_light(L, wl, i, p, fn)
+        if ndp > 0.0:
+            hl = wp.max(wp.dot(fn, wp.normalize(ldir + v)), 0.0)
+            out = out + lpow * (spec[0] * spec_power(hl, spec[1]) * shadow_factor(L, first, 1 + i, 1.0, p, fn))
+    return out
 
 
 @wp.func
@@ -595,7 +625,7 @@ def shade_hit(look: Look, L: Lights, w: int, first: int, label: int, z: float, m
     nrm = wp.vec3(0.0)
     if label == SEG_FLOOR:
         nrm = look.floor_normal[w % look.floor_normal.shape[0]]
-        color = shade_floor(look, L, w, first, mat, eye + z * d_world)
+        color = shade_floor(look, L, w, first, mat, eye + z * d_world, -d_world)
     elif label != SEG_BACKGROUND:
         nrm = n_world
         if wp.dot(n_world, -d_world) < 0.0:
@@ -667,6 +697,7 @@ def resolve_shade(
         first = lights.map_first[w]
     row = y * width
     gain = cam_gain[img]
+    transmit = look.floor_transmit[w % look.floor_transmit.shape[0]]
     # along a row the world ray is affine in x: d(x) = d0 + x * dx, and so are its dot products with the floor axes
     d0 = Rt * wp.vec3(-k[2] / k[0], (py - k[3]) / k[1], 1.0)
     dx = Rt * wp.vec3(1.0 / k[0], 0.0, 0.0)
@@ -676,10 +707,14 @@ def resolve_shade(
     for x in range(x_begin, x_end):
         px = float(x)
         d_world = d0 + px * dx  # a point at camera depth z lies at eye + z * d_world
-        best_z, label, n_world, mat = mesh_surface(zkey[img, row + x], triangles, tri_label, vertices, texcoords, w,
-                                                   R, t, k, px, py, eye, d_world)
-        best_z, label, mat = nearer_floor(fr, px, best_z, label, mat)
+        mz, mlabel, n_world, mmat = mesh_surface(zkey[img, row + x], triangles, tri_label, vertices, texcoords, w,
+                                                 R, t, k, px, py, eye, d_world)
+        best_z, label, mat = nearer_floor(fr, px, mz, mlabel, mmat)
         color, nrm = shade_hit(look, lights, w, first, label, best_z, mat, n_world, eye, d_world, bg)
+        if label != mlabel and mlabel != SEG_BACKGROUND and transmit > 0.0:
+            # a clear plate (render.plate_materials: acrylic): the mesh under it (the EPM) shows through
+            under, _n = shade_hit(look, lights, w, first, mlabel, mz, mmat, n_world, eye, d_world, bg)
+            color = wp.lerp(color, under, transmit)
         if label == SEG_BACKGROUND:
             best_z = 0.0
         if write_normals != 0:

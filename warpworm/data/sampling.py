@@ -123,7 +123,8 @@ def appearance_draws(cfg, traj: np.ndarray) -> dict[str, np.ndarray]:
     for g in APPEARANCE_GROUPS:
         app.update(draw_group(cfg, g, traj).values)
     app["texture.seed"] = rnd.derived_seed(rnd.sample_keys(cfg.seed, traj), "texture") % (2**31 - 1)
-    if cfg.render.plate_pose or cfg.render.lights != "fixed" or cfg.render.distractors[1] > 0:  # issue 24 (per traj.)
+    r = cfg.render  # issue 24: the plate's pose and material, the lights, distractors (per trajectory)
+    if r.plate_pose or r.lights != "fixed" or r.distractors[1] > 0 or r.plate_materials != ["matte"]:
         from warpworm.render.placement import placement_draws
 
         app.update(placement_draws(cfg.render, rnd.sample_keys(cfg.seed, traj)))
