@@ -197,7 +197,8 @@ def finish_substep(world: int, lane: int, bd: int, c: WorldCoefficients, m: BarH
 
 MAX_REGISTERS = 128
 """Registers per thread on CUDA (``__maxnreg__``): unbounded, ptxas (CUDA 13.0, sm_90) gave 192 (band) and 241
-(dense), capping an H200 SM at 10 band or 2 dense worlds; at 128, 16 and 4 (docs/dynamics.md, "GPU")."""
+(dense), capping an H200 SM at 10 band or 2 dense worlds; at 128, 16 and 4 (docs/dynamics.md, "The solver").
+"""
 
 
 @functools.cache

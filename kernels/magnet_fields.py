@@ -912,6 +912,15 @@ def col(m: wp.mat33d, k: int) -> wp.vec3d:
 
 
 @wp.func
+def add_charge(force: wp.vec3d, torque: wp.vec3d, s_shape: int, s_size: wp.vec3d, s_J: wp.vec3d, t_rel: wp.vec3d,
+               lever: wp.vec3d, w: wp.float64):
+    """``force``, ``torque`` plus a surface-charge quadrature point's: charge × weight ``w`` [A·m] at ``lever`` [m]
+    from the target's centre, in the source's field."""
+    f = magnet_field_local(s_shape, s_size, s_J, t_rel + lever) * w
+    return force + f, torque + wp.cross(lever, f)
+
+
+@wp.func
 def cuboid_faces_wrench(force: wp.vec3d, torque: wp.vec3d, k: int, s_shape: int, s_size: wp.vec3d, s_J: wp.vec3d,
                         s_half: wp.vec3d, t_size: wp.vec3d, mk: wp.float64, r_rel: wp.mat33d, t_rel: wp.vec3d,
                         gl_x: wp.array(dtype=wp.float64), gl_w: wp.array(dtype=wp.float64), max_panels: int):
@@ -945,9 +954,7 @@ def cuboid_faces_wrench(force: wp.vec3d, torque: wp.vec3d, k: int, s_shape: int,
                     for b in range(nq):
                         lever = centre + eu * (cu + F64_HALF * du * gl_x[a]) + ev * (cv + F64_HALF * dv * gl_x[b])
                         w = sigma * gl_w[a] * gl_w[b] * F64_HALF * du * F64_HALF * dv
-                        f = magnet_field_local(s_shape, s_size, s_J, t_rel + lever) * w
-                        force = force + f
-                        torque = torque + wp.cross(lever, f)
+                        force, torque = add_charge(force, torque, s_shape, s_size, s_J, t_rel, lever, w)
     return force, torque
 
 
@@ -981,9 +988,7 @@ def cylinder_caps_wrench(force: wp.vec3d, torque: wp.vec3d, s_shape: int, s_size
                     rr = (wp.float64(pr) + F64_HALF + F64_HALF * gl_x[a]) * dr
                     lever = centre + dirv * rr
                     w = sigma * gl_w[a] * F64_HALF * dr * rr * dphi
-                    f = magnet_field_local(s_shape, s_size, s_J, t_rel + lever) * w
-                    force = force + f
-                    torque = torque + wp.cross(lever, f)
+                    force, torque = add_charge(force, torque, s_shape, s_size, s_J, t_rel, lever, w)
     return force, torque
 
 
@@ -1014,9 +1019,7 @@ def cylinder_side_wrench(force: wp.vec3d, torque: wp.vec3d, s_shape: int, s_size
                 zz = -F64_HALF * height + (wp.float64(pz) + F64_HALF + F64_HALF * gl_x[a]) * dz
                 lever = dirv + ez * zz
                 w = sigma * gl_w[a] * F64_HALF * dz * radius * dphi
-                f = magnet_field_local(s_shape, s_size, s_J, t_rel + lever) * w
-                force = force + f
-                torque = torque + wp.cross(lever, f)
+                force, torque = add_charge(force, torque, s_shape, s_size, s_J, t_rel, lever, w)
     return force, torque
 
 

@@ -23,7 +23,8 @@ import warp as wp
 
 from warpworm.ids import WORLD_CRUMPLED
 from warpworm.sim.model import Control, Model, State
-from warpworm.sim.solver import BandSolver, SubstepSettings, put_bounded
+from warpworm.sim.solver import BandSolver, SolverBase, SubstepSettings, put_bounded
+from warpworm.sim.tile_solver import TileSolver
 from warpworm.transforms import quat_wxyz_to_matrix, quat_xyzw_to_wxyz
 
 
@@ -67,6 +68,15 @@ state's arrays, and a caller that makes a state per trajectory would otherwise k
 
 SOLVERS = ("band", "tile-band", "tile-dense")
 """The ways a world's Newton system is solved (``Simulator(solver=...)``)."""
+
+
+def make_solver(name: str, model: Model, settings: SubstepSettings) -> SolverBase:
+    """The solver :data:`SOLVERS` calls ``name``: :class:`BandSolver` or a :class:`TileSolver` of that factorization."""
+    if name not in SOLVERS:
+        raise ValueError(f"solver: got {name!r}; expected one of {SOLVERS}")
+    if name == "band":
+        return BandSolver(model, settings)
+    return TileSolver(model, settings, factorization=name[len("tile-"):])
 
 
 class Simulator:
@@ -136,12 +146,7 @@ class Simulator:
         self.use_graph = (model.device.is_cuda or cpu_graphs_supported()) if use_graph is None else bool(use_graph)
         self.control = model.control()
         """The default inputs (the params' EPM path, anchors at rest): ``step`` uses it unless given another."""
-        if solver == "band":
-            self.solver = BandSolver(model, self.settings)
-        else:
-            from warpworm.sim.tile_solver import TileSolver
-
-            self.solver = TileSolver(model, self.settings, factorization=solver[len("tile-"):])
+        self.solver = make_solver(solver, model, self.settings)
         """The substep solver (:class:`~warpworm.sim.solver.SolverBase`), owner of its scratch."""
         W, dev = model.num_worlds, model.device
         from warpworm.physics.magnets import pair_wrench_scratch
