@@ -294,3 +294,21 @@ def test_anchor_forces_carry_the_weight_of_a_hanging_worm():
     pull = snap["anchor_force"][0].sum(axis=0)  # the worm pulls the anchors down
     assert abs(pull[2] / -weight - 1.0) < 0.01, (pull, weight)
     assert np.abs(pull[:2]).max() < 0.01 * weight
+
+
+def test_model_declares_every_attribute_and_the_kernels_read_them_by_name():
+    """The Model's attributes are exactly its declared ones (a builder that adds an undeclared array is refused), and
+    every field of the kernels' ``BarHingeModel`` is a Model array of the same name and shape."""
+    from warpworm.kernels.substep import BarHingeModel
+    from warpworm.sim.model import ModelBuilder
+    from warpworm.sim.solver import model_struct
+
+    model = Model.from_params(WormParams(), 2, "cpu")
+    assert set(vars(model)) == set(Model.__annotations__)
+    view = model_struct(model)
+    for name in BarHingeModel.vars:
+        assert getattr(view, name).shape == getattr(model, name).shape, name
+    builder = ModelBuilder(WormParams(), 1)
+    builder.host["hinge_rest"] = (np.zeros((1, model.num_hinges), np.float32), float)
+    with pytest.raises(RuntimeError, match="not declared by Model: \\['hinge_rest'\\]"):
+        builder.finalize("cpu")

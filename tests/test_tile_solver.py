@@ -193,6 +193,19 @@ def test_band_factorization_is_bit_for_bit_the_band_path_anchored():
     _assert_identical(band, tile)
 
 
+def test_both_layouts_count_the_same_newton_steps():
+    """The one solver interface: ``newton_stats`` of the tile layout (band factorization) and of the band layout with
+    full steps agree world by world (the same iterations: the same systems, the same stopping test), over landings
+    and slides where the count varies between worlds."""
+    sim, band, tile = landing()
+    tiles = TileSolver(sim.model, sim.settings, "band")
+    _run_substeps(sim, band, tile, tiles, 60)
+    b, t = sim.newton_stats(), tiles.newton_stats()
+    assert len(set(b["steps"])) > 1 and (b["steps"] >= 2 * 60).all(), b  # the worlds took different step counts
+    for k in ("steps", "factors", "capped"):
+        np.testing.assert_array_equal(t[k], b[k], err_msg=k)
+
+
 def test_band_factorization_freezes_the_same_worlds():
     """The speed check at 0.17 m/s: the worlds dropped 2 and 3 mm (0.20, 0.24 m/s at impact) are frozen, the one
     dropped 1 mm (0.14 m/s) is not; a frozen world stays as the band path leaves it."""
