@@ -127,6 +127,7 @@ FEATURES = (
     ("exposure + white balance (gains per image)", [], {"gain": True}),
     ("distractors [3, 6]", ["render.distractors=[3, 6]"], {}),
     ("plate_materials [glossy, acrylic]", ["render.plate_materials=[glossy, acrylic]"], {}),
+    ("paper_bsdf", ["render.paper_bsdf=true"], {}),
     ("distortion (k1 -0.25, k2 0.08)", [], {"dist": (-0.25, 0.08, 0.002, -0.002, 0.0)}),
 )
 """(name, config overrides, Renderer options) of the issue-24 rows: each realism option on its own and together."""

@@ -47,6 +47,9 @@ def placement_draws(render_cfg, keys: np.ndarray) -> dict[str, np.ndarray]:
         out["plate.yaw"] = 2 * np.pi * rnd.uniform01(keys, "plate", 0)
         out["plate.offset_u"] = r * np.cos(ang)
         out["plate.offset_v"] = r * np.sin(ang)
+    if getattr(render_cfg, "paper_bsdf", False):
+        for k, (name, lo_hi) in enumerate(PAPER_RANGES.items()):
+            out[f"paper.{name}"] = _between(rnd.uniform01(keys, "paper", k), lo_hi)
     materials = list(getattr(render_cfg, "plate_materials", ["matte"]))
     if materials != ["matte"]:
         pick = np.minimum(np.floor(rnd.uniform01(keys, "plate.material", 0) * len(materials)), len(materials) - 1)
@@ -177,6 +180,10 @@ def distractor_mesh(draws: dict, num_worlds: int, floor_incline=0.0, segments: i
     return (np.concatenate(verts, 1), np.concatenate(tris), np.concatenate(labels), np.concatenate(texs, 1))
 
 
+PAPER_RANGES = {"wrap": (0.15, 0.45), "sheen": (0.1, 0.4), "roughness": (0.3, 0.7), "ground": (0.25, 0.6)}
+"""Ranges of the sheet's paper BSDF (``render.paper_bsdf``; :func:`warpworm.render.raster_kernels.paper_surface`),
+drawn per trajectory and stored as ``params/paper.<name>``: wrap of the diffuse term, sheen strength and roughness,
+the ambient from below as a fraction of the sky's."""
 MATERIALS = ("matte", "glossy", "acrylic")
 """Plate materials: matte (as before), glossy (Blinn-Phong strength 0.2-0.6, exponent 30-150 from ``plate.gloss``)
 and clear acrylic (as glossy, and ``floor_transmit`` 0.3-0.6 from ``plate.clarity``: the EPM under it shows)."""
@@ -230,6 +237,8 @@ def place(a: Appearance, draws: dict) -> Appearance:
     """``a`` (B worlds) with the drawn point lights and plate pose of :func:`placement_draws` applied (in place and
     returned); draws of an option that is off are absent, and ``a`` keeps what it had for it."""
     B = a.num_worlds
+    if "paper.wrap" in draws:
+        a.paper_bsdf = np.stack([np.asarray(draws[f"paper.{k}"], dtype=np.float64) for k in PAPER_RANGES], axis=1)
     if "plate.material" in draws:
         _plate_material(a, draws)
     if "distractors.count" in draws:
@@ -263,5 +272,5 @@ def place(a: Appearance, draws: dict) -> Appearance:
     return a
 
 
-__all__ = ["COOL", "DISTRACTOR_DRAWS", "KINDS", "LIGHT_DRAWS", "MATERIALS", "WARM", "WORM_REGION", "distractor_mesh",
+__all__ = ["COOL", "DISTRACTOR_DRAWS", "KINDS", "LIGHT_DRAWS", "MATERIALS", "PAPER_RANGES", "WARM", "WORM_REGION", "distractor_mesh",
            "placement_draws", "place"]

@@ -409,6 +409,50 @@ def light_surface(albedo: wp.vec3, spec: wp.vec2, p: wp.vec3, n: wp.vec3, to_eye
 
 
 @wp.func
+def paper_light(albedo: wp.vec3, n: wp.vec3, v: wp.vec3, ndv: float, l: wp.vec3, irr: wp.vec3, vis: float,
+                pb: wp.vec4) -> wp.vec3:
+    """One light (unit direction ``l``, irradiance ``irr`` on a facing surface, visibility ``vis``) on paper:
+    wrapped diffuse ``max(n.l + w, 0) / (1 + w)`` (light through the thin sheet softens the terminator, w = pb[0])
+    plus a soft white sheen, Charlie's distribution ``(2 + 1/r) sin(theta_h)^(1/r) / (2 pi)`` with Ashikhmin's
+    visibility ``1 / (4 (n.l + n.v - n.l n.v))`` times n.l, strength pb[1], roughness r = pb[2]."""
+    ndl = wp.dot(n, l)
+    color = wp.cw_mul(albedo, irr) * (wp.max(ndl + pb[0], 0.0) / (1.0 + pb[0]) * vis)
+    if ndl > 0.0 and pb[1] > 0.0:
+        nh = wp.dot(n, wp.normalize(l + v))
+        sin2 = wp.max(1.0 - nh * nh, 0.0)
+        d = (2.0 + 1.0 / pb[2]) * wp.pow(sin2, 0.5 / pb[2]) / (2.0 * wp.pi)
+        color = color + irr * (pb[1] * d / (4.0 * (ndl + ndv - ndl * ndv)) * ndl * vis)
+    return color
+
+
+@wp.func
+def paper_surface(albedo: wp.vec3, p: wp.vec3, n: wp.vec3, to_eye: wp.vec3, L: Lights, w: int, first: int,
+                  pb: wp.vec4) -> wp.vec3:
+    """The sheet's paper BSDF (``render.paper_bsdf``) under the sun and every point light: :func:`paper_light` each,
+    and a hemispherical ambient, the sky's ``ambient`` from above fading to ``pb[3]`` of it from below (the
+    floor's bounce) instead of a constant."""
+    v = wp.normalize(to_eye)
+    ndv = wp.max(wp.dot(n, v), 1.0e-4)
+    sky = 0.5 * (1.0 + n[2])
+    color = wp.cw_mul(albedo, L.ambient[w % L.ambient.shape[0]]) * (pb[3] + (1.0 - pb[3]) * sky)
+    sd = L.sun_dir[w % L.sun_dir.shape[0]]
+    vis = float(1.0)
+    if wp.dot(n, sd) + pb[0] > 0.0:
+        vis = shadow_factor(L, first, 0, 1.0, p, n)
+    color = color + paper_light(albedo, n, v, ndv, sd, L.sun_color[w % L.sun_color.shape[0]], vis, pb)
+    wl = w % L.pos.shape[0]
+    for i in range(L.pos.shape[1]):
+        if is_dark(L, wl, i):
+            continue
+        ldir, lpow, ndp = point_light(L, wl, i, p, n)
+        vis = 1.0
+        if wp.dot(n, ldir) + pb[0] > 0.0:
+            vis = shadow_factor(L, first, 1 + i, 1.0, p, n)
+        color = color + paper_light(albedo, n, v, ndv, ldir, lpow, vis, pb)
+    return color
+
+
+@wp.func
 def mesh_surface(
     key: wp.int64,
     triangles: wp.array(dtype=wp.vec3i),
@@ -515,7 +559,8 @@ class Look:
     ``floor_axis`` (+u), centre ``floor_origin`` [m], ``floor_half`` [m]; ``floor_tex`` (tile [m], checker contrast,
     grain amplitude, grain frequency [1/m]); ``floor_color2``; ``paper_tex`` (fibre, mottle amplitudes);
     ``tex_seed`` (offsets the shared ``noise`` texture per world); background gradient ``bg_top``, ``bg_bottom``;
-    ``floor_transmit``: the fraction of the light from meshes under the floor that shows through it (a clear plate)."""
+    ``floor_transmit``: the fraction of the light from meshes under the floor that shows through it (a clear plate);
+    ``paper_bsdf``: (wrap, sheen, sheen roughness, ground ambient) of the sheet (:func:`paper_surface`; 0: Lambert)."""
 
     albedo: wp.array2d(dtype=wp.vec3)
     specular: wp.array2d(dtype=wp.vec2)
@@ -531,6 +576,7 @@ class Look:
     bg_bottom: wp.array(dtype=wp.vec3)
     noise: wp.array2d(dtype=float)
     floor_transmit: wp.array(dtype=float)
+    paper_bsdf: wp.array(dtype=wp.vec4)
 
 
 @wp.func
@@ -631,8 +677,12 @@ def shade_hit(look: Look, L: Lights, w: int, first: int, label: int, z: float, m
         if wp.dot(n_world, -d_world) < 0.0:
             nrm = -n_world  # double-sided sheet: light the side the camera sees
         base = object_albedo(look, w, label, mat)
-        color = light_surface(base, look.specular[w % look.specular.shape[0], label], eye + z * d_world, nrm,
-                              -d_world, L, w, first)
+        pb = look.paper_bsdf[w % look.paper_bsdf.shape[0]]
+        if label <= SEG_WORM_LAST and (pb[0] > 0.0 or pb[1] > 0.0 or pb[3] > 0.0):
+            color = paper_surface(base, eye + z * d_world, nrm, -d_world, L, w, first, pb)
+        else:
+            color = light_surface(base, look.specular[w % look.specular.shape[0], label], eye + z * d_world, nrm,
+                                  -d_world, L, w, first)
     return color, nrm
 
 

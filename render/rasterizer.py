@@ -122,6 +122,7 @@ class Renderer:
         look.bg_bottom = _vec_array(a.bg_bottom, wp.vec3, d)
         look.noise = self._noise
         look.floor_transmit = wp.array(np.asarray(a.floor_transmit, dtype=np.float32), dtype=float, device=d)
+        look.paper_bsdf = _vec_array(a.paper_bsdf, wp.vec4, d)
         light_arrays = {
             "ambient": _vec_array(a.ambient, wp.vec3, d), "sun_dir": _vec_array(a.sun_dir, wp.vec3, d),
             "sun_color": _vec_array(a.sun_color, wp.vec3, d), "pos": _vec_array(a.light_pos, wp.vec3, d),

@@ -73,6 +73,9 @@ class Appearance:
     """Point light irradiance at 1 m (falls as 1/r²), shape (W, L, 3); zero pads a world with fewer lights."""
     light_size: np.ndarray
     """Point light radius [m] (spherical lights: the softness of their shadows), shape (W, L)."""
+    paper_bsdf: np.ndarray
+    """The sheet's paper BSDF (wrap, sheen strength, sheen roughness, ground ambient fraction), shape (W, 4); zeros:
+    Lambert with a constant ambient (before ``render.paper_bsdf``; :func:`raster_kernels.paper_surface`)."""
     floor_transmit: np.ndarray
     """Fraction of the light of meshes under the floor (the EPM) that shows through it: 0 opaque, a clear acrylic
     plate 0.3-0.6 (its glossiness is the floor's ``specular`` row), shape (W,)."""
@@ -143,6 +146,7 @@ def default_appearance(num_worlds: int = 1) -> Appearance:
         light_power=np.array([[[0.04, 0.04, 0.045]]]),
         light_size=np.array([[DEFAULT_LAMP_SIZE]]),
         floor_transmit=np.zeros(1),
+        paper_bsdf=np.zeros((1, 4)),
         plate=np.zeros((1, 3)),
         bg_top=np.array([[0.55, 0.6, 0.68]]),
         bg_bottom=np.array([[0.25, 0.27, 0.3]]),

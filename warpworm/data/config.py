@@ -389,6 +389,10 @@ class RenderConfig:
     distortion_k3: Annotated[list[Num], Field(strict=True, min_length=2, max_length=2),
                              AfterValidator(_check_signed_range)] = field(default_factory=lambda: [0.0, 0.0])
     """[lo, hi]: radial k3."""
+    paper_bsdf: Bool = False
+    """The sheet as paper: wrapped diffuse (light through the thin sheet), a soft sheen and a hemispherical ambient
+    (sky above, the floor's bounce below) instead of Lambert with a constant ambient; parameters per trajectory
+    (params/paper.*; docs/render.md)."""
     plate_materials: Annotated[list[Literal["matte", "glossy", "acrylic"]], Field(min_length=1)] = \
         field(default_factory=lambda: ["matte"])
     """Plate materials drawn per trajectory, equally likely: 'matte' (as before), 'glossy' (highlights of every
@@ -422,7 +426,7 @@ RENDER_OFF_GROUPS = {"plate_pose": ("plate_offset",),
                                 "light_warmth"),
                      "shadows": ("shadow_map",), "supersample": (),
                      "distortion": ("distortion_k1", "distortion_k2", "distortion_p", "distortion_k3"),
-                     "exposure": (), "white_balance": (), "distractors": (), "plate_materials": (),
+                     "exposure": (), "white_balance": (), "distractors": (), "plate_materials": (), "paper_bsdf": (),
                      "engine": ("pathtraced_fraction", "pathtraced_spp")}
 """render switch -> the keys it enables: a group whose switch and keys are all at their defaults (OFF) is left out
 of ``to_dict`` (so the files' config_yaml stays that of before the option)."""

@@ -124,7 +124,7 @@ def appearance_draws(cfg, traj: np.ndarray) -> dict[str, np.ndarray]:
         app.update(draw_group(cfg, g, traj).values)
     app["texture.seed"] = rnd.derived_seed(rnd.sample_keys(cfg.seed, traj), "texture") % (2**31 - 1)
     r = cfg.render  # issue 24: the plate's pose and material, the lights, distractors (per trajectory)
-    if r.plate_pose or r.lights != "fixed" or r.distractors[1] > 0 or r.plate_materials != ["matte"]:
+    if r.plate_pose or r.lights != "fixed" or r.distractors[1] > 0 or r.plate_materials != ["matte"] or r.paper_bsdf:
         from warpworm.render.placement import placement_draws
 
         app.update(placement_draws(cfg.render, rnd.sample_keys(cfg.seed, traj)))
@@ -166,7 +166,7 @@ def appearance_from_draws(app: dict, seeds: np.ndarray):
     a.ambient = app["light.ambient"][:, None] * np.ones(3)
     bg = app["color.background_value"][:, None] * np.ones(3)
     a.bg_top, a.bg_bottom = bg, 0.6 * bg
-    if any(k.startswith(("plate.", "lights.", "distractors.")) for k in app):  # drawn when the config asks
+    if any(k.startswith(("plate.", "lights.", "distractors.", "paper.")) for k in app):  # drawn when asked
         from warpworm.render.placement import place
 
         a = place(a, app)
