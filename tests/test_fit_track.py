@@ -57,13 +57,15 @@ def test_fit_track_recovers_the_planted_epm_moment_from_images(planted_video, ca
     assert (d / "track.json").is_file()
     # dipole_density has no effect under the analytic magnet model: the fit must say the track cannot pin it
     assert main(["fit-track", str(d / "track.csv"), "--gait", "peristaltic", "--magnet-model", "analytic",
-                 "--fit", "epm_moment,dipole_density", "--budget", "16", "--popsize", "8", "--spread", "1.25",
+                 "--fit", "epm_moment,dipole_density", "--budget", "16", "--popsize", "8", "--spread", "1.25", "--profile", "1",
                  "--out", str(d / "fit"), "--json"]) == 0
     s = json.loads(capsys.readouterr().out)
     epm = s["value"][0]
     assert abs(epm / (PLANT * base.epm_moment) - 1) < 0.03, (epm, PLANT * base.epm_moment)
     assert s["pinned"] == [True, False] and s["sigma_rel"][0] < 0.03
     assert s["sigma_rel"][1] is None or s["sigma_rel"][1] > 1.0
+    # search, stencil and 4 refine steps, one profile step, the scan (and a stencil if the profile moved the fit)
+    assert s["worlds"] == 16 + 5 * 5 + 2 * 2 * 3 + 8 + 5 * s["profile_moved"]
     assert s["rms_ratio"] < 0.01 and s["rms_displacement_m"] < 5e-4
     text = (d / "fit" / "fit.yaml").read_text()
     assert "epm_moment:" in text and "--set epm_moment=" in text

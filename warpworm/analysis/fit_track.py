@@ -233,12 +233,50 @@ def _uncertainty(J, xb, cb, chi2, n_res, lim, base, names, theta0, track, ref, m
     return sigma, v, max(weakest_sigma, extent), scan, dchi2
 
 
+def _profile(xb, cb, n_res, chi2, lim, delta, iters, step, ev) -> tuple[np.ndarray, np.ndarray, float]:
+    """Profile of every parameter at xb ± ``delta`` (log): that parameter held there, the others re-fitted by
+    ``iters`` damped Gauss-Newton steps, all 2p profile points and their stencils one batch per step (``ev(X)`` ->
+    cost (W,), residuals (W, n)). Returns the profile 1-sigma (p,) (delta over the square root of the smaller
+    chi-square rise of the two sides; inf if a side does not rise), the best point the profiles met (p,) and its
+    cost: below ``cb`` means the fit had not found the minimum."""
+    p = len(xb)
+    pts = np.array([np.clip(xb + sgn * delta * np.eye(p)[i], -lim, lim) for i in range(p) for sgn in (-1, 1)])
+    held = np.repeat(np.arange(p), 2)
+    best_c = np.full(len(pts), np.inf)
+    best_x = pts.copy()
+    for _ in range(max(1, iters)):
+        batch, where = [], []
+        for k, (x, i) in enumerate(zip(pts, held)):
+            free = [j for j in range(p) if j != i]
+            st = [x] + [x + step * np.eye(p)[j] for j in free] + [x - step * np.eye(p)[j] for j in free]
+            where.append((len(batch), free))
+            batch += st
+        cost, res = ev(np.clip(np.array(batch), -lim, lim))
+        for k, (at, free) in enumerate(where):
+            q = len(free)
+            if cost[at] >= best_c[k]:  # no better: back halfway toward the best so far
+                pts[k] = 0.5 * (pts[k] + best_x[k])
+                continue
+            best_c[k], best_x[k] = cost[at], pts[k].copy()
+            J = (res[at + 1:at + 1 + q] - res[at + 1 + q:at + 1 + 2 * q]).T / (2 * step)
+            A = J.T @ J
+            dx = -np.linalg.solve(A + 0.1 * np.diag(np.diag(A) + 1e-9), J.T @ res[at])
+            pts[k, free] = np.clip(pts[k, free] + dx, -lim, lim)
+    rise = (best_c - cb) * n_res / max(1.0, chi2)
+    side = np.minimum(rise[0::2], rise[1::2])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        sigma = np.where(side > 0, delta / np.sqrt(np.maximum(side, 1e-300)), np.inf)
+    k = int(np.argmin(best_c))
+    return sigma, best_x[k], float(best_c[k])
+
+
 def fit(track: dict, base, names, *, budget: int = 96, popsize: int | None = None, spread: float = 3.0, seed: int = 0,
-        meta: dict | None = None, step: float = 0.05, refine: int = 4, log=None, **kw) -> dict:
+        meta: dict | None = None, step: float = 0.05, refine: int = 4, profile: int = 3, log=None, **kw) -> dict:
     """CMA-ES over log(names / base) within ±log(spread), each generation one batch of ``popsize`` worlds, until
     ``budget`` worlds; then ``refine`` Levenberg-Marquardt steps from the best point, each one batch of 2p + 1 worlds
-    (the step and its central differences of ``step`` in log); then the 1-sigma of :func:`_uncertainty` (one more
-    batch). Returns a dict: names, base, value (p,), cost, rms_ratio, rms_disp_m, chi2_red, sigma_rel (p,), pinned
+    (the step and its central differences of ``step`` in log); then ``profile`` steps of every parameter's profile
+    (:func:`_profile`, 2p(2p - 1) worlds a step; 0: none), which also moves the fit when they meet a lower valley; the
+    1-sigma is the larger of the profile's and :func:`_uncertainty`'s (one more batch). Returns a dict: names, base, value (p,), cost, rms_ratio, rms_disp_m, chi2_red, sigma_rel (p,), pinned
     (p,) bool, weakest (p,) (the least pinned combination of log-parameters) and weakest_sigma, obs (the best world's
     simulated track), history (list of (worlds, best cost)), worlds, wall_s, scan."""
     import cma
@@ -286,10 +324,29 @@ def fit(track: dict, base, names, *, budget: int = 96, popsize: int | None = Non
                 f"{n}={v:.4g}" for n, v in zip(names, theta0 * np.exp(xb))))
     n_res = len(r0)
     chi2 = float(np.sum(r0 ** 2) / max(1, n_res - p))
+    prof_sigma, moved = np.zeros(p), False
+    if profile > 0:
+        def ev(X):
+            c, r, _ = _evaluate(base, names, theta0, X, track, ref, meta, **kw)
+            return c, r
+
+        prof_sigma, xp, cp = _profile(xb, cb, n_res, chi2, lim, 0.15, profile, step, ev)
+        worlds += 2 * p * (2 * p - 1) * profile
+        if cp < cb:  # the profiles found a lower valley: polish there instead
+            moved = True
+            cost, res, obs = _evaluate(base, names, theta0, _stencil(xp, step), track, ref, meta, **kw)
+            worlds += 2 * p + 1
+            if cost[0] < cb:
+                xb, cb, r0, J, ob = xp, float(cost[0]), res[0], _jacobian(res, p, step), obs
+            if log:
+                log(f"  {worlds:4d} worlds (profile found a lower valley): cost {cb:.4g}  " + "  ".join(
+                    f"{n}={v:.4g}" for n, v in zip(names, theta0 * np.exp(xb))))
+        chi2 = float(np.sum(r0 ** 2) / max(1, n_res - p))
     obs = ob
     sigma, v, weakest_sigma, scan, dchi2 = _uncertainty(J, xb, cb, chi2, n_res, lim, base, names, theta0, track, ref,
                                                         meta, kw)
     worlds += len(SCAN_STEPS)
+    sigma = np.maximum(sigma, prof_sigma)
     nr = int(np.isfinite(track["ratios"]).sum())
     return {
         "names": list(names), "base": theta0, "value": theta0 * np.exp(xb), "x": xb, "cost": cb,
@@ -297,7 +354,8 @@ def fit(track: dict, base, names, *, budget: int = 96, popsize: int | None = Non
         "rms_disp_m": float(np.sqrt(np.mean(r0[nr:] ** 2)) * SIGMA_DISP), "chi2_red": chi2,
         "sigma_rel": sigma, "pinned": sigma < PIN_REL, "weakest": v, "weakest_sigma": weakest_sigma,
         "obs": {k: a[0] for k, a in obs.items()}, "history": history, "worlds": worlds,
-        "wall_s": time.perf_counter() - t0, "scan": (scan, dchi2),
+        "wall_s": time.perf_counter() - t0, "scan": (scan, dchi2), "profile_sigma": prof_sigma,
+        "profile_moved": moved,
     }
 
 

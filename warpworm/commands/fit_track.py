@@ -28,6 +28,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--popsize", type=int, default=None, help="worlds per CMA-ES generation (default 8+)")
     parser.add_argument("--refine", type=int, default=4,
                         help="Levenberg-Marquardt steps after the search, one batch of 2p+1 worlds each (default 4)")
+    parser.add_argument("--profile", type=int, default=3, metavar="STEPS",
+                        help="re-fit steps of each parameter's profile at ±15 %% (2p(2p-1) worlds a step; 0: curvature "
+                             "only; default 3)")
     parser.add_argument("--spread", type=float, default=3.0,
                         help="search within preset / spread .. preset * spread (default 3)")
     parser.add_argument("--magnet-model", choices=["dipoles", "analytic"], default="dipoles")
@@ -81,7 +84,7 @@ def main(args) -> int:
     try:
         if not Path(args.track).is_file():
             raise ValueError(f"TRACK: got {args.track!r}; expected a track.csv written by 'warpworm track'")
-        if args.budget < 1 or (args.popsize is not None and args.popsize < 2) or args.refine < 0:
+        if args.budget < 1 or (args.popsize is not None and args.popsize < 2) or args.refine < 0 or args.profile < 0:
             raise ValueError(f"--budget/--popsize/--refine: got {args.budget}/{args.popsize}/{args.refine}; expected "
                              ">= 1 / >= 2 / >= 0")
         if not args.spread > 1 or not 0 < args.render_scale <= 1:
@@ -116,7 +119,7 @@ def main(args) -> int:
         log(f"fitting {names} to {len(track['time'])} frames of {args.gait}{' backward' if args.backward else ''} "
             f"({'through the track camera' if meta else 'band centres from above'}), budget {args.budget} worlds")
     res = FT.fit(track, base, names, budget=args.budget, popsize=args.popsize, spread=args.spread, seed=args.seed,
-                 meta=meta, log=log, refine=args.refine, render_scale=args.render_scale, device=args.device)
+                 meta=meta, log=log, refine=args.refine, profile=args.profile, render_scale=args.render_scale, device=args.device)
     frag = FT.write_fragment(out / "fit.yaml", args.gait, args.backward, {**path_fields, **known}, res)
     plot_note = ""
     try:
@@ -127,7 +130,7 @@ def main(args) -> int:
                "sigma_rel": [_num(s) for s in res["sigma_rel"]], "pinned": res["pinned"].tolist(),
                "cost": _num(res["cost"]), "rms_ratio": _num(res["rms_ratio"]),
                "rms_displacement_m": _num(res["rms_disp_m"]),
-               "weakest": res["weakest"].tolist(), "weakest_sigma": _num(res["weakest_sigma"]), "worlds": res["worlds"],
+               "weakest": res["weakest"].tolist(), "profile_moved": bool(res["profile_moved"]), "weakest_sigma": _num(res["weakest_sigma"]), "worlds": res["worlds"],
                "wall_s": res["wall_s"], "files": [str(out / f) for f in ("fit.yaml", "fit.png", "fit.json")]}
     (out / "fit.json").write_text(json.dumps(summary, indent=1, allow_nan=False))
     if args.json:
