@@ -116,6 +116,15 @@ def _worm_specs() -> dict[str, ParamSpec]:
             s[key] = dataclasses.replace(s[key], default=float("nan"), preset=True,
                                          doc=s[key].doc + " (default NaN: the gait preset's value)")
     s["hinge_damping"] = ParamSpec(_WP.hinge_damping, "N*m*s/rad/m", low=0.0, doc="crease damping c_alpha")
+    # Any other scalar WormParams field is randomizable too (constant at its default unless configured), so a field
+    # added to the parameter contract is never silently unreachable from configs.
+    for f in fields(WormParams):
+        v = getattr(_WP, f.name)
+        if f.name not in s and f.name not in ("n_units", "epm_size", "ipm_moment") and isinstance(v, (int, float)) \
+                and not isinstance(v, bool):
+            s[f.name] = ParamSpec(float(v), "see warpworm.physics.params", doc=f"WormParams.{f.name}")
+    # bounds for some of those, set in place (the order of PARAM_SPECS is the order of every shard's config_yaml: a
+    # resumed dataset compares it as text)
     s["support_thickness"] = ParamSpec(_WP.support_thickness, "m", low=0.0,
                                        doc="support plate the worm walks on; the EPM moves beneath it")
     s["closest_approach_scale"] = ParamSpec(_WP.closest_approach_scale, "1", positive=True,
@@ -128,13 +137,6 @@ def _worm_specs() -> dict[str, ParamSpec]:
                                        doc="stretch beyond which a waist bar turns rigid (strain)")
     s["fold_limit_stiffness"] = ParamSpec(_WP.fold_limit_stiffness, "N*m/rad/m", low=0.0,
                                           doc="barrier stiffness of a crease past its fold range")
-    # Any other scalar WormParams field is randomizable too (constant at its default unless configured), so a field
-    # added to the parameter contract is never silently unreachable from configs.
-    for f in fields(WormParams):
-        v = getattr(_WP, f.name)
-        if f.name not in s and f.name not in ("n_units", "epm_size", "ipm_moment") and isinstance(v, (int, float)) \
-                and not isinstance(v, bool):
-            s[f.name] = ParamSpec(float(v), "see warpworm.physics.params", doc=f"WormParams.{f.name}")
     return s
 
 
@@ -389,6 +391,11 @@ class RenderConfig:
     distortion_k3: Annotated[list[Num], Field(strict=True, min_length=2, max_length=2),
                              AfterValidator(_check_signed_range)] = field(default_factory=lambda: [0.0, 0.0])
     """[lo, hi]: radial k3."""
+    motion_blur: Annotated[Num, Field(ge=0, le=0.2)] = 0.0
+    """Shutter time [s]: RGB averaged over ``motion_blur_samples`` sub-frames of the open shutter, the sheet moved
+    along its simulated velocities (labels at the frame's time; docs/render.md). 0: no blur."""
+    motion_blur_samples: Annotated[Int, Field(ge=2, le=64)] = 4
+    """Sub-frames of the shutter (``motion_blur``)."""
     paper_bsdf: Bool = False
     """The sheet as paper: wrapped diffuse (light through the thin sheet), a soft sheen and a hemispherical ambient
     (sky above, the floor's bounce below) instead of Lambert with a constant ambient; parameters per trajectory
@@ -427,6 +434,7 @@ RENDER_OFF_GROUPS = {"plate_pose": ("plate_offset",),
                      "shadows": ("shadow_map",), "supersample": (),
                      "distortion": ("distortion_k1", "distortion_k2", "distortion_p", "distortion_k3"),
                      "exposure": (), "white_balance": (), "distractors": (), "plate_materials": (), "paper_bsdf": (),
+                     "motion_blur": ("motion_blur_samples",),
                      "engine": ("pathtraced_fraction", "pathtraced_spp")}
 """render switch -> the keys it enables: a group whose switch and keys are all at their defaults (OFF) is left out
 of ``to_dict`` (so the files' config_yaml stays that of before the option)."""

@@ -154,6 +154,8 @@ class WarpStages:
         rest = model.rest_positions_host.astype(np.float32)  # per-world rest geometry (a, b, l0 may differ)
         sim.settle(state, cfg.sim.settle_time)
         keep = ("positions", "magnet_pos", "magnet_rot", "crease_angle", "bar_strain", "unstable")
+        if cfg.render.motion_blur > 0:  # issue 24: the shutter's motion needs the vertices' velocities
+            keep += ("velocities",)
         if getattr(cfg.sim, "frame_unit", "s") == "cycle":
             frames = run_at_phases(sim, state, params, num_worlds, cfg.sim.frame_times, keep)
         else:
@@ -199,6 +201,11 @@ class WarpStages:
         if gains is not None:
             cams.gain = gains[0]
         img = self._renderer(cfg).render(scene, cams)
+        if cfg.render.motion_blur > 0:  # RGB over the shutter from the simulated velocities; labels at the frame
+            from warpworm.render.motion import motion_blurred_rgb
+
+            img["rgb"] = motion_blurred_rgb(self._renderer(cfg), scene, cams, frame, cfg.render.motion_blur,
+                                            cfg.render.motion_blur_samples)
         engine = pathtraced_samples(cfg, seeds)  # None: the option is off (nothing more is written)
         rgb = img["rgb"]
         if engine is not None and engine.any():  # RGB only: labels stay the rasterizer's exact passes
