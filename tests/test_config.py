@@ -195,3 +195,34 @@ def test_cli_bad_config_exits_2_and_writes_nothing(tmp_path):
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and "--out" in r.stderr and "writable" in r.stderr
     assert os.environ.get("X") is None
+
+
+# The order of every randomize group as the datasets written before issue 25 list it in each shard's config_yaml
+# (a resumed job compares that text; a reordered PARAM_SPECS would redo every shard of an old dataset). New
+# parameters may only be appended.
+PUBLISHED_ORDER = {
+    "worm": ["a", "b", "l0", "sheet_density", "hinge_stiffness", "bar_stiffness", "valley_bar_stiffness", "damping",
+             "mu_static", "mu_kinetic", "friction_backward_ratio", "floor_incline", "gravity", "dipole_density",
+             "magnet_mass_density", "epm_moment", "epm_size_x", "epm_size_y", "epm_size_z", "ipm_moment_tail",
+             "ipm_moment_centre", "ipm_moment_head", "ipm_diameter", "ipm_thickness", "wavelength", "amplitude",
+             "closest_approach", "orientation", "cycle_period", "gait", "backward", "magnet_model", "hinge_damping",
+             "waist_close_strain", "waist_stop_strain", "fold_limit_stiffness", "support_thickness",
+             "closest_approach_scale", "wavelength_scale"],
+    "camera": ["distance", "elevation", "azimuth", "roll", "fov_y", "lookat_jitter", "min_in_frame", "max_tries"],
+    "light": ["elevation", "azimuth", "intensity", "ambient"],
+    "color": ["worm_hue", "worm_saturation", "worm_value", "floor_hue", "floor_saturation", "floor_value",
+              "background_value"],
+    "texture": ["floor", "floor_scale", "worm"],
+    "sensor": ["noise_std", "blur_sigma", "jpeg_quality", "brightness", "contrast"],
+}
+
+
+def test_parameter_order_of_published_datasets_is_kept():
+    import yaml
+
+    from warpworm.data.config import PARAM_SPECS
+
+    written = yaml.safe_load(load_config("default").to_yaml())["randomize"]
+    for group, names in PUBLISHED_ORDER.items():
+        assert list(PARAM_SPECS[group])[:len(names)] == names, group
+        assert list(written[group])[:len(names)] == names, group
