@@ -108,7 +108,12 @@ def _draw_body_axes(img, labels, n, pt, sh) -> None:
     ends = np.concatenate([o[None], o + 0.01 * Rb.T], axis=0)
     pc = ends @ R.T + t
     if np.all(pc[:, 2] > 1e-4):
-        uv = pc[:, :2] / pc[:, 2:] * [K[0, 0], K[1, 1]] + [K[0, 2], K[1, 2]]
+        xy = pc[:, :2] / pc[:, 2:]
+        if "camera/dist" in labels:  # through the lens, as the image and keypoints/pixel (render.distortion)
+            from warpworm.render.distortion import distort
+
+            xy = np.stack(distort(xy[:, 0], xy[:, 1], np.asarray(labels["camera/dist"][n])), axis=1)
+        uv = xy * [K[0, 0], K[1, 1]] + [K[0, 2], K[1, 2]]
         for a, c in zip(range(1, 4), [(255, 0, 0), (0, 255, 0), (0, 80, 255)]):
             cv2.line(img, pt(uv[0]), pt(uv[a]), c, 2, cv2.LINE_AA, sh)
 
