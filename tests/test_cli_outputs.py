@@ -53,3 +53,16 @@ def test_an_ungridded_field_is_the_presets_value_not_nan():
     for k in ("amplitude", "closest_approach"):
         assert np.all(pts[k] == float(np.asarray(getattr(p, k)).reshape(-1)[0]))
     assert np.isfinite(np.concatenate(list(pts.values()))).all()
+
+
+def test_preview_key_names_every_keypoint_colour():
+    """preview.png's key has one swatch per colour the contact sheet draws keypoints in (its own rule)."""
+    from warpworm.data.previews import legend
+    from warpworm.render.contact_sheet import _kp_color
+    from warpworm.render.labels import KEYPOINT_NAMES
+
+    img = legend(774)
+    assert img.shape[1] == 774 and img.dtype == np.uint8
+    first = img[:18]
+    for colour in {tuple(_kp_color(n)) for n in KEYPOINT_NAMES}:
+        assert np.all(first == np.array(colour, np.uint8), axis=-1).sum() >= 20, colour  # a filled swatch
