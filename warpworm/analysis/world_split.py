@@ -7,8 +7,8 @@ launching thread and release the GIL while they run (a ctypes call), so two thre
 is paid per share to start (a spawned process paid ~1-1.5 s of Python, ``import warp`` and kernel loading, per batch:
 that is what made a short job on 2 cores 1.1x one core on a busy machine; benchmarks/bench_threads.py).
 
-Two rules make the threads safe with Warp 1.19: the kernel modules are loaded once before the threads start (a
-module loaded by two threads at once would be loaded twice), and a split run steps without CPU graphs (a graph
+Two rules make the threads safe with Warp 1.19: the kernel modules are loaded once before the threads start (Warp
+loads a module on its first launch, without a lock: two threads could load it twice), and a split run steps without CPU graphs (a graph
 capture is process-wide state in Warp: launches of another thread during a capture would be recorded into it, not
 run). :func:`simulator` builds a Simulator with that setting; graphs replay the same trajectory bit for bit
 (tests/test_step_graph.py), so the results do not depend on it.
@@ -63,18 +63,19 @@ def simulator(model, **kw):
 
 
 def load_kernels(device="cpu") -> None:
-    """Load every module of ``warpworm.kernels`` on ``device`` (from Warp's cache; compiled in parallel when cold)."""
-    import importlib
-    import pkgutil
-
-    import warp as wp
-
-    from warpworm import kernels, quiet_warp
+    """Load the kernel modules a simulation uses on ``device`` (from Warp's cache; compiled when cold), by one step and
+    one snapshot of a one-world batch in this thread: exactly the modules the shares will launch, none they will not
+    (the tile solver's, on a cold cache, would cost a compile for nothing)."""
+    from warpworm import quiet_warp
+    from warpworm.physics.params import WormParams
+    from warpworm.sim.model import Model
+    from warpworm.sim.simulator import Simulator
 
     quiet_warp()
-    names = [importlib.import_module(f"{kernels.__name__}.{m.name}").__name__
-             for m in pkgutil.iter_modules(kernels.__path__)]
-    wp.force_load(device=device, modules=[wp.get_module(n) for n in names], max_workers=default_workers())
+    sim = Simulator(Model.from_params(WormParams(), 1, device), dt=0.004, substeps=2, use_graph=False)
+    state = sim.initial_state()
+    sim.step(state, 1)
+    sim.snapshot(state)
 
 
 def run_shares(fn: Callable[[int, int], dict], num_worlds: int, workers: int | None = None,
