@@ -24,6 +24,8 @@ from warpworm.cli import COMMANDS, main
 BAD = [
     # generate: the config's own validation, the output folder, the arguments
     ("generate nosuch --out o", "packaged name"),
+    ("generate bad.yaml --out o", "not valid YAML (line 3, column 4)"),
+    ("generate unknown_key.yaml --out o", "sim.worldz: unknown key"),
     ("generate default --out o sim.dt=-1", "sim.dt: got -1"),
     ("generate default --out o sim.device=cuda:99", "sim.device"),
     ("generate default --out o --num 0", "num_samples"),
@@ -110,6 +112,8 @@ def folder(tmp_path, monkeypatch):
     (tmp_path / "nan.csv").write_text("gap_m,force_N\n0.001,1.0\n0.002,nan\n")
     (tmp_path / "zero.csv").write_text("gap_m,force_N\n0.0,1.0\n0.002,0.5\n")
     (tmp_path / "ok.csv").write_text("gap_m,force_N\n0.002,1.0\n0.004,0.5\n0.008,0.1\n")
+    (tmp_path / "bad.yaml").write_text("name: x\nsim: [1,\n  ]: 2\n")
+    (tmp_path / "unknown_key.yaml").write_text("name: x\nsim:\n  worldz: 3\n")
     monkeypatch.chdir(tmp_path)
     return tmp_path
 

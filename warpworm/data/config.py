@@ -789,8 +789,11 @@ def read_yaml(source: str | os.PathLike) -> dict:
         text = res.read_text()
     try:
         raw = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise ConfigError([f"config: {source} is not valid YAML: {exc}"]) from None
+    except yaml.YAMLError as exc:  # one line: where, and what the parser expected
+        mark = getattr(exc, "problem_mark", None)
+        where = f" (line {mark.line + 1}, column {mark.column + 1})" if mark is not None else ""
+        what = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        raise ConfigError([f"config: {source} is not valid YAML{where}: {what}"]) from None
     return raw if raw is not None else {}
 
 
