@@ -364,7 +364,8 @@ def report_lines(result: dict) -> list[str]:
     out = [f"{'parameter':24s} {'preset':>11s} {'fitted':>11s} {'1-sigma':>9s}  pinned by this track?"]
     for n, b, v, s, ok in zip(result["names"], result["base"], result["value"], result["sigma_rel"],
                               result["pinned"]):
-        out.append(f"{n:24s} {b:11.5g} {v:11.5g} {100 * s:8.2f}%  {'yes' if ok else 'NO (not identifiable)'}")
+        sig = f"{100 * s:8.2f}%" if np.isfinite(s) else "unbounded"
+        out.append(f"{n:24s} {b:11.5g} {v:11.5g} {sig:>9s}  {'yes' if ok else 'NO (not identifiable)'}")
     out.append(f"residual: ratios {result['rms_ratio']:.4f} rms, displacement {1e3 * result['rms_disp_m']:.3f} mm "
                f"rms (reduced chi2 {result['chi2_red']:.3g} at the tracker's accuracy)")
     w = result["weakest"]
