@@ -373,6 +373,30 @@ def spec_power(c: float, e: float) -> float:
 
 
 @wp.func
+def light_surface_plain(albedo: wp.vec3, spec: wp.vec2, p: wp.vec3, n: wp.vec3, to_eye: wp.vec3, ambient: wp.vec3,
+                        sun_dir: wp.vec3, sun_color: wp.vec3, lamp_pos: wp.vec3, lamp_power: wp.vec3) -> wp.vec3:
+    """:func:`light_surface` for the plain path (:func:`make_resolve_shade`): one lit point lamp, no shadows, the
+    world's lights passed in as values (the same float operations, so the same bits)."""
+    ndl = wp.max(wp.dot(n, sun_dir), 0.0)
+    to_lamp = lamp_pos - p
+    r2 = wp.max(wp.dot(to_lamp, to_lamp), 1.0e-6)
+    inv_r = 1.0 / wp.sqrt(r2)
+    ldir = to_lamp * inv_r
+    lpow = lamp_power * (inv_r * inv_r)
+    ndp = wp.max(wp.dot(n, ldir), 0.0)
+    color = wp.cw_mul(albedo, ambient + sun_color * ndl + lpow * ndp)
+    if spec[0] > 0.0:
+        v = wp.normalize(to_eye)
+        hs = wp.max(wp.dot(n, wp.normalize(sun_dir + v)), 0.0)
+        hl = wp.max(wp.dot(n, wp.normalize(ldir + v)), 0.0)
+        if ndl > 0.0:
+            color = color + sun_color * (spec[0] * spec_power(hs, spec[1]))
+        if ndp > 0.0:
+            color = color + lpow * (spec[0] * spec_power(hl, spec[1]))
+    return color
+
+
+@wp.func
 def light_surface(albedo: wp.vec3, spec: wp.vec2, p: wp.vec3, n: wp.vec3, to_eye: wp.vec3, L: Lights, w: int,
                   first: int) -> wp.vec3:
     """Ambient + Lambert + Blinn-Phong for the directional sun and every point light of world ``w``, linear RGB.
@@ -587,20 +611,28 @@ def noise_offset(look: Look, w: int) -> wp.vec2:
 
 
 @wp.func
+def floor_albedo(base: wp.vec3, mat: wp.vec3, inv_tile: float, ft: wp.vec4, fc2: wp.vec3,
+                 noise: wp.array2d(dtype=float), off_u: float, off_v: float) -> wp.vec3:
+    """The floor's checker (tiles ``1 / inv_tile`` [m], colours ``base`` and its mix with ``fc2``) and grain at floor
+    coordinates ``mat`` [m] (``ft``: the world's ``Look.floor_tex``; ``off_u``, ``off_v``: its noise offset)."""
+    cu = int(wp.floor(mat[0] * inv_tile))
+    cv = int(wp.floor(mat[1] * inv_tile))
+    albedo = base
+    if ((cu + cv) & 1) != 0:
+        albedo = wp.lerp(base, fc2, ft[1])
+    g = noise_tex(noise, mat[0] * ft[3] + off_u, mat[1] * ft[3] + off_v)
+    return albedo * (1.0 + ft[2] * (g - 0.5))
+
+
+@wp.func
 def shade_floor(look: Look, L: Lights, w: int, first: int, mat: wp.vec3, p: wp.vec3, to_eye: wp.vec3) -> wp.vec3:
     """Checker + grain in floor coordinates [m] (``mat``): ambient + sun + every point light at ``p``, and, for a
     glossy plate (floor specular strength > 0), their highlights seen along ``to_eye``."""
     fn = look.floor_normal[w % look.floor_normal.shape[0]]
     ft = look.floor_tex[w % look.floor_tex.shape[0]]
     off = noise_offset(look, w)
-    base = look.albedo[w % look.albedo.shape[0], SEG_FLOOR]
-    cu = int(wp.floor(mat[0] * (1.0 / ft[0])))
-    cv = int(wp.floor(mat[1] * (1.0 / ft[0])))
-    albedo = base
-    if ((cu + cv) & 1) != 0:
-        albedo = wp.lerp(base, look.floor_color2[w % look.floor_color2.shape[0]], ft[1])
-    g = noise_tex(look.noise, mat[0] * ft[3] + off[0], mat[1] * ft[3] + off[1])
-    albedo = albedo * (1.0 + ft[2] * (g - 0.5))
+    albedo = floor_albedo(look.albedo[w % look.albedo.shape[0], SEG_FLOOR], mat, 1.0 / ft[0], ft,
+                          look.floor_color2[w % look.floor_color2.shape[0]], look.noise, off[0], off[1])
     sc = L.sun_color[w % L.sun_color.shape[0]]
     ndl = wp.max(wp.dot(fn, L.sun_dir[w % L.sun_dir.shape[0]]), 0.0)
     irr = L.ambient[w % L.ambient.shape[0]] + sc * shadow_factor(L, first, 0, ndl, p, fn)
@@ -646,19 +678,27 @@ def floor_highlights(L: Lights, w: int, first: int, spec: wp.vec2, p: wp.vec3, f
 def object_albedo(look: Look, w: int, label: int, mat: wp.vec3) -> wp.vec3:
     """A worm or magnet surface's albedo at material coordinates ``mat``: paper texture on the sheet, the EPM's
     painted half."""
-    albedo = look.albedo[w % look.albedo.shape[0], label]
+    off = noise_offset(look, w)
+    return textured_albedo(look.albedo[w % look.albedo.shape[0], label], label, mat,
+                           look.paper_tex[w % look.paper_tex.shape[0]], look.noise, off[0], off[1])
+
+
+@wp.func
+def textured_albedo(base: wp.vec3, label: int, mat: wp.vec3, pt: wp.vec2, noise: wp.array2d(dtype=float),
+                    off_u: float, off_v: float) -> wp.vec3:
+    """:func:`object_albedo` from the world's values: ``base`` albedo of ``label``, paper texture amplitudes ``pt``,
+    noise offset (``off_u``, ``off_v``) [texels]."""
+    albedo = base
     if label <= SEG_WORM_LAST:
         # paper: short fibres (noise stretched along the sheet's x) over a soft mottle; material coordinates
         # are the rest positions [m], so the texture sticks to the sheet as it folds
-        pt = look.paper_tex[w % look.paper_tex.shape[0]]
-        off = noise_offset(look, w)
         sw = mat[1] + mat[2]
-        fib = noise_tex(look.noise, mat[0] * 2500.0 + off[1], sw * 600.0 + off[0])
-        mot = noise_tex(look.noise, mat[0] * 180.0 - off[0], (mat[1] - mat[2]) * 180.0 + off[1])
-        albedo = albedo * (1.0 + pt[0] * (fib - 0.5) + pt[1] * (mot - 0.5))
+        fib = noise_tex(noise, mat[0] * 2500.0 + off_v, sw * 600.0 + off_u)
+        mot = noise_tex(noise, mat[0] * 180.0 - off_u, (mat[1] - mat[2]) * 180.0 + off_v)
+        albedo = base * (1.0 + pt[0] * (fib - 0.5) + pt[1] * (mot - 0.5))
     elif label == SEG_EPM:
         if mat[2] > 0.0:
-            albedo = albedo * 0.55  # a painted north half breaks the bar's 180 degree symmetry
+            albedo = base * 0.55  # a painted north half breaks the bar's 180 degree symmetry
     return albedo
 
 
@@ -686,98 +726,182 @@ def shade_hit(look: Look, L: Lights, w: int, first: int, label: int, z: float, m
     return color, nrm
 
 
-@wp.kernel
-def resolve_shade(
-    # Model:
-    triangles: wp.array(dtype=wp.vec3i),
-    tri_label: wp.array(dtype=wp.int32),
-    look: Look,
-    lights: Lights,
-    # Data in:
-    vertices: wp.array2d(dtype=wp.vec3),
-    texcoords: wp.array2d(dtype=wp.vec3),
-    image_world: wp.array(dtype=wp.int32),
-    cam_rot: wp.array(dtype=wp.mat33),
-    cam_trans: wp.array(dtype=wp.vec3),
-    cam_intr: wp.array(dtype=wp.vec4),
-    zkey: wp.array2d(dtype=wp.int64),
-    width: int,
-    height: int,
-    span: int,
-    write_normals: int,
-    cam_gain: wp.array(dtype=wp.vec3),
-    # Data out:
-    rgb: wp.array2d(dtype=wp.vec3ub),
-    depth: wp.array2d(dtype=float),
-    seg: wp.array2d(dtype=wp.uint8),
-    normals: wp.array2d(dtype=wp.vec3),
-):
-    """Resolve the nearest surface and shade ``span`` consecutive pixels of one row of one image.
+@wp.struct
+class PlainWorld:
+    """One world's values the plain path (:func:`make_resolve_shade`) loads once per thread: its lights (ambient,
+    sun, the one lamp), floor (checker ``ft``, ``inv_tile`` = 1 / tile [m], second colour ``fc2``, ``floor_irr``:
+    the ambient + sun irradiance of its constant normal ``fn``), paper texture ``pt`` and noise offset [texels]."""
 
-    Launched as ``(N, height, ceil(width / span))``: span = 1 on CUDA (a thread per pixel), span = width on CPU (a
-    thread per row, so per-row setup is paid once and the per-thread launch overhead vanishes). Same code either way.
+    amb: wp.vec3
+    sd: wp.vec3
+    sc: wp.vec3
+    lp: wp.vec3
+    lpw: wp.vec3
+    fn: wp.vec3
+    ft: wp.vec4
+    inv_tile: float
+    fc2: wp.vec3
+    floor_irr: wp.vec3
+    pt: wp.vec2
+    off_u: float
+    off_v: float
 
-    Args (beyond :func:`raster_triangles`'s):
-        look: per-world surfaces (:class:`Look`). lights: lights and shadow maps (:class:`Lights`).
-        texcoords: material coordinates [m] of every scene vertex (rest position for the sheet, magnet-local for
-            magnets), shape (W, Vs); procedural textures are functions of them, so they move with the surface.
-        zkey: keys written by the raster pass, shape (N, H * W).
-        span: pixels per thread along a row.
-        write_normals: 1 to write camera-frame unit normals (facing the camera; 0 for background), 0 to skip.
-        cam_gain: linear RGB gain of every image (exposure x white balance, applied before the display encoding),
-            shape (N,).
-        rgb: (N, H * W) vec3ub. depth: camera z [m], 0 for background, (N, H * W). seg: ids, (N, H * W).
-        normals: (N, H * W) vec3, or a 1-element dummy when write_normals is 0.
-    """
-    img, y, xb = wp.tid()
-    x_begin = xb * span
-    x_end = wp.min(x_begin + span, width)
-    w = image_world[img]
-    R = cam_rot[img]
-    t = cam_trans[img]
-    k = cam_intr[img]
-    Rt = wp.transpose(R)
-    eye = -(Rt * t)
-    py = float(y)
-    wf = w % look.floor_normal.shape[0]
-    bg = wp.lerp(look.bg_top[w % look.bg_top.shape[0]], look.bg_bottom[w % look.bg_bottom.shape[0]],
-                 py / float(height))
-    first = int(-1)
-    if lights.shadows != 0:
-        first = lights.map_first[w]
-    row = y * width
-    gain = cam_gain[img]
-    transmit = look.floor_transmit[w % look.floor_transmit.shape[0]]
-    # along a row the world ray is affine in x: d(x) = d0 + x * dx, and so are its dot products with the floor axes
-    d0 = Rt * wp.vec3(-k[2] / k[0], (py - k[3]) / k[1], 1.0)
-    dx = Rt * wp.vec3(1.0 / k[0], 0.0, 0.0)
-    fr = floor_row(look.floor_normal[wf], look.floor_axis[w % look.floor_axis.shape[0]],
-                   look.floor_origin[w % look.floor_origin.shape[0]], look.floor_half[w % look.floor_half.shape[0]],
-                   eye, d0, dx)
-    for x in range(x_begin, x_end):
-        px = float(x)
-        d_world = d0 + px * dx  # a point at camera depth z lies at eye + z * d_world
-        mz, mlabel, n_world, mmat = mesh_surface(zkey[img, row + x], triangles, tri_label, vertices, texcoords, w,
-                                                 R, t, k, px, py, eye, d_world)
-        best_z, label, mat = nearer_floor(fr, px, mz, mlabel, mmat)
-        color, nrm = shade_hit(look, lights, w, first, label, best_z, mat, n_world, eye, d_world, bg)
-        if label != mlabel and mlabel != SEG_BACKGROUND and transmit > 0.0:
-            # a clear plate (render.plate_materials: acrylic): the mesh under it (the EPM) shows through
-            under, _n = shade_hit(look, lights, w, first, mlabel, mz, mmat, n_world, eye, d_world, bg)
-            color = wp.lerp(color, under, transmit)
-        if label == SEG_BACKGROUND:
-            best_z = 0.0
-        if write_normals != 0:
-            if label == SEG_BACKGROUND:
-                normals[img, row + x] = wp.vec3(0.0)
+
+@wp.func
+def plain_world(look: Look, L: Lights, w: int) -> PlainWorld:
+    """World ``w``'s :class:`PlainWorld` (one lamp: light 0)."""
+    pw = PlainWorld()
+    pw.amb = L.ambient[w % L.ambient.shape[0]]
+    pw.sd = L.sun_dir[w % L.sun_dir.shape[0]]
+    pw.sc = L.sun_color[w % L.sun_color.shape[0]]
+    pw.lp = L.pos[w % L.pos.shape[0], 0]
+    pw.lpw = L.power[w % L.power.shape[0], 0]
+    pw.fn = look.floor_normal[w % look.floor_normal.shape[0]]
+    pw.ft = look.floor_tex[w % look.floor_tex.shape[0]]
+    pw.inv_tile = 1.0 / pw.ft[0]
+    pw.fc2 = look.floor_color2[w % look.floor_color2.shape[0]]
+    pw.floor_irr = pw.amb + pw.sc * wp.max(wp.dot(pw.fn, pw.sd), 0.0)
+    pw.pt = look.paper_tex[w % look.paper_tex.shape[0]]
+    off = noise_offset(look, w)
+    pw.off_u = off[0]
+    pw.off_v = off[1]
+    return pw
+
+
+def make_resolve_shade(plain: bool):
+    """The resolve/shade kernel (:data:`resolve_shade`); ``plain`` compiles the path of the default look only.
+
+    The general kernel shades every issue-24 option (shadow maps, any number of point lights, the paper BSDF, glossy
+    and clear plates) through branches and loops read per pixel. The plain kernel (``plain=True``,
+    :data:`resolve_shade_plain`) serves batches that use none of them (no shadows, exactly one lit lamp per world,
+    Lambert paper, matte opaque floor: :meth:`Renderer` checks the arrays): it loads the world's values once per
+    thread (:class:`PlainWorld`) and shades with one lamp and no shadow lookups, as before issue 24 -- the same float
+    operations as the general kernel in that case, so the same bits, at 3.6x fewer CPU cycles per image
+    (docs/render.md)."""
+
+    @wp.kernel(name="resolve_shade_plain" if plain else "resolve_shade")
+    def resolve_shade(
+        # Model:
+        triangles: wp.array(dtype=wp.vec3i),
+        tri_label: wp.array(dtype=wp.int32),
+        look: Look,
+        lights: Lights,
+        # Data in:
+        vertices: wp.array2d(dtype=wp.vec3),
+        texcoords: wp.array2d(dtype=wp.vec3),
+        image_world: wp.array(dtype=wp.int32),
+        cam_rot: wp.array(dtype=wp.mat33),
+        cam_trans: wp.array(dtype=wp.vec3),
+        cam_intr: wp.array(dtype=wp.vec4),
+        zkey: wp.array2d(dtype=wp.int64),
+        width: int,
+        height: int,
+        span: int,
+        write_normals: int,
+        cam_gain: wp.array(dtype=wp.vec3),
+        # Data out:
+        rgb: wp.array2d(dtype=wp.vec3ub),
+        depth: wp.array2d(dtype=float),
+        seg: wp.array2d(dtype=wp.uint8),
+        normals: wp.array2d(dtype=wp.vec3),
+    ):
+        """Resolve the nearest surface and shade ``span`` consecutive pixels of one row of one image.
+
+        Launched as ``(N, height, ceil(width / span))``: span = 1 on CUDA (a thread per pixel), span = width on CPU
+        (a thread per row, so per-row setup is paid once and the per-thread launch overhead vanishes).
+
+        Args (beyond :func:`raster_triangles`'s):
+            look: per-world surfaces (:class:`Look`). lights: lights and shadow maps (:class:`Lights`).
+            texcoords: material coordinates [m] of every scene vertex (rest position for the sheet, magnet-local
+                for magnets), shape (W, Vs); procedural textures are functions of them, so they move with the surface.
+            zkey: keys written by the raster pass, shape (N, H * W).
+            span: pixels per thread along a row.
+            write_normals: 1 to write camera-frame unit normals (facing the camera; 0 for background), 0 to skip.
+            cam_gain: linear RGB gain of every image (exposure x white balance, applied before the display
+                encoding), shape (N,).
+            rgb: (N, H * W) vec3ub. depth: camera z [m], 0 for background, (N, H * W). seg: ids, (N, H * W).
+            normals: (N, H * W) vec3, or a 1-element dummy when write_normals is 0.
+        """
+        img, y, xb = wp.tid()
+        x_begin = xb * span
+        x_end = wp.min(x_begin + span, width)
+        w = image_world[img]
+        R = cam_rot[img]
+        t = cam_trans[img]
+        k = cam_intr[img]
+        Rt = wp.transpose(R)
+        eye = -(Rt * t)
+        py = float(y)
+        wf = w % look.floor_normal.shape[0]
+        bg = wp.lerp(look.bg_top[w % look.bg_top.shape[0]], look.bg_bottom[w % look.bg_bottom.shape[0]],
+                     py / float(height))
+        first = int(-1)
+        if lights.shadows != 0:
+            first = lights.map_first[w]
+        row = y * width
+        gain = cam_gain[img]
+        transmit = look.floor_transmit[w % look.floor_transmit.shape[0]]
+        pw = plain_world(look, lights, w)
+        # along a row the world ray is affine in x: d(x) = d0 + x * dx, and so are its dot products with the floor
+        d0 = Rt * wp.vec3(-k[2] / k[0], (py - k[3]) / k[1], 1.0)
+        dx = Rt * wp.vec3(1.0 / k[0], 0.0, 0.0)
+        fr = floor_row(look.floor_normal[wf], look.floor_axis[w % look.floor_axis.shape[0]],
+                       look.floor_origin[w % look.floor_origin.shape[0]],
+                       look.floor_half[w % look.floor_half.shape[0]], eye, d0, dx)
+        for x in range(x_begin, x_end):
+            px = float(x)
+            d_world = d0 + px * dx  # a point at camera depth z lies at eye + z * d_world
+            mz, mlabel, n_world, mmat = mesh_surface(zkey[img, row + x], triangles, tri_label, vertices, texcoords,
+                                                     w, R, t, k, px, py, eye, d_world)
+            best_z, label, mat = nearer_floor(fr, px, mz, mlabel, mmat)
+            color = bg
+            nrm = wp.vec3(0.0)
+            if wp.static(plain):
+                if label == SEG_FLOOR:
+                    nrm = pw.fn
+                    p = eye + best_z * d_world
+                    to_lamp = pw.lp - p
+                    inv_r2 = 1.0 / wp.max(wp.dot(to_lamp, to_lamp), 1.0e-6)
+                    ndp = wp.max(wp.dot(pw.fn, to_lamp), 0.0) * wp.sqrt(inv_r2)
+                    albedo = floor_albedo(look.albedo[w % look.albedo.shape[0], SEG_FLOOR], mat, pw.inv_tile, pw.ft,
+                                          pw.fc2, look.noise, pw.off_u, pw.off_v)
+                    color = wp.cw_mul(albedo, pw.floor_irr + pw.lpw * (ndp * inv_r2))
+                elif label != SEG_BACKGROUND:
+                    nrm = n_world
+                    if wp.dot(n_world, -d_world) < 0.0:
+                        nrm = -n_world  # double-sided sheet: light the side the camera sees
+                    base = textured_albedo(look.albedo[w % look.albedo.shape[0], label], label, mat, pw.pt,
+                                           look.noise, pw.off_u, pw.off_v)
+                    color = light_surface_plain(base, look.specular[w % look.specular.shape[0], label],
+                                                eye + best_z * d_world, nrm, -d_world, pw.amb, pw.sd, pw.sc, pw.lp,
+                                                pw.lpw)
             else:
-                normals[img, row + x] = R * nrm
-        color = wp.cw_mul(color, gain)
-        rgb[img, row + x] = wp.vec3ub(to_srgb8(color[0]), to_srgb8(color[1]), to_srgb8(color[2]))
-        depth[img, row + x] = best_z
-        if label > SEG_EPM:
-            label = SEG_FLOOR  # a distractor object (its own albedo row): static scene, the floor's id
-        seg[img, row + x] = wp.uint8(label)
+                color, nrm = shade_hit(look, lights, w, first, label, best_z, mat, n_world, eye, d_world, bg)
+                if label != mlabel and mlabel != SEG_BACKGROUND and transmit > 0.0:
+                    # a clear plate (render.plate_materials: acrylic): the mesh under it (the EPM) shows through
+                    under, _n = shade_hit(look, lights, w, first, mlabel, mz, mmat, n_world, eye, d_world, bg)
+                    color = wp.lerp(color, under, transmit)
+            if label == SEG_BACKGROUND:
+                best_z = 0.0
+            if write_normals != 0:
+                if label == SEG_BACKGROUND:
+                    normals[img, row + x] = wp.vec3(0.0)
+                else:
+                    normals[img, row + x] = R * nrm
+            color = wp.cw_mul(color, gain)
+            rgb[img, row + x] = wp.vec3ub(to_srgb8(color[0]), to_srgb8(color[1]), to_srgb8(color[2]))
+            depth[img, row + x] = best_z
+            if label > SEG_EPM:
+                label = SEG_FLOOR  # a distractor object (its own albedo row): static scene, the floor's id
+            seg[img, row + x] = wp.uint8(label)
+
+    return resolve_shade
+
+
+resolve_shade = make_resolve_shade(False)
+"""Resolve the nearest surface of every pixel and shade it, every option (:func:`make_resolve_shade`)."""
+resolve_shade_plain = make_resolve_shade(True)
+"""The same for batches without any per-pixel shading option: the default look's path, bit for bit."""
 
 
 @wp.kernel

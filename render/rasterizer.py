@@ -59,6 +59,18 @@ def bake_noise(size: int = 128, seed: int = 20240611) -> np.ndarray:
     return out.astype(np.float32)
 
 
+def plain_look(a) -> bool:
+    """True when appearance ``a`` uses no per-pixel shading option of issue 24, so that the plain resolve kernel
+    (:func:`raster_kernels.make_resolve_shade`) renders it bit for bit: exactly one point light per world and it lit,
+    no paper BSDF, no clear (transmitting) or glossy floor. Judged on the float32 values the kernels read."""
+    f32 = lambda v: np.asarray(v, dtype=np.float32)  # noqa: E731
+    power, pb = f32(a.light_power), f32(a.paper_bsdf)
+    return bool(power.shape[1] == 1 and np.all(np.any(power != 0, axis=-1))
+                and not np.any((pb[..., 0] > 0) | (pb[..., 1] > 0) | (pb[..., 3] > 0))
+                and not np.any(f32(a.floor_transmit) > 0)
+                and not np.any(f32(a.specular)[:, rk.SEG_FLOOR, 0] > 0))
+
+
 class Renderer:
     """Off-screen z-buffer rasterizer for batches of (world, camera) images, on any Warp device."""
 
@@ -135,6 +147,7 @@ class Renderer:
             "vertices": _vec_array(scene.vertices, wp.vec3, d),
             "texcoords": _vec_array(scene.texcoords, wp.vec3, d),
             "look": look, "light_arrays": light_arrays, "lights": self._lights(light_arrays, None), "scene": scene,
+            "shade": rk.resolve_shade_plain if not self.shadows and plain_look(a) else rk.resolve_shade,
         }
 
     def _get_buffers(self, n: int, normals: bool, slot: int = 0) -> dict:
@@ -352,7 +365,7 @@ class Renderer:
                   outputs=[b["zkey"], b["mask"]])
         # CPU: a thread per image row (per-thread overhead and per-row setup paid once); GPU: a thread per pixel
         span = self.width if d.is_cpu else 1
-        wp.launch(rk.resolve_shade, dim=(n, self.height, (self.width + span - 1) // span), device=d,
+        wp.launch(s["shade"], dim=(n, self.height, (self.width + span - 1) // span), device=d,
                   inputs=[s["triangles"], s["tri_label"], s["look"], lights, s["vertices"], s["texcoords"], *common,
                           b["zkey"], self.width, self.height, span, int(normals), b["cam_gain"]],
                   outputs=[b["rgb"], b["depth"], b["seg"], b["normals"]])
