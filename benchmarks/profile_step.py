@@ -16,7 +16,9 @@ Two extra measurements give the candidate levers a size:
 Usage::
 
     python benchmarks/profile_step.py [--worlds 1 64] [--gait peristaltic omega inchworm] [--duration 1.0]
-        [--out benchmarks/results/profile_step.json]
+        [--geometric-stiffness] [--out benchmarks/results/profile_step.json]
+    python benchmarks/profile_step.py --alternate REV --worlds 64 --gait peristaltic omega inchworm [--pairs 3]
+        [--geometric-stiffness]   # the code at REV against this tree, alternated run by run
 
 Prints one table per world count and writes the JSON (rows + metadata).
 """
@@ -87,7 +89,7 @@ def launch_timers():
 
 
 def _build(W: int, magnet_model: str, device: str, newton: int | None = None, newton_tol: float | None = None,
-           gait: str = "peristaltic"):
+           gait: str = "peristaltic", sim_kw: dict | None = None):
     """The gait preset's model and simulator (default peristaltic); no CUDA graph (each launch must be seen to be timed: the
     profile's whole-run figures on CUDA are therefore without graph replay, see ``benchmarks/run.py`` for those)."""
     from warpworm.physics import gaits
@@ -96,6 +98,7 @@ def _build(W: int, magnet_model: str, device: str, newton: int | None = None, ne
 
     model = Model.from_params(gaits.preset_params(gait, magnet_model=magnet_model), W, device)
     kw = {} if newton is None else {"newton": newton}
+    kw.update(sim_kw or {})
     if newton_tol is not None:
         kw["newton_tol"] = newton_tol
     sim = Simulator(model, dt=gaits.DEFAULT_DT, substeps=gaits.DEFAULT_SUBSTEPS, use_graph=False, **kw)
@@ -103,7 +106,7 @@ def _build(W: int, magnet_model: str, device: str, newton: int | None = None, ne
 
 
 def profile_run(W: int, *, duration: float, settle: float, skip: float = 1.0, magnet_model: str = "analytic",
-                device: str = "cpu", gait: str = "peristaltic") -> dict:
+                device: str = "cpu", gait: str = "peristaltic", sim_kw: dict | None = None) -> dict:
     """Settle, ``skip`` [s] of the ``gait`` preset untimed (its first cycle, where the worm is pulled in to the
     EPM's line and the Newton iteration is at its easiest), then ``duration`` [s] with every launch timed.
 
@@ -115,7 +118,7 @@ def profile_run(W: int, *, duration: float, settle: float, skip: float = 1.0, ma
     """
     import warp as wp
 
-    model, sim = _build(W, magnet_model, device, gait=gait)
+    model, sim = _build(W, magnet_model, device, gait=gait, sim_kw=sim_kw)
     state = sim.initial_state()
     sim.step(state, 1, epm=False)  # compile every kernel before anything is timed
     sim.settle(state, settle)
@@ -210,6 +213,76 @@ def _table(rows: list[dict], cols: list[str]) -> str:
     return table([{c: r.get(c, "") for c in cols} for r in rows])
 
 
+ONE_RUN = r"""
+import json, sys, time
+import numpy as np
+from warpworm import quiet_warp
+quiet_warp()
+import warp as wp
+from warpworm.physics import gaits
+from warpworm.sim.model import Model
+from warpworm.sim.simulator import Simulator
+gait, W, kw = sys.argv[1], int(sys.argv[2]), json.loads(sys.argv[3])
+model = Model.from_params(gaits.preset_params(gait, magnet_model="analytic"), W, "cpu")
+sim = Simulator(model, dt=gaits.DEFAULT_DT, substeps=gaits.DEFAULT_SUBSTEPS, **kw)
+st = sim.initial_state()
+sim.settle(st, 0.2)
+n = int(round(1.0 / sim.dt))
+sim.step(st, n)
+sim.newton_stats(reset=True)
+c0 = time.thread_time()
+sim.step(st, n)
+wp.synchronize()
+cpu = time.thread_time() - c0
+ns = sim.newton_stats()
+print(json.dumps({"rate": W * n * sim.dt / cpu, "steps": float(np.mean(ns["steps"])) / (n * sim.substeps),
+                  "factors": float(np.mean(ns["factors"])) / (n * sim.substeps),
+                  "unstable": int(st.unstable.numpy().astype(bool).sum())}))
+"""
+"""One timed gait run in a fresh process (argv: gait, W, Simulator kwargs as JSON): settle 0.2 s, the first cycle
+untimed, the second timed by the thread's CPU time. Prints {rate (worm-s per CPU-s), steps and factors (Newton, per
+substep), unstable}. Only API the code before also has, so that both sides of :func:`alternate` run it."""
+
+
+def source_tree(rev: str, into: Path) -> Path:
+    """The committed tree ``rev`` of this repository as an importable folder (``git archive``; ``warpworm/kernels``
+    and ``warpworm/render`` linked to the top-level folders they install from)."""
+    import subprocess
+
+    into.mkdir(parents=True, exist_ok=True)
+    archive = subprocess.run(["git", "-C", str(HERE.parent), "archive", rev], check=True, capture_output=True).stdout
+    subprocess.run(["tar", "-x", "-C", str(into)], input=archive, check=True)
+    for name in ("kernels", "render"):
+        (into / "warpworm" / name).symlink_to(Path("..") / name)
+    return into
+
+
+def alternate(before: str, gaits_: list[str], W: int, pairs: int, after_kw: dict) -> list[dict]:
+    """Gait rate of the code at ``before`` (a git revision) and of this tree (with ``after_kw`` Simulator kwargs),
+    alternated run by run (before, after, before, ... per gait and pair), each run a fresh process: this shared
+    machine's speed drifts by 1.5× over hours, so only runs next to each other compare."""
+    import os
+    import subprocess
+    import tempfile
+
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        trees = {"before": source_tree(before, Path(tmp) / "before"), "after": HERE.parent}
+        for pair in range(1, pairs + 1):
+            for gait in gaits_:
+                for side in ("before", "after"):
+                    env = dict(os.environ, PYTHONPATH=str(trees[side]))
+                    kw = after_kw if side == "after" else {}
+                    out = subprocess.run([sys.executable, "-c", ONE_RUN, gait, str(W), json.dumps(kw)], env=env,
+                                         cwd=tmp, check=True, capture_output=True, text=True).stdout
+                    r = dict(json.loads(out.strip().splitlines()[-1]), pair=pair, gait=gait, side=side)
+                    rows.append(r)
+                    print(f"pair {pair} {gait:12s} {side:6s} {r['rate']:6.1f} worm-s per CPU-s, {r['steps']:.3f} "
+                          f"Newton steps per substep ({r['factors']:.3f} factored), {r['unstable']} unstable",
+                          flush=True)
+    return rows
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--worlds", type=int, nargs="+", default=[1, 64], help="world counts (default 1 64)")
@@ -223,7 +296,20 @@ def main(argv=None) -> int:
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--no-levers", action="store_true", help="skip the Newton-count and launch-floor measurements")
     ap.add_argument("--out", default=str(HERE / "results" / "profile_step.json"), help="JSON path")
+    ap.add_argument("--geometric-stiffness", action="store_true",
+                    help="Simulator(geometric_stiffness=True) (with --alternate: on the tree's side only)")
+    ap.add_argument("--alternate", metavar="REV", help="instead of the profile: the gait rate (second cycle, CPU "
+                    "time) of git revision REV and of this tree, alternated (one W: the first --worlds)")
+    ap.add_argument("--pairs", type=int, default=3, help="with --alternate: before/after pairs per gait (default 3)")
     args = ap.parse_args(argv)
+    if args.alternate:
+        after_kw = {"geometric_stiffness": True} if args.geometric_stiffness else {}
+        rows = alternate(args.alternate, args.gait, args.worlds[0], args.pairs, after_kw)
+        out = Path(args.out)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps({"alternate": args.alternate, "after_kw": after_kw, "rows": rows}, indent=1))
+        print(f"wrote {out}")
+        return 0
     for w in args.worlds:
         if w < 1:
             ap.error(f"--worlds: expected counts >= 1, got {w}")
@@ -241,7 +327,8 @@ def main(argv=None) -> int:
     runs = []
     for gait, W in [(g, w) for g in args.gait for w in args.worlds]:
         r = profile_run(W, duration=args.duration, settle=args.settle, skip=args.skip, magnet_model=args.magnet_model,
-                        device=device, gait=gait)
+                        device=device, gait=gait,
+                        sim_kw={"geometric_stiffness": True} if args.geometric_stiffness else None)
         runs.append(r)
         print(f"\n== {args.magnet_model} magnets, {gait}, W = {W}, {r['steps']} steps of {1e3 * r['dt_s']:g} ms "
               f"({r['substeps']} substeps, <= {r['newton']} Newton, {r['newton_steps_per_substep']:.2f} on average, "
