@@ -842,6 +842,8 @@ def make_resolve_shade(plain: bool):
         gain = cam_gain[img]
         transmit = look.floor_transmit[w % look.floor_transmit.shape[0]]
         pw = plain_world(look, lights, w)
+        wa = w % look.albedo.shape[0]
+        ws = w % look.specular.shape[0]
         # along a row the world ray is affine in x: d(x) = d0 + x * dx, and so are its dot products with the floor
         d0 = Rt * wp.vec3(-k[2] / k[0], (py - k[3]) / k[1], 1.0)
         dx = Rt * wp.vec3(1.0 / k[0], 0.0, 0.0)
@@ -863,16 +865,16 @@ def make_resolve_shade(plain: bool):
                     to_lamp = pw.lp - p
                     inv_r2 = 1.0 / wp.max(wp.dot(to_lamp, to_lamp), 1.0e-6)
                     ndp = wp.max(wp.dot(pw.fn, to_lamp), 0.0) * wp.sqrt(inv_r2)
-                    albedo = floor_albedo(look.albedo[w % look.albedo.shape[0], SEG_FLOOR], mat, pw.inv_tile, pw.ft,
+                    albedo = floor_albedo(look.albedo[wa, SEG_FLOOR], mat, pw.inv_tile, pw.ft,
                                           pw.fc2, look.noise, pw.off_u, pw.off_v)
                     color = wp.cw_mul(albedo, pw.floor_irr + pw.lpw * (ndp * inv_r2))
                 elif label != SEG_BACKGROUND:
                     nrm = n_world
                     if wp.dot(n_world, -d_world) < 0.0:
                         nrm = -n_world  # double-sided sheet: light the side the camera sees
-                    base = textured_albedo(look.albedo[w % look.albedo.shape[0], label], label, mat, pw.pt,
+                    base = textured_albedo(look.albedo[wa, label], label, mat, pw.pt,
                                            look.noise, pw.off_u, pw.off_v)
-                    color = light_surface_plain(base, look.specular[w % look.specular.shape[0], label],
+                    color = light_surface_plain(base, look.specular[ws, label],
                                                 eye + best_z * d_world, nrm, -d_world, pw.amb, pw.sd, pw.sc, pw.lp,
                                                 pw.lpw)
             else:
