@@ -61,6 +61,18 @@ _EMPTY = wp.constant(wp.int64(EMPTY_KEY))
 
 
 @wp.func
+def wrow(w: int, n: int) -> int:
+    """Row ``w % n`` of a per-world array of ``n`` rows for a world ``w >= 0``, without the integer division in the
+    usual cases (n > w: an array per world; n == 1: one row shared): a division costs more than the rest of a plain
+    pixel's shading, and the general kernel read ~15 world rows per pixel."""
+    if w < n:
+        return w
+    if n == 1:
+        return 0
+    return w % n
+
+
+@wp.func
 def edge_fn(ax: float, ay: float, bx: float, by: float, px: float, py: float) -> float:
     """Edge function of directed edge a->b at p, positive on the interior side of a (y down) positive-area triangle."""
     return (bx - ax) * (py - ay) - (by - ay) * (px - ax)
@@ -248,7 +260,7 @@ def raster_triangles(
 
 @wp.struct
 class Lights:
-    """Every light of every world (arrays read as ``a[w % a.shape[0]]``) and, with ``shadows`` = 1, their shadow maps.
+    """Every light of every world (arrays read as ``a[wrow(w, a.shape[0])]``) and, with ``shadows`` = 1, their shadow maps.
 
     ``pos``, ``power``, ``size``: point lights, shape (Wl, L): position [m], irradiance at 1 m (falls as 1/r²; zero
     pads a world with fewer lights), radius [m]. ``sun_dir`` (unit, toward the light), ``sun_color`` (irradiance),
@@ -406,11 +418,11 @@ def light_surface(albedo: wp.vec3, spec: wp.vec2, p: wp.vec3, n: wp.vec3, to_eye
     Schlick's approximation of the power, so matte surfaces pay for Lambert only. ``first``: the world's first
     shadow map (< 0: unshadowed).
     """
-    sd = L.sun_dir[w % L.sun_dir.shape[0]]
-    sc = L.sun_color[w % L.sun_color.shape[0]]
-    wl = w % L.pos.shape[0]
+    sd = L.sun_dir[wrow(w, L.sun_dir.shape[0])]
+    sc = L.sun_color[wrow(w, L.sun_color.shape[0])]
+    wl = wrow(w, L.pos.shape[0])
     ndl = wp.max(wp.dot(n, sd), 0.0)
-    irr = L.ambient[w % L.ambient.shape[0]] + sc * shadow_factor(L, first, 0, ndl, p, n)
+    irr = L.ambient[wrow(w, L.ambient.shape[0])] + sc * shadow_factor(L, first, 0, ndl, p, n)
     for i in range(L.pos.shape[1]):
         if is_dark(L, wl, i):
             continue
@@ -458,13 +470,13 @@ def paper_surface(albedo: wp.vec3, p: wp.vec3, n: wp.vec3, to_eye: wp.vec3, L: L
     v = wp.normalize(to_eye)
     ndv = wp.max(wp.dot(n, v), 1.0e-4)
     sky = 0.5 * (1.0 + n[2])
-    color = wp.cw_mul(albedo, L.ambient[w % L.ambient.shape[0]]) * (pb[3] + (1.0 - pb[3]) * sky)
-    sd = L.sun_dir[w % L.sun_dir.shape[0]]
+    color = wp.cw_mul(albedo, L.ambient[wrow(w, L.ambient.shape[0])]) * (pb[3] + (1.0 - pb[3]) * sky)
+    sd = L.sun_dir[wrow(w, L.sun_dir.shape[0])]
     vis = float(1.0)
     if wp.dot(n, sd) + pb[0] > 0.0:
         vis = shadow_factor(L, first, 0, 1.0, p, n)
-    color = color + paper_light(albedo, n, v, ndv, sd, L.sun_color[w % L.sun_color.shape[0]], vis, pb)
-    wl = w % L.pos.shape[0]
+    color = color + paper_light(albedo, n, v, ndv, sd, L.sun_color[wrow(w, L.sun_color.shape[0])], vis, pb)
+    wl = wrow(w, L.pos.shape[0])
     for i in range(L.pos.shape[1]):
         if is_dark(L, wl, i):
             continue
@@ -578,7 +590,7 @@ def nearer_floor(fr: FloorRow, px: float, best_z: float, label: int, mat: wp.vec
 
 @wp.struct
 class Look:
-    """Per-world surfaces (arrays read as ``a[w % a.shape[0]]``): ``albedo`` (linear RGB) and ``specular``
+    """Per-world surfaces (arrays read as ``a[wrow(w, a.shape[0])]``): ``albedo`` (linear RGB) and ``specular``
     (strength, Blinn exponent) per segmentation id, (Wa, 11); the floor square: unit ``floor_normal``, in-plane
     ``floor_axis`` (+u), centre ``floor_origin`` [m], ``floor_half`` [m]; ``floor_tex`` (tile [m], checker contrast,
     grain amplitude, grain frequency [1/m]); ``floor_color2``; ``paper_tex`` (fibre, mottle amplitudes);
@@ -606,7 +618,7 @@ class Look:
 @wp.func
 def noise_offset(look: Look, w: int) -> wp.vec2:
     """World ``w``'s offset [texels] into the shared noise texture, from its texture seed."""
-    seed0 = look.tex_seed[w % look.tex_seed.shape[0]]
+    seed0 = look.tex_seed[wrow(w, look.tex_seed.shape[0])]
     return wp.vec2(float(seed0 & 4095) * 0.03125, float((seed0 >> 12) & 4095) * 0.03125)
 
 
@@ -628,15 +640,15 @@ def floor_albedo(base: wp.vec3, mat: wp.vec3, inv_tile: float, ft: wp.vec4, fc2:
 def shade_floor(look: Look, L: Lights, w: int, first: int, mat: wp.vec3, p: wp.vec3, to_eye: wp.vec3) -> wp.vec3:
     """Checker + grain in floor coordinates [m] (``mat``): ambient + sun + every point light at ``p``, and, for a
     glossy plate (floor specular strength > 0), their highlights seen along ``to_eye``."""
-    fn = look.floor_normal[w % look.floor_normal.shape[0]]
-    ft = look.floor_tex[w % look.floor_tex.shape[0]]
+    fn = look.floor_normal[wrow(w, look.floor_normal.shape[0])]
+    ft = look.floor_tex[wrow(w, look.floor_tex.shape[0])]
     off = noise_offset(look, w)
-    albedo = floor_albedo(look.albedo[w % look.albedo.shape[0], SEG_FLOOR], mat, 1.0 / ft[0], ft,
-                          look.floor_color2[w % look.floor_color2.shape[0]], look.noise, off[0], off[1])
-    sc = L.sun_color[w % L.sun_color.shape[0]]
-    ndl = wp.max(wp.dot(fn, L.sun_dir[w % L.sun_dir.shape[0]]), 0.0)
-    irr = L.ambient[w % L.ambient.shape[0]] + sc * shadow_factor(L, first, 0, ndl, p, fn)
-    wl = w % L.pos.shape[0]
+    albedo = floor_albedo(look.albedo[wrow(w, look.albedo.shape[0]), SEG_FLOOR], mat, 1.0 / ft[0], ft,
+                          look.floor_color2[wrow(w, look.floor_color2.shape[0])], look.noise, off[0], off[1])
+    sc = L.sun_color[wrow(w, L.sun_color.shape[0])]
+    ndl = wp.max(wp.dot(fn, L.sun_dir[wrow(w, L.sun_dir.shape[0])]), 0.0)
+    irr = L.ambient[wrow(w, L.ambient.shape[0])] + sc * shadow_factor(L, first, 0, ndl, p, fn)
+    wl = wrow(w, L.pos.shape[0])
     for i in range(L.pos.shape[1]):
         if is_dark(L, wl, i):
             continue
@@ -645,7 +657,7 @@ def shade_floor(look: Look, L: Lights, w: int, first: int, mat: wp.vec3, p: wp.v
         ndp = wp.max(wp.dot(fn, to_lamp), 0.0) * wp.sqrt(inv_r2)
         irr = irr + L.power[wl, i] * (shadow_factor(L, first, 1 + i, ndp, p, fn) * inv_r2)
     color = wp.cw_mul(albedo, irr)
-    spec = look.specular[w % look.specular.shape[0], SEG_FLOOR]
+    spec = look.specular[wrow(w, look.specular.shape[0]), SEG_FLOOR]
     if spec[0] > 0.0:  # a glossy plate (render.plate_materials): Blinn-Phong highlights of every light
         color = color + floor_highlights(L, w, first, spec, p, fn, to_eye)
     return color
@@ -657,13 +669,13 @@ def floor_highlights(L: Lights, w: int, first: int, spec: wp.vec2, p: wp.vec3, f
     """Blinn-Phong highlights (strength, exponent ``spec``) of the sun and every point light on the floor at ``p``
     seen along ``to_eye``, shadowed like the diffuse term."""
     v = wp.normalize(to_eye)
-    sd = L.sun_dir[w % L.sun_dir.shape[0]]
+    sd = L.sun_dir[wrow(w, L.sun_dir.shape[0])]
     out = wp.vec3(0.0)
     if wp.dot(fn, sd) > 0.0:
         hs = wp.max(wp.dot(fn, wp.normalize(sd + v)), 0.0)
-        out = L.sun_color[w % L.sun_color.shape[0]] * (spec[0] * spec_power(hs, spec[1]) *
+        out = L.sun_color[wrow(w, L.sun_color.shape[0])] * (spec[0] * spec_power(hs, spec[1]) *
                                                        shadow_factor(L, first, 0, 1.0, p, fn))
-    wl = w % L.pos.shape[0]
+    wl = wrow(w, L.pos.shape[0])
     for i in range(L.pos.shape[1]):
         if is_dark(L, wl, i):
             continue
@@ -679,8 +691,8 @@ def object_albedo(look: Look, w: int, label: int, mat: wp.vec3) -> wp.vec3:
     """A worm or magnet surface's albedo at material coordinates ``mat``: paper texture on the sheet, the EPM's
     painted half."""
     off = noise_offset(look, w)
-    return textured_albedo(look.albedo[w % look.albedo.shape[0], label], label, mat,
-                           look.paper_tex[w % look.paper_tex.shape[0]], look.noise, off[0], off[1])
+    return textured_albedo(look.albedo[wrow(w, look.albedo.shape[0]), label], label, mat,
+                           look.paper_tex[wrow(w, look.paper_tex.shape[0])], look.noise, off[0], off[1])
 
 
 @wp.func
@@ -710,18 +722,18 @@ def shade_hit(look: Look, L: Lights, w: int, first: int, label: int, z: float, m
     color = bg
     nrm = wp.vec3(0.0)
     if label == SEG_FLOOR:
-        nrm = look.floor_normal[w % look.floor_normal.shape[0]]
+        nrm = look.floor_normal[wrow(w, look.floor_normal.shape[0])]
         color = shade_floor(look, L, w, first, mat, eye + z * d_world, -d_world)
     elif label != SEG_BACKGROUND:
         nrm = n_world
         if wp.dot(n_world, -d_world) < 0.0:
             nrm = -n_world  # double-sided sheet: light the side the camera sees
         base = object_albedo(look, w, label, mat)
-        pb = look.paper_bsdf[w % look.paper_bsdf.shape[0]]
+        pb = look.paper_bsdf[wrow(w, look.paper_bsdf.shape[0])]
         if label <= SEG_WORM_LAST and (pb[0] > 0.0 or pb[1] > 0.0 or pb[3] > 0.0):
             color = paper_surface(base, eye + z * d_world, nrm, -d_world, L, w, first, pb)
         else:
-            color = light_surface(base, look.specular[w % look.specular.shape[0], label], eye + z * d_world, nrm,
+            color = light_surface(base, look.specular[wrow(w, look.specular.shape[0]), label], eye + z * d_world, nrm,
                                   -d_world, L, w, first)
     return color, nrm
 
@@ -751,17 +763,17 @@ class PlainWorld:
 def plain_world(look: Look, L: Lights, w: int) -> PlainWorld:
     """World ``w``'s :class:`PlainWorld` (one lamp: light 0)."""
     pw = PlainWorld()
-    pw.amb = L.ambient[w % L.ambient.shape[0]]
-    pw.sd = L.sun_dir[w % L.sun_dir.shape[0]]
-    pw.sc = L.sun_color[w % L.sun_color.shape[0]]
-    pw.lp = L.pos[w % L.pos.shape[0], 0]
-    pw.lpw = L.power[w % L.power.shape[0], 0]
-    pw.fn = look.floor_normal[w % look.floor_normal.shape[0]]
-    pw.ft = look.floor_tex[w % look.floor_tex.shape[0]]
+    pw.amb = L.ambient[wrow(w, L.ambient.shape[0])]
+    pw.sd = L.sun_dir[wrow(w, L.sun_dir.shape[0])]
+    pw.sc = L.sun_color[wrow(w, L.sun_color.shape[0])]
+    pw.lp = L.pos[wrow(w, L.pos.shape[0]), 0]
+    pw.lpw = L.power[wrow(w, L.power.shape[0]), 0]
+    pw.fn = look.floor_normal[wrow(w, look.floor_normal.shape[0])]
+    pw.ft = look.floor_tex[wrow(w, look.floor_tex.shape[0])]
     pw.inv_tile = 1.0 / pw.ft[0]
-    pw.fc2 = look.floor_color2[w % look.floor_color2.shape[0]]
+    pw.fc2 = look.floor_color2[wrow(w, look.floor_color2.shape[0])]
     pw.floor_irr = pw.amb + pw.sc * wp.max(wp.dot(pw.fn, pw.sd), 0.0)
-    pw.pt = look.paper_tex[w % look.paper_tex.shape[0]]
+    pw.pt = look.paper_tex[wrow(w, look.paper_tex.shape[0])]
     off = noise_offset(look, w)
     pw.off_u = off[0]
     pw.off_v = off[1]
@@ -832,24 +844,24 @@ def make_resolve_shade(plain: bool):
         Rt = wp.transpose(R)
         eye = -(Rt * t)
         py = float(y)
-        wf = w % look.floor_normal.shape[0]
-        bg = wp.lerp(look.bg_top[w % look.bg_top.shape[0]], look.bg_bottom[w % look.bg_bottom.shape[0]],
+        wf = wrow(w, look.floor_normal.shape[0])
+        bg = wp.lerp(look.bg_top[wrow(w, look.bg_top.shape[0])], look.bg_bottom[wrow(w, look.bg_bottom.shape[0])],
                      py / float(height))
         first = int(-1)
         if lights.shadows != 0:
             first = lights.map_first[w]
         row = y * width
         gain = cam_gain[img]
-        transmit = look.floor_transmit[w % look.floor_transmit.shape[0]]
+        transmit = look.floor_transmit[wrow(w, look.floor_transmit.shape[0])]
         pw = plain_world(look, lights, w)
-        wa = w % look.albedo.shape[0]
-        ws = w % look.specular.shape[0]
+        wa = wrow(w, look.albedo.shape[0])
+        ws = wrow(w, look.specular.shape[0])
         # along a row the world ray is affine in x: d(x) = d0 + x * dx, and so are its dot products with the floor
         d0 = Rt * wp.vec3(-k[2] / k[0], (py - k[3]) / k[1], 1.0)
         dx = Rt * wp.vec3(1.0 / k[0], 0.0, 0.0)
-        fr = floor_row(look.floor_normal[wf], look.floor_axis[w % look.floor_axis.shape[0]],
-                       look.floor_origin[w % look.floor_origin.shape[0]],
-                       look.floor_half[w % look.floor_half.shape[0]], eye, d0, dx)
+        fr = floor_row(look.floor_normal[wf], look.floor_axis[wrow(w, look.floor_axis.shape[0])],
+                       look.floor_origin[wrow(w, look.floor_origin.shape[0])],
+                       look.floor_half[wrow(w, look.floor_half.shape[0])], eye, d0, dx)
         for x in range(x_begin, x_end):
             px = float(x)
             d_world = d0 + px * dx  # a point at camera depth z lies at eye + z * d_world
