@@ -16,9 +16,9 @@ Two extra measurements give the candidate levers a size:
 Usage::
 
     python benchmarks/profile_step.py [--worlds 1 64] [--gait peristaltic omega inchworm] [--duration 1.0]
-        [--geometric-stiffness] [--out benchmarks/results/profile_step.json]
+        [--out benchmarks/results/profile_step.json]
     python benchmarks/profile_step.py --alternate REV --worlds 64 --gait peristaltic omega inchworm [--pairs 3]
-        [--geometric-stiffness]   # the code at REV against this tree, alternated run by run
+        # the code at REV against this tree, alternated run by run
 
 Prints one table per world count and writes the JSON (rows + metadata).
 """
@@ -296,14 +296,12 @@ def main(argv=None) -> int:
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--no-levers", action="store_true", help="skip the Newton-count and launch-floor measurements")
     ap.add_argument("--out", default=str(HERE / "results" / "profile_step.json"), help="JSON path")
-    ap.add_argument("--geometric-stiffness", action="store_true",
-                    help="Simulator(geometric_stiffness=True) (with --alternate: on the tree's side only)")
     ap.add_argument("--alternate", metavar="REV", help="instead of the profile: the gait rate (second cycle, CPU "
                     "time) of git revision REV and of this tree, alternated (one W: the first --worlds)")
     ap.add_argument("--pairs", type=int, default=3, help="with --alternate: before/after pairs per gait (default 3)")
     args = ap.parse_args(argv)
     if args.alternate:
-        after_kw = {"geometric_stiffness": True} if args.geometric_stiffness else {}
+        after_kw = {}
         rows = alternate(args.alternate, args.gait, args.worlds[0], args.pairs, after_kw)
         out = Path(args.out)
         out.parent.mkdir(parents=True, exist_ok=True)
@@ -327,8 +325,7 @@ def main(argv=None) -> int:
     runs = []
     for gait, W in [(g, w) for g in args.gait for w in args.worlds]:
         r = profile_run(W, duration=args.duration, settle=args.settle, skip=args.skip, magnet_model=args.magnet_model,
-                        device=device, gait=gait,
-                        sim_kw={"geometric_stiffness": True} if args.geometric_stiffness else None)
+                        device=device, gait=gait)
         runs.append(r)
         print(f"\n== {args.magnet_model} magnets, {gait}, W = {W}, {r['steps']} steps of {1e3 * r['dt_s']:g} ms "
               f"({r['substeps']} substeps, <= {r['newton']} Newton, {r['newton_steps_per_substep']:.2f} on average, "

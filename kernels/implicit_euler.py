@@ -17,19 +17,18 @@ from .common import freeze_world
 from .substep import (  # noqa: F401  (CONTACT_*, friction_force: the substep's public names, also read from here)
     CONTACT_FIXED, CONTACT_FREE, CONTACT_SLIDING, CONTACT_STUCK, CONTACTS_LANDED, WORLD_CRUMPLED, BarHingeModel,
     BarHingeState, NewtonScratch, SubstepOptions, WorldCoefficients, add_anchors, add_bar, add_hinge, apply_step,
-    finish_vertices, friction_force, friction_row, inertia_row, mass_over_dt2, predict, project_row, project_rhs, skin_profile,
+    finish_vertices, friction_force, friction_row, inertia_row, predict, project_row, project_rhs, skin_profile,
     update_contacts, update_hinge_angles, world_coefficients)
 
 wp.set_module_options({"enable_backward": False})
 
 CHORD_CONTRACTION = wp.constant(0.5)  # a chord step is taken only if it is shorter than this times the last step
-STOP_ERROR = wp.constant(0.1)
-PIVOT_GUARD = wp.constant(0.5)  # with the geometric stiffness: the least pivot accepted, in units of its m/dt²  # a chord step ends a substep only if θ/(1 − θ)·step is below this times the tolerance
+STOP_ERROR = wp.constant(0.1)  # a chord step ends a substep only if θ/(1 − θ)·step is below this times the tolerance
 
 
 @wp.func
 def elastic_terms(world: int, c: WorldCoefficients, m: BarHingeModel, opt: SubstepOptions,
-                  anchor_target: wp.array2d(dtype=wp.vec3), with_hessian: bool, geometric: bool, s: BarHingeState,
+                  anchor_target: wp.array2d(dtype=wp.vec3), with_hessian: bool, s: BarHingeState,
                   w: NewtonScratch) -> int:
     """Inertia, bars, hinges and anchors into ``grad`` (and the unprojected band): all but the friction, which is
     tangential and so not in the floor's normal balance that the contact update reads. Returns 1 if a bar is
@@ -37,7 +36,7 @@ def elastic_terms(world: int, c: WorldCoefficients, m: BarHingeModel, opt: Subst
     for i in range(s.x.shape[1]):
         inertia_row(world, i, c, m, with_hessian, w)
     for e in range(m.edges.shape[0]):
-        if add_bar(world, e, ALL_ROWS, c, m, opt, with_hessian, geometric, s, w) != 0:
+        if add_bar(world, e, ALL_ROWS, c, m, opt, with_hessian, s, w) != 0:
             return 1
     for h in range(m.hinges.shape[0]):
         add_hinge(world, h, ALL_ROWS, c, m, with_hessian, s, w)
@@ -62,10 +61,10 @@ def project_on_contacts(world: int, c: WorldCoefficients, m: BarHingeModel, s: B
 
 @wp.func
 def assemble(world: int, c: WorldCoefficients, m: BarHingeModel, opt: SubstepOptions,
-             anchor_target: wp.array2d(dtype=wp.vec3), geometric: bool, s: BarHingeState, w: NewtonScratch) -> int:
-    """The whole Newton system: gradient and Gauss–Newton band (with the bars' compressive geometric stiffness if
-    ``geometric``), friction included, projected on the contacts. Returns 1 if a bar is strained beyond its limit."""
-    if elastic_terms(world, c, m, opt, anchor_target, True, geometric, s, w) != 0:
+             anchor_target: wp.array2d(dtype=wp.vec3), s: BarHingeState, w: NewtonScratch) -> int:
+    """The whole Newton system: gradient and Gauss–Newton band, friction included, projected on the contacts.
+    Returns 1 if a bar is strained beyond its limit."""
+    if elastic_terms(world, c, m, opt, anchor_target, True, s, w) != 0:
         return 1
     friction_terms(world, c, opt.slip_speed, True, s, w)
     project_on_contacts(world, c, m, s, w)
@@ -73,33 +72,15 @@ def assemble(world: int, c: WorldCoefficients, m: BarHingeModel, opt: SubstepOpt
 
 
 @wp.func
-def weak_pivot(world: int, nv: int, c: WorldCoefficients, m: BarHingeModel, w: NewtonScratch) -> bool:
-    """Whether a pivot of the factor in ``w.hess`` (diagonal slots L_uu⁻¹) is below :data:`PIVOT_GUARD` times its
-    vertex's m/dt², or not finite. With K positive semidefinite every pivot of M/dt² + K is at least m/dt² (a Schur
-    complement of it is at least M's); a negative geometric stiffness that ate more of the mass term is refused."""
-    for j in range(nv):
-        inv = w.hess[world, j, 0]
-        lim = 1.0 / (PIVOT_GUARD * mass_over_dt2(m.inv_mass[c.im_row, j], c.inv_dt2))  # 1 / pivot, at most
-        if not (inv[0, 0] * inv[0, 0] <= lim and inv[1, 1] * inv[1, 1] <= lim and inv[2, 2] * inv[2, 2] <= lim):
-            return True
-    return False
-
-
-@wp.func
-def newton_solve(world: int, c: WorldCoefficients, m: BarHingeModel, factor: bool, guard: bool, s: BarHingeState,
-                 w: NewtonScratch):
+def newton_solve(world: int, c: WorldCoefficients, factor: bool, s: BarHingeState, w: NewtonScratch) -> float:
     """Solve H dx = −grad on the allowed directions, leaving −dx in ``w.grad``; ``factor`` the fresh H first, else
-    reuse the factor in ``w.hess`` (a chord step); ``guard``: a factor with a weak pivot (:func:`weak_pivot`) is not
-    used. Returns (max |dx| [m], 1e30 for a non-finite step; whether the guard refused the factor: nothing solved)."""
+    reuse the factor in ``w.hess`` (a chord step). Returns max |dx| [m] (1e30 for a non-finite step)."""
     nv = s.x.shape[1]
     bw = w.hess.shape[2] - 1
     for i in range(nv):
         project_rhs(world, i, c, s, w)
     if factor:
         band_cholesky_factor(world, nv, bw, w.hess)
-        if guard:
-            if weak_pivot(world, nv, c, m, w):
-                return float(1.0e30), True
     band_cholesky_solve(world, nv, bw, w.hess, w.grad)
     step = float(0.0)
     for i in range(nv):
@@ -107,7 +88,7 @@ def newton_solve(world: int, c: WorldCoefficients, m: BarHingeModel, factor: boo
         if not (length < 1.0e30):
             length = 1.0e30  # a non-finite step is no convergence (wp.max would drop a NaN)
         step = wp.max(step, length)
-    return step, False
+    return step
 
 
 @wp.func
@@ -116,19 +97,18 @@ def newton_system(world: int, it: int, fresh: bool, c: WorldCoefficients, m: Bar
     """The system of Newton step ``it`` (``fresh``: with a new Hessian); after the first step one assembly serves
     both the contact update and the step, friction added after it. A landing (x moved) or, for a chord step, a
     changed contact assembles anew. Returns (bad, fresh)."""
-    geometric = opt.geometric != 0
     if it == 0:
         if fresh:
-            return assemble(world, c, m, opt, anchor_target, geometric, s, w), fresh
-        bad = elastic_terms(world, c, m, opt, anchor_target, False, False, s, w)
+            return assemble(world, c, m, opt, anchor_target, s, w), fresh
+        bad = elastic_terms(world, c, m, opt, anchor_target, False, s, w)
         if bad == 0:
             friction_terms(world, c, opt.slip_speed, False, s, w)
         return bad, fresh
-    if elastic_terms(world, c, m, opt, anchor_target, fresh, geometric, s, w) != 0:
+    if elastic_terms(world, c, m, opt, anchor_target, fresh, s, w) != 0:
         return 1, fresh
     change = update_contacts(world, 0, 1, c, m, opt.slip_speed, s, w)
     if change == CONTACTS_LANDED or (change != 0 and not fresh):
-        return assemble(world, c, m, opt, anchor_target, geometric, s, w), True
+        return assemble(world, c, m, opt, anchor_target, s, w), True
     friction_terms(world, c, opt.slip_speed, fresh, s, w)
     if fresh:
         project_on_contacts(world, c, m, s, w)
@@ -154,14 +134,7 @@ def newton_iterations(world: int, have_factor: bool, c: WorldCoefficients, m: Ba
         w.newton_steps[world] = w.newton_steps[world] + 1
         if fresh:
             w.newton_factors[world] = w.newton_factors[world] + 1
-        step, weak = newton_solve(world, c, m, fresh, opt.geometric != 0, s, w)
-        if weak:  # the geometric stiffness made the matrix (nearly) indefinite: this step without it
-            w.newton_fallbacks[world] = w.newton_fallbacks[world] + 1
-            w.newton_factors[world] = w.newton_factors[world] + 1
-            bad = assemble(world, c, m, opt, anchor_target, False, s, w)
-            if bad != 0:
-                break
-            step, weak = newton_solve(world, c, m, True, False, s, w)
+        step = newton_solve(world, c, fresh, s, w)
         if fresh:
             carried = opt.refactor == 0 and not have_factor
         if not fresh and not (step < CHORD_CONTRACTION * last_step):

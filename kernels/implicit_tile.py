@@ -65,7 +65,7 @@ def assemble_row(world: int, u: int, c: WorldCoefficients, m: BarHingeModel, opt
     rows need no atomics. Reads every vertex's x: call it after a barrier. Returns 1 for an over-strained bar."""
     inertia_row(world, u, c, m, True, w)
     for q in range(inc.bar_start[u], inc.bar_start[u + 1]):
-        if add_bar(world, inc.bar[q], u, c, m, opt, True, False, s, w) != 0:  # no geometric stiffness: no guard
+        if add_bar(world, inc.bar[q], u, c, m, opt, True, s, w) != 0:
             return 1
     for q in range(inc.hinge_start[u], inc.hinge_start[u + 1]):
         add_hinge(world, inc.hinge[q], u, c, m, True, s, w)

@@ -74,7 +74,6 @@ class SubstepOptions:
     strain_limit: wp.array(dtype=float)  # (E,) |strain| beyond which a world explodes
     speed_limit: float  # [m/s] beyond which (or non-finite) a world explodes
     fold_tolerance: float  # [rad] beyond a hinge's range: the world crumpled
-    geometric: int  # 1: the bars' compressive geometric stiffness in the Newton matrix, guarded (band layout only)
 
 
 @wp.struct
@@ -104,7 +103,6 @@ class NewtonScratch:
     newton_steps: wp.array(dtype=wp.int32)  # (W,) Newton steps taken, summed over substeps (band layout)
     newton_capped: wp.array(dtype=wp.int32)  # (W,) substeps that took every step without meeting the tolerance
     newton_factors: wp.array(dtype=wp.int32)  # (W,) Newton steps that assembled and factored the Hessian
-    newton_fallbacks: wp.array(dtype=wp.int32)  # (W,) factors the geometric stiffness's guard refused (band layout)
 
 
 @wp.struct
@@ -532,12 +530,11 @@ def inertia_row(world: int, i: int, c: WorldCoefficients, m: BarHingeModel, with
 
 
 @wp.func
-def bar_terms(e: int, d: wp.vec3, c: WorldCoefficients, m: BarHingeModel, geometric: bool):
+def bar_terms(e: int, d: wp.vec3, c: WorldCoefficients, m: BarHingeModel):
     """Bar ``e``'s spring ½ (EA / L0)(L − L0)² at bar vector ``d`` = x_a − x_b [m], and a waist bar's stop past
     |ε| = ε_s (a soft bar standing for panel bending turns rigid: the panels bend only so far). Returns (strain, f
-    on a [N], unit direction, axial and transverse stiffness [N/m]); the transverse (geometric) stiffness T / L is
-    negative in compression: kept with ``geometric`` (the exact Hessian; the caller guards the factor,
-    docs/dynamics.md, "Geometric stiffness"), else clamped at zero (positive semidefinite)."""
+    on a [N], unit direction, axial and transverse stiffness [N/m]); the compressive geometric stiffness is dropped
+    (keeps the matrix positive definite)."""
     length = wp.length(d)
     l0 = m.rest_length[c.rl_row, e]
     strain = (length - l0) / l0
@@ -548,28 +545,23 @@ def bar_terms(e: int, d: wp.vec3, c: WorldCoefficients, m: BarHingeModel, geomet
     stops = m.bar_stop_strain[c.ss_row, e]
     stop = wp.where(strain < 0.0, -stops[0], stops[1])
     l_stop = l0 * (1.0 + stop)
-    k_trans = ka * (1.0 - l0 / length)
-    if not geometric:
-        k_trans = wp.max(0.0, k_trans)
+    k_trans = ka * wp.max(0.0, 1.0 - l0 / length)
     if wp.where(strain < 0.0, strain < stop, strain > stop):
         ks = m.bar_stop_stiffness[c.sk_row, e] / l0
         f = f + n * (ks * (length - l_stop))
         k_axial = k_axial + ks
-        k_stop = ks * (1.0 - l_stop / length)  # the stop's tension, as the bar's
-        if not geometric:
-            k_stop = wp.max(0.0, k_stop)
-        k_trans = k_trans + k_stop
+        k_trans = k_trans + ks * wp.max(0.0, 1.0 - l_stop / length)  # the stop's tension, as the bar's
     return strain, f, n, k_axial, k_trans
 
 
 @wp.func
 def add_bar(world: int, e: int, row: int, c: WorldCoefficients, m: BarHingeModel, opt: SubstepOptions,
-            with_hessian: bool, geometric: bool, s: BarHingeState, w: NewtonScratch) -> int:
+            with_hessian: bool, s: BarHingeState, w: NewtonScratch) -> int:
     """Add bar ``e`` (:func:`bar_terms`) to the rows ``row`` selects and record its strain (its first vertex's row).
     Returns 1 if it is strained beyond its ``strain_limit`` (or non-finite), else 0."""
     a = m.edges[e, 0]
     b = m.edges[e, 1]
-    strain, f, n, k_axial, k_trans = bar_terms(e, s.x[world, a] - s.x[world, b], c, m, geometric)
+    strain, f, n, k_axial, k_trans = bar_terms(e, s.x[world, a] - s.x[world, b], c, m)
     if in_row(row, a):
         s.bar_strain[world, e] = strain
         if not (wp.abs(strain) < opt.strain_limit[e]):  # also catches NaN

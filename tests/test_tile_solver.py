@@ -153,9 +153,6 @@ def test_bad_arguments_name_the_key():
         TileSolver(model, sim.settings, block_dim=0)
     with pytest.raises(ValueError, match="num_substeps"):
         TileSolver(model, sim.settings).step(sim.initial_state(), sim.control, 0)
-    geo = Simulator(model, chord=False, geometric_stiffness=True)
-    with pytest.raises(ValueError, match="geometric_stiffness"):
-        TileSolver(model, geo.settings)
 
 
 def _assert_identical(band, tile) -> None:

@@ -87,8 +87,6 @@ class Simulator:
         dt: step [s]: the magnetic wrench and the EPM pose are refreshed once per step.
         substeps: substeps per step (``dt / substeps`` the substep; 2 ms, the gaits' default, is accurate for them).
         magnet_every_substep: re-evaluate the magnetic wrench every substep (slower; for dt studies).
-        geometric_stiffness: the bars' compressive geometric stiffness in the Newton matrix, guarded ("band" only;
-            :class:`~warpworm.sim.solver.SubstepSettings`).
         strain_limit: a bar strained beyond |ΔL/L0| this flags its world unstable (the soft waist bars at
             ``max(strain_limit, 0.9)``).
         speed_limit: a vertex faster than this [m/s] (or non-finite) flags its world unstable.
@@ -127,7 +125,6 @@ class Simulator:
         newton_tol: float = 1.0e-4,
         slip_speed: float = 1.0e-5,
         solver: str = "band",
-        geometric_stiffness: bool = False,
     ):
         from warpworm.kernels import magnet_pose
 
@@ -144,8 +141,7 @@ class Simulator:
         self.settings = SubstepSettings(
             dt=self.dt_sub, newton=int(newton), newton_tol=float(newton_tol),
             chord=solver == "band" if chord is None else bool(chord), slip_speed=float(slip_speed),
-            strain_limit=float(strain_limit), speed_limit=float(speed_limit), fold_tolerance=float(fold_tolerance),
-            geometric_stiffness=bool(geometric_stiffness))
+            strain_limit=float(strain_limit), speed_limit=float(speed_limit), fold_tolerance=float(fold_tolerance))
         """The substep's settings, as the solver takes them."""
         self.use_graph = (model.device.is_cuda or cpu_graphs_supported()) if use_graph is None else bool(use_graph)
         self.control = model.control()

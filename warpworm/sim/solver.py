@@ -51,9 +51,6 @@ class SubstepSettings:
     """[m/s] a vertex faster (or non-finite) flags its world unstable."""
     fold_tolerance: float = float(np.radians(5.0))
     """[rad] a hinge this far outside its NoFoldThrough range: the world crumpled."""
-    geometric_stiffness: bool = False
-    """The bars' compressive geometric stiffness in the Newton matrix, a factor with a pivot below half its m/dt²
-    refused for one without (band layout only; docs/dynamics.md, "Geometric stiffness")."""
 
     def __post_init__(self):
         if not self.dt > 0:
@@ -104,8 +101,8 @@ class SolverBase:
         s.x_prev, s.delta, s.grad = (wp.zeros((W, V), dtype=wp.vec3, device=dev) for _ in range(3))
         s.hess = wp.zeros((W, V, model.vertex_bandwidth + 1), dtype=wp.mat33, device=dev)
         s.released = wp.zeros((W, V), dtype=wp.int32, device=dev)
-        s.newton_steps, s.newton_capped, s.newton_factors, s.newton_fallbacks = (
-            wp.zeros(W, dtype=wp.int32, device=dev) for _ in range(4))
+        s.newton_steps, s.newton_capped, s.newton_factors = (wp.zeros(W, dtype=wp.int32, device=dev)
+                                                             for _ in range(3))
         self._cmds = {}
 
     def options(self, num_substeps: int) -> substep.SubstepOptions:
@@ -116,7 +113,6 @@ class SolverBase:
         o.newton_tol = st.newton_tol * st.dt
         o.slip_speed, o.strain_limit = st.slip_speed, self.strain_limit
         o.speed_limit, o.fold_tolerance = st.speed_limit, st.fold_tolerance
-        o.geometric = 1 if st.geometric_stiffness else 0
         return o
 
     def _record(self, state, control, num_substeps: int):
@@ -145,15 +141,13 @@ class SolverBase:
     def newton_stats(self, reset: bool = False) -> dict:
         """Per world since built (or the last reset), shape (W,) int64 each: ``steps`` (Newton steps summed over
         substeps), ``factors`` (those that assembled and factored the Hessian; the rest were chord steps) and
-        ``capped`` (substeps that took all ``newton`` steps without meeting the tolerance) and ``fallbacks`` (factors
-        with the geometric stiffness that its guard refused, each replaced by one without)."""
+        ``capped`` (substeps that took all ``newton`` steps without meeting the tolerance)."""
         s = self.scratch
         out = {"steps": s.newton_steps.numpy().astype(np.int64),
                "factors": s.newton_factors.numpy().astype(np.int64),
-               "capped": s.newton_capped.numpy().astype(np.int64),
-               "fallbacks": s.newton_fallbacks.numpy().astype(np.int64)}
+               "capped": s.newton_capped.numpy().astype(np.int64)}
         if reset:
-            for a in (s.newton_steps, s.newton_factors, s.newton_capped, s.newton_fallbacks):
+            for a in (s.newton_steps, s.newton_factors, s.newton_capped):
                 a.zero_()
         return out
 

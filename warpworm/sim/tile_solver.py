@@ -59,9 +59,6 @@ class TileSolver(SolverBase):
         if settings.chord:
             raise ValueError("chord: chord Newton steps are implemented by the 'band' solver only, got solver="
                              f"'tile-{factorization}'")
-        if settings.geometric_stiffness:
-            raise ValueError("geometric_stiffness: the guarded geometric stiffness is implemented by the 'band' solver "
-                             f"only, got solver='tile-{factorization}'")
         if block_dim is None:
             block_dim = DEFAULT_CUDA_BLOCK_DIM[factorization] if model.device.is_cuda else 1
         if not 1 <= int(block_dim) <= 1024:
