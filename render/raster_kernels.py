@@ -782,8 +782,9 @@ def plain_world(look: Look, L: Lights, w: int) -> PlainWorld:
     return pw
 
 
-def make_resolve_shade(plain: bool):
-    """The resolve/shade kernel (:data:`resolve_shade`); ``plain`` compiles the path of the default look only.
+def make_resolve_shade(plain: bool, shade: bool = True):
+    """The resolve/shade kernel (:data:`resolve_shade`); ``plain`` compiles the path of the default look only;
+    ``shade=False`` (:data:`resolve_labels`) writes depth, segmentation and normals only (no RGB, no lights read).
 
     The general kernel shades every issue-24 option (shadow maps, any number of point lights, the paper BSDF, glossy
     and clear plates) through branches and loops read per pixel. The plain kernel (``plain=True``,
@@ -793,7 +794,7 @@ def make_resolve_shade(plain: bool):
     operations as the general kernel in that case, so the same bits, at 3.6x fewer CPU cycles per image
     (docs/render.md)."""
 
-    @wp.kernel(name="resolve_shade_plain" if plain else "resolve_shade")
+    @wp.kernel(name="resolve_labels" if not shade else ("resolve_shade_plain" if plain else "resolve_shade"))
     def resolve_shade(
         # Model:
         triangles: wp.array(dtype=wp.vec3i),
@@ -872,7 +873,14 @@ def make_resolve_shade(plain: bool):
             best_z, label, mat = nearer_floor(fr, px, mz, mlabel, mmat)
             color = bg
             nrm = wp.vec3(0.0)
-            if wp.static(plain):
+            if wp.static(not shade):
+                if label == SEG_FLOOR:
+                    nrm = pw.fn
+                elif label != SEG_BACKGROUND:
+                    nrm = n_world
+                    if wp.dot(n_world, -d_world) < 0.0:
+                        nrm = -n_world
+            elif wp.static(plain):
                 if label == SEG_FLOOR:
                     nrm = pw.fn
                     p = eye + best_z * d_world
@@ -904,8 +912,9 @@ def make_resolve_shade(plain: bool):
                     normals[img, row + x] = wp.vec3(0.0)
                 else:
                     normals[img, row + x] = R * nrm
-            color = wp.cw_mul(color, gain)
-            rgb[img, row + x] = wp.vec3ub(to_srgb8(color[0]), to_srgb8(color[1]), to_srgb8(color[2]))
+            if wp.static(shade):
+                color = wp.cw_mul(color, gain)
+                rgb[img, row + x] = wp.vec3ub(to_srgb8(color[0]), to_srgb8(color[1]), to_srgb8(color[2]))
             depth[img, row + x] = best_z
             if label > SEG_EPM:
                 label = SEG_FLOOR  # a distractor object (its own albedo row): static scene, the floor's id
@@ -918,6 +927,9 @@ resolve_shade = make_resolve_shade(False)
 """Resolve the nearest surface of every pixel and shade it, every option (:func:`make_resolve_shade`)."""
 resolve_shade_plain = make_resolve_shade(True)
 """The same for batches without any per-pixel shading option: the default look's path, bit for bit."""
+resolve_labels = make_resolve_shade(True, shade=False)
+"""Depth, segmentation and normals only: the pixel-centre pass of a supersampled render, whose RGB comes from the
+fine pass (the same labels as :data:`resolve_shade`, without shading or shadow maps)."""
 
 
 @wp.kernel

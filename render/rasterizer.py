@@ -357,7 +357,9 @@ class Renderer:
         b["mask"].zero_()
         d = self.device
         lights = s["lights"]
-        if self.shadows:
+        # supersampled: this pass gives the labels only (RGB comes from the fine pass), so no shading, no shadow maps
+        labels_only = self.supersample > 1
+        if self.shadows and not labels_only:
             lights = self._shadow_maps(s, np.unique(world[:n]))
         common = [b["image_world"], b["cam_rot"], b["cam_trans"], b["cam_intr"]]
         wp.launch(rk.raster_triangles, dim=(n, s["triangles"].shape[0]), device=d,
@@ -365,19 +367,20 @@ class Renderer:
                   outputs=[b["zkey"], b["mask"]])
         # CPU: a thread per image row (per-thread overhead and per-row setup paid once); GPU: a thread per pixel
         span = self.width if d.is_cpu else 1
-        wp.launch(s["shade"], dim=(n, self.height, (self.width + span - 1) // span), device=d,
+        wp.launch(rk.resolve_labels if labels_only else s["shade"], dim=(n, self.height, (self.width + span - 1) // span), device=d,
                   inputs=[s["triangles"], s["tri_label"], s["look"], lights, s["vertices"], s["texcoords"], *common,
                           b["zkey"], self.width, self.height, span, int(normals), b["cam_gain"]],
                   outputs=[b["rgb"], b["depth"], b["seg"], b["normals"]])
         H, W = self.height, self.width
         res = {
-            "rgb": b["rgb"].numpy()[:n].reshape(n, H, W, 3),
             "depth": b["depth"].numpy()[:n].reshape(n, H, W),
             "seg": b["seg"].numpy()[:n].reshape(n, H, W),
             "worm_mask": b["mask"].numpy()[:n].reshape(n, H, W).astype(bool),
         }
         if normals:
             res["normals"] = b["normals"].numpy()[:n].reshape(n, H, W, 3)
+        if not labels_only:
+            res["rgb"] = b["rgb"].numpy()[:n].reshape(n, H, W, 3)
         return res
 
 
