@@ -172,6 +172,74 @@ def feature_rows(quick: bool, dev) -> list[dict]:
     return rows
 
 
+def plain_rows(sizes=(128, 256), worlds: int = 32, cameras: int = 4, repeats: int = 5, device=None) -> list[dict]:
+    """Images per CPU-second of the default look (the plain resolve kernel): ``worlds`` posed worms x ``cameras``,
+    best of ``repeats`` renders (``python3 benchmarks/bench_render.py --plain``; the A/B measurement of
+    docs/render.md's plain-path table)."""
+    from warpworm import quiet_warp
+    from warpworm.render import Renderer, sample_cameras
+
+    quiet_warp()
+    states, scene = _scene(worlds)
+    idx = np.repeat(np.arange(worlds), cameras)
+    rows = []
+    for size in sizes:
+        cams = sample_cameras(np.arange(worlds * cameras), states["positions"][idx], width=size, height=size,
+                              world_index=idx)
+        renderer = Renderer(size, size, device=device)
+        renderer.render(scene, cams)  # warm-up
+        _, c = _best_time(lambda: renderer.render(scene, cams), repeats, cpu=True)
+        rows.append({"size": size, "images": len(cams), "img_per_cpu_s": len(cams) / c})
+    return rows
+
+
+PRODUCTION_LOOKS = ["render.plate_pose=true", "render.lights=random", "render.distractors=[0, 4]",
+                    "render.plate_materials=[matte, glossy, acrylic]", "render.paper_bsdf=true"]
+"""The per-trajectory look options of ``dataset_configs/production.yaml`` (shadows, supersampling, the lens and the
+gains are renderer/camera options, added by :func:`production_rows`)."""
+
+
+def production_rows(size: int = 256, worlds: int = 8, cameras: int = 2, repeats: int = 3, device=None) -> list[dict]:
+    """CPU ms per image of the default look, production's looks, + shadows, and production's whole set (+ shadows,
+    supersample 2, a lens of k1 -0.25, k2 0.08, gains), ``size``² px, posed worms (``python3
+    benchmarks/bench_render.py --production``; best of ``repeats``, CPU time of this process)."""
+    from warpworm import quiet_warp
+    from warpworm.data.config import load_config
+    from warpworm.data.sampling import appearance_draws, sample_appearance
+    from warpworm.render import Renderer, build_scene, sample_cameras
+    from warpworm.render.demo import default_pattern, posed_worm_states
+    from warpworm.render.placement import distractor_mesh
+
+    quiet_warp()
+    dist = (-0.25, 0.08, 0.002, -0.002, 0.0)
+    cases = [("default look", [], {}), ("production looks", PRODUCTION_LOOKS, {"gain": True}),
+             ("production looks + shadows", PRODUCTION_LOOKS, {"shadows": True, "gain": True}),
+             ("production (+ supersample 2, lens)", PRODUCTION_LOOKS,
+              {"shadows": True, "supersample": 2, "gain": True, "dist": dist})]
+    pattern = default_pattern()
+    states = posed_worm_states(np.arange(worlds), pattern)
+    N = worlds * cameras
+    cams = sample_cameras(np.arange(N), states["positions"], width=size, height=size,
+                          world_index=np.arange(N) % worlds)
+    rows = []
+    for name, overrides, opts in cases:
+        cfg = load_config("default", overrides)
+        scene = build_scene(states["positions"], pattern.triangles, pattern.triangle_segment,
+                            magnet_pos=states["magnet_pos"], magnet_rot=states["magnet_rot"],
+                            worm_texcoords=pattern.vertices, appearance=sample_appearance(cfg, np.arange(worlds)),
+                            extra_mesh=distractor_mesh(appearance_draws(cfg, np.arange(worlds)), worlds))
+        opts, view = dict(opts), cams
+        if opts.pop("gain", False):
+            view = dataclasses.replace(view, gain=np.tile([[1.4, 1.0, 0.8]], (N, 1)))
+        if "dist" in opts:
+            view = dataclasses.replace(view, dist=np.tile([opts.pop("dist")], (N, 1)))
+        renderer = Renderer(size, size, device=device, **opts)
+        renderer.render(scene, view)  # warm-up
+        _, c = _best_time(lambda: renderer.render(scene, view), repeats, cpu=True)
+        rows.append({"case": name, "size": size, "images": N, "cpu_ms_per_image": c / N * 1e3})
+    return rows
+
+
 def headline(device=None, quick: bool = False) -> dict:
     """One row for the summary table of ``benchmarks/run.py``: images/s of the rasterizer (RGB + depth +
     segmentation, host copies included) on ``device``: 128² px, 16 worlds × 8 cameras on the CPU (quick: 4 × 8);
@@ -204,7 +272,12 @@ if __name__ == "__main__":
     import sys
 
     quick = "--quick" in sys.argv
-    rows = run(quick=quick)
+    if "--production" in sys.argv:
+        rows = production_rows()
+    elif "--plain" in sys.argv:
+        rows = plain_rows()
+    else:
+        rows = run(quick=quick)
     cols = list(rows[0])
     print("  ".join(f"{c:>13}" for c in cols))
     for r in rows:

@@ -791,8 +791,8 @@ def make_resolve_shade(plain: bool, shade: bool = True):
     :data:`resolve_shade_plain`) serves batches that use none of them (no shadows, exactly one lit lamp per world,
     Lambert paper, matte opaque floor: :meth:`Renderer` checks the arrays): it loads the world's values once per
     thread (:class:`PlainWorld`) and shades with one lamp and no shadow lookups, as before issue 24 -- the same float
-    operations as the general kernel in that case, so the same bits, at 3.6x fewer CPU cycles per image
-    (docs/render.md)."""
+    operations as the general kernel in that case, so the same bits, in a third of the general kernel's CPU time
+    on the same look (docs/render.md, "The plain path")."""
 
     @wp.kernel(name="resolve_labels" if not shade else ("resolve_shade_plain" if plain else "resolve_shade"))
     def resolve_shade(
