@@ -782,6 +782,32 @@ def plain_world(look: Look, L: Lights, w: int) -> PlainWorld:
     return pw
 
 
+@wp.func(inline=True)
+def shade_hit_plain(look: Look, pw: PlainWorld, wa: int, ws: int, label: int, z: float, mat: wp.vec3,
+                    n_world: wp.vec3, eye: wp.vec3, d_world: wp.vec3, bg: wp.vec3):
+    """:func:`shade_hit` for the plain path: world ``pw`` (its albedo row ``wa``, specular row ``ws``) under one lamp,
+    no shadows, Lambert paper, a matte opaque floor."""
+    color = bg
+    nrm = wp.vec3(0.0)
+    if label == SEG_FLOOR:
+        nrm = pw.fn
+        p = eye + z * d_world
+        to_lamp = pw.lp - p
+        inv_r2 = 1.0 / wp.max(wp.dot(to_lamp, to_lamp), 1.0e-6)
+        ndp = wp.max(wp.dot(pw.fn, to_lamp), 0.0) * wp.sqrt(inv_r2)
+        albedo = floor_albedo(look.albedo[wa, SEG_FLOOR], mat, pw.inv_tile, pw.ft, pw.fc2, look.noise, pw.off_u,
+                              pw.off_v)
+        color = wp.cw_mul(albedo, pw.floor_irr + pw.lpw * (ndp * inv_r2))
+    elif label != SEG_BACKGROUND:
+        nrm = n_world
+        if wp.dot(n_world, -d_world) < 0.0:
+            nrm = -n_world  # double-sided sheet: light the side the camera sees
+        base = textured_albedo(look.albedo[wa, label], label, mat, pw.pt, look.noise, pw.off_u, pw.off_v)
+        color = light_surface_plain(base, look.specular[ws, label], eye + z * d_world, nrm, -d_world, pw.amb, pw.sd,
+                                    pw.sc, pw.lp, pw.lpw)
+    return color, nrm
+
+
 def make_resolve_shade(plain: bool, shade: bool = True):
     """The resolve/shade kernel (:data:`resolve_shade`); ``plain`` compiles the path of the default look only;
     ``shade=False`` (:data:`resolve_labels`) writes depth, segmentation and normals only (no RGB, no lights read).
@@ -881,24 +907,7 @@ def make_resolve_shade(plain: bool, shade: bool = True):
                     if wp.dot(n_world, -d_world) < 0.0:
                         nrm = -n_world
             elif wp.static(plain):
-                if label == SEG_FLOOR:
-                    nrm = pw.fn
-                    p = eye + best_z * d_world
-                    to_lamp = pw.lp - p
-                    inv_r2 = 1.0 / wp.max(wp.dot(to_lamp, to_lamp), 1.0e-6)
-                    ndp = wp.max(wp.dot(pw.fn, to_lamp), 0.0) * wp.sqrt(inv_r2)
-                    albedo = floor_albedo(look.albedo[wa, SEG_FLOOR], mat, pw.inv_tile, pw.ft,
-                                          pw.fc2, look.noise, pw.off_u, pw.off_v)
-                    color = wp.cw_mul(albedo, pw.floor_irr + pw.lpw * (ndp * inv_r2))
-                elif label != SEG_BACKGROUND:
-                    nrm = n_world
-                    if wp.dot(n_world, -d_world) < 0.0:
-                        nrm = -n_world  # double-sided sheet: light the side the camera sees
-                    base = textured_albedo(look.albedo[wa, label], label, mat, pw.pt,
-                                           look.noise, pw.off_u, pw.off_v)
-                    color = light_surface_plain(base, look.specular[ws, label],
-                                                eye + best_z * d_world, nrm, -d_world, pw.amb, pw.sd, pw.sc, pw.lp,
-                                                pw.lpw)
+                color, nrm = shade_hit_plain(look, pw, wa, ws, label, best_z, mat, n_world, eye, d_world, bg)
             else:
                 color, nrm = shade_hit(look, lights, w, first, label, best_z, mat, n_world, eye, d_world, bg)
                 if label != mlabel and mlabel != SEG_BACKGROUND and transmit > 0.0:
