@@ -809,60 +809,35 @@ def shade_hit_plain(look: Look, pw: PlainWorld, wa: int, ws: int, label: int, z:
 
 
 def make_resolve_shade(plain: bool, shade: bool = True):
-    """The resolve/shade kernel (:data:`resolve_shade`); ``plain`` compiles the path of the default look only;
-    ``shade=False`` (:data:`resolve_labels`) writes depth, segmentation and normals only (no RGB, no lights read).
-
-    The general kernel shades every issue-24 option (shadow maps, any number of point lights, the paper BSDF, glossy
-    and clear plates) through branches and loops read per pixel. The plain kernel (``plain=True``,
-    :data:`resolve_shade_plain`) serves batches that use none of them (no shadows, exactly one lit lamp per world,
-    Lambert paper, matte opaque floor: :meth:`Renderer` checks the arrays): it loads the world's values once per
-    thread (:class:`PlainWorld`) and shades with one lamp and no shadow lookups, as before issue 24 -- the same float
-    operations as the general kernel in that case, so the same bits, in a third of the general kernel's CPU time
-    on the same look (docs/render.md, "The plain path")."""
+    """The resolve/shade kernel: ``plain`` compiles the default look's path only (one lit lamp, no shadows, Lambert
+    paper, matte opaque floor; world values loaded once per thread, the same bits as the general kernel in a third of
+    its CPU time); ``shade=False`` (:data:`resolve_labels`) writes depth, segmentation and normals only. The general
+    kernel shades every option (shadow maps, any number of lights, paper BSDF, glossy and clear plates); see
+    docs/render.md, "The plain path".
+    """
 
     @wp.kernel(name="resolve_labels" if not shade else ("resolve_shade_plain" if plain else "resolve_shade"))
     def resolve_shade(
         # Model:
-        triangles: wp.array(dtype=wp.vec3i),
-        tri_label: wp.array(dtype=wp.int32),
-        look: Look,
-        lights: Lights,
+        triangles: wp.array(dtype=wp.vec3i), tri_label: wp.array(dtype=wp.int32),
+        look: Look, lights: Lights,
         # Data in:
-        vertices: wp.array2d(dtype=wp.vec3),
-        texcoords: wp.array2d(dtype=wp.vec3),
+        vertices: wp.array2d(dtype=wp.vec3), texcoords: wp.array2d(dtype=wp.vec3),
         image_world: wp.array(dtype=wp.int32),
-        cam_rot: wp.array(dtype=wp.mat33),
-        cam_trans: wp.array(dtype=wp.vec3),
-        cam_intr: wp.array(dtype=wp.vec4),
+        cam_rot: wp.array(dtype=wp.mat33), cam_trans: wp.array(dtype=wp.vec3), cam_intr: wp.array(dtype=wp.vec4),
         zkey: wp.array2d(dtype=wp.int64),
-        width: int,
-        height: int,
-        span: int,
-        write_normals: int,
+        width: int, height: int, span: int, write_normals: int,
         cam_gain: wp.array(dtype=wp.vec3),
         # Data out:
-        rgb: wp.array2d(dtype=wp.vec3ub),
-        depth: wp.array2d(dtype=float),
-        seg: wp.array2d(dtype=wp.uint8),
+        rgb: wp.array2d(dtype=wp.vec3ub), depth: wp.array2d(dtype=float), seg: wp.array2d(dtype=wp.uint8),
         normals: wp.array2d(dtype=wp.vec3),
     ):
-        """Resolve the nearest surface and shade ``span`` consecutive pixels of one row of one image.
-
-        Launched as ``(N, height, ceil(width / span))``: span = 1 on CUDA (a thread per pixel), span = width on CPU
-        (a thread per row, so per-row setup is paid once and the per-thread launch overhead vanishes).
-
-        Args (beyond :func:`raster_triangles`'s):
-            look: per-world surfaces (:class:`Look`). lights: lights and shadow maps (:class:`Lights`).
-            texcoords: material coordinates [m] of every scene vertex (rest position for the sheet, magnet-local
-                for magnets), shape (W, Vs); procedural textures are functions of them, so they move with the surface.
-            zkey: keys written by the raster pass, shape (N, H * W).
-            span: pixels per thread along a row.
-            write_normals: 1 to write camera-frame unit normals (facing the camera; 0 for background), 0 to skip.
-            cam_gain: linear RGB gain of every image (exposure x white balance, applied before the display
-                encoding), shape (N,).
-            rgb: (N, H * W) vec3ub. depth: camera z [m], 0 for background, (N, H * W). seg: ids, (N, H * W).
-            normals: (N, H * W) vec3, or a 1-element dummy when write_normals is 0.
-        """
+        """Resolve the nearest surface and shade ``span`` pixels of one row of one image; launched as
+        ``(N, height, ceil(width / span))`` (span 1 on CUDA, the whole row on the CPU). Beyond
+        :func:`raster_triangles`'s arguments: ``texcoords`` (W, Vs) material coordinates [m] (procedural textures move
+        with the surface); ``zkey`` (N, H*W) the raster pass's keys; ``cam_gain`` (N,) linear RGB gain (exposure x
+        white balance); outputs (N, H*W): ``rgb`` vec3ub, ``depth`` camera z [m] (0 background), ``seg`` ids,
+        ``normals`` camera-frame unit normals when ``write_normals`` is 1 (else a 1-element dummy)."""
         img, y, xb = wp.tid()
         x_begin = xb * span
         x_end = wp.min(x_begin + span, width)

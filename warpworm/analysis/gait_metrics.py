@@ -72,6 +72,62 @@ def _at_time(t, values, when):
     return np.where(inside.reshape((W,) + (1,) * (values.ndim - 2)), out, np.nan)
 
 
+def _cycle_measures(s, C: int, centroid, ratios, length, tail, head, mag_x):
+    """Per cycle c < C (W, C): centroid displacement [m], smallest segment ratios (W, C, 4), end hold ratio and
+    approach placement (see :func:`gait_metrics`), from ``s`` (F, W) cycles, ``centroid``, ``length``, ``tail``,
+    ``head`` (F, W) [m], ``ratios`` (F, W, 4) and ``mag_x`` (F, W, 4) [m] along the axis."""
+    F, W = s.shape
+    cyc_disp = np.zeros((W, C))
+    cyc_rmin = np.ones((W, C, 4))
+    hold = np.full((W, C), np.nan)
+    placement = np.full((W, C), np.nan)
+    wi = np.arange(W)
+    for c in range(C):  # a few cycles: the loop is over cycles, every operation is over all worlds
+        inside = (s >= c - 1e-9) & (s <= c + 1 + 1e-9)  # (F, W)
+        first = np.argmax(inside, axis=0)
+        last = F - 1 - np.argmax(inside[::-1], axis=0)
+        cyc_disp[:, c] = centroid[last, wi] - centroid[first, wi]
+        cyc_rmin[:, c] = np.where(inside[..., None], ratios, np.inf).min(axis=0)
+        longest = np.argmax(np.where(inside, length, -np.inf), axis=0)
+        after = inside & (np.arange(F)[:, None] >= longest[None, :])
+        shortest = np.argmin(np.where(after, length, np.inf), axis=0)
+        start = np.where(shortest > longest, longest, first)
+        shortest = np.where(shortest > longest, shortest, np.argmin(np.where(inside, length, np.inf), axis=0))
+        dt_ = np.abs(tail[shortest, wi] - tail[start, wi])
+        dh = np.abs(head[shortest, wi] - head[start, wi])
+        big = np.maximum(dt_, dh)
+        contracted = (shortest != start) & (big > 0)  # a cycle in which the worm never got shorter has no value
+        hold[:, c] = np.where(contracted, np.minimum(dt_, dh) / np.where(big > 0, big, 1.0), np.nan)
+        near = np.argmin(np.abs(s - (c + 0.5)), axis=0)  # (W,) the frame nearest the closest approach
+        mx = mag_x[near, wi]  # (W, 4)
+        spacing = mx[:, IPM_HEAD_SLOT] - mx[:, IPM_CENTRE_SLOT]
+        placement[:, c] = (mx[:, EPM_SLOT] - mx[:, IPM_CENTRE_SLOT]) / np.where(spacing != 0, spacing, np.nan)
+    return cyc_disp, cyc_rmin, hold, placement
+
+
+def _far_point_measures(s, t, T, centroid, ratios, C: int):
+    """The largest centroid motion [m] and |ratio - 1| (W,) in the windows ±0.1 cycle around the far points
+    s = 1..C: ``s`` (F, W) cycles, ``t`` (F,) [s], ``T`` (W,) periods [s], ``centroid`` (F, W) [m] along the
+    axis, ``ratios`` (F, W, 4)."""
+    W = centroid.shape[1]
+    far = np.zeros(W)
+    far_dev = np.zeros(W)
+    for k in range(1, C + 1):
+        # the window [k − 0.1, k + 0.1] cycles: its frames plus the values interpolated at its two ends, so that the
+        # measure does not depend on whether a frame happens to fall on an end (fps 50 puts one there, fps 25 not)
+        win = np.abs(s - k) <= 0.1 + 1e-9
+        ends = [_at_time(t, v, (k + e) * T) for e in (-0.1, 0.1) for v in (centroid, ratios)]
+        c_lo, r_lo, c_hi, r_hi = ends
+        hi = np.maximum(np.where(win, centroid, -np.inf).max(axis=0), np.fmax(c_lo, c_hi))
+        lo = np.minimum(np.where(win, centroid, np.inf).min(axis=0), np.fmin(c_lo, c_hi))
+        far = np.maximum(far, np.where(np.isfinite(hi - lo), hi - lo, 0.0))
+        dev = np.where(win[..., None], np.abs(ratios - 1.0), 0.0).max(axis=(0, 2))
+        dev_ends = np.fmax(np.abs(r_lo - 1.0), np.abs(r_hi - 1.0)).max(axis=-1)
+        far_dev = np.maximum(far_dev, np.where(np.isfinite(dev_ends), dev_ends, 0.0))
+        far_dev = np.maximum(far_dev, dev)
+    return far, far_dev
+
+
 def gait_metrics(pattern, hinge_label, frames: dict, period, incline=0.0) -> dict:
     """Per-world measures of one gait run.
 
@@ -128,48 +184,9 @@ def gait_metrics(pattern, hinge_label, frames: dict, period, incline=0.0) -> dic
 
     s = t[:, None] / T[None, :]  # (F, W) cycles since the gait started
     C = int(np.floor(s[-1].min() + 1e-9))
-    cyc_disp = np.zeros((W, C))
-    cyc_rmin = np.ones((W, C, 4))
-    hold = np.full((W, C), np.nan)
-    placement = np.full((W, C), np.nan)
     length = np.linalg.norm(head_c - tail_c, axis=-1)  # head–tail distance (a worm that turns is not shorter)
-    wi = np.arange(W)
-    for c in range(C):  # a few cycles: the loop is over cycles, every operation is over all worlds
-        inside = (s >= c - 1e-9) & (s <= c + 1 + 1e-9)  # (F, W)
-        first = np.argmax(inside, axis=0)
-        last = F - 1 - np.argmax(inside[::-1], axis=0)
-        cyc_disp[:, c] = centroid[last, wi] - centroid[first, wi]
-        cyc_rmin[:, c] = np.where(inside[..., None], ratios, np.inf).min(axis=0)
-        longest = np.argmax(np.where(inside, length, -np.inf), axis=0)
-        after = inside & (np.arange(F)[:, None] >= longest[None, :])
-        shortest = np.argmin(np.where(after, length, np.inf), axis=0)
-        start = np.where(shortest > longest, longest, first)
-        shortest = np.where(shortest > longest, shortest, np.argmin(np.where(inside, length, np.inf), axis=0))
-        dt_ = np.abs(tail[shortest, wi] - tail[start, wi])
-        dh = np.abs(head[shortest, wi] - head[start, wi])
-        big = np.maximum(dt_, dh)
-        contracted = (shortest != start) & (big > 0)  # a cycle in which the worm never got shorter has no value
-        hold[:, c] = np.where(contracted, np.minimum(dt_, dh) / np.where(big > 0, big, 1.0), np.nan)
-        near = np.argmin(np.abs(s - (c + 0.5)), axis=0)  # (W,) the frame nearest the closest approach
-        mx = mag_x[near, wi]  # (W, 4)
-        spacing = mx[:, IPM_HEAD_SLOT] - mx[:, IPM_CENTRE_SLOT]
-        placement[:, c] = (mx[:, EPM_SLOT] - mx[:, IPM_CENTRE_SLOT]) / np.where(spacing != 0, spacing, np.nan)
-
-    far = np.zeros(W)
-    far_dev = np.zeros(W)
-    for k in range(1, C + 1):
-        # the window [k − 0.1, k + 0.1] cycles: its frames plus the values interpolated at its two ends, so that the
-        # measure does not depend on whether a frame happens to fall on an end (fps 50 puts one there, fps 25 not)
-        win = np.abs(s - k) <= 0.1 + 1e-9
-        ends = [_at_time(t, v, (k + e) * T) for e in (-0.1, 0.1) for v in (centroid, ratios)]
-        c_lo, r_lo, c_hi, r_hi = ends
-        hi = np.maximum(np.where(win, centroid, -np.inf).max(axis=0), np.fmax(c_lo, c_hi))
-        lo = np.minimum(np.where(win, centroid, np.inf).min(axis=0), np.fmin(c_lo, c_hi))
-        far = np.maximum(far, np.where(np.isfinite(hi - lo), hi - lo, 0.0))
-        dev = np.where(win[..., None], np.abs(ratios - 1.0), 0.0).max(axis=(0, 2))
-        dev_ends = np.fmax(np.abs(r_lo - 1.0), np.abs(r_hi - 1.0)).max(axis=-1)
-        far_dev = np.maximum(far_dev, np.where(np.isfinite(dev_ends), dev_ends, 0.0))
-        far_dev = np.maximum(far_dev, dev)
+    cyc_disp, cyc_rmin, hold, placement = _cycle_measures(s, C, centroid, ratios, length, tail, head, mag_x)
+    far, far_dev = _far_point_measures(s, t, T, centroid, ratios, C)
 
     return {
         "deformation_ratio_min": ratios.min(axis=0),
