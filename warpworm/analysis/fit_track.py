@@ -164,8 +164,8 @@ def observe(params, num_worlds: int, times, ref: int, meta: dict | None, *, rend
     else:
         centres = band_centres(fr["positions"], model.pattern.triangles, model.pattern.triangle_segment)
     centres = np.moveaxis(centres, 0, 1)  # (W, T, 5, 3)
-    r, d = zip(*(ratios_and_displacement(c, ref) for c in centres))
-    return {"ratios": np.stack(r), "displacement": np.stack(d), "unstable": fr["unstable"], "centres": centres}
+    r, d = ratios_and_displacement(centres, ref)
+    return {"ratios": r, "displacement": d, "unstable": fr["unstable"], "centres": centres}
 
 
 def residuals(obs: dict, track: dict) -> np.ndarray:

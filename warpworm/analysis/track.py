@@ -182,15 +182,15 @@ def back_project(uv: np.ndarray, cam: CameraModel, height: float) -> np.ndarray:
 
 
 def ratios_and_displacement(centres: np.ndarray, ref: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """Four deformation ratios (F, 4) (adjacent band-centre distances over frame ``ref``'s) and the displacement
-    (F,) [m] of the five centres' mean along frame ``ref``'s tail -> head direction, from centres (F, 5, 3) [m];
-    NaN where a band is missing."""
+    """Four deformation ratios (..., F, 4) (adjacent band-centre distances over frame ``ref``'s) and the
+    displacement (..., F) [m] of the five centres' mean along frame ``ref``'s tail -> head direction, from centres
+    (..., F, 5, 3) [m] (leading axes: e.g. worlds); NaN where a band is missing."""
     c = np.asarray(centres, np.float64)
-    d = np.linalg.norm(np.diff(c, axis=1), axis=-1)
-    axis = c[ref, -1] - c[ref, 0]
-    axis = axis / np.linalg.norm(axis)
-    mean = c.mean(axis=1)
-    return d / d[ref], (mean - mean[ref]) @ axis
+    d = np.linalg.norm(np.diff(c, axis=-2), axis=-1)
+    axis = c[..., ref, -1, :] - c[..., ref, 0, :]
+    axis = axis / np.linalg.norm(axis, axis=-1, keepdims=True)
+    mean = c.mean(axis=-2)
+    return d / d[..., ref:ref + 1, :], ((mean - mean[..., ref:ref + 1, :]) @ axis[..., None])[..., 0]
 
 
 def read_frames(source, fps: float | None = None):
