@@ -149,7 +149,7 @@ def distractor_mesh(draws: dict, num_worlds: int, floor_incline=0.0, segments: i
 
     if "distractors.count" not in draws:
         return None
-    n = max(int(k.split(".")[1]) + 1 for k in draws if k.startswith("distractors.") and k != "distractors.count")
+    n = _slot_count(draws, "distractors")
     W = num_worlds
     g = lambda i, name: np.broadcast_to(np.asarray(draws[f"distractors.{i}.{name}"], np.float64), (W,))  # noqa
     count = np.broadcast_to(np.asarray(draws["distractors.count"]), (W,))
@@ -189,6 +189,12 @@ MATERIALS = ("matte", "glossy", "acrylic")
 and clear acrylic (as glossy, and ``floor_transmit`` 0.3-0.6 from ``plate.clarity``: the EPM under it shows)."""
 
 
+def _slot_count(draws: dict, prefix: str) -> int:
+    """Number of slots ``i`` drawn as ``<prefix>.<i>.<name>`` in ``draws`` (0 when none)."""
+    return max((int(k.split(".")[1]) + 1 for k in draws if k.startswith(prefix + ".") and k != prefix + ".count"),
+               default=0)
+
+
 def _plate_material(a: Appearance, draws: dict) -> None:
     """The floor's specular row and transmittance from the drawn ``plate.material``, ``plate.gloss``,
     ``plate.clarity`` (B,)."""
@@ -208,7 +214,7 @@ def _distractor_looks(a: Appearance, draws: dict) -> None:
     and cylinders any hue, a little gloss."""
     from warpworm.render.scene import hsv_to_rgb
 
-    n = max(int(k.split(".")[1]) + 1 for k in draws if k.startswith("distractors.") and k != "distractors.count")
+    n = _slot_count(draws, "distractors")
     B = a.num_worlds
     alb = np.broadcast_to(a.albedo, (B,) + a.albedo.shape[1:])
     spec = np.broadcast_to(a.specular, (B,) + a.specular.shape[1:])
@@ -244,8 +250,7 @@ def place(a: Appearance, draws: dict) -> Appearance:
     if "distractors.count" in draws:
         _distractor_looks(a, draws)
     if "lights.count" in draws:
-        n = max(1, max((int(k.split(".")[1]) + 1 for k in draws if k.startswith("lights.") and k != "lights.count"),
-                       default=0))
+        n = max(1, _slot_count(draws, "lights"))
         pos, power, size = np.zeros((B, n, 3)), np.zeros((B, n, 3)), np.full((B, n), DEFAULT_LAMP_SIZE)
         count = np.asarray(draws["lights.count"])
         for i in range(n):
