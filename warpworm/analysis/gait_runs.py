@@ -69,7 +69,7 @@ def run_gait(params, num_worlds: int, cycles: float, *, device="cpu", dt=None, s
     else:
         sim.step(state, n_steps)
     snap = sim.snapshot(state)
-    disp = axis_displacement(x0, snap["positions"], np.broadcast_to(np.asarray(params.floor_incline), (num_worlds,)))
+    disp = axis_displacement(x0, snap["positions"], params.floor_incline)
     return {
         "displacement_m": disp,
         "unstable": snap["unstable"],
