@@ -282,6 +282,22 @@ def band_centres(positions, triangles, triangle_segment, view=(0.0, 0.0, 1.0)) -
         return num / den[..., None]
 
 
+def band_pixel_centroids(seg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Centroid (N, 5, 2) [px] of band b's visible pixels (segmentation id 2 + b) in each of N segmentation images
+    (N, H, W), NaN when unseen, and the pixel counts (N, 5)."""
+    seg = np.asarray(seg)
+    N, H, W = seg.shape
+    v, u = np.mgrid[0:H, 0:W].astype(np.float64)
+    pix, cnt = np.full((N, 5, 2), np.nan), np.zeros((N, 5), np.int64)
+    for b in range(5):
+        m = seg == SEG_WORM_FIRST + b
+        n = m.sum(axis=(1, 2))
+        cnt[:, b] = n
+        with np.errstate(invalid="ignore", divide="ignore"):
+            pix[:, b] = np.stack([(m * u).sum(axis=(1, 2)), (m * v).sum(axis=(1, 2))], -1) / n[:, None]
+    return pix, cnt
+
+
 def band_labels(images: dict, cameras: Cameras) -> dict:
     """The marker bands as N rendered images show them (scenes painted with
     :func:`warpworm.render.scene.band_appearance`; what ``warpworm track`` measures): ``bands/pixel`` (N, 5, 2) [px]
@@ -295,12 +311,9 @@ def band_labels(images: dict, cameras: Cameras) -> dict:
     ray = np.einsum("nij,jhw->nhwi", Kinv, np.stack([u, v, np.ones_like(u)]))  # z = 1 rays (N, H, W, 3)
     pc = ray * depth[..., None]
     pw = np.einsum("nji,nhwj->nhwi", cameras.R, pc - cameras.t[:, None, None])  # R^T (x_cam - t)
-    pix, cnt, world = np.full((N, 5, 2), np.nan), np.zeros((N, 5), np.int64), np.full((N, 5, 3), np.nan)
+    pix, cnt = band_pixel_centroids(seg)
+    world = np.full((N, 5, 3), np.nan)
     for b in range(5):
-        m = seg == SEG_WORM_FIRST + b
-        n = m.sum(axis=(1, 2))
-        cnt[:, b] = n
         with np.errstate(invalid="ignore", divide="ignore"):
-            pix[:, b] = np.stack([(m * u).sum(axis=(1, 2)), (m * v).sum(axis=(1, 2))], -1) / n[:, None]
-            world[:, b] = np.einsum("nhw,nhwc->nc", m, pw) / n[:, None]
+            world[:, b] = np.einsum("nhw,nhwc->nc", seg == SEG_WORM_FIRST + b, pw) / cnt[:, b, None]
     return {"bands/pixel": pix, "bands/pixels": cnt, "bands/world": world}

@@ -108,7 +108,7 @@ def band_pixels_from_render(frames: dict, model, cam, width: int, height: int, s
     them, from the renderer's segmentation at ``scale`` times the resolution; NaN where a band is unseen."""
     from warpworm.render import Renderer, make_cameras
     from warpworm.render.scene import build_scene
-    from warpworm.ids import SEG_WORM_FIRST
+    from warpworm.render.labels import band_pixel_centroids
 
     T_, W = frames["positions"].shape[:2]
     w_s, h_s = max(8, int(round(width * scale))), max(8, int(round(height * scale)))
@@ -123,7 +123,6 @@ def band_pixels_from_render(frames: dict, model, cam, width: int, height: int, s
     rest = np.asarray(model.rest_positions_host)
     rest = np.broadcast_to(rest, (W,) + rest.shape[-2:])
     out = np.full((T_ * W, 5, 2), np.nan)
-    v, u = np.mgrid[0:h_s, 0:w_s].astype(np.float64)
     for lo in range(0, T_ * W, chunk):
         idx = np.arange(lo, min(lo + chunk, T_ * W))
         wi = idx % W
@@ -136,14 +135,10 @@ def band_pixels_from_render(frames: dict, model, cam, width: int, height: int, s
         n = len(idx)
         cams = make_cameras(K, np.broadcast_to(cam.R, (n, 3, 3)), np.broadcast_to(cam.t, (n, 3)), np.arange(n),
                             w_s, h_s)
-        seg = renderer.render(scene, cams)["seg"]
-        for b in range(5):
-            m = seg == SEG_WORM_FIRST + b
-            c = m.sum(axis=(1, 2))
-            with np.errstate(invalid="ignore", divide="ignore"):
-                out[idx, b, 0] = ((m * u).sum(axis=(1, 2)) / c + 0.5) / sx - 0.5
-                out[idx, b, 1] = ((m * v).sum(axis=(1, 2)) / c + 0.5) / sy - 0.5
-            out[idx[c < 3], b] = np.nan
+        pix, cnt = band_pixel_centroids(renderer.render(scene, cams)["seg"])
+        out[idx, :, 0] = (pix[..., 0] + 0.5) / sx - 0.5  # back to the pixels of ``cam``
+        out[idx, :, 1] = (pix[..., 1] + 0.5) / sy - 0.5
+        out[idx] = np.where(cnt[..., None] < 3, np.nan, out[idx])
     return out.reshape(T_, W, 5, 2)
 
 
