@@ -85,6 +85,22 @@ def output_folder(path, option: str = "OUT", *, overwrite: bool = False):
     return p
 
 
+def add_export_arguments(parser, out_help: str = "output folder (new or empty, unless --overwrite)") -> None:
+    """The arguments every ``export-*`` command of a dataset folder takes: DIR, OUT, ``--limit``, ``--overwrite``."""
+    parser.add_argument("dir", help="dataset folder written by 'warpworm generate'")
+    parser.add_argument("out", help=out_help)
+    parser.add_argument("--limit", type=int, default=None, help="export only the first N samples")
+    parser.add_argument("--overwrite", action="store_true", help="write into a non-empty OUT")
+
+
+def check_export_arguments(args, **minimums) -> None:
+    """ValueError (ConfigError) unless ``args.dir`` is a dataset folder, ``args.out`` a usable output folder and
+    ``args.limit`` (and each ``option=(value, minimum)`` of ``minimums``, as :func:`check_minimum`) in range."""
+    dataset_folder(args.dir)
+    output_folder(args.out, overwrite=args.overwrite)
+    check_minimum(limit=(args.limit, 1), **minimums)
+
+
 def first_run_notice(modules=("warpworm.kernels.implicit_euler", "warpworm.kernels.magnet_wrench")) -> bool:
     """Say on stderr, before a command's first kernel launch, that the Warp kernels compile now when none of
     ``modules`` has ever been built into Warp's kernel cache (a fresh machine or cache: ~20-60 s of silence

@@ -9,21 +9,18 @@ HELP = ("Export a generated dataset folder to the BOP format (camera.json, model
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("dir", help="dataset folder written by 'warpworm generate'")
-    parser.add_argument("out", help="BOP output folder (new or empty, unless --overwrite)")
+    from warpworm.commands.common import add_export_arguments
+
+    add_export_arguments(parser, out_help="BOP output folder (new or empty, unless --overwrite)")
     parser.add_argument("--split", default="train_pbr", help="BOP split folder name (default train_pbr)")
-    parser.add_argument("--limit", type=int, default=None, help="export only the first N samples")
-    parser.add_argument("--overwrite", action="store_true", help="write into a non-empty OUT")
 
 
 def main(args: argparse.Namespace) -> int:
-    from warpworm.commands.common import check_minimum, dataset_folder, output_folder, refuse
+    from warpworm.commands.common import check_export_arguments, refuse
     from warpworm.data.export_bop import export_bop
 
     try:
-        dataset_folder(args.dir)
-        output_folder(args.out, overwrite=args.overwrite)
-        check_minimum(limit=(args.limit, 1))
+        check_export_arguments(args)
         if not args.split or "/" in args.split:
             raise ValueError(f"--split: got {args.split!r}; expected a folder name such as train_pbr")
     except ValueError as exc:

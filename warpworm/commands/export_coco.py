@@ -24,7 +24,6 @@ person keypoints); the file's ``info.kpt_oks_sigmas`` holds ours (export_keypoin
 from __future__ import annotations
 
 import argparse
-import os
 from pathlib import Path
 
 import numpy as np
@@ -37,10 +36,9 @@ HELP = "Export a dataset folder to COCO keypoints (images/*.png + annotations/ke
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("dir", help="dataset folder")
-    parser.add_argument("out", help="output folder (new or empty, unless --overwrite)")
-    parser.add_argument("--limit", type=int, default=None, help="export only the first N samples")
-    parser.add_argument("--overwrite", action="store_true", help="write into a non-empty OUT")
+    from warpworm.commands.common import add_export_arguments
+
+    add_export_arguments(parser)
 
 
 def skeleton(names: list[str]) -> list[list[int]]:
@@ -115,20 +113,16 @@ def export_coco(src, out, limit: int | None = None, overwrite: bool = False) -> 
                         "half_turn_pairs": ek.index_pairs(ek.HALF_TURN_PAIRS, names, base=1)}],
     }
     path = out / "annotations" / "keypoints.json"
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(strict_json.dumps(coco))
-    os.replace(tmp, path)
+    strict_json.write(path, coco)
     reader.close()
     return {"images": len(images), "annotations": len(anns), "file": str(path)}
 
 
 def main(args: argparse.Namespace) -> int:
-    from warpworm.commands.common import check_minimum, dataset_folder, output_folder, refuse
+    from warpworm.commands.common import check_export_arguments, refuse
 
     try:
-        dataset_folder(args.dir)
-        output_folder(args.out, overwrite=args.overwrite)
-        check_minimum(limit=(args.limit, 1))
+        check_export_arguments(args)
         r = export_coco(args.dir, args.out, args.limit, overwrite=args.overwrite)
     except (ValueError, OSError) as exc:
         return refuse(exc)

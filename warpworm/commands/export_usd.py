@@ -35,6 +35,7 @@ def _worlds(text: str) -> list[int]:
 
 
 def main(args: argparse.Namespace) -> int:
+    from warpworm.commands.common import refuse
     from warpworm.data.usd_export import compliance_errors, export_usd
 
     out = Path(args.out)
@@ -49,8 +50,7 @@ def main(args: argparse.Namespace) -> int:
         out.parent.mkdir(parents=True, exist_ok=True)
         path = export_usd(args.source, out, worlds=worlds, spacing=args.spacing)
     except (FileNotFoundError, ValueError, OSError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+        return refuse(exc)
     print(f"wrote {path}")
     if args.check:
         errs = compliance_errors(path)

@@ -9,20 +9,17 @@ HELP = ("Export a dataset folder as BOP-webdataset tar shards (per image: rgb, d
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("dir", help="dataset folder written by 'warpworm generate'")
-    parser.add_argument("out", help="output folder (new or empty, unless --overwrite)")
-    parser.add_argument("--limit", type=int, default=None, help="export only the first N samples")
+    from warpworm.commands.common import add_export_arguments
+
+    add_export_arguments(parser)
     parser.add_argument("--shard-size", type=int, default=1000, help="images per tar shard (default 1000)")
-    parser.add_argument("--overwrite", action="store_true", help="write into a non-empty OUT")
 
 
 def main(args: argparse.Namespace) -> int:
-    from warpworm.commands.common import check_minimum, dataset_folder, output_folder, refuse
+    from warpworm.commands.common import check_export_arguments, refuse
 
     try:
-        dataset_folder(args.dir)
-        output_folder(args.out, overwrite=args.overwrite)
-        check_minimum(limit=(args.limit, 1), shard_size=(args.shard_size, 1))
+        check_export_arguments(args, shard_size=(args.shard_size, 1))
         import importlib.util
 
         if importlib.util.find_spec("webdataset") is None:

@@ -9,21 +9,18 @@ HELP = ("Export a dataset folder for Ultralytics YOLO pose: images/ and labels/ 
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("dir", help="dataset folder written by 'warpworm generate'")
-    parser.add_argument("out", help="output folder (new or empty, unless --overwrite)")
-    parser.add_argument("--limit", type=int, default=None, help="export only the first N samples")
+    from warpworm.commands.common import add_export_arguments
+
+    add_export_arguments(parser)
     parser.add_argument("--val-fraction", type=float, default=0.1,
                         help="share of the trajectories held out for validation (default 0.1)")
-    parser.add_argument("--overwrite", action="store_true", help="write into a non-empty OUT")
 
 
 def main(args: argparse.Namespace) -> int:
-    from warpworm.commands.common import check_minimum, dataset_folder, output_folder, refuse
+    from warpworm.commands.common import check_export_arguments, refuse
 
     try:
-        dataset_folder(args.dir)
-        output_folder(args.out, overwrite=args.overwrite)
-        check_minimum(limit=(args.limit, 1))
+        check_export_arguments(args)
         if not 0 <= args.val_fraction < 1:
             raise ValueError(f"--val-fraction: got {args.val_fraction}; expected a fraction in [0, 1)")
     except ValueError as exc:

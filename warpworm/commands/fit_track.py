@@ -8,7 +8,6 @@ parameters as a config fragment; the ``simulate --set`` form in its header) and 
 
 from __future__ import annotations
 
-import json
 
 HELP = "fit worm parameters (k_alpha, friction, EPM moment, ...) to a band track from 'warpworm track' (batched CMA-ES)"
 
@@ -79,6 +78,7 @@ def main(args) -> int:
     from warpworm.analysis import fit_track as FT
     from warpworm.analysis import track as T
     from warpworm.commands.common import refuse
+    from warpworm.data import export_json as strict_json
     from warpworm.data.config import ConfigError
 
     try:
@@ -120,31 +120,24 @@ def main(args) -> int:
             f"({'through the track camera' if meta else 'band centres from above'}), budget {args.budget} worlds")
     res = FT.fit(track, base, names, budget=args.budget, popsize=args.popsize, spread=args.spread, seed=args.seed,
                  meta=meta, log=log, refine=args.refine, profile=args.profile, render_scale=args.render_scale, device=args.device)
-    frag = FT.write_fragment(out / "fit.yaml", args.gait, args.backward, {**path_fields, **known}, res)
+    frag = FT.write_fragment(out / "fit.yaml", args.gait, args.backward, {**path_fields, **known}, res, base)
     plot_note = ""
     try:
         FT.plot_fit(out / "fit.png", track, res, title=f"{args.gait}: measured (red) vs fitted (blue)")
     except ImportError:
         plot_note = " (no fit.png: install the plots extra, pip install 'warpworm[plots]')"
     summary = {"names": names, "value": res["value"].tolist(), "preset": res["base"].tolist(),
-               "sigma_rel": [_num(s) for s in res["sigma_rel"]], "pinned": res["pinned"].tolist(),
-               "cost": _num(res["cost"]), "rms_ratio": _num(res["rms_ratio"]),
-               "rms_displacement_m": _num(res["rms_disp_m"]),
-               "weakest": res["weakest"].tolist(), "profile_moved": bool(res["profile_moved"]), "weakest_sigma": _num(res["weakest_sigma"]), "worlds": res["worlds"],
+               "sigma_rel": [float(s) for s in res["sigma_rel"]], "pinned": res["pinned"].tolist(),
+               "cost": float(res["cost"]), "rms_ratio": float(res["rms_ratio"]),
+               "rms_displacement_m": float(res["rms_disp_m"]), "weakest": res["weakest"].tolist(),
+               "profile_moved": bool(res["profile_moved"]), "weakest_sigma": float(res["weakest_sigma"]),
+               "worlds": res["worlds"],
                "wall_s": res["wall_s"], "files": [str(out / f) for f in ("fit.yaml", "fit.png", "fit.json")]}
-    (out / "fit.json").write_text(json.dumps(summary, indent=1, allow_nan=False))
+    strict_json.write(out / "fit.json", summary, indent=1)  # inf (an unidentifiable sigma) as null
     if args.json:
-        print(json.dumps(summary))
+        print(strict_json.dumps(summary))
         return 0
     print("\n".join(FT.report_lines(res)))
     print(f"{res['worlds']} worlds in {res['wall_s']:.1f} s; wrote {out}/fit.yaml, fit.json, fit.png{plot_note}")
     print(frag.splitlines()[1])
     return 0
-
-
-def _num(x):
-    """A finite float, or None (JSON has no inf)."""
-    import math
-
-    x = float(x)
-    return x if math.isfinite(x) else None

@@ -10,7 +10,6 @@ the same camera.
 
 from __future__ import annotations
 
-import json
 
 HELP = "track the five marker bands in a video or image folder: deformation ratios and displacement per frame (CSV)"
 
@@ -70,6 +69,7 @@ def main(args) -> int:
 
     from warpworm.analysis import track as T
     from warpworm.commands.common import refuse
+    from warpworm.data import export_json as strict_json
 
     try:
         if args.fps is not None and not args.fps > 0:
@@ -96,7 +96,7 @@ def main(args) -> int:
                "displacement_end_m": float(tr["displacement"][-1]) if np.isfinite(tr["displacement"][-1]) else None,
                "out": str(args.out), "meta": str(T.meta_path(args.out))}
     if args.json:
-        print(json.dumps(summary))
+        print(strict_json.dumps(summary))  # a band never seen: its ratio min/max as null
         return 0
     print(f"tracked {summary['frames']} frames at {fps:g} fps; all five bands seen in {summary['frames_all_bands']} "
           f"(unseen per band, tail -> head: {summary['unseen_per_band']})")

@@ -33,7 +33,6 @@ approximation, stated in ``models_info.json``).
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
@@ -59,9 +58,7 @@ def _bbox(mask: np.ndarray) -> list[int]:
 
 
 def _write_json(path: Path, obj) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(strict_json.dumps(obj, indent=1))
-    os.replace(tmp, path)
+    strict_json.write(path, obj, indent=1)
 
 
 def _half_turn(axis: int) -> list[float]:
@@ -182,10 +179,9 @@ def write_model_files(reader, out: Path) -> None:
         for k, v in OBJECTS.items()})
 
 
-def export_bop(src, out, *, split: str = "train_pbr", limit: int | None = None) -> dict:
-    """Write the BOP layout of dataset ``src`` to ``out``; returns {"images": n, "scenes": k}."""
-    import cv2
-
+def begin_export(src, out, limit: int | None):
+    """Open dataset ``src``, create ``out`` and write its ``camera.json``, ``models/`` and ``models_info.json``;
+    returns (reader, out as a Path, number of samples to export). ValueError when there are none."""
     reader = ds.open(src)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -198,6 +194,14 @@ def export_bop(src, out, *, split: str = "train_pbr", limit: int | None = None) 
                                       "fy": float(K0[1, 1]), "width": int(W), "height": int(H),
                                       "depth_scale": DEPTH_SCALE})
     write_model_files(reader, out)
+    return reader, out, n
+
+
+def export_bop(src, out, *, split: str = "train_pbr", limit: int | None = None) -> dict:
+    """Write the BOP layout of dataset ``src`` to ``out``; returns {"images": n, "scenes": k}."""
+    import cv2
+
+    reader, out, n = begin_export(src, out, limit)
     scenes = 0
     for s0 in range(0, n, SCENE_SIZE):
         idx = np.arange(s0, min(n, s0 + SCENE_SIZE))

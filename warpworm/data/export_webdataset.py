@@ -27,11 +27,9 @@ Every JSON is strict (no NaN). Reading back: ``webdataset.WebDataset(urls)`` yie
 from __future__ import annotations
 
 import io
-from pathlib import Path
 
 import numpy as np
 
-from warpworm.data import dataset as ds
 from warpworm.data import export_bop as bop
 from warpworm.data import export_json as strict_json
 
@@ -60,27 +58,13 @@ def rle_uncompressed(mask: np.ndarray) -> dict:
     return {"size": [int(mask.shape[0]), int(mask.shape[1])], "counts": [int(c) for c in counts]}
 
 
-_rle = rle_uncompressed
-
-
 def export_webdataset(src, out, *, limit: int | None = None, shard_size: int = SHARD_SIZE) -> dict:
     """Write the shards of dataset ``src`` to ``out``; returns {"images": n, "shards": k}."""
     import webdataset as wds
 
     from warpworm.data.export_keypoints import KeypointExporter
 
-    reader = ds.open(src)
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    n = len(reader) if limit is None else min(limit, len(reader))
-    if n == 0:
-        raise ValueError(f"{src} holds no samples")
-    K0 = reader.read("camera/K", [0])[0]
-    H, W = reader.read("depth", [0]).shape[1:]
-    strict_json.write(out / "camera.json", {"cx": float(K0[0, 2]), "cy": float(K0[1, 2]), "fx": float(K0[0, 0]),
-                                            "fy": float(K0[1, 1]), "width": int(W), "height": int(H),
-                                            "depth_scale": bop.DEPTH_SCALE}, indent=1)
-    bop.write_model_files(reader, out)
+    reader, out, n = bop.begin_export(src, out, limit)
     kpx = KeypointExporter(reader)
     key_to_shard, shards = {}, 0
     for s0 in range(0, n, shard_size):
@@ -103,9 +87,10 @@ def export_webdataset(src, out, *, limit: int | None = None, shard_size: int = S
                     "camera.json": strict_json.dumps(rec["camera"]).encode(),
                     "gt.json": strict_json.dumps(rec["gt"]).encode(),
                     "gt_info.json": strict_json.dumps(rec["gt_info"]).encode(),
-                    "mask.json": strict_json.dumps({str(k): _rle(m) for k, m in enumerate(rec["mask"])}).encode(),
-                    "mask_visib.json": strict_json.dumps({str(k): _rle(m) for k, m in
-                                                          enumerate(rec["mask_visib"])}).encode(),
+                    "mask.json": strict_json.dumps({str(k): rle_uncompressed(m)
+                                                    for k, m in enumerate(rec["mask"])}).encode(),
+                    "mask_visib.json": strict_json.dumps({str(k): rle_uncompressed(m)
+                                                          for k, m in enumerate(rec["mask_visib"])}).encode(),
                     "warpworm.json": strict_json.dumps(labels).encode()})
                 key_to_shard[key] = shards
         tmp.replace(path)
