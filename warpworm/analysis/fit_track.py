@@ -371,14 +371,14 @@ def report_lines(result: dict) -> list[str]:
     return out
 
 
-def write_fragment(path, gait: str, backward: bool, path_fields: dict, result: dict) -> str:
+def write_fragment(path, gait: str, backward: bool, path_fields: dict, result: dict, base) -> str:
     """The fitted parameters as a YAML config fragment (``randomize.worm.*``: merge into a dataset config, or pass
-    each as ``generate ... randomize.worm.NAME=VALUE`` / ``simulate --set NAME=VALUE``); returns the text."""
-    vals = dict(zip(result["names"], (float(v) for v in result["value"])))
-    if "mu_static" in vals and "mu_kinetic" not in vals:
-        from warpworm.physics.params import WormParams
-
-        vals["mu_kinetic"] = vals["mu_static"] * WormParams().mu_kinetic / WormParams().mu_static
+    each as ``generate ... randomize.worm.NAME=VALUE`` / ``simulate --set NAME=VALUE``); returns the text. ``base``:
+    the WormParams the fit started from (mu_kinetic follows mu_static as in :func:`candidate_params`)."""
+    names = list(result["names"])
+    fitted = candidate_params(base, names, np.asarray(result["value"], np.float64)[None])
+    extra = ["mu_kinetic"] if "mu_static" in names and "mu_kinetic" not in names else []
+    vals = {n: float(np.asarray(getattr(fitted, n)).reshape(-1)[0]) for n in names + extra}
     worm = {"gait": gait, "backward": bool(backward), **path_fields, **vals}
     lines = ["# warpworm fit-track: fitted worm parameters (a config fragment)",
              "# simulate: " + " ".join(f"--set {k}={v:.6g}" for k, v in {**path_fields, **vals}.items()),
