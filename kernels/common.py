@@ -192,7 +192,7 @@ def wings_collapsed(n1: wp.vec3, n2: wp.vec3, len2: float) -> bool:
 
 @wp.func
 def hinge_angle_at_substep_end(prev: float, xi: wp.vec3, xj: wp.vec3, xk: wp.vec3, xl: wp.vec3, label: int,
-                          fold_tolerance: float):
+                               fold_tolerance: float):
     """A hinge's angle at the end of a substep, unwrapped from its angle ``prev`` [rad] at the start, and whether
     the sheet crumpled there: the angle more than ``fold_tolerance`` [rad] outside the hinge's NoFoldThrough range,
     or a wing collapsed (:func:`wings_collapsed`). Returns (phi, crumpled); shared by the band and tile kernels."""

@@ -128,7 +128,6 @@ def block_band_cholesky_factor(world: int, lane: int, bd: int, nv: int, bw: int,
                 t = t - mat[world, i, i - k] * wp.transpose(mat[world, j, j - k])
             mat[world, i, i - j] = t * inv_t
     block_max(0)  # the last column before anyone reads the factor
-    return 0
 
 
 @wp.func
