@@ -391,6 +391,7 @@ class ShardWriter:
                     if buf is None:
                         buf = self._buffers[name] = np.zeros((self.count,) + arr.shape[1:], arr.dtype)
                     elif arr.dtype.kind == "S" and arr.dtype.itemsize > buf.dtype.itemsize:
+                        # other callers' text; the pipeline passes text at its schema width (shard.text_column)
                         buf = self._buffers[name] = buf.astype(arr.dtype)
                     buf[sl] = arr
         except OSError as exc:
@@ -721,6 +722,8 @@ class DatasetReader:
             if first is None:
                 out = np.empty((idx.size,) + data.shape[1:], dtype=data.dtype)
                 first = True
+            elif data.dtype != out.dtype:  # text written before its width was fixed: widen, never truncate
+                out = out.astype(np.result_type(out.dtype, data.dtype))
             out[sel[order]] = data
         if out is None:
             ds = self._file(0)[name]

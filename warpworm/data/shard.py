@@ -306,9 +306,38 @@ def _render_rows(stages, cfg: DatasetConfig, batch: _Trajectories, sid: np.ndarr
     if K > 1:  # only then: a dataset of views_per_frame = 1 keeps exactly the datasets of before the option
         rows["view"] = vidx.astype(np.int32)
     for name, v in {**_take(batch.draws.values, tsel), **app, **cam_draws}.items():
-        rows[f"params/{name}"] = v
+        rows[f"params/{name}"] = text_column(name, v) if np.asarray(v).dtype.kind in "OSU" else v
     stats.write_s += time.perf_counter() - t0
     return rows
+
+
+@functools.lru_cache(maxsize=None)
+def text_widths() -> dict[str, int]:
+    """Bytes of the longest value each text parameter may take, from the schema (not from the values drawn): the
+    ``values`` of every text parameter of :data:`~warpworm.data.config.PARAM_SPECS` and the renderer's plate
+    materials (``render.plate_materials``, :data:`warpworm.render.placement.MATERIALS`)."""
+    from warpworm.data.config import PARAM_SPECS
+    from warpworm.render.placement import MATERIALS
+
+    out = {f"{g}.{n}": max(len(str(v).encode()) for v in spec.values)
+           for g, specs in PARAM_SPECS.items() for n, spec in specs.items()
+           if spec.values is not None and all(isinstance(v, str) for v in spec.values)}
+    out["plate.material"] = max(len(m.encode()) for m in MATERIALS)
+    return out
+
+
+def text_column(name: str, values) -> np.ndarray:
+    """Text parameter ``name``'s values (n,) as fixed-width bytes ``S<w>``, w from :func:`text_widths`, so a shard's
+    dtype depends on the schema alone, not on which values its samples drew (nor on the shard size)."""
+    width = text_widths().get(name)
+    if width is None:
+        raise RuntimeError(f"params/{name}: a text parameter without a declared set of values; give it `values` in "
+                           "warpworm.data.config.PARAM_SPECS (its width in the files comes from them)")
+    raw = np.asarray(values, dtype=object).astype("S")
+    if raw.dtype.itemsize > width:
+        raise ValueError(f"params/{name}: got {max(raw.tolist(), key=len)!r}; expected one of the schema's values (at most {width} "
+                         "bytes)")
+    return raw.astype(f"S{width}")
 
 
 def _stack_frames(frames: list[dict]) -> dict:
@@ -322,4 +351,4 @@ def _gather_frames(stacked: dict, tsel: np.ndarray, fidx: np.ndarray) -> dict:
 
 
 __all__ = ["Interrupted", "ShardStats", "root_attributes", "run_shard",
-           "simulate_with_replacement"]
+           "simulate_with_replacement", "text_column", "text_widths"]
