@@ -13,10 +13,15 @@ Stage layout (``metersPerUnit = 1``, ``upAxis = Z``, ``timeCodesPerSecond = 100`
                                           primvars:barStrain    (vertex)  mean |strain| of incident bars
     /World/w000/IPM_tail|IPM_centre|IPM_head   Xform, transform time-sampled; child Cylinder (axis Z) = the disk
     /World/w000/EPM                     Xform, transform time-sampled; child Cube scaled to the EPM's extents
-    /World/w000/Camera                  Camera (dataset sources): OpenCV pose converted to USD's −Z-forward, +Y-up
+    /World/w000/Camera                  Camera (dataset sources): OpenCV pose converted to USD's −Z-forward, +Y-up;
+                                          with render.views_per_frame K > 1 one camera per view, Camera_v0 ..
+                                          Camera_v<K-1>; a camera that moves (render.camera_per_frame) is
+                                          time-sampled at the frames its view shows
 
 Sources:
-* a dataset folder (``warpworm generate``): trajectory ``j``'s frames are the samples with ``trajectory == j``;
+* a dataset folder (``warpworm generate``): trajectory ``j``'s frames are the samples with ``trajectory == j``; one
+  time sample per simulated frame (its K views share the physical state: the first view's sample is taken), the
+  views' cameras each their own prim;
 * a trajectory file (``.npz`` or ``.h5``) with ``positions (F, W, V, 3)`` [m], ``magnet_pos (F, W, 4, 3)``,
   ``magnet_rot (F, W, 4, 3, 3)``, ``crease_angle (F, W, H)``, ``bar_strain (F, W, E)``, ``time (F,)`` [s] and the
   topology ``triangles (T, 3)``, ``hinges (H, 4)``, ``edges (E, 2)`` (optional ``ipm_diameter``, ``ipm_thickness``,
@@ -55,35 +60,66 @@ class Track:
     ipm_thickness: float
     epm_size: np.ndarray  # (3,)
     floor_incline: float
-    camera: tuple | None = None  # (K (3,3), R (3,3), t (3,), width, height), OpenCV world -> camera
+    cameras: tuple = ()  # ViewCamera per view (dataset sources)
+
+
+@dataclass
+class ViewCamera:
+    """One view's OpenCV pinhole camera (world -> camera) at the frames it shows."""
+
+    name: str  # prim name under the world: Camera (one view), Camera_v<k> (K views)
+    time: np.ndarray  # (n,) [s] the frames' times
+    K: np.ndarray  # (n, 3, 3) [px]
+    R: np.ndarray  # (n, 3, 3)
+    t: np.ndarray  # (n, 3) [m]
+    width: int
+    height: int
 
 
 def tracks_from_dataset(root, trajectories=(0,)) -> list[Track]:
-    """Tracks of the given trajectory ids of a dataset folder."""
+    """Tracks of the given trajectory ids of a dataset folder: one frame per simulated frame (with
+    ``render.views_per_frame`` K > 1 a frame is K samples of one physical state: the first one's state is taken) and
+    one :class:`ViewCamera` per view."""
     from warpworm.data import dataset as ds
 
     r = ds.open(root)
-    a = r.attrs
-    traj = r.read("trajectory")
-    out = []
-    for j in trajectories:
-        idx = np.flatnonzero(traj == j)
-        if idx.size == 0:
-            raise ValueError(f"trajectory {j} is not in {root} (it has {traj.min()}..{traj.max()})")
-        idx = idx[np.argsort(r.read("frame", idx), kind="stable")]
-        pose = np.concatenate([r.read("poses/epm", idx)[:, None], r.read("poses/ipm", idx)], axis=1)
-        p0 = lambda n: float(r.read(f"params/worm.{n}", idx[:1])[0])  # noqa: E731
-        out.append(Track(
-            name=f"w{j:03d}", time=r.read("time", idx).astype(np.float64),
-            points=r.read("worm/vertices", idx).astype(np.float32), magnet_pose=pose,
-            crease_angle=r.read("creases/angle", idx), bar_strain=r.read("bars/strain", idx),
-            triangles=np.asarray(a["mesh_triangles"]), hinges=np.asarray(a["crease_hinges"]),
-            edges=np.asarray(a["bar_edges"]), ipm_diameter=p0("ipm_diameter"), ipm_thickness=p0("ipm_thickness"),
-            epm_size=np.array([p0("epm_size_x"), p0("epm_size_y"), p0("epm_size_z")]),
-            floor_incline=p0("floor_incline"),
-            camera=(r.read("camera/K", idx[:1])[0], r.read("camera/R", idx[:1])[0], r.read("camera/t", idx[:1])[0],
-                    int(r.read("depth", idx[:1]).shape[2]), int(r.read("depth", idx[:1]).shape[1]))))
-    r.close()
+    try:
+        a = r.attrs
+        traj = r.read("trajectory")
+        has_view = "view" in r.keys()
+        height, width = r.read("depth", [0]).shape[1:3]
+        out = []
+        for j in trajectories:
+            idx = np.flatnonzero(traj == j)  # sample order: view-major, then frame
+            if idx.size == 0:
+                raise ValueError(f"trajectory {j} is not in {root} (it has {traj.min()}..{traj.max()})")
+            frame = r.read("frame", idx)
+            view = r.read("view", idx) if has_view else np.zeros(idx.size, np.int32)
+            _, first = np.unique(frame, return_index=True)  # each frame's first sample (view 0), by frame
+            state = idx[first]
+            time = r.read("time", state).astype(np.float64)
+            if np.any(np.diff(time) <= 0):
+                raise ValueError(f"trajectory {j} of {root}: frame times {time.tolist()} are not strictly increasing")
+            pose = np.concatenate([r.read("poses/epm", state)[:, None], r.read("poses/ipm", state)], axis=1)
+            p0 = lambda n: float(r.read(f"params/worm.{n}", state[:1])[0])  # noqa: E731
+            views = np.unique(view)
+            cams = []
+            for v in views:
+                sel = idx[view == v]  # frames in increasing order within a view
+                cams.append(ViewCamera(
+                    name="Camera" if len(views) == 1 else f"Camera_v{int(v)}",
+                    time=r.read("time", sel).astype(np.float64), K=r.read("camera/K", sel),
+                    R=r.read("camera/R", sel), t=r.read("camera/t", sel), width=int(width), height=int(height)))
+            out.append(Track(
+                name=f"w{j:03d}", time=time, points=r.read("worm/vertices", state).astype(np.float32),
+                magnet_pose=pose, crease_angle=r.read("creases/angle", state),
+                bar_strain=r.read("bars/strain", state), triangles=np.asarray(a["mesh_triangles"]),
+                hinges=np.asarray(a["crease_hinges"]), edges=np.asarray(a["bar_edges"]),
+                ipm_diameter=p0("ipm_diameter"), ipm_thickness=p0("ipm_thickness"),
+                epm_size=np.array([p0("epm_size_x"), p0("epm_size_y"), p0("epm_size_z")]),
+                floor_incline=p0("floor_incline"), cameras=tuple(cams)))
+    finally:
+        r.close()
     return out
 
 
@@ -250,24 +286,37 @@ def _define_magnets(stage, root: str, tr: Track, codes) -> None:
             cyl.CreateDisplayColorAttr([Gf.Vec3f(0.55, 0.55, 0.58)])
 
 
-def _define_camera(stage, root: str, camera) -> None:
-    """The dataset's OpenCV pinhole camera (K, R, t, width, height) as a USD camera."""
-    from pxr import Gf, UsdGeom
+def _define_camera(stage, root: str, cam: ViewCamera) -> None:
+    """A dataset view's OpenCV pinhole camera as a USD camera: fixed values if it does not move over the frames,
+    else time-sampled at the frames' times."""
+    from pxr import Gf, Usd, UsdGeom
 
-    K, R, t, w, h = camera
-    cam = UsdGeom.Camera.Define(stage, f"{root}/Camera")
+    w, h = cam.width, cam.height
+    c2w = np.broadcast_to(np.eye(4), (len(cam.time), 4, 4)).copy()
     # OpenCV camera (+z forward, +y down) -> USD camera (-z forward, +y up): flip the y and z axes
-    c2w = np.eye(4)
-    c2w[:3, :3] = R.T @ np.diag([1.0, -1.0, -1.0])
-    c2w[:3, 3] = -R.T @ t
-    cam.AddTransformOp().Set(_gf_matrix(c2w))
-    pitch = 36.0 / w  # aperture units per pixel (mm for a 36 mm-wide sensor); only ratios matter
-    cam.CreateHorizontalApertureAttr(float(w * pitch))
-    cam.CreateVerticalApertureAttr(float(h * pitch * K[0, 0] / K[1, 1]))
-    cam.CreateFocalLengthAttr(float(K[0, 0] * pitch))
-    cam.CreateHorizontalApertureOffsetAttr(float((K[0, 2] - (w - 1) / 2) * pitch))
-    cam.CreateVerticalApertureOffsetAttr(float(-(K[1, 2] - (h - 1) / 2) * pitch))
-    cam.CreateClippingRangeAttr(Gf.Vec2f(0.001, 100.0))
+    c2w[:, :3, :3] = np.swapaxes(cam.R, 1, 2) @ np.diag([1.0, -1.0, -1.0])
+    c2w[:, :3, 3] = (-np.swapaxes(cam.R, 1, 2) @ cam.t[:, :, None])[:, :, 0]  # centre -R^T t
+    pitch = 36.0 / w  # aperture units per pixel column (mm for a 36 mm-wide sensor); only ratios matter
+    row = pitch * cam.K[:, 0, 0] / cam.K[:, 1, 1]  # aperture units per pixel row (fx / fy: non-square pixels)
+    values = {"xform": c2w, "horizontalAperture": np.full(len(cam.time), w * pitch), "verticalAperture": h * row,
+              "focalLength": cam.K[:, 0, 0] * pitch,
+              "horizontalApertureOffset": (cam.K[:, 0, 2] - (w - 1) / 2) * pitch,
+              "verticalApertureOffset": -(cam.K[:, 1, 2] - (h - 1) / 2) * row}
+    moving = not (all(np.array_equal(cam.K[0], k) for k in cam.K) and all(np.array_equal(cam.R[0], x) for x in cam.R)
+                  and all(np.array_equal(cam.t[0], x) for x in cam.t))
+    codes = ([Usd.TimeCode(float(t * TIME_CODES_PER_SECOND)) for t in cam.time] if moving
+             else [Usd.TimeCode.Default()])
+    prim = UsdGeom.Camera.Define(stage, f"{root}/{cam.name}")
+    op = prim.AddTransformOp()
+    attrs = {"horizontalAperture": prim.CreateHorizontalApertureAttr(),
+             "verticalAperture": prim.CreateVerticalApertureAttr(), "focalLength": prim.CreateFocalLengthAttr(),
+             "horizontalApertureOffset": prim.CreateHorizontalApertureOffsetAttr(),
+             "verticalApertureOffset": prim.CreateVerticalApertureOffsetAttr()}
+    for f, tc in enumerate(codes):
+        op.Set(_gf_matrix(values["xform"][f]), tc)
+        for key, attr in attrs.items():
+            attr.Set(float(values[key][f]), tc)
+    prim.CreateClippingRangeAttr(Gf.Vec2f(0.001, 100.0))
 
 
 def write_stage(tracks: list[Track], path, *, spacing: float = 0.0, floor_half: float = 0.3) -> Path:
@@ -295,8 +344,8 @@ def write_stage(tracks: list[Track], path, *, spacing: float = 0.0, floor_half: 
         codes = [Usd.TimeCode(float(t * TIME_CODES_PER_SECOND)) for t in tr.time]
         _define_worm(stage, root, tr, codes)
         _define_magnets(stage, root, tr, codes)
-        if tr.camera is not None:
-            _define_camera(stage, root, tr.camera)
+        for cam in tr.cameras:
+            _define_camera(stage, root, cam)
     stage.GetRootLayer().customLayerData = {"warpworm": json.dumps({"source_tracks": [t.name for t in tracks]})}
     stage.GetRootLayer().Save()
     return path
