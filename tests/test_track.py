@@ -16,14 +16,6 @@ from warpworm.analysis import track as T
 W_IMG, H_IMG = 640, 480
 
 
-def _sensor(F):
-    """The dataset's harshest noise, blur, brightness and contrast draws (sensor.*), no JPEG (docs/calibration.md)."""
-    return {"wb_r": np.ones(F), "wb_g": np.ones(F), "wb_b": np.ones(F), "hue_deg": np.zeros(F),
-            "saturation": np.ones(F), "contrast": np.full(F, 1.15, np.float32),
-            "brightness": np.full(F, 12 / 255, np.float32), "blur_sigma": np.full(F, 0.8),
-            "noise_sigma": np.full(F, 4 / 255), "shot_noise": np.zeros(F), "jpeg_quality": np.zeros(F, np.int64)}
-
-
 @pytest.fixture(scope="module")
 def gait_videos():
     """One cycle of each preset (1 world, 15 fps), rendered with the bands from above at 640x480 with sensor noise."""
@@ -39,8 +31,8 @@ def gait_videos():
     for gait in ("peristaltic", "omega", "inchworm"):
         r = run_gait(gaits.preset_params(gait), 1, 1.0, fps=15, save_worlds=1)
         F = r["frames"]["positions"].shape[0]
-        rgb, images = T.render_band_video(r["frames"], r["model"], cam, W_IMG, H_IMG, sensor_values=_sensor(F),
-                                          seed=7, return_images=True)
+        rgb, images = T.render_band_video(r["frames"], r["model"], cam, W_IMG, H_IMG,
+                                          sensor_values=T.harshest_sensor(F), seed=7, return_images=True)
         cams = make_cameras(cam.K, np.broadcast_to(cam.R, (F, 3, 3)), np.broadcast_to(cam.t, (F, 3)), np.arange(F),
                             W_IMG, H_IMG)
         out[gait] = (rgb, band_labels(images, cams), cam, r["model"].params)
@@ -136,3 +128,16 @@ def test_bands_texture_in_dataset_configs():
     assert (a.paper_tex == 0).all()
     with pytest.raises(ConfigError, match="texture.worm"):
         load_config("default", ["randomize.texture.worm=stripes"])
+
+
+def test_harshest_sensor_is_the_randomization_ranges_upper_end():
+    from warpworm.data.config import load_config
+
+    v = T.harshest_sensor(2)  # PARAM_SPECS' ranges: noise [0, 4], blur [0, 0.8], brightness ±12, contrast 1.15
+    np.testing.assert_allclose(v["noise_sigma"], 4 / 255)
+    np.testing.assert_allclose(v["blur_sigma"], 0.8)
+    np.testing.assert_allclose(v["brightness"], 12 / 255, rtol=1e-6)
+    np.testing.assert_allclose(v["contrast"], 1.15, rtol=1e-6)
+    assert (v["jpeg_quality"] == 0).all()  # JPEG off
+    d = T.harshest_sensor(1, load_config("default").randomize["sensor"])  # default.yaml: noise [0, 3]
+    np.testing.assert_allclose(d["noise_sigma"], 3 / 255)

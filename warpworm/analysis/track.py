@@ -108,6 +108,20 @@ class Thresholds:
         return cls(hue=hsv[:, 0], sat=hsv[:, 1], val=hsv[:, 2], white=hsv[:, 1] < 0.3 * 255, **overrides)
 
 
+def parse_band_colors(text: str | None, key: str = "--band-colors"):
+    """``"r,g,b;r,g,b;..."`` (five display colours tail -> head, each in [0, 1]) -> (5, 3) array; None -> None.
+    ``key`` names the option in the error."""
+    if text is None:
+        return None
+    try:
+        c = np.array([[float(x) for x in part.split(",")] for part in str(text).split(";")])
+    except ValueError:
+        c = None
+    if c is None or c.shape != (NUM_BANDS, 3) or not np.all((c >= 0) & (c <= 1)):
+        raise ValueError(f"{key}: got {text!r}; expected five R,G,B triples in [0, 1] separated by ';' (tail -> head)")
+    return c
+
+
 def band_masks(rgb: np.ndarray, thr: Thresholds) -> np.ndarray:
     """The five band masks (5, H, W) bool of one RGB uint8 image (H, W, 3) (rules in the module docstring)."""
     import cv2
@@ -292,6 +306,27 @@ def default_band_height(params=None) -> float:
     pat = crease.build_worm(float(np.ravel(p.a)[0]), float(np.ravel(p.b)[0]), int(p.n_units), float(np.ravel(p.l0)[0]))
     c = band_centres(pat.vertices, pat.triangles, pat.triangle_segment)
     return float(np.mean(c[:, 2]) - pat.vertices[:, 2].min())
+
+
+def harshest_sensor(num: int, sensor: dict | None = None) -> dict:
+    """:func:`warpworm.render.sensor.apply_sensor` values (each (num,)) of a dataset's harshest camera: the upper end
+    of every ``sensor.*`` range (noise, blur, brightness, contrast) with JPEG off (quality 100). ``sensor``: a
+    config's ``randomize['sensor']`` distributions; default the randomization's own (``PARAM_SPECS``: noise 4
+    levels, blur 0.8 px, brightness +12, contrast 1.15). Through :func:`warpworm.data.sampling.sensor_values`, the
+    conversion a dataset uses."""
+    from warpworm.data import randomize as rnd
+    from warpworm.data.config import PARAM_SPECS
+    from warpworm.data.sampling import sensor_values
+
+    if sensor is None:
+        sensor = {n: rnd.parse_distribution(spec.default) for n, spec in PARAM_SPECS["sensor"].items()}
+
+    def top(d):
+        return float(d.high) if isinstance(d, rnd.Uniform) else float(np.max(getattr(d, "values", [d.value])))
+
+    app = {f"sensor.{n}": np.full(num, top(d)) for n, d in sensor.items() if n != "jpeg_quality"}
+    app["sensor.jpeg_quality"] = np.full(num, 100, np.int64)
+    return sensor_values(app)
 
 
 def render_band_video(frames: dict, model, cam: CameraModel, width: int, height: int, *, world: int = 0,

@@ -1,8 +1,9 @@
 """``warpworm fit-track track.csv --gait G [--backward] --path w=,a=,h= --fit NAMES [--budget WORLDS]``: fit worm
 parameters to a band track (:mod:`warpworm.analysis.fit_track`): CMA-ES, every candidate a world of one batch.
 
-Prints the fit, the residual, each parameter's 1-sigma (the fit's local curvature) and which ones the track cannot pin
-down; writes ``fit.png`` (Fig. 11-like: measured vs fitted ratios and displacement), ``fit.yaml`` (the fitted
+Prints the fit, the residual, each parameter's acceptable range (every evaluated world, the global profile's
+included, within a chi-square rise of 3.84 at the track's noise) and which ones the track cannot pin down (a range
+beyond the parameter's tolerance); writes ``fit.png`` (Fig. 11-like: measured vs fitted ratios and displacement), ``fit.yaml`` (the fitted
 parameters as a config fragment; the ``simulate --set`` form in its header) and ``fit.json`` into ``--out``.
 """
 
@@ -28,8 +29,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--refine", type=int, default=4,
                         help="Levenberg-Marquardt steps after the search, one batch of 2p+1 worlds each (default 4)")
     parser.add_argument("--profile", type=int, default=3, metavar="STEPS",
-                        help="re-fit steps of each parameter's profile at ±15 %% (2p(2p-1) worlds a step; 0: curvature "
-                             "only; default 3)")
+                        help="re-fit steps of the global profile (every parameter held over its whole range, the others "
+                             "re-fitted; one batch a step; 0: ranges from the search's candidates only; default 3)")
     parser.add_argument("--spread", type=float, default=3.0,
                         help="search within preset / spread .. preset * spread (default 3)")
     parser.add_argument("--magnet-model", choices=["dipoles", "analytic"], default="dipoles")
@@ -127,11 +128,13 @@ def main(args) -> int:
     except ImportError:
         plot_note = " (no fit.png: install the plots extra, pip install 'warpworm[plots]')"
     summary = {"names": names, "value": res["value"].tolist(), "preset": res["base"].tolist(),
-               "sigma_rel": [float(s) for s in res["sigma_rel"]], "pinned": res["pinned"].tolist(),
+               "range_rel": res["range_rel"].tolist(), "at_bound": res["at_bound"].tolist(),
+               "tolerance": res["tolerance"].tolist(), "pinned": res["pinned"].tolist(),
+               "sigma_rel": [float(s) for s in res["sigma_rel"]],
                "cost": float(res["cost"]), "rms_ratio": float(res["rms_ratio"]),
                "rms_displacement_m": float(res["rms_disp_m"]), "weakest": res["weakest"].tolist(),
-               "profile_moved": bool(res["profile_moved"]), "weakest_sigma": float(res["weakest_sigma"]),
-               "worlds": res["worlds"],
+               "moved": bool(res["moved"]), "weakest_sigma": float(res["weakest_sigma"]),
+               "threshold_dchi2": float(res["threshold"]), "worlds": res["worlds"],
                "wall_s": res["wall_s"], "files": [str(out / f) for f in ("fit.yaml", "fit.png", "fit.json")]}
     strict_json.write(out / "fit.json", summary, indent=1)  # inf (an unidentifiable sigma) as null
     if args.json:

@@ -33,18 +33,10 @@ def add_arguments(parser) -> None:
 
 
 def parse_colors(text: str | None):
-    """``"r,g,b;r,g,b;..."`` -> (5, 3) array, or None."""
-    import numpy as np
+    """``"r,g,b;r,g,b;..."`` -> (5, 3) array, or None (:func:`warpworm.analysis.track.parse_band_colors`)."""
+    from warpworm.analysis.track import parse_band_colors
 
-    if text is None:
-        return None
-    try:
-        c = np.array([[float(x) for x in part.split(",")] for part in text.split(";")])
-    except ValueError:
-        c = None
-    if c is None or c.shape != (5, 3) or not np.all((c >= 0) & (c <= 1)):
-        raise ValueError(f"--band-colors: got {text!r}; expected five R,G,B triples in [0, 1] separated by ';'")
-    return c
+    return parse_band_colors(text)
 
 
 def _thresholds(args):
