@@ -27,6 +27,10 @@ BAD = [
     ("generate bad.yaml --out o", "not valid YAML (line 3, column 4)"),
     ("generate unknown_key.yaml --out o", "sim.worldz: unknown key"),
     ("generate default --out o sim.dt=-1", "sim.dt: got -1"),
+    ("generate default --out o sim.dt=.inf", "sim.dt: got inf; expected a finite number"),
+    ("generate default --out o sim.dt=.nan", "sim.dt: got nan; expected a finite number"),
+    ("generate default --out o sim.substeps=0", "sim.substeps: got 0; expected >= 1"),
+    ("generate default --out o sim.substeps=1.5", "sim.substeps: got 1.5; expected an integer"),
     ("generate default --out o sim.device=cuda:99", "sim.device"),
     ("generate default --out o --num 0", "num_samples"),
     ("generate default --out o --workers 0", "--workers"),
@@ -37,7 +41,10 @@ BAD = [
     # simulate: the same rules as generate's for the same values
     ("simulate --cycles -1", "--cycles"),
     ("simulate --dt -0.01", "--dt (sim.dt): got -0.01; expected > 0"),
-    ("simulate --substeps 0", "--substeps"),
+    ("simulate --dt inf", "--dt (sim.dt): got inf; expected a finite number"),  # was an internal error
+    ("simulate --dt nan", "--dt (sim.dt): got nan; expected > 0"),
+    ("simulate --substeps 0", "--substeps (sim.substeps): got 0; expected >= 1"),
+    ("simulate --substeps 1.5", "--substeps: invalid int value: '1.5'"),
     ("simulate --worlds 0", "--worlds"),
     ("simulate --settle -1", "--settle"),
     ("simulate --device cuda:99", "--device"),
@@ -176,3 +183,24 @@ def test_an_internal_error_is_one_line_too(folder, capfd, monkeypatch):
     monkeypatch.setenv("WARPWORM_DEBUG", "1")
     with pytest.raises(KeyError):
         main(["verify", "junk"])
+
+
+@pytest.mark.parametrize("dt,substeps,must", [
+    (0.0, 2, ["Simulator dt: got 0.0; expected a step > 0 [s]"]),
+    (-4e-3, 2, ["Simulator dt: got -0.004; expected a step > 0 [s]"]),
+    (4e-3, 0, ["Simulator substeps: got 0; expected a whole number >= 1"]),
+    (0, -1, ["Simulator dt: got 0; expected", "Simulator substeps: got -1; expected"]),
+])
+def test_simulator_refuses_bad_dt_and_substeps_by_name(dt, substeps, must, monkeypatch):
+    """The library's own refusal (for callers that skip the CLI's checks): key, value and expectation, one line,
+    raised before the solver is built (no work: SubstepSettings is never reached)."""
+    from warpworm.physics.params import WormParams
+    from warpworm.sim import simulator
+    from warpworm.sim.model import Model
+
+    model = Model.from_params(WormParams(), 1)
+    monkeypatch.setattr(simulator, "SubstepSettings", lambda *a, **k: pytest.fail("work started"))
+    with pytest.raises(ValueError) as info:
+        simulator.Simulator(model, dt=dt, substeps=substeps)
+    msg = str(info.value)
+    assert "\n" not in msg and all(m in msg for m in must), msg

@@ -734,11 +734,14 @@ def check_option(option: str, value, key: str):
     ``--device`` as ``sim.device``): the validated value, or :class:`ConfigError` "--dt (sim.dt): got X; expected Y"."""
     section, name = key.split(".")
     try:
-        return _field_adapter(section, name).validate_python(value)
+        out = _field_adapter(section, name).validate_python(value)
     except ValidationError as exc:
         msgs = [_message({**e, "loc": ()}) for e in exc.errors(include_url=False)]
         msgs = [m.replace(f"(override with {key}=cpu)", f"(use {option} cpu)") for m in msgs]
         raise ConfigError([f"{option} ({key}){m}" for m in msgs]) from None
+    if isinstance(out, float) and not math.isfinite(out):  # as the config's sections (allow_inf_nan=False)
+        raise ConfigError([f"{option} ({key}): got {_fmt(out)}; expected a finite number"])
+    return out
 
 
 def check_options(options: dict) -> dict:

@@ -335,8 +335,8 @@ def text_column(name: str, values) -> np.ndarray:
                            "warpworm.data.config.PARAM_SPECS (its width in the files comes from them)")
     raw = np.asarray(values, dtype=object).astype("S")
     if raw.dtype.itemsize > width:
-        raise ValueError(f"params/{name}: got {max(raw.tolist(), key=len)!r}; expected one of the schema's values (at most {width} "
-                         "bytes)")
+        raise ValueError(f"params/{name}: got {max(raw.tolist(), key=len)!r}; expected one of the schema's values "
+                         f"(at most {width} bytes)")
     return raw.astype(f"S{width}")
 
 

@@ -135,7 +135,9 @@ class Simulator:
         self.dt = float(dt)
         self.substeps = int(substeps)
         if self.dt <= 0 or self.substeps < 1:
-            raise ValueError("dt must be > 0 and substeps >= 1")
+            raise ValueError("; ".join(m for m in (
+                f"Simulator dt: got {dt}; expected a step > 0 [s]" if self.dt <= 0 else "",
+                f"Simulator substeps: got {substeps}; expected a whole number >= 1" if self.substeps < 1 else "") if m))
         self.dt_sub = self.dt / self.substeps
         self.magnet_every_substep = bool(magnet_every_substep)
         self.settings = SubstepSettings(
