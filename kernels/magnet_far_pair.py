@@ -148,6 +148,10 @@ def ring_setup(nphi: int, rot: wp.mat33, m: wp.vec3):
     return step, half, 1.0 / float(nphi), rot * m, ax, ay
 
 
+RingPoints = wp.types.matrix(shape=(32, 4), dtype=float)
+"""Up to 2 × 16 ring points: (x, y, z, weight) rows."""
+
+
 @wp.func
 def far_cylinder_pair_wrench(
     s_rule: wp.vec4,
@@ -167,6 +171,17 @@ def far_cylinder_pair_wrench(
         nphi: points per ring (:func:`ring_points_for_distance`).
     """
     step, half, inv_n, mt_dir, ax, ay = ring_setup(nphi, r_rel, t_m)
+    # the source's ring points (x, y; z = 0) and its two rings' moments, once: the same numbers every target point's
+    # loop would make again (the recurrence of ring_point and the weights)
+    src = RingPoints()
+    cs = wp.vec2(1.0, 0.0)
+    for sp in range(2 * nphi):
+        cs = ring_point(sp, nphi, cs, step, half)
+        sk = sp // nphi
+        src[sp, 0] = s_rule[sk] * cs[0]
+        src[sp, 1] = s_rule[sk] * cs[1]
+    ms0 = s_m * (s_rule[2] * inv_n)
+    ms1 = s_m * (s_rule[3] * inv_n)
     force = wp.vec3(0.0)
     torque = wp.vec3(0.0)
     ct = wp.vec2(1.0, 0.0)
@@ -178,12 +193,12 @@ def far_cylinder_pair_wrench(
         pt = t_rel + lever
         f = wp.vec3(0.0)
         b = wp.vec3(0.0)
-        cs = wp.vec2(1.0, 0.0)
-        for sp in range(2 * nphi):
-            cs = ring_point(sp, nphi, cs, step, half)
-            sk = sp // nphi
-            ff, bb = dipole_pair_force_field(s_m * (s_rule[2 + sk] * inv_n), mt,
-                                             pt - wp.vec3(s_rule[sk] * cs[0], s_rule[sk] * cs[1], 0.0))
+        for sp in range(nphi):
+            ff, bb = dipole_pair_force_field(ms0, mt, pt - wp.vec3(src[sp, 0], src[sp, 1], 0.0))
+            f += ff
+            b += bb
+        for sp in range(nphi, 2 * nphi):
+            ff, bb = dipole_pair_force_field(ms1, mt, pt - wp.vec3(src[sp, 0], src[sp, 1], 0.0))
             f += ff
             b += bb
         force += f
@@ -237,10 +252,6 @@ def cuboid_ring_rule(c_size: wp.vec3, y_size: wp.vec3, y_in_c: wp.vec3):
     if q < NEAR_LIMIT:
         return 16, 6, rule
     return ring_points_for_distance(q, 1.0), 4, rule
-
-
-RingPoints = wp.types.matrix(shape=(32, 4), dtype=float)
-"""Up to 2 × 16 ring points: (x, y, z, weight) rows."""
 
 
 @wp.func
