@@ -244,14 +244,26 @@ untimed, the second timed by the thread's CPU time. Prints {rate (worm-s per CPU
 substep), unstable}. Only API the code before also has, so that both sides of :func:`alternate` run it."""
 
 
-def source_tree(rev: str, into: Path) -> Path:
-    """The committed tree ``rev`` of this repository as an importable folder (``git archive``; ``warpworm/kernels``
-    and ``warpworm/render`` linked to the top-level folders they install from)."""
+def source_tree(rev: str | None, into: Path) -> Path:
+    """The committed tree ``rev`` of this repository (None: the working tree's files as they are now, tracked and
+    untracked but not ignored) as an importable folder (``git archive`` or a copy; ``warpworm/kernels`` and
+    ``warpworm/render`` linked to the top-level folders they install from). A copy, so that the run neither depends
+    on where the package is installed from nor sees edits made to the tree while it runs."""
+    import shutil
     import subprocess
 
     into.mkdir(parents=True, exist_ok=True)
-    archive = subprocess.run(["git", "-C", str(HERE.parent), "archive", rev], check=True, capture_output=True).stdout
-    subprocess.run(["tar", "-x", "-C", str(into)], input=archive, check=True)
+    root = HERE.parent
+    if rev is None:
+        files = subprocess.run(["git", "-C", str(root), "ls-files", "-z", "--cached", "--others", "--exclude-standard"],
+                               check=True, capture_output=True).stdout.decode().split("\0")
+        for name in filter(None, files):
+            if (root / name).is_file():
+                (into / name).parent.mkdir(parents=True, exist_ok=True)
+                shutil.copy2(root / name, into / name)
+    else:
+        archive = subprocess.run(["git", "-C", str(root), "archive", rev], check=True, capture_output=True).stdout
+        subprocess.run(["tar", "-x", "-C", str(into)], input=archive, check=True)
     for name in ("kernels", "render"):
         (into / "warpworm" / name).symlink_to(Path("..") / name)
     return into
@@ -267,7 +279,7 @@ def alternate(before: str, gaits_: list[str], W: int, pairs: int, after_kw: dict
 
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
-        trees = {"before": source_tree(before, Path(tmp) / "before"), "after": HERE.parent}
+        trees = {"before": source_tree(before, Path(tmp) / "before"), "after": source_tree(None, Path(tmp) / "after")}
         for pair in range(1, pairs + 1):
             for gait in gaits_:
                 for side in ("before", "after"):
