@@ -5,7 +5,10 @@ Outputs in ``--out`` (default ``./simulate_out``):
   ``magnet_rot (F, S, 4, 3, 3)``; ``crease_angle (F, S, H)`` [rad]; ``bar_strain (F, S, E)``; ``unstable (S,)``;
   topology ``triangles``, ``edges``, ``hinges``, ``hinge_label``, ``triangle_segment``; ``displacement_m (W,)``;
   S = the first ``--save-worlds`` worlds (float32).
-- ``preview.mp4`` (OpenCV mp4v; side view of world 0 with the magnets) and ``preview_strip.png`` (frames side by side).
+- ``preview.mp4`` (OpenCV mp4v; side view of world 0 with the magnets) and ``preview_strip.png`` (frames side by side);
+  with ``--texture-worm bands`` (or a ``--randomize`` config whose ``texture.worm`` is ``bands``) the facets are
+  painted in the paper's five marker bands (``--band-colors``, or the config's ``render.band_colors``), as the
+  renderer paints them.
 """
 
 from __future__ import annotations
@@ -46,12 +49,19 @@ def add_arguments(parser) -> None:
                         help="draw every world's parameters as a dataset job of CONFIG (default: default) with --seed "
                              "draws its trajectories (the config's distributions around the gait preset), gait, "
                              "direction and magnet model fixed to this command's")
+    parser.add_argument("--texture-worm", choices=["plain", "bands"], default=None,
+                        help="the previews' sheet: 'bands' paints the five marker bands (as a dataset config's "
+                             "texture.worm: bands; default: the --randomize config's, else plain)")
+    parser.add_argument("--band-colors", default=None, metavar="R,G,B;R,G,B;...",
+                        help="the five band colours tail -> head as displayed, each R,G,B in [0, 1] (default: the "
+                             "--randomize config's render.band_colors, else the paper's)")
 
 
 def _draw_frame(x, tri, mpos, mrot, msize, width=640, height=360, xlim=(-0.03, 0.14), zlim=(-0.01, 0.10), *,
-                edges=None, edge_colour=None):
+                edges=None, edge_colour=None, facet_colour=None):
     """Side view (x right, z up) of one world: facets, floor line (z = 0; the EPM moves beneath it), magnets (EPM red,
-    IPMs orange); with ``edges`` (E, 2) and ``edge_colour`` (E, 3) BGR the bars are drawn in those colours."""
+    IPMs orange); with ``edges`` (E, 2) and ``edge_colour`` (E, 3) BGR the bars are drawn in those colours; with
+    ``facet_colour`` (T, 3) BGR the facets are filled in those (the marker bands)."""
     import cv2
 
     img = np.full((height, width, 3), 255, np.uint8)
@@ -65,8 +75,8 @@ def _draw_frame(x, tri, mpos, mrot, msize, width=640, height=360, xlim=(-0.03, 0
     y0 = px(np.array([0.0, 0.0, 0.0]))[1]
     cv2.line(img, (0, int(y0)), (width - 1, int(y0)), (80, 80, 80), 1)
     pts = px(x[tri])
-    for poly in pts:  # back-to-front order is irrelevant for a flat-shaded outline view
-        cv2.fillConvexPoly(img, poly, (225, 235, 240))
+    for k, poly in enumerate(pts):  # back-to-front order is irrelevant for a flat-shaded outline view
+        cv2.fillConvexPoly(img, poly, (225, 235, 240) if facet_colour is None else tuple(int(c) for c in facet_colour[k]))
         cv2.polylines(img, [poly], True, (120, 120, 120), 1, cv2.LINE_AA)
     if edges is not None:
         ends = px(x[np.asarray(edges)])
@@ -135,8 +145,16 @@ def write_filmstrip(path: Path, frames: dict, model, params, world: int = 0, cou
     return path
 
 
-def write_outputs(out: Path, result: dict, params, num_worlds: int) -> list[Path]:
-    """trajectory.npz, preview.mp4 and preview_strip.png (world 0)."""
+def band_facet_colours(triangle_segment, colors) -> np.ndarray:
+    """BGR uint8 (T, 3) of each facet painted in the marker bands: segment i (tail -> head) gets display colour
+    ``colors[i]`` ((5, 3) RGB in [0, 1]), as :func:`warpworm.render.scene.band_appearance` paints the render."""
+    c = np.asarray(colors, np.float64)[np.asarray(triangle_segment)]
+    return np.round(255 * c[:, ::-1]).astype(np.uint8)
+
+
+def write_outputs(out: Path, result: dict, params, num_worlds: int, band_colors=None) -> list[Path]:
+    """trajectory.npz, preview.mp4 and preview_strip.png (world 0); ``band_colors`` (5, 3) paints the previews'
+    facets in the marker bands."""
     import cv2
 
     out.mkdir(parents=True, exist_ok=True)
@@ -157,8 +175,9 @@ def write_outputs(out: Path, result: dict, params, num_worlds: int) -> list[Path
     hi = max(x[..., 0].max(), fr["magnet_pos"][:, 0, :, 0].max()) + 0.02
     ztop = max(0.06, float(fr["magnet_pos"][:, 0, 0, 2].max()) + 0.03)
     size = model.magnet_size_host[0]
+    facets = None if band_colors is None else band_facet_colours(pat.triangle_segment, band_colors)
     imgs = [_draw_frame(x[f], pat.triangles, fr["magnet_pos"][f, 0], fr["magnet_rot"][f, 0], size,
-                        xlim=(lo, hi), zlim=(-0.01, ztop)) for f in range(len(x))]
+                        xlim=(lo, hi), zlim=(-0.01, ztop), facet_colour=facets) for f in range(len(x))]
     for f, img in enumerate(imgs):
         cv2.putText(img, f"{params.gait}{' backward' if params.backward else ''}  t = {fr['time'][f]:.2f} s",
                     (10, 22), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (0, 0, 0), 1, cv2.LINE_AA)
@@ -174,6 +193,32 @@ def write_outputs(out: Path, result: dict, params, num_worlds: int) -> list[Path
     paths.append(strip)
     paths.append(write_filmstrip(out / "filmstrip.png", fr, model, params))
     return paths
+
+
+def _preview_bands(args):
+    """The previews' band colours (5, 3), or None for the plain sheet: ``--texture-worm`` / ``--band-colors``, else
+    the ``--randomize`` config's ``texture.worm`` (a constant ``bands``) and ``render.band_colors``."""
+    from warpworm.analysis.track import parse_band_colors
+    from warpworm.render.scene import BAND_COLORS
+
+    colors = parse_band_colors(args.band_colors)
+    texture = args.texture_worm
+    if args.randomize and (texture is None or colors is None):
+        from warpworm.data import randomize as rnd
+        from warpworm.data.config import load_config
+
+        cfg = load_config(args.randomize)
+        worm = cfg.randomize["texture"]["worm"]
+        if texture is None and isinstance(worm, rnd.Constant) and worm.value == "bands":
+            texture = "bands"
+        if colors is None and cfg.render.band_colors is not None:
+            colors = np.asarray(cfg.render.band_colors, np.float64)
+    if texture != "bands":
+        if args.band_colors is not None:
+            raise ValueError(f"--band-colors: got {args.band_colors!r} without bands; expected --texture-worm bands "
+                             "(or a --randomize config with texture.worm: bands)")
+        return None
+    return BAND_COLORS if colors is None else colors
 
 
 def main(args) -> int:
@@ -201,6 +246,7 @@ def main(args) -> int:
                                        args.seed)
         params = check_worm_params(replace(params, **overrides))
         Model.from_params(params, args.worlds, "cpu")  # refuse bad values of any world before any work (~50 ms at 4096)
+        band_colors = _preview_bands(args)
         if not args.no_output and Path(args.out).exists() and not Path(args.out).is_dir():
             raise ValueError(f"--out: got '{args.out}'; expected a folder (it is a file)")
     except ValueError as e:
@@ -219,7 +265,7 @@ def main(args) -> int:
                             fps=args.fps if (want_files or args.json) else None, save_worlds=args.save_worlds)
     disp = result["displacement_m"]
     unstable = result["unstable"]
-    paths = write_outputs(Path(args.out), result, params, args.worlds) if want_files else []
+    paths = write_outputs(Path(args.out), result, params, args.worlds, band_colors) if want_files else []
     if args.json:
         summary = {
             "gait": args.gait,
