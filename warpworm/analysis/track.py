@@ -122,6 +122,27 @@ def parse_band_colors(text: str | None, key: str = "--band-colors"):
     return c
 
 
+def dataset_band_colors(path) -> np.ndarray:
+    """The band colours (5, 3) a dataset folder was rendered with: its ``config_yaml`` attribute's
+    ``render.band_colors`` (the paper's :data:`warpworm.render.scene.BAND_COLORS` when the config left it out)."""
+    import yaml
+
+    from warpworm.data import dataset as ds
+    from warpworm.render.scene import BAND_COLORS
+
+    try:
+        reader = ds.open(path)
+    except Exception as exc:  # noqa: BLE001 (any unreadable folder: one clear message)
+        raise ValueError(f"--band-colors-from: got {str(path)!r}; expected a dataset folder ({exc})") from None
+    try:
+        text = reader.attrs["config_yaml"]
+    finally:
+        reader.close()
+    cfg = yaml.safe_load(text.decode() if isinstance(text, bytes) else str(text)) or {}
+    colors = (cfg.get("render") or {}).get("band_colors")
+    return BAND_COLORS.copy() if colors is None else np.asarray(colors, np.float64)
+
+
 def band_masks(rgb: np.ndarray, thr: Thresholds) -> np.ndarray:
     """The five band masks (5, H, W) bool of one RGB uint8 image (H, W, 3) (rules in the module docstring)."""
     import cv2

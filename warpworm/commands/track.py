@@ -29,6 +29,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--threshold", action="append", default=[], metavar="NAME=VALUE",
                         help="override a segmentation threshold: hue_tol, sat_frac, val_frac, min_pixels, blob_reach "
                              "(docs/calibration.md)")
+    parser.add_argument("--band-colors-from", default=None, metavar="DATASET",
+                        help="take the band colours from a dataset folder's config (render.band_colors; the paper's "
+                             "when it has none)")
     parser.add_argument("--json", action="store_true", help="print a JSON summary only")
 
 
@@ -51,6 +54,13 @@ def _thresholds(args):
             over[name] = int(value) if name == "min_pixels" else float(value)
         except ValueError:
             raise ValueError(f"--threshold {item!r}: got {value!r}; expected a number") from None
+    if args.band_colors is not None and args.band_colors_from is not None:
+        raise ValueError(f"--band-colors / --band-colors-from: got both ({args.band_colors!r}, "
+                         f"{args.band_colors_from!r}); expected one")
+    if args.band_colors_from is not None:
+        from warpworm.analysis.track import dataset_band_colors
+
+        return Thresholds.from_colors(dataset_band_colors(args.band_colors_from), **over)
     return Thresholds.from_colors(parse_colors(args.band_colors), **over)
 
 

@@ -292,6 +292,13 @@ def _check_range(r: list) -> list:
     return r
 
 
+def _check_band_colors(c):
+    a = None if c is None else np.asarray(c, dtype=np.float64)
+    if a is not None and (a.shape != (5, 3) or not np.all((a >= 0) & (a <= 1))):
+        raise _problem(f"got {c}; expected five [r, g, b] display colours in [0, 1], tail -> head")
+    return c
+
+
 def _mitsuba_missing() -> bool:
     import importlib.util
 
@@ -426,6 +433,11 @@ class RenderConfig:
     sample's engine is stored in the ``engine`` dataset). 0: none."""
     pathtraced_spp: Annotated[Int, Field(ge=1)] = 16
     """Samples per pixel of the path-traced images."""
+    # -- issue 26: the marker bands' colours (randomize.texture.worm: bands)
+    band_colors: Annotated[list[list[Num]] | None, AfterValidator(_check_band_colors)] = None
+    """Five display colours [[r, g, b], ...] in [0, 1], tail -> head, of the worm painted in bands
+    (``randomize.texture.worm: bands``; ``warpworm track --band-colors-from DATASET`` reads them back). None: the
+    paper's (``warpworm.render.scene.BAND_COLORS``)."""
 
 
 RENDER_OFF_GROUPS = {"plate_pose": ("plate_offset",),
@@ -435,7 +447,7 @@ RENDER_OFF_GROUPS = {"plate_pose": ("plate_offset",),
                      "distortion": ("distortion_k1", "distortion_k2", "distortion_p", "distortion_k3"),
                      "exposure": (), "white_balance": (), "distractors": (), "plate_materials": (), "paper_bsdf": (),
                      "motion_blur": ("motion_blur_samples",),
-                     "engine": ("pathtraced_fraction", "pathtraced_spp")}
+                     "engine": ("pathtraced_fraction", "pathtraced_spp"), "band_colors": ()}
 """render switch -> the keys it enables: a group whose switch and keys are all at their defaults (OFF) is left out
 of ``to_dict`` (so the files' config_yaml stays that of before the option)."""
 

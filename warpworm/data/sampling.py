@@ -131,8 +131,9 @@ def appearance_draws(cfg, traj: np.ndarray) -> dict[str, np.ndarray]:
     return app
 
 
-def appearance_from_draws(app: dict, seeds: np.ndarray):
-    """The renderer's :class:`~warpworm.render.Appearance` from the drawn ``light/color/texture`` values (B,) each."""
+def appearance_from_draws(app: dict, seeds: np.ndarray, band_colors=None):
+    """The renderer's :class:`~warpworm.render.Appearance` from the drawn ``light/color/texture`` values (B,) each;
+    ``band_colors`` (5, 3): the bands' display colours (``render.band_colors``; None: the paper's)."""
     from warpworm.render import default_appearance, hsv_to_rgb
 
     B = len(seeds)
@@ -156,7 +157,8 @@ def appearance_from_draws(app: dict, seeds: np.ndarray):
     if bands.any():  # the paper's marker bands (§IV-E): one colour per segment, flat paint
         from warpworm.render.scene import BAND_COLORS
 
-        a.albedo[bands, 2:7] = BAND_COLORS[None] ** 2
+        c = BAND_COLORS if band_colors is None else np.asarray(band_colors, np.float64)
+        a.albedo[bands, 2:7] = c[None] ** 2
         a.paper_tex[bands] = 0.0
     tex_seed = app.get("texture.seed")  # per trajectory (appearance_draws); a bare per-sample seed otherwise
     a.tex_seed = ((seeds if tex_seed is None else np.asarray(tex_seed)) % (2**31 - 1)).astype(np.int32)
@@ -177,7 +179,8 @@ def sample_appearance(cfg, index: np.ndarray):
     """The renderer's :class:`~warpworm.render.Appearance` of ``index`` (n,) trajectories (or any ids) drawn from the
     config's ``light / color / texture`` distributions: the look a dataset job gives those trajectories."""
     index = np.asarray(index, dtype=np.int64).reshape(-1)
-    return appearance_from_draws(appearance_draws(cfg, index), rnd.derived_seed(rnd.sample_keys(cfg.seed, index)))
+    return appearance_from_draws(appearance_draws(cfg, index), rnd.derived_seed(rnd.sample_keys(cfg.seed, index)),
+                                 cfg.render.band_colors)
 
 
 def sensor_values(app: dict) -> dict:

@@ -189,7 +189,7 @@ class WarpStages:
             frame["positions"], pattern.triangles, pattern.triangle_segment, magnet_pos=frame["magnet_pos"],
             magnet_rot=frame["magnet_rot"], worm_texcoords=pattern.vertices, ipm_diameter=params.ipm_diameter,
             ipm_thickness=params.ipm_thickness, epm_size=params.epm_size, floor_incline=params.floor_incline,
-            appearance=appearance_from_draws(appearance, seeds),
+            appearance=appearance_from_draws(appearance, seeds, cfg.render.band_colors),
             extra_mesh=distractor_mesh(appearance, B, params.floor_incline))  # render.distractors (None: off)
         from warpworm.render.labels import schema_labels
         from warpworm.render.sensor import apply_sensor
