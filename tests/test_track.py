@@ -110,6 +110,9 @@ def test_track_command_writes_csv_and_refuses_bad_input(gait_videos, tmp_path, c
     bad.write_text(json.dumps({"K": np.eye(3).tolist(), "R": np.eye(3).tolist()}))
     for argv in (["--camera", str(bad)], ["--camera", str(tmp_path / "camera.json"), "--threshold", "hue=3"],
                  ["--camera", str(tmp_path / "camera.json"), "--band-colors", "1,0,0"],
+                 ["--camera", str(tmp_path / "camera.json"), "--band-colors-from", str(tmp_path / "no_dataset")],
+                 ["--camera", str(tmp_path / "camera.json"), "--band-colors-from", str(tmp_path),
+                  "--band-colors", "0,0,1;1,0,1;1,1,1;0,1,0;1,0,0"],
                  ["--camera", str(tmp_path / "camera.json"), "--fps", "0"]):
         o = tmp_path / "no.csv"
         assert main(["track", str(folder), "--out", str(o)] + argv) == 2

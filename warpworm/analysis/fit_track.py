@@ -1,6 +1,9 @@
 """Fit worm parameters to a band track (``warpworm track``'s ratios and displacement): every candidate one world of
-one batched simulation, searched with CMA-ES (the ``cma`` package), then the fit's local curvature for per-parameter
-uncertainty and the combinations the track cannot pin down.
+one batched simulation, searched with CMA-ES (the ``cma`` package) and polished by Levenberg-Marquardt; then a global
+profile of every parameter over its whole search range (the others re-fitted, all points one batch a step), which
+also moves a fit out of a side valley, and per parameter the acceptable range: every evaluated world within a
+chi-square rise of 3.84 at the track's noise. A parameter whose range exceeds its tolerance is reported as not
+identifiable from the track.
 
 The simulated observable is the tracked one: each candidate world is run with the existing batched Simulator
 (:func:`warpworm.analysis.gait_runs.run_gait`), its frames interpolated to the track's times and, when the track
@@ -289,10 +292,11 @@ def _refine(ev, x, steps, step, lim, history, log, show, tag="refine") -> dict:
     return min(sts, key=lambda d: d["cost"])
 
 
-def _profile_dips(xb, cb, held, target, cost, x):
+def _profile_dips(xb, cb, held, target, cost, x, limit=None):
     """Points (k, p) where a profile has a local minimum away from the fit (a dip between higher neighbours, or at
     its far end below its neighbour): another valley the fit may have missed, to be refined with every parameter
-    free."""
+    free; the ``limit`` lowest (default p)."""
+    limit = len(xb) if limit is None else limit
     out = []
     for i in np.unique(held):
         for sgn in (-1.0, 1.0):
@@ -301,8 +305,9 @@ def _profile_dips(xb, cb, held, target, cost, x):
             c = np.concatenate([[cb], cost[sel], [np.inf]])
             for j in range(1, len(c) - 1):
                 if c[j] < c[j - 1] and c[j] <= c[j + 1]:
-                    out.append(x[sel[j - 1]])
-    return np.array(out).reshape(-1, len(xb))
+                    out.append((c[j], x[sel[j - 1]]))
+    out.sort(key=lambda d: d[0])  # the lowest ``limit`` dips
+    return np.array([d[1] for d in out[:limit]]).reshape(-1, len(xb))
 
 
 def _profile_targets(xb, lim, names, factor=PROFILE_FACTOR):
@@ -502,6 +507,10 @@ def report_lines(result: dict) -> list[str]:
                + ("" if result["profile"] is not None else "; no profile (ranges from the search's candidates only)"))
     out.append(f"residual: ratios {result['rms_ratio']:.4f} rms, displacement {1e3 * result['rms_disp_m']:.3f} mm "
                f"rms (reduced chi2 {result['chi2_red']:.3g} at the tracker's accuracy)")
+    loose = [n for n, ok in zip(result["names"], result["pinned"]) if not ok]
+    if loose:
+        out.append(f"not identifiable from this track: {', '.join(loose)} (docs/calibration.md: which gait and how "
+                   "many cycles pin which parameter; or measure it (steps 1-2) and pass it with --set)")
     w = result["weakest"]
     combo = " ".join(f"{c:+.2f}*log({n})" for c, n in zip(w, result["names"]) if abs(c) > 0.05)
     ws = result["weakest_sigma"]
