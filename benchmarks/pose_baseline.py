@@ -89,7 +89,7 @@ def flip_permutation(names: list[str]) -> np.ndarray:
 
 # ---------------------------------------------------------------------------------------------------------------------
 # model
-def build_model(num_kp: int, num_reg: int, size: int, net_size: int | None = None):
+def build_model(num_kp: int, num_reg: int, size: int, net_size: int | None = None, head: str = "keypoints"):
     import torch
     from torch import nn
 
@@ -98,7 +98,10 @@ def build_model(num_kp: int, num_reg: int, size: int, net_size: int | None = Non
                              nn.Conv2d(cout, cout, 3, 1, 1, bias=False), nn.BatchNorm2d(cout), nn.ReLU(inplace=True))
 
     class Net(nn.Module):
-        """Stride-4 feature map -> keypoint heatmaps (soft-argmax to pixels); pooled features -> creases + ratios."""
+        """Stride-4 feature map -> keypoint heatmaps (soft-argmax to pixels); creases + ratios from the globally
+        pooled deep features (``head="global"``) or, by default (``head="keypoints"``), also from the stride-4
+        features pooled under each keypoint's heatmap and the predicted keypoints' normalized 2-D layout: a fold
+        shows as the shading and outline of the panels next to the keypoints, which a global average washes out."""
 
         def __init__(self):
             super().__init__()
@@ -107,7 +110,9 @@ def build_model(num_kp: int, num_reg: int, size: int, net_size: int | None = Non
             self.body = nn.Sequential(stem, block(32, 48, 1))
             self.deep = nn.Sequential(block(48, 64, 2), block(64, 96, 2), nn.AdaptiveAvgPool2d(1), nn.Flatten())
             self.heat = nn.Conv2d(48, num_kp, 1)
-            self.reg = nn.Sequential(nn.Linear(96, 128), nn.ReLU(inplace=True), nn.Linear(128, num_reg))
+            self.head = head
+            n_in = 96 + (num_kp * (48 + 2) if head == "keypoints" else 0)
+            self.reg = nn.Sequential(nn.Linear(n_in, 256), nn.ReLU(inplace=True), nn.Linear(256, num_reg))
             self.pool = max(1, size // (net_size or size))  # the network sees size / pool pixels (area average)
             self.stride = self.pool * 4.0  # native pixels per heatmap cell
 
@@ -123,7 +128,13 @@ def build_model(num_kp: int, num_reg: int, size: int, net_size: int | None = Non
             ys = (torch.arange(hh, dtype=x.dtype) + 0.5) * self.stride - 0.5
             uv = torch.stack([(p.sum(2) * xs).sum(-1), (p.sum(3) * ys).sum(-1)], dim=-1)
             self.cells = (xs, ys)
-            return uv, self.reg(self.deep(f)), logp
+            z = self.deep(f)
+            if self.head == "keypoints":
+                at_kp = torch.einsum("nkhw,nchw->nkc", p, f).reshape(n, -1)  # features under each heatmap
+                rel = uv - uv.mean(1, keepdim=True)  # the 2-D layout, translation and scale removed
+                rel = rel / rel.pow(2).sum(-1).mean(1).sqrt().clamp(min=1e-3)[:, None, None]
+                z = torch.cat([z, at_kp, rel.reshape(n, -1)], dim=1)
+            return uv, self.reg(z), logp
 
     return Net()
 
@@ -158,8 +169,10 @@ def train(d: dict, a) -> tuple[object, dict, dict]:
     kp = torch.from_numpy(d["keypoints/pixel"].astype(np.float32))
     w = torch.from_numpy((d["keypoints/visibility"] > 0).astype(np.float32))
     reg = torch.from_numpy(_targets(d, stats))
-    model = build_model(kp.shape[1], reg.shape[1], a.size, a.net_size)
+    model = build_model(kp.shape[1], reg.shape[1], a.size, a.net_size, a.head)
     opt = torch.optim.AdamW(model.parameters(), lr=2e-3, weight_decay=1e-4)
+    # cosine decay over the step budget: the last epochs average out the batch noise instead of jumping on it
+    sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda i: 0.5 * (1.0 + np.cos(np.pi * min(i / a.steps, 1.0))))
     rng = np.random.default_rng(a.seed)
     t0, steps, epochs, log = time.perf_counter(), 0, 0, []
     def done():  # the fixed budget: optimizer steps (reproducible on any machine), capped by wall time if given
@@ -176,6 +189,7 @@ def train(d: dict, a) -> tuple[object, dict, dict]:
             opt.zero_grad()
             loss.backward()
             opt.step()
+            sched.step()
             steps += 1
             if done():
                 break
@@ -302,6 +316,8 @@ def main(argv=None) -> int:
     ap.add_argument("--size", type=int, default=128, help="square image side [px]")
     ap.add_argument("--net-size", type=int, default=32,
                     help="side the network sees [px] (images area-averaged down to it; keypoints stay native px)")
+    ap.add_argument("--head", choices=("keypoints", "global"), default="keypoints",
+                    help="crease/ratio head: features under the keypoints + their 2-D layout, or global pooling only")
     ap.add_argument("--spp", type=int, default=16, help="path-traced samples per pixel")
     ap.add_argument("--no-pathtraced", action="store_true", help="skip the path-traced test set")
     ap.add_argument("--steps", type=int, default=1500, help="training budget: optimizer steps of --batch images")
