@@ -53,10 +53,18 @@ def band_cholesky_factor(world: int, nv: int, bw: int, mat: wp.array3d(dtype=wp.
     return 0
 
 
+UNROLLED_BANDWIDTH = wp.constant(6)
+"""The worm's bandwidth (``Model.vertex_bandwidth``), whose solve runs with its inner loops unrolled."""
+
+
 @wp.func
 def band_cholesky_solve(world: int, nv: int, bw: int, mat: wp.array3d(dtype=wp.mat33),
                         rhs: wp.array2d(dtype=wp.vec3)):
-    """Solve L Lᵀ y = rhs in place (``rhs[world]`` overwritten by y) with the factor of :func:`band_cholesky_factor`."""
+    """Solve L Lᵀ y = rhs in place (``rhs[world]`` overwritten by y) with the factor of :func:`band_cholesky_factor`.
+    At ``bw`` = :data:`UNROLLED_BANDWIDTH` the inner loops have constant trip counts (unrolled by Warp; the same
+    operations in the same order, so the same bits: ~20 % less time in a micro-benchmark)."""
+    if bw == UNROLLED_BANDWIDTH:
+        return band_cholesky_solve_unrolled(world, nv, mat, rhs)
     for j in range(nv):
         t = rhs[world, j]
         for k in range(wp.max(0, j - bw), j):
@@ -67,6 +75,27 @@ def band_cholesky_solve(world: int, nv: int, bw: int, mat: wp.array3d(dtype=wp.m
         t = rhs[world, j]
         for i in range(j + 1, wp.min(nv, j + bw + 1)):
             t = t - wp.transpose(mat[world, i, i - j]) * rhs[world, i]
+        rhs[world, j] = wp.transpose(mat[world, j, 0]) * t
+    return 0
+
+
+@wp.func
+def band_cholesky_solve_unrolled(world: int, nv: int, mat: wp.array3d(dtype=wp.mat33), rhs: wp.array2d(dtype=wp.vec3)):
+    """:func:`band_cholesky_solve` at bandwidth :data:`UNROLLED_BANDWIDTH`: k = j − d for d from the bandwidth down
+    to 1 (k ascending, as there), i = j + d for d from 1 up."""
+    for j in range(nv):
+        t = rhs[world, j]
+        for dd in range(UNROLLED_BANDWIDTH):
+            d = UNROLLED_BANDWIDTH - dd
+            if d <= j:
+                t = t - mat[world, j, d] * rhs[world, j - d]
+        rhs[world, j] = mat[world, j, 0] * t
+    for jj in range(nv):
+        j = nv - 1 - jj
+        t = rhs[world, j]
+        for d in range(1, UNROLLED_BANDWIDTH + 1):
+            if j + d < nv:
+                t = t - wp.transpose(mat[world, j + d, d]) * rhs[world, j + d]
         rhs[world, j] = wp.transpose(mat[world, j, 0]) * t
     return 0
 
