@@ -22,14 +22,15 @@ PLANT = {"hinge_stiffness": 1.3, "valley_bar_stiffness": 0.8, "mu_static": 0.85,
 FPS = 12.5  # 20 solver steps of 4 ms between frames
 
 
-def planted_track(gait: str, names, mult, model: str, cycles: float, width=640, height=480, backward=False):
+def planted_track(gait: str, names, mult, model: str, cycles: float, width=640, height=480, backward=False,
+                  path=None):
     """(track dict, camera meta, base params, planted values) of one simulated, rendered and tracked run."""
     from warpworm.analysis import fit_track as FT
     from warpworm.analysis import track as T
     from warpworm.analysis.gait_runs import run_gait
     from warpworm.physics import gaits
 
-    base = gaits.preset_params(gait, backward, magnet_model=model)
+    base = gaits.preset_params(gait, backward, magnet_model=model, **(path or {}))
     truth = np.array([float(getattr(base, n)) * mult[n] for n in names])
     r = run_gait(FT.candidate_params(base, names, truth[None]), 1, cycles, fps=FPS, save_worlds=1)
     t = np.asarray(r["frames"]["time"])
@@ -55,6 +56,7 @@ def main() -> None:
     ap.add_argument("--profile", type=int, default=3, help="re-fit steps of the global profile (0: none)")
     ap.add_argument("--popsize", type=int, default=None)
     ap.add_argument("--cycles", type=float, default=1.0)
+    ap.add_argument("--path", default=None, metavar="w=…,a=…,h=…", help="the EPM path [m] (default: the preset's)")
     ap.add_argument("--true-model", default="analytic", choices=["analytic", "dipoles"])
     ap.add_argument("--fit-model", default="analytic", choices=["analytic", "dipoles"])
     ap.add_argument("--known", default="", help="planted parameters given to the fit as known (calibration steps "
@@ -70,7 +72,8 @@ def main() -> None:
     rows = []
     for gait in args.gaits.split(","):
         t0 = time.perf_counter()
-        tr, meta, base, truth_all = planted_track(gait, names + known, PLANT, args.true_model, args.cycles)
+        tr, meta, base, truth_all = planted_track(gait, names + known, PLANT, args.true_model, args.cycles,
+                                                  path=FT.parse_path(args.path))
         truth = truth_all[:len(names)]
         from dataclasses import replace
 
@@ -78,7 +81,8 @@ def main() -> None:
         res = FT.fit(tr, base, names, budget=args.budget, meta=meta, refine=args.refine, popsize=args.popsize,
                      profile=args.profile)
         err = res["value"] / truth - 1
-        print(f"\n{gait} ({args.true_model} -> {args.fit_model}, {args.cycles:g} cycle, {len(tr['time'])} frames, "
+        print(f"\n{gait}{' path ' + args.path if args.path else ''} ({args.true_model} -> {args.fit_model}, "
+              f"{args.cycles:g} cycle, {len(tr['time'])} frames, "
               f"{res['worlds']} worlds, {time.perf_counter() - t0:.0f} s; known: {known or 'none'})")
         print("\n".join(FT.report_lines(res)))
         for n, tv, e in zip(names, truth, err):
