@@ -53,7 +53,7 @@ def main() -> None:
     ap.add_argument("--fit", default=",".join(PLANT))
     ap.add_argument("--budget", type=int, default=64)
     ap.add_argument("--refine", type=int, default=5)
-    ap.add_argument("--profile", type=int, default=3, help="re-fit steps of the global profile (0: none)")
+    ap.add_argument("--profile", type=int, default=6, help="re-fit steps of the global profile (0: none)")
     ap.add_argument("--popsize", type=int, default=None)
     ap.add_argument("--cycles", type=float, default=1.0)
     ap.add_argument("--path", default=None, metavar="w=…,a=…,h=…", help="the EPM path [m] (default: the preset's)")

@@ -409,7 +409,7 @@ def acceptable_ranges(X, cost, xb, best_cost, n_res, lim, threshold=ACCEPT_DCHI2
 
 
 def fit_batches(ev, names, *, lim: float, budget: int, pop: int, seed: int = 0, step: float = 0.05, refine: int = 4,
-                profile: int = 3, log=None, show=str, start=None) -> dict:
+                profile: int = 6, log=None, show=str, start=None) -> dict:
     """The search and the global uncertainty over an evaluator ``ev`` (:class:`_Batches`: log-parameter points
     (W, p) -> cost (W,), residuals (W, n), obs; one batch a call; ``ev.all()`` every evaluated point): CMA-ES
     (:func:`_search`), ``refine`` Levenberg-Marquardt steps (:func:`_refine`), the global profile (:func:`_profile`),
@@ -447,7 +447,7 @@ def fit_batches(ev, names, *, lim: float, budget: int, pop: int, seed: int = 0, 
 
 
 def fit(track: dict, base, names, *, budget: int = 96, popsize: int | None = None, spread: float = 3.0, seed: int = 0,
-        meta: dict | None = None, step: float = 0.05, refine: int = 4, profile: int = 3, log=None, **kw) -> dict:
+        meta: dict | None = None, step: float = 0.05, refine: int = 4, profile: int = 6, log=None, **kw) -> dict:
     """Fit ``names`` to ``track``: every candidate one world of a batch (:func:`observe`) searched over log(names /
     base) within ±log(spread), CMA-ES with ``popsize`` worlds a generation until ``budget`` worlds, ``refine``
     Levenberg-Marquardt steps (2p + 1 worlds each), then the global profile with ``profile`` re-fit steps (0: none,

@@ -28,9 +28,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--popsize", type=int, default=None, help="worlds per CMA-ES generation (default 8+)")
     parser.add_argument("--refine", type=int, default=4,
                         help="Levenberg-Marquardt steps after the search, one batch of 2p+1 worlds each (default 4)")
-    parser.add_argument("--profile", type=int, default=3, metavar="STEPS",
+    parser.add_argument("--profile", type=int, default=6, metavar="STEPS",
                         help="re-fit steps of the global profile (every parameter held over its whole range, the others "
-                             "re-fitted; one batch a step; 0: ranges from the search's candidates only; default 3)")
+                             "re-fitted; one batch a step; 0: ranges from the search's candidates only; default 6)")
     parser.add_argument("--spread", type=float, default=3.0,
                         help="search within preset / spread .. preset * spread (default 3)")
     parser.add_argument("--magnet-model", choices=["dipoles", "analytic"], default="dipoles")
