@@ -9,6 +9,9 @@ import warp as wp
 
 from .common import PI, TWO_PI, pw
 
+# forward only (nothing differentiates these kernels): the adjoints doubled-to-tripled the cold compile (docs/dynamics.md)
+wp.set_module_options({"enable_backward": False})
+
 
 @wp.func
 def mount_frame(

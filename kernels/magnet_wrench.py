@@ -24,6 +24,9 @@ from .magnet_fields import (
     magnet_field_local,
 )
 
+# forward only (nothing differentiates these kernels): the adjoints doubled-to-tripled the cold compile (docs/dynamics.md)
+wp.set_module_options({"enable_backward": False})
+
 MODEL_DIPOLES = wp.constant(ids.MODEL_DIPOLES)
 MODEL_ANALYTIC = wp.constant(ids.MODEL_ANALYTIC)
 
