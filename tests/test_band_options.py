@@ -80,3 +80,22 @@ def test_simulate_previews_draw_the_bands(tmp_path, capsys):
                   ["--texture-worm", "bands", "--band-colors", "1,0,0"]):
         assert main(base + extra + ["--out", str(tmp_path / "no")]) == 2
         assert not (tmp_path / "no").exists() and "--band-colors" in capsys.readouterr().err
+
+
+def test_simulate_previews_follow_a_randomize_config_with_bands(tmp_path):
+    import argparse
+
+    import yaml
+
+    from warpworm.commands.simulate import _preview_bands
+    from warpworm.data.config import read_yaml
+
+    raw = read_yaml("default")
+    raw.setdefault("randomize", {}).setdefault("texture", {})["worm"] = "bands"
+    raw.setdefault("render", {})["band_colors"] = COLORS
+    path = tmp_path / "bands.yaml"
+    path.write_text(yaml.safe_dump(raw))
+    ns = dict(texture_worm=None, band_colors=None, randomize=str(path))
+    np.testing.assert_array_equal(_preview_bands(argparse.Namespace(**ns)), COLORS)
+    assert _preview_bands(argparse.Namespace(**{**ns, "texture_worm": "plain"})) is None  # the flag wins
+    assert _preview_bands(argparse.Namespace(**{**ns, "randomize": "default"})) is None  # texture.worm plain/fibre
