@@ -19,6 +19,7 @@ Usage::
         [--out benchmarks/results/profile_step.json]
     python benchmarks/profile_step.py --alternate REV --worlds 64 --gait peristaltic omega inchworm [--pairs 3]
         [--repeats 3]  # the code at REV against this tree, alternated run by run
+    python benchmarks/profile_step.py --parts --worlds 64 --gait omega  # a Newton step's parts, each alone
 
 Prints one table per world count and writes the JSON (rows + metadata).
 """
@@ -161,6 +162,86 @@ def profile_run(W: int, *, duration: float, settle: float, skip: float = 1.0, ma
             "worm_substeps_per_s_wall": W * n_steps * sim.substeps / wall,
             "sim_s_per_wall_s_wall": W * n_steps * sim.dt / wall,
             "unstable_worlds": unstable, "stages": stages}
+
+
+PARTS = ("gradient", "gradient + Hessian", "hinges' gradient", "inertia + bars' gradient", "band copy",
+         "band copy + factor", "rhs copy", "rhs copy + solve")
+"""The Newton step's parts :func:`parts_cost` times (the copies restore the factor's and the solve's input)."""
+
+
+def _parts_kernel():
+    """A kernel running part ``part`` of a Newton step ``reps`` times per world (:data:`PARTS`), with the substep's
+    own functions, on the scratch of a simulator (``hess0`` / ``grad0``: an assembled band and right-hand side)."""
+    import warp as wp
+
+    from warpworm.kernels import implicit_euler as ie
+    from warpworm.kernels import substep as sub
+    from warpworm.kernels.band_cholesky import ALL_ROWS, band_cholesky_factor, band_cholesky_solve
+
+    @wp.kernel
+    def parts(part: int, reps: int, m: sub.BarHingeModel, opt: sub.SubstepOptions,
+              anchor_target: wp.array2d(dtype=wp.vec3), s: sub.BarHingeState, w: sub.NewtonScratch,
+              hess0: wp.array3d(dtype=wp.mat33), grad0: wp.array2d(dtype=wp.vec3)):
+        world = wp.tid()
+        c = sub.world_coefficients(m, world, opt.dt)
+        nv = s.x.shape[1]
+        bw = w.hess.shape[2] - 1
+        for r in range(reps):
+            if part == 0 or part == 1:
+                ie.elastic_terms(world, c, m, opt, anchor_target, part == 1, s, w)
+            elif part == 2:
+                for h in range(m.hinges.shape[0]):
+                    sub.add_hinge(world, h, ALL_ROWS, c, m, False, s, w)
+            elif part == 3:
+                for i in range(nv):
+                    sub.inertia_row(world, i, c, m, False, w)
+                for e in range(m.edges.shape[0]):
+                    sub.add_bar(world, e, ALL_ROWS, c, m, opt, False, s, w)
+            elif part == 4 or part == 5:
+                for i in range(nv):
+                    for k in range(bw + 1):
+                        w.hess[world, i, k] = hess0[world, i, k]
+                if part == 5:
+                    band_cholesky_factor(world, nv, bw, w.hess)
+            else:
+                for i in range(nv):
+                    w.grad[world, i] = grad0[world, i]
+                if part == 7:
+                    band_cholesky_solve(world, nv, bw, w.hess, w.grad)
+
+    return parts
+
+
+def parts_cost(W: int, gait: str = "omega", at: float = 1.5, reps: int = 20, tries: int = 7) -> list[dict]:
+    """µs of thread CPU per world and call of each of :data:`PARTS` on the ``gait`` preset's state ``at`` [s] into
+    the gait (CPU; the least of ``tries`` launches of ``reps`` calls each, the parts interleaved)."""
+    import warp as wp
+
+    from warpworm.sim.solver import state_struct
+
+    kernel = _parts_kernel()
+    model, sim = _build(W, "analytic", "cpu", gait=gait)
+    state = sim.initial_state()
+    sim.settle(state, 0.2)
+    sim.step(state, int(round(at / sim.dt)))
+    sol = sim.solver
+    w = sol.scratch
+    hess0, grad0 = wp.zeros_like(w.hess), wp.zeros_like(w.grad)
+
+    def launch(part, reps_):
+        wp.launch(kernel, dim=W, inputs=[part, reps_, sol.model_arrays, sol.options(1), sim.control.anchor_target,
+                                         state_struct(state), w, hess0, grad0], device="cpu")
+
+    launch(1, 1)  # an assembled band and gradient (inertia, bars, hinges) to factor and solve
+    wp.copy(hess0, w.hess)
+    wp.copy(grad0, w.grad)
+    best = [float("inf")] * len(PARTS)
+    for _ in range(tries):
+        for part in range(len(PARTS)):
+            c0 = time.thread_time()
+            launch(part, reps)
+            best[part] = min(best[part], 1e6 * (time.thread_time() - c0) / (W * reps))
+    return [{"gait": gait, "W": W, "part": name, "us_per_world_call": t} for name, t in zip(PARTS, best)]
 
 
 def newton_cost(W: int, newtons=(2, 3, 4), device: str = "cpu", steps: int = 15) -> list[dict]:
@@ -328,6 +409,8 @@ def main(argv=None) -> int:
                     help="gait presets profiled, each at every --worlds (default peristaltic)")
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--no-levers", action="store_true", help="skip the Newton-count and launch-floor measurements")
+    ap.add_argument("--parts", action="store_true", help="only the Newton step's parts (gradient, Hessian, factor, "
+                    "solve) timed alone on each --gait's state 1.5 s into the gait (first --worlds; CPU)")
     ap.add_argument("--out", default=str(HERE / "results" / "profile_step.json"), help="JSON path")
     ap.add_argument("--alternate", metavar="REV", help="instead of the profile: the gait rate (second cycle, CPU "
                     "time) of git revision REV and of this tree, alternated (one W: the first --worlds)")
@@ -359,6 +442,10 @@ def main(argv=None) -> int:
     import warp as wp
 
     wp.init()
+    if args.parts:
+        rows = [r for g in args.gait for r in parts_cost(args.worlds[0], g)]
+        print(_table(rows, ["gait", "W", "part", "us_per_world_call"]))
+        return 0
     device = "cuda:0" if args.device == "cuda" else args.device
     runs = []
     for gait, W in [(g, w) for g in args.gait for w in args.worlds]:
