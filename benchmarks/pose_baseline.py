@@ -13,7 +13,7 @@ better of the two), body rotation error by PnP (cv2.solvePnP of the predicted pi
 <= 0.6x the mean baseline in-domain.
 
     pip install torch  # CPU wheel is enough
-    python benchmarks/pose_baseline.py --config default --train-num 768 --test-num 192 --size 128 --steps 1500
+    python benchmarks/pose_baseline.py --config default     # 3072 train / 192 test at 128^2, 3000 steps
     python benchmarks/pose_baseline.py --data out/pose_bench --skip-generate     # reuse generated datasets
 
 Writes benchmarks/results/pose_baseline.json and prints a table (docs/dataset.md, "Learnability benchmark").
@@ -311,8 +311,8 @@ def main(argv=None) -> int:
     ap.add_argument("--set", action="append", help="extra KEY=VALUE for every generated set (repeatable)")
     ap.add_argument("--data", default="out/pose_bench", help="folder of the train / test / test_pt datasets")
     ap.add_argument("--skip-generate", action="store_true", help="use the datasets already in --data")
-    ap.add_argument("--train-num", type=int, default=1024)
-    ap.add_argument("--test-num", type=int, default=256)
+    ap.add_argument("--train-num", type=int, default=3072)
+    ap.add_argument("--test-num", type=int, default=192)
     ap.add_argument("--size", type=int, default=128, help="square image side [px]")
     ap.add_argument("--net-size", type=int, default=32,
                     help="side the network sees [px] (images area-averaged down to it; keypoints stay native px)")
@@ -320,7 +320,7 @@ def main(argv=None) -> int:
                     help="crease/ratio head: features under the keypoints + their 2-D layout, or global pooling only")
     ap.add_argument("--spp", type=int, default=16, help="path-traced samples per pixel")
     ap.add_argument("--no-pathtraced", action="store_true", help="skip the path-traced test set")
-    ap.add_argument("--steps", type=int, default=1500, help="training budget: optimizer steps of --batch images")
+    ap.add_argument("--steps", type=int, default=3000, help="training budget: optimizer steps of --batch images")
     ap.add_argument("--budget-s", type=float, default=None, help="also stop training after this many seconds")
     ap.add_argument("--batch", type=int, default=16)
     ap.add_argument("--threads", type=int, default=2)

@@ -1,0 +1,91 @@
+"""How much of the crease angles can a keypoint-based model know? Oracle regressions on the labels (issue 24).
+
+Fits ridge regressions from label features to the 105 crease angles on a training set and reports their MAE on a
+test set as a fraction of predicting the training mean (the learnability benchmark's baseline): from the exact 3-D
+keypoints in the body frame, from the exact 2-D keypoints (intrinsics, translation and scale removed; linear and
+quadratic features), from those with Gaussian pixel noise of sigma px (what a keypoint detector of that accuracy
+leaves), and from the four deformation ratios. It says where the crease information lies: if noisy 2-D keypoints
+cannot reach a ratio, a network must read the folds from shading and outline, not from the keypoint layout.
+
+    python benchmarks/crease_oracle.py out/pose_bench/train out/pose_bench/test [--noise 0.5 1 2 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import glob
+import json
+
+import numpy as np
+
+KEYS = ("creases/angle", "keypoints/body", "keypoints/pixel", "camera/K", "labels/deformation")
+
+
+def load(root: str) -> dict[str, np.ndarray]:
+    """The arrays in KEYS, concatenated over the shards of dataset folder ``root`` (h5py only)."""
+    import h5py
+
+    parts: dict[str, list] = {k: [] for k in KEYS}
+    for p in sorted(glob.glob(f"{root}/shard-*.h5")):
+        with h5py.File(p, "r") as f:
+            for k in KEYS:
+                parts[k].append(f[k][...].astype(np.float64))
+    return {k: np.concatenate(v) for k, v in parts.items()}
+
+
+def ridge_ratio(x_tr, y_tr, x_te, y_te, lam: float) -> float:
+    """Test MAE of a ridge fit (standardized features, penalty lam * n) over the training-mean baseline's MAE."""
+    mu, sd = x_tr.mean(0), x_tr.std(0) + 1e-12
+    a = np.c_[(x_tr - mu) / sd, np.ones(len(x_tr))]
+    b = np.c_[(x_te - mu) / sd, np.ones(len(x_te))]
+    w = np.linalg.solve(a.T @ a + lam * len(a) * np.eye(a.shape[1]), a.T @ y_tr)
+    return float(np.abs(b @ w - y_te).mean() / np.abs(y_tr.mean(0) - y_te).mean())
+
+
+def layout_2d(uv: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """Keypoints (N, P, 2) [px] -> normalized image coordinates, centred and scaled to unit RMS radius: (N, 2P)."""
+    p = np.stack([(uv[..., 0] - K[:, 0, 2, None]) / K[:, 0, 0, None],
+                  (uv[..., 1] - K[:, 1, 2, None]) / K[:, 1, 1, None]], -1)
+    p = p - p.mean(1, keepdims=True)
+    return (p / np.sqrt((p**2).sum(-1).mean(1))[:, None, None]).reshape(len(p), -1)
+
+
+def quadratic(x: np.ndarray) -> np.ndarray:
+    i, j = np.triu_indices(x.shape[1])
+    return np.c_[x, x[:, i] * x[:, j]]
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("train")
+    ap.add_argument("test")
+    ap.add_argument("--noise", type=float, nargs="*", default=[0.5, 1.0, 2.0, 3.0], help="pixel noise sigmas [px]")
+    ap.add_argument("--seed", type=int, default=0)
+    a = ap.parse_args(argv)
+    tr, te = load(a.train), load(a.test)
+    y_tr, y_te = tr["creases/angle"], te["creases/angle"]
+    rows = {"3-D keypoints (body frame), linear": ridge_ratio(tr["keypoints/body"].reshape(len(y_tr), -1), y_tr,
+                                                               te["keypoints/body"].reshape(len(y_te), -1), y_te, 1e-3),
+            "deformation ratios, linear": ridge_ratio(tr["labels/deformation"], y_tr, te["labels/deformation"], y_te,
+                                                      1e-3)}
+    x_tr, x_te = layout_2d(tr["keypoints/pixel"], tr["camera/K"]), layout_2d(te["keypoints/pixel"], te["camera/K"])
+    rows["2-D keypoints exact, linear"] = ridge_ratio(x_tr, y_tr, x_te, y_te, 1e-3)
+    rows["2-D keypoints exact, quadratic"] = ridge_ratio(quadratic(x_tr), y_tr, quadratic(x_te), y_te, 1e-2)
+    rng = np.random.default_rng(a.seed)
+    for sigma in a.noise:  # trained and tested on keypoints with the same detector noise
+        n_tr = layout_2d(tr["keypoints/pixel"] + rng.normal(0, sigma, tr["keypoints/pixel"].shape), tr["camera/K"])
+        n_te = layout_2d(te["keypoints/pixel"] + rng.normal(0, sigma, te["keypoints/pixel"].shape), te["camera/K"])
+        rows[f"2-D keypoints + {sigma:g} px noise, linear"] = ridge_ratio(n_tr, y_tr, n_te, y_te, 1e-2)
+        rows[f"2-D keypoints + {sigma:g} px noise, quadratic"] = ridge_ratio(quadratic(n_tr), y_tr, quadratic(n_te),
+                                                                            y_te, 1e-1)
+    print(f"crease MAE of the training mean on the test set: "
+          f"{np.degrees(np.abs(y_tr.mean(0) - y_te).mean()):.2f} deg ({len(y_tr)} train, {len(y_te)} test)")
+    print("| oracle (ridge regression) | crease MAE / mean baseline |\n|---|---|")
+    for k, v in rows.items():
+        print(f"| {k} | {v:.3f} |")
+    print(json.dumps(rows))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
