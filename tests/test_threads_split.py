@@ -73,3 +73,50 @@ def test_gait_run_over_threads_equals_one_batch():
             np.testing.assert_array_equal(v, r["frames"][k], err_msg=k)
         assert r["frames"]["positions"].shape[1] == 3
     assert np.ptp(one["displacement_m"]) > 0  # the worlds do differ: a mixed-up share would show
+
+
+def test_host_shares_run_beside_the_caller_in_world_order():
+    """start_shares returns while its shares run: the two share threads and the caller meet at a barrier that only
+    opens if all three run at once; the results come back in world order; one share runs at once in this thread."""
+    barrier = threading.Barrier(3, timeout=60)
+
+    def share(lo, hi):
+        barrier.wait()
+        return (list(range(lo, hi)), threading.get_ident())
+
+    job = ws.start_shares(share, 5, workers=2)
+    barrier.wait()  # the caller goes on with its own work while the shares run
+    (a, ta), (b, tb) = job.result()
+    assert a + b == [0, 1, 2, 3, 4] and ta != tb and threading.get_ident() not in (ta, tb)
+    ((c, tc),) = ws.start_shares(lambda lo, hi: (list(range(lo, hi)), threading.get_ident()), 5, workers=1).result()
+    assert c == [0, 1, 2, 3, 4] and tc == threading.get_ident()
+
+    def failing(lo, hi):
+        if lo > 0:
+            raise RuntimeError(f"host share {lo}:{hi} failed")
+        return []
+
+    with pytest.raises(RuntimeError, match="host share 2:4 failed"):
+        ws.start_shares(failing, 4, workers=2).result()
+
+
+def test_blas_runs_one_thread_inside_a_split_whatever_the_workers():
+    """OpenBLAS's rounding depends on its thread count (and 2 threads spin on small solves), so a split holds it at
+    one thread for 1 or 2 workers alike, and puts the caller's count back afterwards, nested or not."""
+    if ws.blas_threads() is None:
+        pytest.skip("NumPy's BLAS is not an OpenBLAS this module can set")
+    get, put = ws._openblas()
+    before = get()
+    put(2)
+    try:
+        seen = []
+        for workers in (1, 2):
+            ws.run_shares(lambda lo, hi: seen.append(ws.blas_threads()) or {}, 4, workers=workers)
+            with ws.one_blas_thread():
+                with ws.one_blas_thread():
+                    seen.append(ws.blas_threads())
+                seen.append(ws.blas_threads())
+            seen.append(("after", ws.blas_threads()))
+        assert seen == [1, 1, 1, ("after", 2), 1, 1, 1, 1, ("after", 2)]
+    finally:
+        put(before)

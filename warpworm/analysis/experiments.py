@@ -65,6 +65,7 @@ def _dt_substeps(dt, substeps):
 
 from warpworm.analysis.world_split import simulator as _simulator
 from warpworm.analysis.world_split import world_shares  # noqa: F401  (the split's shares; re-exported)
+from warpworm.analysis.world_split import start_shares
 
 
 def split_run(core, params: WormParams, num_worlds: int, world_axis: dict, *, workers: int | None = 1,
@@ -353,6 +354,20 @@ def _stiffness_sweep(hinge_stiffness, base: WormParams | None, overrides: dict):
     return ks, len(ks), replace(base or WormParams(), hinge_stiffness=ks, **kw)
 
 
+def _linear_units(model, params: WormParams, n_fixed: int, n_moved: int, axis: int, workers):
+    """Start the linear prediction (:func:`linear_anchor_response`) of every world: the moved anchors' summed force
+    along ``axis`` per metre of their offset along ``-axis`` [N/m], one small dense solve per world (host NumPy, not
+    the simulation), on ``workers`` threads beside the simulation's (``world_split.start_shares``); ``.result()``
+    gives one list per share, in world order."""
+    def part(lo, hi):
+        off = np.zeros((n_fixed + n_moved, 3))
+        off[n_fixed:, axis] = -1.0
+        return [linear_anchor_response(model, params, off * 1e-6, world=w)[n_fixed:, axis].sum() / 1e-6
+                for w in range(lo, hi)]
+
+    return start_shares(part, model.num_worlds, 1 if model.device.is_cuda else workers)  # a GPU: one batch
+
+
 def compression(hinge_stiffness=DEFAULT_HINGE_SWEEP, max_displacement: float = 2.0e-3, increments: int = 8,
                 *, displacements=None, base: WormParams | None = None, hold: float = 0.1, settle: float = 0.2,
                 anchor_stiffness: float = 1.0e4, dt=None, substeps=None, device="cpu", workers: int | None = 1,
@@ -376,13 +391,11 @@ def compression(hinge_stiffness=DEFAULT_HINGE_SWEEP, max_displacement: float = 2
     anchors = np.concatenate([tail, head])
     model = Model.from_params(p, W, device, anchors=anchors, anchor_stiffness=anchor_stiffness)  # for the prediction
     steps = _steps(max_displacement, increments, displacements)
+    pred = _linear_units(model, p, len(tail), len(head), 0, workers)  # beside the simulation's threads
     r = _quasi_static(p, W, anchors, anchor_stiffness, head, (-1.0, 0.0, 0.0), steps, settle=settle, hold=hold,
                       dt=dt, substeps=substeps, device=device, workers=workers)
     lin = np.zeros_like(r["force"])
-    for w in range(W):  # host reference, one small dense solve per stiffness (not the simulation)
-        off = np.zeros((len(tail) + len(head), 3))
-        off[len(tail):, 0] = -1.0
-        unit = linear_anchor_response(model, p, off * 1e-6, world=w)[len(tail):, 0].sum() / 1e-6
+    for w, unit in enumerate(u for part in pred.result() for u in part):
         lin[:, w] = unit * r["prescribed"]
     fmax = r["force"][-1]
     dmax = r["displacement"][-1]
@@ -421,13 +434,11 @@ def flexure(hinge_stiffness=DEFAULT_HINGE_SWEEP, max_deflection: float = 2.0e-3,
     anchors = np.concatenate([sup, load])
     model = Model.from_params(p, W, device, anchors=anchors, anchor_stiffness=anchor_stiffness)  # for the prediction
     steps = _steps(max_deflection, increments, displacements)
+    pred = _linear_units(model, p, len(sup), len(load), 2, workers)  # beside the simulation's threads
     r = _quasi_static(p, W, anchors, anchor_stiffness, load, (0.0, 0.0, -1.0), steps, lift=lift, settle=settle,
                       hold=hold, dt=dt, substeps=substeps, device=device, workers=workers)
     lin = np.zeros_like(r["force"])
-    for w in range(W):
-        off = np.zeros((len(sup) + len(load), 3))
-        off[len(sup):, 2] = -1.0
-        unit = linear_anchor_response(model, p, off * 1e-6, world=w)[len(sup):, 2].sum() / 1e-6
+    for w, unit in enumerate(u for part in pred.result() for u in part):
         lin[:, w] = unit * r["prescribed"]
     fmax, dmax = r["force"][-1], r["displacement"][-1]
     r.update(hinge_stiffness=ks, linear=lin, summary={

@@ -13,20 +13,30 @@ capture is process-wide state in Warp: launches of another thread during a captu
 run). :func:`simulator` builds a Simulator with that setting; graphs replay the same trajectory bit for bit
 (tests/test_step_graph.py), so the results do not depend on it.
 
+NumPy's OpenBLAS runs one thread inside a split, whatever the worker count (:func:`one_blas_thread`): its rounding
+depends on its thread count, so a per-world result computed with BLAS would otherwise depend on the split, and a
+two-thread OpenBLAS spin-waits on small solves (compression's 192 linear predictions: 7-11 CPU-s at 2 BLAS threads
+against 1.1 at one on this 2-core machine). Host work of the caller that does not need the simulation (e.g.
+compression's NumPy prediction) can run beside the split's threads (:func:`start_shares`), so that the share threads'
+kernels and the caller's NumPy use the cores together rather than one after the other.
+
 Used by :func:`warpworm.analysis.gait_runs.run_gait_split` (``simulate``, ``search-gait``) and
 :func:`warpworm.analysis.experiments.split_run` (``experiment``).
 """
 
 from __future__ import annotations
 
+import ctypes
 import os
 import threading
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, wait
+from contextlib import contextmanager
 from typing import Callable
 
 import numpy as np
 
 _local = threading.local()
+_blas = {"lock": threading.Lock(), "users": 0, "saved": None, "lib": False}
 
 
 def default_workers() -> int:
@@ -78,26 +88,117 @@ def load_kernels(device="cpu") -> None:
     sim.snapshot(state)
 
 
+def _openblas():
+    """(get, set) of the thread count of the OpenBLAS NumPy loaded (ctypes), or None where there is none (MKL,
+    Accelerate, not Linux): then :func:`one_blas_thread` does nothing."""
+    if _blas["lib"] is not False:
+        return _blas["lib"]
+    _blas["lib"] = None
+    try:
+        with open("/proc/self/maps") as f:
+            paths = sorted({ln.split()[-1] for ln in f if "openblas" in ln.lower() and ".so" in ln})
+    except OSError:  # pragma: no cover - not Linux
+        paths = []
+    for path in paths:
+        try:
+            lib = ctypes.CDLL(path)
+        except OSError:  # pragma: no cover
+            continue
+        for get, put in (("scipy_openblas_get_num_threads64_", "scipy_openblas_set_num_threads64_"),
+                         ("openblas_get_num_threads64_", "openblas_set_num_threads64_"),
+                         ("openblas_get_num_threads", "openblas_set_num_threads")):
+            if hasattr(lib, get) and hasattr(lib, put):
+                g, p = getattr(lib, get), getattr(lib, put)
+                g.restype, g.argtypes, p.restype, p.argtypes = ctypes.c_int, [], None, [ctypes.c_int]
+                _blas["lib"] = (g, p)
+                return _blas["lib"]
+    return None
+
+
+def blas_threads() -> int | None:
+    """NumPy's OpenBLAS thread count now (None: not an OpenBLAS this module can set)."""
+    lib = _openblas()
+    return None if lib is None else int(lib[0]())
+
+
+@contextmanager
+def one_blas_thread():
+    """NumPy's OpenBLAS at one thread while any caller is inside (the setting is process-wide in a pthreads OpenBLAS;
+    the count before the first caller entered is put back when the last one leaves). Module docstring: why."""
+    lib = _openblas()
+    if lib is None:
+        yield
+        return
+    with _blas["lock"]:
+        if _blas["users"] == 0:
+            _blas["saved"] = int(lib[0]())
+            lib[1](1)
+        _blas["users"] += 1
+    try:
+        yield
+    finally:
+        with _blas["lock"]:
+            _blas["users"] -= 1
+            if _blas["users"] == 0:
+                lib[1](_blas["saved"])
+
+
+class Shares:
+    """The running shares of :func:`start_shares`; :meth:`result` waits for all of them."""
+
+    def __init__(self, futures=None, done=None):
+        self._futures, self._done = futures, done
+
+    def result(self) -> list:
+        """The shares' results in world order; an exception in a share is re-raised after every share has stopped."""
+        if self._futures is None:
+            return self._done
+        wait(self._futures)
+        return [f.result() for f in self._futures]
+
+
+def start_shares(fn: Callable[[int, int], object], num_worlds: int, workers: int | None = None) -> Shares:
+    """Start ``fn(lo, hi)`` for the contiguous shares of ``num_worlds`` worlds (:func:`world_shares`), one thread each,
+    and return at once (:meth:`Shares.result` gathers them); host work (NumPy), one BLAS thread, no kernel rules. One
+    share: run here and now, so that one worker keeps to one core. Used to run a caller's host work beside a split
+    (:func:`run_shares`) of the same worlds: e.g. ``pred = start_shares(...); r = split...; pred.result()``."""
+    shares = world_shares(num_worlds, workers)
+    if len(shares) == 1:
+        with one_blas_thread():
+            return Shares(done=[fn(0, int(num_worlds))])
+
+    def share(lo, hi):
+        with one_blas_thread():
+            return fn(lo, hi)
+
+    pool = ThreadPoolExecutor(max_workers=len(shares), thread_name_prefix="warpworm-share")
+    try:
+        return Shares(futures=[pool.submit(share, lo, hi) for lo, hi in shares])
+    finally:
+        pool.shutdown(wait=False)  # the threads end with their share
+
+
 def run_shares(fn: Callable[[int, int], dict], num_worlds: int, workers: int | None = None,
                device="cpu") -> list[dict]:
     """``fn(lo, hi)`` for the contiguous shares of ``num_worlds`` worlds (:func:`world_shares`), one thread each
     (one share: in this thread, graphs allowed); returns their results in world order. ``fn`` builds its own Model
     and Simulator (through :func:`simulator`) for worlds [lo, hi). An exception in a share is re-raised here after
-    every share has stopped."""
+    every share has stopped. NumPy's OpenBLAS runs one thread meanwhile, whatever the shares
+    (:func:`one_blas_thread`)."""
     shares = world_shares(num_worlds, workers)
     if len(shares) == 1 or str(device).startswith("cuda"):  # one device queue: a GPU runs the batch as one
-        return [fn(0, int(num_worlds))]
+        with one_blas_thread():
+            return [fn(0, int(num_worlds))]
     load_kernels(device)
 
-    def share(lo_hi):
+    def share(lo, hi):
         _local.split = True
         try:
-            return fn(*lo_hi)
+            return fn(lo, hi)
         finally:
             _local.split = False
 
-    with ThreadPoolExecutor(max_workers=len(shares), thread_name_prefix="warpworm-share") as pool:
-        return list(pool.map(share, shares))
+    return start_shares(share, num_worlds, workers).result()
 
 
 def concat(parts: list[dict], world_axis: dict) -> dict:
@@ -107,4 +208,5 @@ def concat(parts: list[dict], world_axis: dict) -> dict:
             for k in parts[0]}
 
 
-__all__ = ["concat", "default_workers", "in_split", "load_kernels", "run_shares", "simulator", "world_shares"]
+__all__ = ["Shares", "blas_threads", "concat", "default_workers", "in_split", "load_kernels", "one_blas_thread",
+           "run_shares", "simulator", "start_shares", "world_shares"]
