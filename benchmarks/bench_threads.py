@@ -15,8 +15,10 @@ Modes: ``threads1`` (one batch, this thread), ``threads2`` (:mod:`warpworm.analy
 process) and ``processes2`` (the split of before: a ``spawn`` pool of two processes made for the batch and closed
 after it, reproduced here as it was, so both run in the same session). The modes alternate (two rounds), every
 result is checked equal to ``threads1``'s, and each row gives the wall time, the CPU time of this process and its
-children, ``speedup`` = wall of threads1 / wall of the mode in the same round, and ``others_cores``: the CPU the other
-processes of this shared machine used meanwhile (a busy machine cannot give two cores to anyone).
+children, ``main_cpu_s``: the CPU of the calling thread alone (for threads2: the serial part, what the split leaves
+to one thread; for threads1: everything), ``speedup`` = wall of threads1 / wall of the mode in the same round, and
+``others_cores``: the CPU the other processes of this shared machine used meanwhile (a busy machine cannot give two
+cores to anyone).
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ from dataclasses import replace
 import numpy as np
 
 NOTES = ("speedup: wall of threads1 over the mode's, same round; cpu_s: this process and its children; "
+         "main_cpu_s: the calling thread's CPU (threads2: the part left serial); "
          "others_cores: CPU the other processes used during the row")
 
 
@@ -109,10 +112,10 @@ def _cpu() -> float:
 
 def _timed(fn):
     hz = os.sysconf("SC_CLK_TCK")
-    j0, c0, t0 = _busy_jiffies(), _cpu(), time.perf_counter()
+    j0, c0, m0, t0 = _busy_jiffies(), _cpu(), time.thread_time(), time.perf_counter()
     out = fn()
-    j1, c1, t1 = _busy_jiffies(), _cpu(), time.perf_counter()
-    return out, t1 - t0, c1 - c0, max(0.0, (j1 - j0) / hz - (c1 - c0)) / max(t1 - t0, 1e-9)
+    j1, c1, m1, t1 = _busy_jiffies(), _cpu(), time.thread_time(), time.perf_counter()
+    return out, t1 - t0, c1 - c0, max(0.0, (j1 - j0) / hz - (c1 - c0)) / max(t1 - t0, 1e-9), m1 - m0
 
 
 def _tasks(quick: bool):
@@ -139,7 +142,7 @@ def _tasks(quick: bool):
             r = ex.compression(k, increments=2, hold=0.05, settle=0.05, workers=1 if mode == "threads1" else 2)
         finally:
             ex.split_run = real
-        return r["force_raw"]
+        return np.concatenate([r["force_raw"].ravel(), r["linear"].ravel()])  # the simulation and the prediction
 
     def search(mode):
         real = gr.run_gait_split
@@ -166,9 +169,9 @@ def run(quick: bool = False) -> list[dict]:
         for rnd in range(2):
             outs, these = {}, []
             for mode in (modes if rnd == 0 else modes[::-1]):
-                outs[mode], wall, cpu, others = _timed(lambda: fn(mode))
+                outs[mode], wall, cpu, others, main = _timed(lambda: fn(mode))
                 these.append({"bench": "threads", "job": name, "worlds": worlds, "round": rnd, "mode": mode,
-                              "wall_s": wall, "cpu_s": cpu, "others_cores": others})
+                              "wall_s": wall, "cpu_s": cpu, "main_cpu_s": main, "others_cores": others})
             for mode, out in outs.items():  # every split gives the one-batch numbers
                 assert np.array_equal(out, outs["threads1"], equal_nan=True), (name, mode)
             base = next(r["wall_s"] for r in these if r["mode"] == "threads1")
