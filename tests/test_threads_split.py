@@ -75,29 +75,28 @@ def test_gait_run_over_threads_equals_one_batch():
     assert np.ptp(one["displacement_m"]) > 0  # the worlds do differ: a mixed-up share would show
 
 
-def test_host_shares_run_beside_the_caller_in_world_order():
-    """start_shares returns while its shares run: the two share threads and the caller meet at a barrier that only
-    opens if all three run at once; the results come back in world order; one share runs at once in this thread."""
-    barrier = threading.Barrier(3, timeout=60)
+def test_host_work_runs_beside_a_split_and_here_for_one_worker():
+    """beside() returns while its work runs on a thread of its own: that thread and the caller meet at a barrier that
+    only opens if both run at once; for one worker it runs here and now (one core); errors reach .result()."""
+    barrier = threading.Barrier(2, timeout=60)
 
-    def share(lo, hi):
+    def work():
         barrier.wait()
-        return (list(range(lo, hi)), threading.get_ident())
+        return threading.get_ident(), ws.blas_threads()
 
-    job = ws.start_shares(share, 5, workers=2)
-    barrier.wait()  # the caller goes on with its own work while the shares run
-    (a, ta), (b, tb) = job.result()
-    assert a + b == [0, 1, 2, 3, 4] and ta != tb and threading.get_ident() not in (ta, tb)
-    ((c, tc),) = ws.start_shares(lambda lo, hi: (list(range(lo, hi)), threading.get_ident()), 5, workers=1).result()
-    assert c == [0, 1, 2, 3, 4] and tc == threading.get_ident()
+    job = ws.beside(work, 5, workers=2)
+    barrier.wait()  # the caller goes on (with its split) while the work runs
+    tid, blas = job.result()
+    assert tid != threading.get_ident() and blas in (None, 1)
+    done = ws.beside(lambda: threading.get_ident(), 5, workers=1)
+    assert done.done() and done.result() == threading.get_ident()
 
-    def failing(lo, hi):
-        if lo > 0:
-            raise RuntimeError(f"host share {lo}:{hi} failed")
-        return []
+    def failing():
+        raise RuntimeError("host work failed")
 
-    with pytest.raises(RuntimeError, match="host share 2:4 failed"):
-        ws.start_shares(failing, 4, workers=2).result()
+    for workers in (1, 2):
+        with pytest.raises(RuntimeError, match="host work failed"):
+            ws.beside(failing, 4, workers=workers).result()
 
 
 def test_blas_runs_one_thread_inside_a_split_whatever_the_workers():
@@ -120,3 +119,24 @@ def test_blas_runs_one_thread_inside_a_split_whatever_the_workers():
         assert seen == [1, 1, 1, ("after", 2), 1, 1, 1, 1, ("after", 2)]
     finally:
         put(before)
+
+
+def test_batched_linear_prediction_equals_the_per_world_one_bit_for_bit():
+    """experiment compression / flexure's linear prediction (host NumPy beside the split) for every world at once:
+    the per-world reference function's numbers exactly, with every world's hinge and bar stiffness different."""
+    from dataclasses import replace
+
+    from warpworm.analysis import experiments as ex
+    from warpworm.physics.params import WormParams
+    from warpworm.sim.model import Model
+
+    p = replace(WormParams(), hinge_stiffness=np.array([0.003, 0.01, 0.04]), bar_stiffness=np.array([15.0, 20.0, 30.0]))
+    n = int(p.n_units)
+    anchors = np.concatenate([ex.section_vertices(n, 0), ex.section_vertices(n, 2 * n)])
+    model = Model.from_params(p, 3, "cpu", anchors=anchors, anchor_stiffness=1.0e4)
+    off = np.zeros((len(anchors), 3))
+    off[3:, 0] = -1.0e-6
+    ref = np.stack([ex.linear_anchor_response(model, p, off, world=w) for w in range(3)])
+    np.testing.assert_array_equal(ex.linear_anchor_responses(model, p, off), ref)
+    pull = ref[:, 3:, 0].sum(axis=1)  # pushed along -x, the worm pulls the pusher back along +x, harder when stiffer
+    assert np.all(pull > 0) and np.all(np.diff(pull) > 0)

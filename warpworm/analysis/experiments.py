@@ -65,7 +65,7 @@ def _dt_substeps(dt, substeps):
 
 from warpworm.analysis.world_split import simulator as _simulator
 from warpworm.analysis.world_split import world_shares  # noqa: F401  (the split's shares; re-exported)
-from warpworm.analysis.world_split import start_shares
+from warpworm.analysis.world_split import beside
 
 
 def split_run(core, params: WormParams, num_worlds: int, world_axis: dict, *, workers: int | None = 1,
@@ -355,17 +355,61 @@ def _stiffness_sweep(hinge_stiffness, base: WormParams | None, overrides: dict):
 
 
 def _linear_units(model, params: WormParams, n_fixed: int, n_moved: int, axis: int, workers):
-    """Start the linear prediction (:func:`linear_anchor_response`) of every world: the moved anchors' summed force
-    along ``axis`` per metre of their offset along ``-axis`` [N/m], one small dense solve per world (host NumPy, not
-    the simulation), on ``workers`` threads beside the simulation's (``world_split.start_shares``); ``.result()``
-    gives one list per share, in world order."""
-    def part(lo, hi):
+    """Start the linear prediction (:func:`linear_anchor_responses`) of every world: the moved anchors' summed force
+    along ``axis`` per metre of their offset along ``-axis`` [N/m] (host NumPy, not the simulation), on a thread
+    beside the ``workers`` threads of the simulation (``world_split.beside``); ``.result()`` gives the list (W,)."""
+    def units():
         off = np.zeros((n_fixed + n_moved, 3))
         off[n_fixed:, axis] = -1.0
-        return [linear_anchor_response(model, params, off * 1e-6, world=w)[n_fixed:, axis].sum() / 1e-6
-                for w in range(lo, hi)]
+        return [(r[n_fixed:, axis].sum() / 1e-6) for r in linear_anchor_responses(model, params, off * 1e-6)]
 
-    return start_shares(part, model.num_worlds, 1 if model.device.is_cuda else workers)  # a GPU: one batch
+    return beside(units, model.num_worlds, 1 if model.device.is_cuda else workers)  # a GPU: one batch
+
+
+def _rows(a, W: int) -> np.ndarray:
+    """A model array's rows for every world (W, ...) as float64, row ``w % rows`` (as the kernels read it)."""
+    a = np.asarray(a)
+    return a[np.arange(W) % a.shape[0]].astype(np.float64)
+
+
+def linear_anchor_responses(model, params: WormParams, target_offsets: np.ndarray) -> np.ndarray:
+    """:func:`linear_anchor_response` of every world at once, bit for bit (W, A, 3) [N] (model's anchor stiffness):
+    every world's stiffness matrix takes the same additions in the same order (one per bar, hinge and anchor, each a
+    block of every world at once; the zero entries of a hinge's 3V x 3V outer product added nothing), at about a tenth
+    of the per-world loop's CPU (which was half of ``experiment compression``'s at 192 worlds, holding the GIL;
+    docs/dynamics.md). tests/test_threads_split.py checks it against the per-world function."""
+    pat, W, V = model.pattern, model.num_worlds, model.num_vertices
+    x = np.asarray(model.rest_positions_host, np.float64)  # (W, V, 3)
+    per_world = lambda v: np.broadcast_to(np.asarray(v, np.float64), (W,))  # noqa: E731  (a parameter: scalar or (W,))
+    ea_e = np.repeat(per_world(params.bar_stiffness)[:, None], model.num_edges, axis=1)
+    valley = getattr(params, "valley_bar_stiffness", None)
+    if valley is not None:
+        ea_e[:, pat.edge_label == crease.VALLEY] = per_world(valley)[:, None]
+    kb = ea_e / _rows(model.rest_length.numpy(), W)  # (W, E)
+    hl = _rows(model.hinge_length.numpy(), W)  # (W, H)
+    ka = per_world(params.hinge_stiffness)
+    e = x[:, pat.edges[:, 1]] - x[:, pat.edges[:, 0]]
+    e /= np.linalg.norm(e, axis=-1, keepdims=True)
+    K = np.zeros((W, 3 * V, 3 * V))
+    for s, (i, j) in enumerate(pat.edges):
+        blk = kb[:, s, None, None] * (e[:, s, :, None] * e[:, s, None, :])  # np.outer's products, world by world
+        r = np.r_[3 * i:3 * i + 3, 3 * j:3 * j + 3]
+        K[:, r[:, None], r[None, :]] += np.block([[blk, -blk], [-blk, blk]])  # the four distinct 3x3 blocks
+    g = np.stack([crease.dihedral_gradients(x[w], pat.hinges) for w in range(W)])  # (W, H, 4, 3), per world
+    for h, stencil in enumerate(pat.hinges):
+        r = (3 * np.asarray(stencil)[:, None] + np.arange(3)).reshape(-1)  # the 12 nonzero entries of gv
+        gv = g[:, h].reshape(W, 12)
+        K[:, r[:, None], r[None, :]] += (ka * hl[:, h])[:, None, None] * (gv[:, :, None] * gv[:, None, :])
+    av = model.anchor_vertex.numpy()
+    ak = _rows(model.anchor_stiffness.numpy(), W)  # (W, A)
+    off = np.asarray(target_offsets, np.float64).reshape(len(av), 3)
+    f = np.zeros((W, 3 * V))
+    for a, v in enumerate(av):
+        d = np.arange(3 * v, 3 * v + 3)
+        K[:, d, d] += ak[:, a, None]  # ak * eye(3): the off-diagonal zeros add nothing
+        f[:, d] += ak[:, a, None] * off[a]
+    u = np.stack([np.linalg.solve(K[w], f[w]) for w in range(W)]).reshape(W, V, 3)
+    return ak[:, :, None] * (u[:, av] - off)
 
 
 def compression(hinge_stiffness=DEFAULT_HINGE_SWEEP, max_displacement: float = 2.0e-3, increments: int = 8,
@@ -395,7 +439,7 @@ def compression(hinge_stiffness=DEFAULT_HINGE_SWEEP, max_displacement: float = 2
     r = _quasi_static(p, W, anchors, anchor_stiffness, head, (-1.0, 0.0, 0.0), steps, settle=settle, hold=hold,
                       dt=dt, substeps=substeps, device=device, workers=workers)
     lin = np.zeros_like(r["force"])
-    for w, unit in enumerate(u for part in pred.result() for u in part):
+    for w, unit in enumerate(pred.result()):
         lin[:, w] = unit * r["prescribed"]
     fmax = r["force"][-1]
     dmax = r["displacement"][-1]
@@ -438,7 +482,7 @@ def flexure(hinge_stiffness=DEFAULT_HINGE_SWEEP, max_deflection: float = 2.0e-3,
     r = _quasi_static(p, W, anchors, anchor_stiffness, load, (0.0, 0.0, -1.0), steps, lift=lift, settle=settle,
                       hold=hold, dt=dt, substeps=substeps, device=device, workers=workers)
     lin = np.zeros_like(r["force"])
-    for w, unit in enumerate(u for part in pred.result() for u in part):
+    for w, unit in enumerate(pred.result()):
         lin[:, w] = unit * r["prescribed"]
     fmax, dmax = r["force"][-1], r["displacement"][-1]
     r.update(hinge_stiffness=ks, linear=lin, summary={

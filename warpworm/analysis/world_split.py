@@ -17,7 +17,7 @@ NumPy's OpenBLAS runs one thread inside a split, whatever the worker count (:fun
 depends on its thread count, so a per-world result computed with BLAS would otherwise depend on the split, and a
 two-thread OpenBLAS spin-waits on small solves (compression's 192 linear predictions: 7-11 CPU-s at 2 BLAS threads
 against 1.1 at one on this 2-core machine). Host work of the caller that does not need the simulation (e.g.
-compression's NumPy prediction) can run beside the split's threads (:func:`start_shares`), so that the share threads'
+compression's NumPy prediction) can run beside the split's threads (:func:`beside`), so that the share threads'
 kernels and the caller's NumPy use the cores together rather than one after the other.
 
 Used by :func:`warpworm.analysis.gait_runs.run_gait_split` (``simulate``, ``search-gait``) and
@@ -29,7 +29,7 @@ from __future__ import annotations
 import ctypes
 import os
 import threading
-from concurrent.futures import ThreadPoolExecutor, wait
+from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager
 from typing import Callable
 
@@ -143,39 +143,31 @@ def one_blas_thread():
                 lib[1](_blas["saved"])
 
 
-class Shares:
-    """The running shares of :func:`start_shares`; :meth:`result` waits for all of them."""
+def beside(fn: Callable[[], object], num_worlds: int, workers: int | None = None) -> Future:
+    """Start ``fn()`` (host work of the caller that does not need the simulation, e.g. compression's NumPy linear
+    prediction) on one thread of its own beside a split of ``num_worlds`` worlds over ``workers`` threads
+    (:func:`run_shares`), one BLAS thread; returns its Future at once. Where that split has one share, ``fn`` runs
+    here and now, so that one worker keeps to one core. One thread, not one per share: NumPy on small arrays holds
+    the GIL most of the time (two threads of compression's prediction used 1.0 core between them, slower than one),
+    while the share threads' kernels release it, so the prediction and the kernels share the cores."""
+    out = Future()
+    if len(world_shares(num_worlds, workers)) == 1:
+        try:
+            with one_blas_thread():
+                out.set_result(fn())
+        except BaseException as e:  # re-raised by out.result(), as from a thread
+            out.set_exception(e)
+        return out
 
-    def __init__(self, futures=None, done=None):
-        self._futures, self._done = futures, done
-
-    def result(self) -> list:
-        """The shares' results in world order; an exception in a share is re-raised after every share has stopped."""
-        if self._futures is None:
-            return self._done
-        wait(self._futures)
-        return [f.result() for f in self._futures]
-
-
-def start_shares(fn: Callable[[int, int], object], num_worlds: int, workers: int | None = None) -> Shares:
-    """Start ``fn(lo, hi)`` for the contiguous shares of ``num_worlds`` worlds (:func:`world_shares`), one thread each,
-    and return at once (:meth:`Shares.result` gathers them); host work (NumPy), one BLAS thread, no kernel rules. One
-    share: run here and now, so that one worker keeps to one core. Used to run a caller's host work beside a split
-    (:func:`run_shares`) of the same worlds: e.g. ``pred = start_shares(...); r = split...; pred.result()``."""
-    shares = world_shares(num_worlds, workers)
-    if len(shares) == 1:
+    def run():
         with one_blas_thread():
-            return Shares(done=[fn(0, int(num_worlds))])
+            return fn()
 
-    def share(lo, hi):
-        with one_blas_thread():
-            return fn(lo, hi)
-
-    pool = ThreadPoolExecutor(max_workers=len(shares), thread_name_prefix="warpworm-share")
+    pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="warpworm-beside")
     try:
-        return Shares(futures=[pool.submit(share, lo, hi) for lo, hi in shares])
+        return pool.submit(run)
     finally:
-        pool.shutdown(wait=False)  # the threads end with their share
+        pool.shutdown(wait=False)  # the thread ends with fn
 
 
 def run_shares(fn: Callable[[int, int], dict], num_worlds: int, workers: int | None = None,
@@ -191,14 +183,16 @@ def run_shares(fn: Callable[[int, int], dict], num_worlds: int, workers: int | N
             return [fn(0, int(num_worlds))]
     load_kernels(device)
 
-    def share(lo, hi):
+    def share(lo_hi):
         _local.split = True
         try:
-            return fn(lo, hi)
+            with one_blas_thread():
+                return fn(*lo_hi)
         finally:
             _local.split = False
 
-    return start_shares(share, num_worlds, workers).result()
+    with ThreadPoolExecutor(max_workers=len(shares), thread_name_prefix="warpworm-share") as pool:
+        return list(pool.map(share, shares))
 
 
 def concat(parts: list[dict], world_axis: dict) -> dict:
@@ -208,5 +202,5 @@ def concat(parts: list[dict], world_axis: dict) -> dict:
             for k in parts[0]}
 
 
-__all__ = ["Shares", "blas_threads", "concat", "default_workers", "in_split", "load_kernels", "one_blas_thread",
-           "run_shares", "simulator", "start_shares", "world_shares"]
+__all__ = ["beside", "blas_threads", "concat", "default_workers", "in_split", "load_kernels", "one_blas_thread",
+           "run_shares", "simulator", "world_shares"]
