@@ -15,7 +15,7 @@ run). :func:`simulator` builds a Simulator with that setting; graphs replay the 
 
 NumPy's OpenBLAS runs one thread inside a split, whatever the worker count (:func:`one_blas_thread`): its rounding
 depends on its thread count, so a per-world result computed with BLAS would otherwise depend on the split, and a
-two-thread OpenBLAS spin-waits on small solves (compression's 192 linear predictions: 7-11 CPU-s at 2 BLAS threads
+two-thread OpenBLAS spin-waits on small solves (compression's 192 linear predictions: 5-11 CPU-s at 2 BLAS threads
 against 1.1 at one on this 2-core machine). Host work of the caller that does not need the simulation (e.g.
 compression's NumPy prediction) can run beside the split's threads (:func:`beside`), so that the share threads'
 kernels and the caller's NumPy use the cores together rather than one after the other.
