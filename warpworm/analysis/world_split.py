@@ -8,9 +8,9 @@ is paid per share to start (a spawned process paid ~1-1.5 s of Python, ``import 
 that is what made a short job on 2 cores 1.1x one core on a busy machine; benchmarks/bench_threads.py).
 
 Two rules make the threads safe with Warp 1.19: the kernel modules are loaded once before the threads start (Warp
-loads a module on its first launch, without a lock: two threads could load it twice), and a split run steps without CPU graphs (a graph
-capture is process-wide state in Warp: launches of another thread during a capture would be recorded into it, not
-run). :func:`simulator` builds a Simulator with that setting; graphs replay the same trajectory bit for bit
+loads a module on its first launch, without a lock: two threads could load it twice), and a split run steps without
+CPU graphs (a graph capture is process-wide state in Warp: launches of another thread during a capture would be
+recorded into it, not run). :func:`simulator` builds a Simulator with that setting; graphs replay the same trajectory bit for bit
 (tests/test_step_graph.py), so the results do not depend on it.
 
 NumPy's OpenBLAS runs one thread inside a split, whatever the worker count (:func:`one_blas_thread`): its rounding
