@@ -186,10 +186,14 @@ def test_an_internal_error_is_one_line_too(folder, capfd, monkeypatch):
 
 
 @pytest.mark.parametrize("dt,substeps,must", [
-    (0.0, 2, ["Simulator dt: got 0.0; expected a step > 0 [s]"]),
-    (-4e-3, 2, ["Simulator dt: got -0.004; expected a step > 0 [s]"]),
+    (0.0, 2, ["Simulator dt: got 0.0; expected a finite step > 0 [s]"]),
+    (-4e-3, 2, ["Simulator dt: got -0.004; expected a finite step > 0 [s]"]),
     (4e-3, 0, ["Simulator substeps: got 0; expected a whole number >= 1"]),
     (0, -1, ["Simulator dt: got 0; expected", "Simulator substeps: got -1; expected"]),
+    (float("inf"), 2, ["Simulator dt: got inf; expected a finite step > 0 [s]"]),
+    (float("nan"), 2, ["Simulator dt: got nan; expected"]),
+    (4e-3, 1.5, ["Simulator substeps: got 1.5; expected a whole number >= 1"]),
+    (4e-3, float("nan"), ["Simulator substeps: got nan; expected a whole number >= 1"]),
 ])
 def test_simulator_refuses_bad_dt_and_substeps_by_name(dt, substeps, must, monkeypatch):
     """The library's own refusal (for callers that skip the CLI's checks): key, value and expectation, one line,

@@ -18,6 +18,8 @@ default, or one passed to :meth:`~Simulator.step` / :meth:`~Simulator.run`.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import warp as wp
 
@@ -132,12 +134,14 @@ class Simulator:
         if solver not in SOLVERS:
             raise ValueError(f"solver: got {solver!r}; expected one of {SOLVERS}")
         self.model = model
+        bad_dt = not (0.0 < float(dt) < math.inf)  # also NaN
+        bad_sub = not (float(substeps) >= 1 and float(substeps).is_integer())  # also NaN, inf, 1.5
+        if bad_dt or bad_sub:
+            raise ValueError("; ".join(m for m in (
+                f"Simulator dt: got {dt}; expected a finite step > 0 [s]" if bad_dt else "",
+                f"Simulator substeps: got {substeps}; expected a whole number >= 1" if bad_sub else "") if m))
         self.dt = float(dt)
         self.substeps = int(substeps)
-        if self.dt <= 0 or self.substeps < 1:
-            raise ValueError("; ".join(m for m in (
-                f"Simulator dt: got {dt}; expected a step > 0 [s]" if self.dt <= 0 else "",
-                f"Simulator substeps: got {substeps}; expected a whole number >= 1" if self.substeps < 1 else "") if m))
         self.dt_sub = self.dt / self.substeps
         self.magnet_every_substep = bool(magnet_every_substep)
         self.settings = SubstepSettings(
