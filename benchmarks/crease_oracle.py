@@ -4,7 +4,7 @@ Fits ridge regressions from label features to the 105 crease angles on a trainin
 test set as a fraction of predicting the training mean (the learnability benchmark's baseline): from the exact 3-D
 keypoints in the body frame, from the exact 2-D keypoints (intrinsics, translation and scale removed; linear and
 quadratic features), from those with Gaussian pixel noise of sigma px (what a keypoint detector of that accuracy
-leaves), and from the four deformation ratios. It says where the crease information lies: if noisy 2-D keypoints
+leaves), from the four deformation ratios, and from the worm's geometry and crease stiffness (per world). It says where the crease information lies: if noisy 2-D keypoints
 cannot reach a ratio, a network must read the folds from shading and outline, not from the keypoint layout.
 
     python benchmarks/crease_oracle.py out/pose_bench/train out/pose_bench/test [--noise 0.5 1 2 3]
@@ -19,6 +19,8 @@ import json
 import numpy as np
 
 KEYS = ("creases/angle", "keypoints/body", "keypoints/pixel", "camera/K", "labels/deformation")
+GEOMETRY = ("params/worm.a", "params/worm.b", "params/worm.l0", "params/worm.hinge_stiffness")
+"""The worm's randomized geometry [m] and crease stiffness [N/rad]: each world's rest folds follow from them (eq. 7)."""
 
 
 def load(root: str) -> dict[str, np.ndarray]:
@@ -28,8 +30,8 @@ def load(root: str) -> dict[str, np.ndarray]:
     parts: dict[str, list] = {k: [] for k in KEYS}
     for p in sorted(glob.glob(f"{root}/shard-*.h5")):
         with h5py.File(p, "r") as f:
-            for k in KEYS:
-                parts[k].append(f[k][...].astype(np.float64))
+            for k in KEYS + GEOMETRY:
+                parts.setdefault(k, []).append(f[k][...].astype(np.float64))
     return {k: np.concatenate(v) for k, v in parts.items()}
 
 
@@ -68,6 +70,8 @@ def main(argv=None) -> int:
                                                                te["keypoints/body"].reshape(len(y_te), -1), y_te, 1e-3),
             "deformation ratios, linear": ridge_ratio(tr["labels/deformation"], y_tr, te["labels/deformation"], y_te,
                                                       1e-3)}
+    g_tr, g_te = np.stack([tr[k] for k in GEOMETRY], 1), np.stack([te[k] for k in GEOMETRY], 1)
+    rows["geometry a, b, l0 and k_alpha, linear"] = ridge_ratio(g_tr, y_tr, g_te, y_te, 1e-3)
     x_tr, x_te = layout_2d(tr["keypoints/pixel"], tr["camera/K"]), layout_2d(te["keypoints/pixel"], te["camera/K"])
     rows["2-D keypoints exact, linear"] = ridge_ratio(x_tr, y_tr, x_te, y_te, 1e-3)
     rows["2-D keypoints exact, quadratic"] = ridge_ratio(quadratic(x_tr), y_tr, quadratic(x_te), y_te, 1e-2)
