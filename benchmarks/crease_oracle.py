@@ -13,7 +13,6 @@ cannot reach a ratio, a network must read the folds from shading and outline, no
 from __future__ import annotations
 
 import argparse
-import glob
 import json
 
 import numpy as np
@@ -24,15 +23,11 @@ GEOMETRY = ("params/worm.a", "params/worm.b", "params/worm.l0", "params/worm.hin
 
 
 def load(root: str) -> dict[str, np.ndarray]:
-    """The arrays in KEYS, concatenated over the shards of dataset folder ``root`` (h5py only)."""
-    import h5py
+    """The arrays in KEYS and GEOMETRY of dataset folder ``root``, every sample in order, as float64."""
+    from warpworm.data import dataset
 
-    parts: dict[str, list] = {k: [] for k in KEYS}
-    for p in sorted(glob.glob(f"{root}/shard-*.h5")):
-        with h5py.File(p, "r") as f:
-            for k in KEYS + GEOMETRY:
-                parts.setdefault(k, []).append(f[k][...].astype(np.float64))
-    return {k: np.concatenate(v) for k, v in parts.items()}
+    with dataset.open(root) as ds:
+        return {k: ds.read(k).astype(np.float64) for k in KEYS + GEOMETRY}
 
 
 def ridge_ratio(x_tr, y_tr, x_te, y_te, lam: float) -> float:
