@@ -156,9 +156,13 @@ def heatmap_ce(logp, kp, xs, ys, sigma: float):
     return -(t * logp).sum(-1)
 
 
+KP_SCALE = 8.0
+"""[px] per unit of the keypoint L1 loss (brings pixels to the heatmap loss's scale)."""
+
+
 def train(d: dict, a) -> tuple[object, dict, dict]:
-    """AdamW for ``--steps`` steps (or until ``--budget-s``): heatmap cross-entropy + L1 of the soft-argmax pixels (/ 16) on in-image
-    keypoints, + L1 on the normalized creases and ratios."""
+    """AdamW for ``--steps`` steps (or until ``--budget-s``), cosine-decayed: heatmap cross-entropy + 0.5 x the L1 of
+    the soft-argmax pixels / KP_SCALE on in-image keypoints, + L1 on the normalized creases and ratios."""
     import torch
 
     torch.manual_seed(a.seed)
@@ -182,7 +186,7 @@ def train(d: dict, a) -> tuple[object, dict, dict]:
         model.train()
         for idx in np.array_split(rng.permutation(len(x)), max(1, len(x) // a.batch)):
             uv, r, logp = model(x[idx].float() / 127.5 - 1.0)
-            l_kp = ((uv - kp[idx]).abs().sum(-1) * w[idx]).sum() / w[idx].sum().clamp(min=1) / 8.0
+            l_kp = ((uv - kp[idx]).abs().sum(-1) * w[idx]).sum() / w[idx].sum().clamp(min=1) / KP_SCALE
             l_heat = (heatmap_ce(logp, kp[idx], *model.cells, model.stride) * w[idx]).sum() / w[idx].sum().clamp(min=1)
             l_reg = (r - reg[idx]).abs().mean()
             loss = l_heat + 0.5 * l_kp + l_reg
@@ -194,7 +198,7 @@ def train(d: dict, a) -> tuple[object, dict, dict]:
             if done():
                 break
         epochs += 1
-        log.append({"epoch": epochs, "s": round(time.perf_counter() - t0, 1), "kp_loss_px": float(l_kp.detach()) * 8,
+        log.append({"epoch": epochs, "s": round(time.perf_counter() - t0, 1), "kp_loss_px": float(l_kp.detach()) * KP_SCALE,
                     "reg_loss": float(l_reg.detach())})
         print(f"epoch {epochs}: {log[-1]['s']} s, keypoint L1 {log[-1]['kp_loss_px']:.2f} px, "
               f"creases+ratios L1 {log[-1]['reg_loss']:.3f} (normalized)", flush=True)
