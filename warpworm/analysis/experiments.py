@@ -395,7 +395,7 @@ def linear_anchor_responses(model, params: WormParams, target_offsets: np.ndarra
         blk = kb[:, s, None, None] * (e[:, s, :, None] * e[:, s, None, :])  # np.outer's products, world by world
         r = np.r_[3 * i:3 * i + 3, 3 * j:3 * j + 3]
         K[:, r[:, None], r[None, :]] += np.block([[blk, -blk], [-blk, blk]])  # the four distinct 3x3 blocks
-    g = np.stack([crease.dihedral_gradients(x[w], pat.hinges) for w in range(W)])  # (W, H, 4, 3), per world
+    g = crease.dihedral_gradients(x, pat.hinges)  # (W, H, 4, 3)
     for h, stencil in enumerate(pat.hinges):
         r = (3 * np.asarray(stencil)[:, None] + np.arange(3)).reshape(-1)  # the 12 nonzero entries of gv
         gv = g[:, h].reshape(W, 12)
@@ -408,7 +408,7 @@ def linear_anchor_responses(model, params: WormParams, target_offsets: np.ndarra
         d = np.arange(3 * v, 3 * v + 3)
         K[:, d, d] += ak[:, a, None]  # ak * eye(3): the off-diagonal zeros add nothing
         f[:, d] += ak[:, a, None] * off[a]
-    u = np.stack([np.linalg.solve(K[w], f[w]) for w in range(W)]).reshape(W, V, 3)
+    u = np.linalg.solve(K, f[..., None]).reshape(W, V, 3)  # one LAPACK gesv per world, as the per-world solve
     return ak[:, :, None] * (u[:, av] - off)
 
 
