@@ -302,8 +302,7 @@ def _define_camera(stage, root: str, cam: ViewCamera) -> None:
               "focalLength": cam.K[:, 0, 0] * pitch,
               "horizontalApertureOffset": (cam.K[:, 0, 2] - (w - 1) / 2) * pitch,
               "verticalApertureOffset": -(cam.K[:, 1, 2] - (h - 1) / 2) * row}
-    moving = not (all(np.array_equal(cam.K[0], k) for k in cam.K) and all(np.array_equal(cam.R[0], x) for x in cam.R)
-                  and all(np.array_equal(cam.t[0], x) for x in cam.t))
+    moving = any(not np.all(a == a[:1]) for a in (cam.K, cam.R, cam.t))  # any frame differs from the first
     codes = ([Usd.TimeCode(float(t * TIME_CODES_PER_SECOND)) for t in cam.time] if moving
              else [Usd.TimeCode.Default()])
     prim = UsdGeom.Camera.Define(stage, f"{root}/{cam.name}")
