@@ -69,7 +69,27 @@ def undistort_maps(K: np.ndarray, dist: np.ndarray, width: int, height: int, dev
     return out.numpy().reshape(N, height, width, 2)
 
 
-__all__ = ["DIST_NAMES", "distort", "draw_distortion", "undistort", "undistort_maps"]
+def widened_pinhole(cameras, device=None):
+    """The pinhole cameras a distorted image is warped from (the renderers' lens path): the same K widened by
+    margins that hold the ray of every distorted pixel centre of ``cameras`` (``dist`` (N, 5)), and where each
+    distorted pixel centre lies in that wider image. Returns (cameras with the shifted K, ``dist`` None and the wider
+    ``width``/``height``, mx (N, H, W) float32, my (N, H, W) float32) [px]."""
+    import dataclasses
+
+    H, W = int(cameras.height), int(cameras.width)
+    maps = undistort_maps(cameras.K, np.asarray(cameras.dist, dtype=np.float64), W, H, device)  # (N, H, W, 2)
+    lo = np.floor(maps.reshape(-1, 2).min(axis=0)) - 1
+    hi = np.ceil(maps.reshape(-1, 2).max(axis=0)) + 1
+    ml, mt = int(max(0, -lo[0])), int(max(0, -lo[1]))
+    Wp, Hp = W + ml + int(max(0, hi[0] - (W - 1))), H + mt + int(max(0, hi[1] - (H - 1)))
+    K = cameras.K.copy()
+    K[:, 0, 2] += ml
+    K[:, 1, 2] += mt
+    wide = dataclasses.replace(cameras, K=K, dist=None, width=Wp, height=Hp)
+    return wide, (maps[..., 0] + ml).astype(np.float32), (maps[..., 1] + mt).astype(np.float32)
+
+
+__all__ = ["DIST_NAMES", "distort", "draw_distortion", "undistort", "undistort_maps", "widened_pinhole"]
 
 
 def draw_distortion(render_cfg, seeds: np.ndarray) -> np.ndarray:

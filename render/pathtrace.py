@@ -244,24 +244,13 @@ def _distorted(scene: SceneBatch, cameras: Cameras, spp: int, seeds: np.ndarray)
     """Images through ``cameras.dist`` the way the rasterizer makes them (``Renderer._render_distorted``): a pinhole
     image with the same K widened by margins that hold the ray of every distorted pixel centre, warped bilinearly
     (``cv2.remap``) by :func:`warpworm.render.distortion.undistort_maps`. Linear (N, H, W, 3) float32."""
-    import dataclasses
-
     import cv2
 
-    from warpworm.render.distortion import undistort_maps
+    from warpworm.render.distortion import widened_pinhole
 
     N, H, W = len(cameras), int(cameras.height), int(cameras.width)
-    maps = undistort_maps(cameras.K, np.asarray(cameras.dist, dtype=np.float64), W, H)  # (N, H, W, 2)
-    lo = np.floor(maps.reshape(-1, 2).min(axis=0)) - 1
-    hi = np.ceil(maps.reshape(-1, 2).max(axis=0)) + 1
-    ml, mt = int(max(0, -lo[0])), int(max(0, -lo[1]))
-    Wp, Hp = W + ml + int(max(0, hi[0] - (W - 1))), H + mt + int(max(0, hi[1] - (H - 1)))
-    K = cameras.K.copy()
-    K[:, 0, 2] += ml
-    K[:, 1, 2] += mt
-    pin = _trace(scene, dataclasses.replace(cameras, K=K, dist=None, width=Wp, height=Hp), spp, seeds)
-    mx = (maps[..., 0] + ml).astype(np.float32)
-    my = (maps[..., 1] + mt).astype(np.float32)
+    view, mx, my = widened_pinhole(cameras)
+    pin = _trace(scene, view, spp, seeds)
     return np.stack([cv2.remap(pin[i], mx[i], my[i], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
                      for i in range(N)]).reshape(N, H, W, 3)
 

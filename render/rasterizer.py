@@ -271,30 +271,20 @@ class Renderer:
         render with the same K, widened by margins so that it holds the ray of every distorted pixel centre, warped:
         RGB bilinearly (``cv2.remap``), depth, segmentation, the worm mask and normals from the nearest pinhole pixel
         centre (within half a pixel of the exact ray)."""
-        import dataclasses
-
         import cv2
 
-        from warpworm.render.distortion import undistort_maps
+        from warpworm.render.distortion import widened_pinhole
 
         H, W, N = self.height, self.width, len(cameras)
-        maps = undistort_maps(cameras.K, np.asarray(cameras.dist, dtype=np.float64), W, H, self.device)  # (N, H, W, 2)
-        lo = np.floor(maps.reshape(-1, 2).min(axis=0)) - 1
-        hi = np.ceil(maps.reshape(-1, 2).max(axis=0)) + 1
-        ml, mt = int(max(0, -lo[0])), int(max(0, -lo[1]))
-        Wp, Hp = W + ml + int(max(0, hi[0] - (W - 1))), H + mt + int(max(0, hi[1] - (H - 1)))
+        view, mx, my = widened_pinhole(cameras, self.device)
+        Wp, Hp = int(view.width), int(view.height)
         wide = self._wide.get((Wp, Hp))
         if wide is None:
             wide = self._wide[(Wp, Hp)] = Renderer(
                 Wp, Hp, device=self.device, near=self.near, max_chunk_pixels=self.max_chunk_pixels,
                 threads=self.threads, shadows=self.shadows, shadow_map=self.shadow_map or max(W, H),
                 supersample=self.supersample)
-        K = cameras.K.copy()
-        K[:, 0, 2] += ml
-        K[:, 1, 2] += mt
-        pin = wide.render(scene, dataclasses.replace(cameras, K=K, dist=None, width=Wp, height=Hp), normals=normals)
-        mx = (maps[..., 0] + ml).astype(np.float32)
-        my = (maps[..., 1] + mt).astype(np.float32)
+        pin = wide.render(scene, view, normals=normals)
         ix = np.clip(np.floor(mx + 0.5).astype(np.int64), 0, Wp - 1)
         iy = np.clip(np.floor(my + 0.5).astype(np.int64), 0, Hp - 1)
         n = np.arange(N)[:, None, None]
