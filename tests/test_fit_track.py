@@ -18,14 +18,15 @@ FPS = 12.5  # 20 solver steps of 4 ms between frames: the video's frame times ar
 PLANT = 1.08  # planted EPM moment over the preset's
 
 
-@pytest.fixture(scope="module")
-def planted_video(tmp_path_factory):
+def _planted_video(d, magnet_model):
+    """Simulate one peristaltic cycle at the planted EPM moment under magnet_model, render it with the bands and the
+    harshest sensor draws, and write frames/*.png and camera.json under d; returns the preset's params."""
     from warpworm import quiet_warp
     from warpworm.analysis.gait_runs import run_gait
     from warpworm.physics import gaits
 
     quiet_warp()
-    base = gaits.preset_params("peristaltic", magnet_model="analytic")
+    base = gaits.preset_params("peristaltic", magnet_model=magnet_model)
     planted = FT.candidate_params(base, ["epm_moment"], np.array([[PLANT * base.epm_moment]]))
     r = run_gait(planted, 1, 1.0, fps=FPS, save_worlds=1)
     t = np.asarray(r["frames"]["time"])
@@ -36,12 +37,17 @@ def planted_video(tmp_path_factory):
     cam = T.overhead_camera(centre=(0.05, 0.0, 0.0), width=640, height=480, fov_deg=22.0)
     sensor = T.harshest_sensor(F)  # the randomization's harshest sensor draws, no JPEG
     rgb = T.render_band_video(r["frames"], r["model"], cam, 640, 480, sensor_values=sensor, seed=3)
-    d = tmp_path_factory.mktemp("planted")
     (d / "frames").mkdir()
     for i, im in enumerate(rgb):
         cv2.imwrite(str(d / "frames" / f"{i:03d}.png"), im[..., ::-1])
     cam.save(d / "camera.json")
-    return d, base
+    return base
+
+
+@pytest.fixture(scope="module")
+def planted_video(tmp_path_factory):
+    d = tmp_path_factory.mktemp("planted")
+    return d, _planted_video(d, "analytic")
 
 
 def test_fit_track_recovers_the_planted_epm_moment_from_images(planted_video, capsys):
@@ -163,7 +169,6 @@ def test_global_profile_reports_a_traded_pair_not_identifiable_and_keeps_a_pinne
     c2 = np.sqrt(FT.ACCEPT_DCHI2 / np.sum((40 * w - np.stack([30 * u, a1], 1) @ np.linalg.lstsq(
         np.stack([30 * u, a1], 1), 40 * w, rcond=None)[0]) ** 2))
     np.testing.assert_allclose(out["hi"][2] - out["lo"][2], 2 * c2, rtol=0.02)  # x2: the same from its grid
-    x = out["st"]["x"]
     assert abs(x[2] - truth[2]) < 0.01 and x[2] + out["lo"][2] <= truth[2] <= x[2] + out["hi"][2]
 
 
@@ -192,25 +197,9 @@ def test_fit_track_absorbs_the_dipole_model_error_into_the_analytic_moment(tmp_p
     exact analytic model. At peristalsis's gaps (>= 5 mm) the two models' fields agree to < 0.1 % (docs/magnets.md,
     magpylib), so the moment the fit absorbs must stay within the EPM's 3 % tolerance and the analytic model must
     explain the dipole track to the tracker's accuracy; the absorbed offset is printed."""
-    from warpworm import quiet_warp
-    from warpworm.analysis.gait_runs import run_gait
     from warpworm.cli import main
-    from warpworm.physics import gaits
 
-    quiet_warp()
-    base = gaits.preset_params("peristaltic", magnet_model="dipoles")
-    planted = FT.candidate_params(base, ["epm_moment"], np.array([[PLANT * base.epm_moment]]))
-    r = run_gait(planted, 1, 1.0, fps=FPS, save_worlds=1)
-    t = np.asarray(r["frames"]["time"])
-    on_grid = np.abs(t * FPS - np.round(t * FPS)) < 1e-6
-    frames = {k: v[on_grid] for k, v in r["frames"].items()}
-    cam = T.overhead_camera(centre=(0.05, 0.0, 0.0), width=640, height=480, fov_deg=22.0)
-    rgb = T.render_band_video(frames, r["model"], cam, 640, 480, sensor_values=T.harshest_sensor(int(on_grid.sum())),
-                              seed=3)
-    (tmp_path / "frames").mkdir()
-    for i, im in enumerate(rgb):
-        cv2.imwrite(str(tmp_path / "frames" / f"{i:03d}.png"), im[..., ::-1])
-    cam.save(tmp_path / "camera.json")
+    base = _planted_video(tmp_path, "dipoles")
     assert main(["track", str(tmp_path / "frames"), "--camera", str(tmp_path / "camera.json"), "--out",
                  str(tmp_path / "track.csv"), "--fps", str(FPS), "--json"]) == 0
     capsys.readouterr()
