@@ -15,7 +15,7 @@ from warpworm import quiet_warp
 from warpworm.data.config import ConfigError, load_config
 from warpworm.render import Renderer, build_scene, sample_cameras
 from warpworm.render.demo import default_pattern, posed_worm_states
-from warpworm.render.distortion import distort, draw_distortion, undistort
+from warpworm.render.distortion import distort, draw_distortion, undistort, undistort_maps
 from warpworm.render.labels import schema_labels
 from warpworm.render.raycast import RayCaster
 
@@ -49,6 +49,20 @@ def test_inverse_undoes_the_lens():
     xd, yd = distort(x[None], y[None], d[:, None, None])
     xu, yu, res = undistort(xd, yd, d[:, None, None])
     assert np.abs(xu - x).max() < 1e-12 and np.abs(yu - y).max() < 1e-12 and res.max() < 1e-14
+
+
+def test_warp_maps_equal_the_numpy_inverse():
+    # undistort_maps runs Newton's method in a Warp kernel (raster_kernels.undistort_pixels): its twin in NumPy is
+    # undistort, so every pixel centre must map to the same pinhole pixel (float64 both, the same iteration)
+    _, _, cams = _scenes()
+    H, W = cams.height, cams.width
+    maps = undistort_maps(cams.K, cams.dist, W, H)
+    v, u = np.mgrid[0:H, 0:W].astype(np.float64)
+    fx, fy = cams.K[:, 0, 0, None, None], cams.K[:, 1, 1, None, None]
+    cx, cy = cams.K[:, 0, 2, None, None], cams.K[:, 1, 2, None, None]
+    x, y, res = undistort((u[None] - cx) / fx, (v[None] - cy) / fy, cams.dist[:, None, None, :])
+    assert res.max() < 1e-12
+    np.testing.assert_allclose(maps, np.stack([fx * x + cx, fy * y + cy], axis=-1), rtol=0, atol=1e-9)
 
 
 def test_warped_images_match_rays_through_the_lens():
