@@ -357,11 +357,11 @@ def _stiffness_sweep(hinge_stiffness, base: WormParams | None, overrides: dict):
 def _linear_units(model, params: WormParams, n_fixed: int, n_moved: int, axis: int, workers):
     """Start the linear prediction (:func:`linear_anchor_responses`) of every world: the moved anchors' summed force
     along ``axis`` per metre of their offset along ``-axis`` [N/m] (host NumPy, not the simulation), on a thread
-    beside the ``workers`` threads of the simulation (``world_split.beside``); ``.result()`` gives the list (W,)."""
+    beside the ``workers`` threads of the simulation (``world_split.beside``); ``.result()`` gives the array (W,)."""
     def units():
         off = np.zeros((n_fixed + n_moved, 3))
         off[n_fixed:, axis] = -1.0
-        return [(r[n_fixed:, axis].sum() / 1e-6) for r in linear_anchor_responses(model, params, off * 1e-6)]
+        return linear_anchor_responses(model, params, off * 1e-6)[:, n_fixed:, axis].sum(axis=1) / 1e-6
 
     return beside(units, model.num_worlds, 1 if model.device.is_cuda else workers)  # a GPU: one batch
 
@@ -438,9 +438,7 @@ def compression(hinge_stiffness=DEFAULT_HINGE_SWEEP, max_displacement: float = 2
     pred = _linear_units(model, p, len(tail), len(head), 0, workers)  # beside the simulation's threads
     r = _quasi_static(p, W, anchors, anchor_stiffness, head, (-1.0, 0.0, 0.0), steps, settle=settle, hold=hold,
                       dt=dt, substeps=substeps, device=device, workers=workers)
-    lin = np.zeros_like(r["force"])
-    for w, unit in enumerate(pred.result()):
-        lin[:, w] = unit * r["prescribed"]
+    lin = r["prescribed"][:, None] * pred.result()  # (K+1, W) [N]
     fmax = r["force"][-1]
     dmax = r["displacement"][-1]
     r.update(hinge_stiffness=ks, linear=lin, summary={
@@ -481,9 +479,7 @@ def flexure(hinge_stiffness=DEFAULT_HINGE_SWEEP, max_deflection: float = 2.0e-3,
     pred = _linear_units(model, p, len(sup), len(load), 2, workers)  # beside the simulation's threads
     r = _quasi_static(p, W, anchors, anchor_stiffness, load, (0.0, 0.0, -1.0), steps, lift=lift, settle=settle,
                       hold=hold, dt=dt, substeps=substeps, device=device, workers=workers)
-    lin = np.zeros_like(r["force"])
-    for w, unit in enumerate(pred.result()):
-        lin[:, w] = unit * r["prescribed"]
+    lin = r["prescribed"][:, None] * pred.result()  # (K+1, W) [N]
     fmax, dmax = r["force"][-1], r["displacement"][-1]
     r.update(hinge_stiffness=ks, linear=lin, summary={
         "hinge_stiffness_N_per_rad": ks.tolist(),
