@@ -86,8 +86,8 @@ def main(args) -> int:
         if not Path(args.track).is_file():
             raise ValueError(f"TRACK: got {args.track!r}; expected a track.csv written by 'warpworm track'")
         if args.budget < 1 or (args.popsize is not None and args.popsize < 2) or args.refine < 0 or args.profile < 0:
-            raise ValueError(f"--budget/--popsize/--refine: got {args.budget}/{args.popsize}/{args.refine}; expected "
-                             ">= 1 / >= 2 / >= 0")
+            raise ValueError(f"--budget/--popsize/--refine/--profile: got {args.budget}/{args.popsize}/{args.refine}/"
+                             f"{args.profile}; expected >= 1 / >= 2 / >= 0 / >= 0")
         if not args.spread > 1 or not 0 < args.render_scale <= 1:
             raise ValueError(f"--spread/--render-scale: got {args.spread}/{args.render_scale}; expected > 1 / (0, 1]")
         try:
