@@ -293,9 +293,10 @@ def _check_range(r: list) -> list:
 
 
 def _check_band_colors(c):
-    a = None if c is None else np.asarray(c, dtype=np.float64)
-    if a is not None and (a.shape != (5, 3) or not np.all((a >= 0) & (a <= 1))):
-        raise _problem(f"got {c}; expected five [r, g, b] display colours in [0, 1], tail -> head")
+    if c is not None:
+        a = np.asarray(c, dtype=np.float64)
+        if a.shape != (5, 3) or not np.all((a >= 0) & (a <= 1)):
+            raise _problem(f"got {c}; expected five [r, g, b] display colours in [0, 1], tail -> head")
     return c
 
 
