@@ -133,14 +133,36 @@ FEATURES = (
 """(name, config overrides, Renderer options) of the issue-24 rows: each realism option on its own and together."""
 
 
+def _option_case(overrides: list, opts: dict, states: dict, pattern, cams):
+    """One benchmark case: the appearance and scene of the default config with ``overrides`` (its looks, lights and
+    distractors) over the posed worms ``states``; ``cams`` with the case's ``gain`` (exposure x white balance) and
+    ``dist`` (lens) applied; and the rest of ``opts`` (Renderer options). Returns (appearance, scene, cameras,
+    options)."""
+    from warpworm.data.config import load_config
+    from warpworm.data.sampling import appearance_draws, sample_appearance
+    from warpworm.render import build_scene
+    from warpworm.render.placement import distractor_mesh
+
+    W, N = len(states["positions"]), len(cams)
+    cfg = load_config("default", overrides)
+    app = sample_appearance(cfg, np.arange(W))
+    scene = build_scene(states["positions"], pattern.triangles, pattern.triangle_segment,
+                        magnet_pos=states["magnet_pos"], magnet_rot=states["magnet_rot"],
+                        worm_texcoords=pattern.vertices, appearance=app,
+                        extra_mesh=distractor_mesh(appearance_draws(cfg, np.arange(W)), W))
+    opts, view = dict(opts), cams
+    if opts.pop("gain", False):
+        view = dataclasses.replace(view, gain=np.tile([[1.4, 1.0, 0.8]], (N, 1)))
+    if "dist" in opts:
+        view = dataclasses.replace(view, dist=np.tile([opts.pop("dist")], (N, 1)))
+    return app, scene, view, opts
+
+
 def feature_rows(quick: bool, dev) -> list[dict]:
     """Images/s at the dataset's 128 x 96 with each issue-24 option on and off (posed worms with magnets, the
     config's looks and lights; 16 worlds x 8 cameras, quick 8 x 8; one thread)."""
-    from warpworm.data.config import load_config
-    from warpworm.data.sampling import appearance_draws, sample_appearance
-    from warpworm.render import Renderer, build_scene, sample_cameras
+    from warpworm.render import Renderer, sample_cameras
     from warpworm.render.demo import default_pattern, posed_worm_states
-    from warpworm.render.placement import distractor_mesh
 
     W, C, repeats = (8, 8, 3) if quick else (16, 8, 5)
     pattern = default_pattern()
@@ -149,18 +171,7 @@ def feature_rows(quick: bool, dev) -> list[dict]:
     cams = sample_cameras(np.arange(N), states["positions"], width=128, height=96, world_index=np.arange(N) % W)
     rows, base = [], None
     for name, overrides, opts in FEATURES:
-        cfg = load_config("default", overrides)
-        app = sample_appearance(cfg, np.arange(W))
-        scene = build_scene(states["positions"], pattern.triangles, pattern.triangle_segment,
-                            magnet_pos=states["magnet_pos"], magnet_rot=states["magnet_rot"],
-                            worm_texcoords=pattern.vertices, appearance=app,
-                            extra_mesh=distractor_mesh(appearance_draws(cfg, np.arange(W)), W))
-        opts = dict(opts)
-        view = cams
-        if opts.pop("gain", False):
-            view = dataclasses.replace(cams, gain=np.tile([[1.4, 1.0, 0.8]], (N, 1)))
-        if "dist" in opts:
-            view = dataclasses.replace(cams, dist=np.tile([opts.pop("dist")], (N, 1)))
+        app, scene, view, opts = _option_case(overrides, opts, states, pattern, cams)
         renderer = Renderer(128, 96, device=dev, **opts)
         renderer.render(scene, view)  # warm-up
         gauge = _machine_ns_per_element(dev)
@@ -204,11 +215,8 @@ def production_rows(size: int = 256, worlds: int = 8, cameras: int = 2, repeats:
     supersample 2, a lens of k1 -0.25, k2 0.08, gains), ``size``² px, posed worms (``python3
     benchmarks/bench_render.py --production``; best of ``repeats``, CPU time of this process)."""
     from warpworm import quiet_warp
-    from warpworm.data.config import load_config
-    from warpworm.data.sampling import appearance_draws, sample_appearance
-    from warpworm.render import Renderer, build_scene, sample_cameras
+    from warpworm.render import Renderer, sample_cameras
     from warpworm.render.demo import default_pattern, posed_worm_states
-    from warpworm.render.placement import distractor_mesh
 
     quiet_warp()
     dist = (-0.25, 0.08, 0.002, -0.002, 0.0)
@@ -223,16 +231,7 @@ def production_rows(size: int = 256, worlds: int = 8, cameras: int = 2, repeats:
                           world_index=np.arange(N) % worlds)
     rows = []
     for name, overrides, opts in cases:
-        cfg = load_config("default", overrides)
-        scene = build_scene(states["positions"], pattern.triangles, pattern.triangle_segment,
-                            magnet_pos=states["magnet_pos"], magnet_rot=states["magnet_rot"],
-                            worm_texcoords=pattern.vertices, appearance=sample_appearance(cfg, np.arange(worlds)),
-                            extra_mesh=distractor_mesh(appearance_draws(cfg, np.arange(worlds)), worlds))
-        opts, view = dict(opts), cams
-        if opts.pop("gain", False):
-            view = dataclasses.replace(view, gain=np.tile([[1.4, 1.0, 0.8]], (N, 1)))
-        if "dist" in opts:
-            view = dataclasses.replace(view, dist=np.tile([opts.pop("dist")], (N, 1)))
+        _, scene, view, opts = _option_case(overrides, opts, states, pattern, cams)
         renderer = Renderer(size, size, device=device, **opts)
         renderer.render(scene, view)  # warm-up
         _, c = _best_time(lambda: renderer.render(scene, view), repeats, cpu=True)
