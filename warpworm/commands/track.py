@@ -35,15 +35,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--json", action="store_true", help="print a JSON summary only")
 
 
-def parse_colors(text: str | None):
-    """``"r,g,b;r,g,b;..."`` -> (5, 3) array, or None (:func:`warpworm.analysis.track.parse_band_colors`)."""
-    from warpworm.analysis.track import parse_band_colors
-
-    return parse_band_colors(text)
-
-
 def _thresholds(args):
-    from warpworm.analysis.track import OVERRIDABLE, Thresholds
+    from warpworm.analysis.track import OVERRIDABLE, Thresholds, dataset_band_colors, parse_band_colors
 
     over = {}
     for item in args.threshold:
@@ -58,10 +51,8 @@ def _thresholds(args):
         raise ValueError(f"--band-colors / --band-colors-from: got both ({args.band_colors!r}, "
                          f"{args.band_colors_from!r}); expected one")
     if args.band_colors_from is not None:
-        from warpworm.analysis.track import dataset_band_colors
-
         return Thresholds.from_colors(dataset_band_colors(args.band_colors_from), **over)
-    return Thresholds.from_colors(parse_colors(args.band_colors), **over)
+    return Thresholds.from_colors(parse_band_colors(args.band_colors), **over)
 
 
 def main(args) -> int:
