@@ -22,7 +22,8 @@ quiet_warp()
 def _scene(appearance=None, worlds=3):
     pattern = default_pattern()
     st = posed_worm_states(np.arange(worlds), pattern)
-    app = sample_appearance(load_config("default"), np.arange(worlds)) if appearance is None else appearance
+    plain = load_config("default", ["render.plate_pose=false", "render.lights=fixed"])  # one lamp, as before issue 24
+    app = sample_appearance(plain, np.arange(worlds)) if appearance is None else appearance
     scene = build_scene(st["positions"], pattern.triangles, pattern.triangle_segment, magnet_pos=st["magnet_pos"],
                         magnet_rot=st["magnet_rot"], worm_texcoords=pattern.vertices, appearance=app)
     cams = sample_cameras(np.arange(2 * worlds), st["positions"][np.arange(2 * worlds) % worlds], width=64,

@@ -20,6 +20,7 @@ from warpworm.render.raycast import RayCaster
 quiet_warp()
 PATTERN = default_pattern()
 ON = ["render.plate_pose=true", "render.lights=random"]
+OFF = ["render.plate_pose=false", "render.lights=fixed"]  # the look of before (the default config's until issue 24)
 
 
 def dataset_like_worms(n: int):
@@ -79,7 +80,7 @@ def z_scores(d: np.ndarray) -> np.ndarray:
 def test_fixed_lamp_tells_head_from_tail():
     # the old setting: lamp at (-0.15, 0.2, 0.3) m, worms heading +x -> the tail's floor is brighter (measured
     # z = -30 for the luminance, -6.7 for the texture contrast)
-    d = head_tail_differences([])
+    d = head_tail_differences(OFF)
     assert len(d) > 200
     z = z_scores(d)
     assert z[0] < -10 and abs(z[1]) > 4, z
@@ -103,7 +104,8 @@ def test_draws_keyed_by_trajectory_and_recorded():
     assert np.all((a["plate.yaw"] >= 0) & (a["plate.yaw"] < 2 * np.pi))
     assert np.all(np.hypot(a["plate.offset_u"], a["plate.offset_v"]) <= cfg.render.plate_offset)
     # old configs draw nothing new (datasets of before keep their params)
-    assert not any(k.startswith(("plate.", "lights.")) for k in appearance_draws(load_config("default"), np.arange(3)))
+    old = load_config("default", OFF)
+    assert not any(k.startswith(("plate.", "lights.")) for k in appearance_draws(old, np.arange(3)))
 
 
 def test_lights_are_where_the_draws_say():
@@ -188,9 +190,9 @@ def test_config_errors_name_the_key():
 
 
 def test_off_values_leave_config_and_appearance_as_before():
-    cfg = load_config("default")
+    cfg = load_config("default", OFF)
     assert not any(k.startswith(("plate", "light", "shadow")) for k in cfg.to_dict()["render"])
-    on = load_config("default", ["render.plate_pose=true"]).to_dict()["render"]
+    on = load_config("default", OFF + ["render.plate_pose=true"]).to_dict()["render"]
     assert on["plate_pose"] is True and on["plate_offset"] == 0.05
     a = sample_appearance(cfg, np.arange(3))
     assert np.all(a.plate == 0) and a.light_pos.shape == (3, 1, 3)
