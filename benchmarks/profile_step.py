@@ -165,7 +165,8 @@ def profile_run(W: int, *, duration: float, settle: float, skip: float = 1.0, ma
 
 
 PARTS = ("gradient", "gradient + Hessian", "hinges' gradient", "inertia + bars' gradient", "band copy",
-         "band copy + factor", "rhs copy", "rhs copy + solve")
+         "band copy + factor", "rhs copy", "rhs copy + solve", "hinges' gradient + Hessian", "contacts update",
+         "friction + Hessian", "contact projection", "hinge angles (substep end)")
 """The Newton step's parts :func:`parts_cost` times (the copies restore the factor's and the solve's input)."""
 
 
@@ -176,6 +177,7 @@ def _parts_kernel():
 
     from warpworm.kernels import implicit_euler as ie
     from warpworm.kernels import substep as sub
+    from warpworm.kernels.hinge_lanes import add_hinges, update_hinge_angles_lanes
     from warpworm.kernels.band_cholesky import ALL_ROWS, band_cholesky_factor, band_cholesky_solve
 
     @wp.kernel
@@ -190,8 +192,7 @@ def _parts_kernel():
             if part == 0 or part == 1:
                 ie.elastic_terms(world, c, m, opt, anchor_target, part == 1, s, w)
             elif part == 2:
-                for h in range(m.hinges.shape[0]):
-                    sub.add_hinge(world, h, ALL_ROWS, c, m, False, s, w)
+                add_hinges(world, c, m, False, s, w)
             elif part == 3:
                 for i in range(nv):
                     sub.inertia_row(world, i, c, m, False, w)
@@ -203,11 +204,21 @@ def _parts_kernel():
                         w.hess[world, i, k] = hess0[world, i, k]
                 if part == 5:
                     band_cholesky_factor(world, nv, bw, w.hess)
-            else:
+            elif part == 6 or part == 7:
                 for i in range(nv):
                     w.grad[world, i] = grad0[world, i]
                 if part == 7:
                     band_cholesky_solve(world, nv, bw, w.hess, w.grad)
+            elif part == 8:
+                add_hinges(world, c, m, True, s, w)
+            elif part == 9:
+                sub.update_contacts(world, 0, 1, c, m, opt.slip_speed, s, w)
+            elif part == 10:
+                ie.friction_terms(world, c, opt.slip_speed, True, s, w)
+            elif part == 11:
+                ie.project_on_contacts(world, c, m, s, w)
+            else:
+                update_hinge_angles_lanes(world, m, opt.fold_tolerance, s)
 
     return parts
 

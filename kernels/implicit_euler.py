@@ -1,8 +1,9 @@
 """The band layout of the implicit-Euler substep: one thread per world, elements added whole, chord Newton steps.
 
 :func:`implicit_step` is launched over worlds (``world = wp.tid()``); each thread runs its world's substeps with the
-physics of :mod:`.substep` (adders called with ``ALL_ROWS``, per-vertex phases with stride 1) and solves each Newton
-system with the block-band Cholesky of :mod:`.band_cholesky`. With ``refactor`` 0 (the default) only the first step
+physics of :mod:`.substep` (adders called with ``ALL_ROWS``, per-vertex phases with stride 1; the hinges
+:data:`~.hinge_lanes.LANES` at a time, :mod:`.hinge_lanes`, the same numbers) and solves each Newton system with the
+block-band Cholesky of :mod:`.band_cholesky`. With ``refactor`` 0 (the default) only the first step
 of every other substep, and a step after a contact changed, assembles and factors; the others are chord steps on the
 last factor, taken only if they at least halve the last step, and ending a substep only with the error estimate
 θ/(1 − θ)·step below :data:`STOP_ERROR` times the tolerance (docs/dynamics.md, "Newton convergence").
@@ -14,11 +15,11 @@ import warp as wp
 
 from .band_cholesky import ALL_ROWS, band_cholesky_factor, band_cholesky_solve
 from .common import freeze_world
+from .hinge_lanes import add_hinges, update_hinge_angles_lanes
 from .substep import (  # noqa: F401  (CONTACT_SLIDING, CONTACT_STUCK, friction_force: read from here by tests)
     CONTACT_SLIDING, CONTACT_STUCK, CONTACTS_LANDED, WORLD_CRUMPLED, BarHingeModel, BarHingeState, NewtonScratch,
-    SubstepOptions, WorldCoefficients, add_anchors, add_bar, add_hinge, apply_step, finish_vertices, friction_force,
-    friction_row, inertia_row, predict, project_row, project_rhs, update_contacts, update_hinge_angles,
-    world_coefficients)
+    SubstepOptions, WorldCoefficients, add_anchors, add_bar, apply_step, finish_vertices, friction_force,
+    friction_row, inertia_row, predict, project_row, project_rhs, update_contacts, world_coefficients)
 
 wp.set_module_options({"enable_backward": False})
 
@@ -38,8 +39,7 @@ def elastic_terms(world: int, c: WorldCoefficients, m: BarHingeModel, opt: Subst
     for e in range(m.edges.shape[0]):
         if add_bar(world, e, ALL_ROWS, c, m, opt, with_hessian, s, w) != 0:
             return 1
-    for h in range(m.hinges.shape[0]):
-        add_hinge(world, h, ALL_ROWS, c, m, with_hessian, s, w)
+    add_hinges(world, c, m, with_hessian, s, w)
     add_anchors(world, ALL_ROWS, c, m, anchor_target, with_hessian, s, w)
     return 0
 
@@ -175,7 +175,7 @@ def implicit_step(m: BarHingeModel, opt: SubstepOptions, f_ext: wp.array2d(dtype
             bad, statuses_changed = finish_vertices(world, 0, 1, c, m, opt, s, w)
             if statuses_changed != 0:
                 carried = False  # the factor's projection is another contact set's
-            crumpled = update_hinge_angles(world, 0, 1, m, opt.fold_tolerance, s)
+            crumpled = update_hinge_angles_lanes(world, m, opt.fold_tolerance, s)
             if bad == 0 and crumpled != 0:
                 freeze_world(world, s.x.shape[1], s.x, s.v, w.x_prev, w.delta, s.unstable)
                 s.unstable[world] = WORLD_CRUMPLED
