@@ -62,6 +62,36 @@ def freeze_world(world: int, num_vertices: int, x: wp.array2d(dtype=wp.vec3), v:
     return 0
 
 
+LANES = wp.constant(8)
+"""Elements (hinges, ring points) per vector of lanes (8 float32: one AVX register)."""
+
+lanes = wp.types.vector(length=8, dtype=wp.float32)
+"""One float32 per element of a batch: Warp's component-wise operations on it compile to SIMD
+instructions on the CPU (:mod:`.hinge_lanes`, :func:`.magnet_far_pair.far_cylinder_pair_wrench`)."""
+
+
+@wp.func
+def lanes_cross(ax: lanes, ay: lanes, az: lanes, bx: lanes, by: lanes, bz: lanes):
+    """``wp.cross`` lane by lane: (a_y b_z − a_z b_y, a_z b_x − a_x b_z, a_x b_y − a_y b_x)."""
+    return (wp.cw_mul(ay, bz) - wp.cw_mul(az, by), wp.cw_mul(az, bx) - wp.cw_mul(ax, bz),
+            wp.cw_mul(ax, by) - wp.cw_mul(ay, bx))
+
+
+@wp.func
+def lanes_dot(ax: lanes, ay: lanes, az: lanes, bx: lanes, by: lanes, bz: lanes) -> lanes:
+    """``wp.dot`` lane by lane, summed in its order: (a_x b_x + a_y b_y) + a_z b_z."""
+    return wp.cw_mul(ax, bx) + wp.cw_mul(ay, by) + wp.cw_mul(az, bz)
+
+
+@wp.func
+def lanes_sqrt(a: lanes) -> lanes:
+    """``wp.sqrt`` of every lane."""
+    r = lanes()
+    for k in range(8):
+        r[k] = wp.sqrt(a[k])
+    return r
+
+
 TAN_PI_8 = wp.constant(0.41421356237309503)
 QUARTER_PI = wp.constant(0.78539816339744831)
 HALF_PI = wp.constant(1.57079632679489662)

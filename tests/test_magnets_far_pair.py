@@ -16,7 +16,7 @@ import pytest
 import warp as wp
 
 from warpworm.physics import magnets as mg
-from warpworm.kernels.magnet_far_pair import cylinder_ring_rule
+from warpworm.kernels.magnet_far_pair import cylinder_ring_rule, far_cylinder_pair_wrench, far_cylinder_pair_wrench_lanes
 
 
 @wp.kernel
@@ -139,6 +139,41 @@ def test_far_rule_agrees_with_closed_form(diameter, height, radii):
     # elsewhere; the bound leaves 2.5x
     assert np.abs(f_far - f_cf).max() <= 2e-5 * f_scale
     assert np.abs(t_far - t_cf).max() <= 2e-5 * t_scale
+
+
+@wp.kernel
+def _pair_rule_kernel(lanes: int, t_rel: wp.array(dtype=wp.vec3), r_rel: wp.array(dtype=wp.mat33), nphi: int,
+                      rule: wp.vec4, s_m: wp.vec3, t_m: wp.vec3, force: wp.array(dtype=wp.vec3),
+                      torque: wp.array(dtype=wp.vec3)):
+    i = wp.tid()
+    if lanes != 0:
+        f, t = far_cylinder_pair_wrench_lanes(rule, s_m, rule, t_m, r_rel[i], t_rel[i], nphi)
+    else:
+        f, t = far_cylinder_pair_wrench(rule, s_m, rule, t_m, r_rel[i], t_rel[i], nphi)
+    force[i] = f
+    torque[i] = t
+
+
+@pytest.mark.parametrize("nphi", [6, 8, 12, 16])
+def test_far_rule_in_lanes_is_the_scalar_rule_bit_for_bit(nphi):
+    """far_cylinder_pair_wrench_lanes (8 target points at a time, what the wrench kernel runs) gives the scalar
+    ring rule's numbers to the last bit: 2 nphi = 12, 16, 24, 32 target points (12 and 24 leave lanes unused)."""
+    pos, rs, rt = _random_pairs(64, 0.03, seed=nphi)
+    t_rel = np.einsum("nji,nj->ni", rs, pos)  # the target's centre in the source's frame
+    r_rel = np.einsum("nji,njk->nik", rs, rt)
+    rule = wp.vec4(*_rules([0.005], [0.001])[0].astype(np.float32))
+    out = []
+    for lanes in (0, 1):
+        force = wp.zeros(len(pos), dtype=wp.vec3, device="cpu")
+        torque = wp.zeros(len(pos), dtype=wp.vec3, device="cpu")
+        wp.launch(_pair_rule_kernel, dim=len(pos), device="cpu",
+                  inputs=[lanes, wp.array(t_rel.astype(np.float32), dtype=wp.vec3, device="cpu"),
+                          wp.array(r_rel.astype(np.float32), dtype=wp.mat33, device="cpu"), nphi, rule,
+                          wp.vec3(0.0, 0.0, 0.07), wp.vec3(0.01, -0.02, 0.05), force, torque])
+        out.append((force.numpy(), torque.numpy()))
+    assert np.abs(out[0][0]).max() > 0.0
+    np.testing.assert_array_equal(out[1][0], out[0][0])
+    np.testing.assert_array_equal(out[1][1], out[0][1])
 
 
 def test_far_rule_inside_limit_is_closed_form():
