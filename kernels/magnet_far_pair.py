@@ -417,30 +417,74 @@ def cuboid_faces_in_ring_field(
                 nv = panel_count(wp.float64(lv), gap, max_panels)
                 du = lu / float(nu)
                 dv = lv / float(nv)
-                for iu in range(nu * order):
-                    gu = gauss_legendre_node(order, iu % order)
-                    cu = -0.5 * lu + (float(iu / order) + 0.5 + 0.5 * gu[0]) * du
-                    for iv in range(nv * order):
-                        gv = gauss_legendre_node(order, iv % order)
-                        cv = -0.5 * lv + (float(iv / order) + 0.5 + 0.5 * gv[0]) * dv
-                        p = centre
-                        p[u] = cu
-                        p[v] = cv
-                        # the ring rule's field at p
-                        s_ar = wp.vec3(0.0)
-                        s_i3 = float(0.0)
-                        for rp in range(2 * nphi):
-                            r = p - wp.vec3(pts[rp, 0], pts[rp, 1], pts[rp, 2])
-                            inv_r2 = 1.0 / wp.dot(r, r)
-                            inv_r3 = wp.sqrt(inv_r2) * inv_r2
-                            wk = pts[rp, 3] * inv_r3
-                            s_ar += r * (wk * wp.dot(r, m_dir) * inv_r2)
-                            s_i3 += wk
-                        b = (MU0_OVER_4PI * inv_n) * (3.0 * s_ar - s_i3 * m_dir)
-                        f = b * (sigma * gu[1] * gv[1] * 0.25 * du * dv)
+                # the face's (nu order) x (nv order) points, v fastest, LANES at a time (lanes past the last point
+                # repeat it and are not summed)
+                npts = nu * order * nv * order
+                for q0 in range(0, npts, LANES):
+                    px, py, pz, wq = face_points_lanes(q0, npts, nv * order, order, centre, u, v, lu, lv, du, dv,
+                                                       sigma)
+                    sx, sy, sz, si3 = ring_field_sums_lanes(px, py, pz, pts, nphi, m_dir)
+                    for j in range(wp.min(LANES, npts - q0)):  # not k: the face's axis
+                        p = wp.vec3(px[j], py[j], pz[j])
+                        b = (MU0_OVER_4PI * inv_n) * (3.0 * wp.vec3(sx[j], sy[j], sz[j]) - si3[j] * m_dir)
+                        f = b * wq[j]
                         force += f
                         torque += wp.cross(p, f)
     return force, torque
+
+
+@wp.func
+def face_points_lanes(q0: int, npts: int, nvo: int, order: int, centre: wp.vec3, u: int, v: int, lu: float,
+                      lv: float, du: float, dv: float, sigma: float):
+    """Points q0 .. q0 + LANES − 1 (q = iu · nvo + iv, the scalar loops' order; past ``npts`` the last) of a face's
+    Gauss–Legendre grid (:func:`cuboid_faces_in_ring_field`): positions by coordinate [m] and each point's weight
+    σ w_u w_v du dv / 4, the scalar expressions in their order."""
+    px = lanes()
+    py = lanes()
+    pz = lanes()
+    wq = lanes()
+    for k in range(8):
+        q = wp.min(q0 + k, npts - 1)
+        iu = q / nvo
+        iv = q - iu * nvo
+        gu = gauss_legendre_node(order, iu % order)
+        cu = -0.5 * lu + (float(iu / order) + 0.5 + 0.5 * gu[0]) * du
+        gv = gauss_legendre_node(order, iv % order)
+        cv = -0.5 * lv + (float(iv / order) + 0.5 + 0.5 * gv[0]) * dv
+        p = centre
+        p[u] = cu
+        p[v] = cv
+        px[k] = p[0]
+        py[k] = p[1]
+        pz[k] = p[2]
+        wq[k] = sigma * gu[1] * gv[1] * 0.25 * du * dv
+    return px, py, pz, wq
+
+
+@wp.func
+def ring_field_sums_lanes(px: lanes, py: lanes, pz: lanes, pts: RingPoints, nphi: int, m_dir: wp.vec3):
+    """The ring rule's field sums at the lanes' points p (:func:`cuboid_faces_in_ring_field`): Σ r (w_k a / r⁵) by
+    coordinate and Σ w_k / r³ over the 2 ``nphi`` ring points in their order (r = p − the ring point, a = r·m̂)."""
+    mx = lanes(m_dir[0])
+    my = lanes(m_dir[1])
+    mz = lanes(m_dir[2])
+    sx = lanes(0.0)
+    sy = lanes(0.0)
+    sz = lanes(0.0)
+    si3 = lanes(0.0)
+    for rp in range(2 * nphi):
+        rx = px - lanes(pts[rp, 0])
+        ry = py - lanes(pts[rp, 1])
+        rz = pz - lanes(pts[rp, 2])
+        inv_r2 = wp.cw_div(lanes(1.0), lanes_dot(rx, ry, rz, rx, ry, rz))
+        inv_r3 = wp.cw_mul(lanes_sqrt(inv_r2), inv_r2)
+        wk = wp.cw_mul(lanes(pts[rp, 3]), inv_r3)
+        t = wp.cw_mul(wp.cw_mul(wk, lanes_dot(rx, ry, rz, mx, my, mz)), inv_r2)
+        sx += wp.cw_mul(rx, t)
+        sy += wp.cw_mul(ry, t)
+        sz += wp.cw_mul(rz, t)
+        si3 += wk
+    return sx, sy, sz, si3
 
 
 @wp.func
