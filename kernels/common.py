@@ -1,6 +1,7 @@
 """Shared ``@wp.func`` helpers and constants of the dynamics kernels (:mod:`warpworm.kernels.substep`,
 :mod:`warpworm.kernels.magnet_pose`): per-world parameters, angle wrapping, hinge fold ranges, freezing a diverging
-world, and the dihedral angle of a hinge with its gradient.
+world, the dihedral angle of a hinge with its gradient, and vectors of :data:`LANES` float32 with the vec3 operations
+done lane by lane (:mod:`warpworm.kernels.hinge_lanes`, :mod:`warpworm.kernels.magnet_far_pair`).
 
 Per-world parameters are read as ``p[world % p.shape[0]]`` so that an array of one value (shared) or one value per
 world both work. float32, SI units.
