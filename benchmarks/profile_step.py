@@ -421,7 +421,8 @@ def main(argv=None) -> int:
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--no-levers", action="store_true", help="skip the Newton-count and launch-floor measurements")
     ap.add_argument("--parts", action="store_true", help="only the Newton step's parts (gradient, Hessian, factor, "
-                    "solve) timed alone on each --gait's state 1.5 s into the gait (first --worlds; CPU)")
+                    "solve, contacts, friction, projection, substep-end angles) timed alone on each --gait's state "
+                    "1.5 s into the gait (first --worlds; CPU)")
     ap.add_argument("--out", default=str(HERE / "results" / "profile_step.json"), help="JSON path")
     ap.add_argument("--alternate", metavar="REV", help="instead of the profile: the gait rate (second cycle, CPU "
                     "time) of git revision REV and of this tree, alternated (one W: the first --worlds)")
