@@ -66,9 +66,10 @@ def freeze_world(world: int, num_vertices: int, x: wp.array2d(dtype=wp.vec3), v:
 LANES = wp.constant(8)
 """Elements (hinges, ring points) per vector of lanes (8 float32: one AVX register)."""
 
-lanes = wp.types.vector(length=8, dtype=wp.float32)
+lanes = wp.types.vector(length=LANES, dtype=wp.float32)
 """One float32 per element of a batch: Warp's component-wise operations on it compile to SIMD
-instructions on the CPU (:mod:`.hinge_lanes`, :func:`.magnet_far_pair.far_cylinder_pair_wrench`)."""
+instructions on the CPU (:mod:`.hinge_lanes`, :func:`.magnet_far_pair.far_cylinder_pair_wrench_lanes`,
+:func:`.magnet_far_pair.cuboid_faces_in_ring_field`)."""
 
 
 @wp.func

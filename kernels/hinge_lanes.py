@@ -22,7 +22,7 @@ from .band_cholesky import ALL_ROWS, band_add_gauss_newton4
 from .common import (LANES, PANEL_CONTACT_ALTITUDE, SLIVER_ALTITUDE, atan2_f32, fold_range, lanes, lanes_cross,
                      lanes_dot, lanes_sqrt, wrap_angle)
 from .substep import (BarHingeModel, BarHingeState, NewtonScratch, WorldCoefficients, add_hinge, add_to_row,
-                      add_wing, hinge_angle_at_substep_end, hinge_torque)
+                      add_wing, hinge_torque, update_hinge_angles)
 
 @wp.func
 def gather_column(world: int, h0: int, col: int, m: BarHingeModel, s: BarHingeState):
@@ -158,9 +158,9 @@ def add_hinges(world: int, c: WorldCoefficients, m: BarHingeModel, with_hessian:
 
 @wp.func
 def update_hinge_angles_lanes(world: int, m: BarHingeModel, fold_tolerance: float, s: BarHingeState) -> int:
-    """:func:`~.substep.update_hinge_angles` of every hinge (stride 1), whole batches in lanes: the angles
-    unwrapped to the end of the substep into ``crease_angle``; 1 if the sheet crumpled
-    (:func:`~.common.hinge_angle_at_substep_end`), else 0."""
+    """:func:`~.substep.update_hinge_angles` of every hinge (stride 1), whole batches in lanes, the last H mod LANES
+    hinges by that function: the angles unwrapped to the end of the substep into ``crease_angle``; 1 if the sheet
+    crumpled (:func:`~.common.hinge_angle_at_substep_end`), else 0."""
     nh = m.hinges.shape[0]
     whole = (nh / LANES) * LANES
     crumpled = int(0)
@@ -189,11 +189,6 @@ def update_hinge_angles_lanes(world: int, m: BarHingeModel, fold_tolerance: floa
             s.crease_angle[world, h] = phi
             if phi < lo - fold_tolerance or phi > hi + fold_tolerance or wing[k] < sliver[k]:
                 crumpled = 1
-    for h in range(whole, nh):
-        phi, flagged = hinge_angle_at_substep_end(s.crease_angle[world, h], s.x[world, m.hinges[h, 0]],
-                                                  s.x[world, m.hinges[h, 1]], s.x[world, m.hinges[h, 2]],
-                                                  s.x[world, m.hinges[h, 3]], m.hinge_label[h], fold_tolerance)
-        s.crease_angle[world, h] = phi
-        if flagged:
-            crumpled = 1
+    if update_hinge_angles(world, whole, 1, m, fold_tolerance, s) != 0:  # the last H mod LANES hinges
+        crumpled = 1
     return crumpled

@@ -503,11 +503,12 @@ def far_pair_wrench(
     about its centre) in the source's frame (``r_rel`` target -> source frame, ``t_rel`` the target's centre there
     [m]); taken = False (zeros): the caller's closed form.
 
-    Two far cylinders by :func:`far_cylinder_pair_wrench_lanes` (:func:`far_cylinder_pair_wrench`'s numbers). A cuboid and a far cylinder (either the source) by
-    :func:`cuboid_faces_in_ring_field`, where :func:`cuboid_ring_rule` allows: a cylinder target (the EPM's wrench
-    on an IPM) by reciprocity, the cuboid's force and torque F_c, τ_c in the cylinder's ring field, then F = −F_c and
-    τ = −τ_c + t_rel × F_c (momentum and angular momentum of the pair conserved). The cuboid's ~32 face points
-    against ~24 ring dipoles replace ~96 closed-form cuboid fields over the cylinder's caps: docs/magnets.md."""
+    Two far cylinders by :func:`far_cylinder_pair_wrench_lanes` (:func:`far_cylinder_pair_wrench`'s numbers). A
+    cuboid and a far cylinder (either the source) by :func:`cuboid_faces_in_ring_field`, where
+    :func:`cuboid_ring_rule` allows: a cylinder target (the EPM's wrench on an IPM) by reciprocity, the cuboid's
+    force and torque F_c, τ_c in the cylinder's ring field, then F = −F_c and τ = −τ_c + t_rel × F_c (momentum
+    and angular momentum of the pair conserved). The cuboid's ~32 face points against ~24 ring dipoles replace ~96
+    closed-form cuboid fields over the cylinder's caps: docs/magnets.md."""
     zero = wp.vec3(0.0)
     nphi, s_rule, t_rule = far_pair_rules(s_shape, s_size, t_shape, t_size, wp.length(t_rel))
     if nphi > 0:

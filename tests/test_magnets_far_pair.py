@@ -16,7 +16,12 @@ import pytest
 import warp as wp
 
 from warpworm.physics import magnets as mg
-from warpworm.kernels.magnet_far_pair import cylinder_ring_rule, far_cylinder_pair_wrench, far_cylinder_pair_wrench_lanes
+from warpworm.kernels import magnet_wrench
+from warpworm.kernels.magnet_far_pair import (cylinder_ring_rule, far_cylinder_pair_wrench,
+                                              far_cylinder_pair_wrench_lanes)
+
+# compiled as the wrench kernel that runs the rules is (its SLP vectorizer flags), so the lanes are checked as run
+wp.set_module_options({"cpu_compiler_flags": wp.get_module_options(magnet_wrench)["cpu_compiler_flags"]})
 
 
 @wp.kernel
@@ -143,13 +148,13 @@ def test_far_rule_agrees_with_closed_form(diameter, height, radii):
 
 @wp.kernel
 def _pair_rule_kernel(lanes: int, t_rel: wp.array(dtype=wp.vec3), r_rel: wp.array(dtype=wp.mat33), nphi: int,
-                      rule: wp.vec4, s_m: wp.vec3, t_m: wp.vec3, force: wp.array(dtype=wp.vec3),
+                      s_rule: wp.vec4, s_m: wp.vec3, t_rule: wp.vec4, t_m: wp.vec3, force: wp.array(dtype=wp.vec3),
                       torque: wp.array(dtype=wp.vec3)):
     i = wp.tid()
     if lanes != 0:
-        f, t = far_cylinder_pair_wrench_lanes(rule, s_m, rule, t_m, r_rel[i], t_rel[i], nphi)
+        f, t = far_cylinder_pair_wrench_lanes(s_rule, s_m, t_rule, t_m, r_rel[i], t_rel[i], nphi)
     else:
-        f, t = far_cylinder_pair_wrench(rule, s_m, rule, t_m, r_rel[i], t_rel[i], nphi)
+        f, t = far_cylinder_pair_wrench(s_rule, s_m, t_rule, t_m, r_rel[i], t_rel[i], nphi)
     force[i] = f
     torque[i] = t
 
@@ -157,19 +162,20 @@ def _pair_rule_kernel(lanes: int, t_rel: wp.array(dtype=wp.vec3), r_rel: wp.arra
 @pytest.mark.parametrize("nphi", [6, 8, 12, 16])
 def test_far_rule_in_lanes_is_the_scalar_rule_bit_for_bit(nphi):
     """far_cylinder_pair_wrench_lanes (8 target points at a time, what the wrench kernel runs) gives the scalar
-    ring rule's numbers to the last bit: 2 nphi = 12, 16, 24, 32 target points (12 and 24 leave lanes unused)."""
+    ring rule's numbers to the last bit: 2 nphi = 12, 16, 24, 32 target points (12 and 24 leave lanes unused);
+    two different cylinders, so a source and target rule mixed up shows."""
     pos, rs, rt = _random_pairs(64, 0.03, seed=nphi)
     t_rel = np.einsum("nji,nj->ni", rs, pos)  # the target's centre in the source's frame
     r_rel = np.einsum("nji,njk->nik", rs, rt)
-    rule = wp.vec4(*_rules([0.005], [0.001])[0].astype(np.float32))
+    s_rule, t_rule = (wp.vec4(*r.astype(np.float32)) for r in _rules([0.005, 0.003], [0.001, 0.0012]))
     out = []
     for lanes in (0, 1):
         force = wp.zeros(len(pos), dtype=wp.vec3, device="cpu")
         torque = wp.zeros(len(pos), dtype=wp.vec3, device="cpu")
         wp.launch(_pair_rule_kernel, dim=len(pos), device="cpu",
                   inputs=[lanes, wp.array(t_rel.astype(np.float32), dtype=wp.vec3, device="cpu"),
-                          wp.array(r_rel.astype(np.float32), dtype=wp.mat33, device="cpu"), nphi, rule,
-                          wp.vec3(0.0, 0.0, 0.07), wp.vec3(0.01, -0.02, 0.05), force, torque])
+                          wp.array(r_rel.astype(np.float32), dtype=wp.mat33, device="cpu"), nphi, s_rule,
+                          wp.vec3(0.0, 0.0, 0.07), t_rule, wp.vec3(0.01, -0.02, 0.05), force, torque])
         out.append((force.numpy(), torque.numpy()))
     assert np.abs(out[0][0]).max() > 0.0
     np.testing.assert_array_equal(out[1][0], out[0][0])
