@@ -862,8 +862,10 @@ def _is_warpworm_manifest(path: Path) -> bool:
     """Whether ``path`` is a warpworm dataset's manifest (another tool's manifest.json is not)."""
     import json
 
+    from warpworm.data.dataset import FORMAT
+
     try:
-        return json.loads(path.read_text()).get("format") == "warpworm-dataset"
+        return json.loads(path.read_text()).get("format") == FORMAT
     except (OSError, ValueError, AttributeError, UnicodeDecodeError):
         return False
 

@@ -41,6 +41,8 @@ from warpworm import ids
 from warpworm.data import signal_hold
 
 SCHEMA_VERSION = 1
+FORMAT = "warpworm-dataset"
+"""The ``format`` of every shard's root attributes and of the manifest."""
 MANIFEST = "manifest.json"
 SHARD_RE = re.compile(r"^shard-(\d{5})\.h5$")
 QUATERNION_ORDER = "wxyz"
@@ -517,7 +519,7 @@ def read_manifest(root) -> dict:
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise DatasetError(f"{mpath}: unreadable ({type(exc).__name__}: {exc}); rerun the job that wrote it with "
                            "--resume to rebuild it from the shards") from exc
-    if not isinstance(m, dict) or m.get("format") != "warpworm-dataset" or not isinstance(m.get("shards"), list):
+    if not isinstance(m, dict) or m.get("format") != FORMAT or not isinstance(m.get("shards"), list):
         raise DatasetError(f"{mpath}: not a warpworm manifest (expected a JSON object with format "
                            "'warpworm-dataset' and a shards list); rerun the job with --resume to rebuild it")
     return m

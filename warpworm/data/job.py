@@ -86,7 +86,7 @@ def _manifest(cfg: DatasetConfig, done: dict[int, ShardStats | dict], complete: 
         shards.append({"index": k, "file": ds.shard_name(k), "first_sample": a, "count": b - a,
                        "bytes": s.get("bytes", 0), "sha256": s.get("sha256", ""), "replaced": s.get("replaced", 0)})
     return {
-        "format": "warpworm-dataset", "schema_version": ds.SCHEMA_VERSION, "complete": complete,
+        "format": ds.FORMAT, "schema_version": ds.SCHEMA_VERSION, "complete": complete,
         "num_samples": cfg.num_samples, "shard_size": cfg.shard_size, "num_shards": cfg.num_shards,
         "shard_size_requested": cfg.shard_size if shard_size_requested is None else shard_size_requested,
         "samples_written": int(sum(s["count"] for s in shards)), "shards": shards,

@@ -119,7 +119,7 @@ def root_attributes(cfg: DatasetConfig, meta: dict) -> dict:
     import warpworm
 
     return {
-        "format": "warpworm-dataset",
+        "format": ds.FORMAT,
         "schema_version": ds.SCHEMA_VERSION,
         "warpworm_version": warpworm.__version__,
         "warp_version": warp_version(),
