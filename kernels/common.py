@@ -22,6 +22,20 @@ PI = wp.constant(3.14159265358979)
 TWO_PI = wp.constant(6.28318530717959)
 
 
+@wp.func_native("""
+#if defined(__CUDA_ARCH__)
+    return true;
+#else
+    return false;
+#endif
+""")
+def on_gpu() -> bool:
+    """True in a kernel's CUDA build, False in its CPU build (a preprocessor test, constant after inlining): lets a
+    kernel take its CPU-only path (the SIMD lanes of :mod:`.hinge_lanes`), whose CUDA build is of no use on a GPU (a
+    thread per world, no vector units) and took NVRTC over 11 minutes, while the CUDA build compiles the scalar code."""
+    ...
+
+
 @wp.func
 def pw(p: wp.array(dtype=float), world: int) -> float:
     """Per-world scalar: one shared value or one per world."""
