@@ -18,11 +18,12 @@ from __future__ import annotations
 
 import warp as wp
 
-from .band_cholesky import ALL_ROWS, band_add_gauss_newton4
+from .band_cholesky import ALL_ROWS
 from .common import (LANES, PANEL_CONTACT_ALTITUDE, SLIVER_ALTITUDE, atan2_f32, fold_range, lanes, lanes_cross,
                      lanes_dot, lanes_sqrt, wrap_angle)
-from .substep import (BarHingeModel, BarHingeState, NewtonScratch, WorldCoefficients, add_hinge, add_to_row,
+from .substep import (BarHingeModel, BarHingeState, NewtonScratch, WorldCoefficients, add_hinge, add_hinge_rows,
                       add_wing, hinge_torque, update_hinge_angles)
+
 
 @wp.func
 def gather_column(world: int, h0: int, col: int, m: BarHingeModel, s: BarHingeState):
@@ -126,12 +127,7 @@ def add_hinge_lanes(world: int, h0: int, c: WorldCoefficients, m: BarHingeModel,
         g1 = wp.vec3(gjx[k], gjy[k], gjz[k])
         g2 = wp.vec3(gkx[k], gky[k], gkz[k])
         g3 = wp.vec3(glx[k], gly[k], glz[k])
-        add_to_row(world, ALL_ROWS, i0, g0 * torque, w)
-        add_to_row(world, ALL_ROWS, i1, g1 * torque, w)
-        add_to_row(world, ALL_ROWS, i2, g2 * torque, w)
-        add_to_row(world, ALL_ROWS, i3, g3 * torque, w)
-        if with_hessian:
-            band_add_gauss_newton4(world, w.hess, ALL_ROWS, stiff, i0, i1, i2, i3, g0, g1, g2, g3)
+        add_hinge_rows(world, ALL_ROWS, torque, stiff, i0, i1, i2, i3, g0, g1, g2, g3, with_hessian, w)
         if nn1[k] < clear2[k] or nn2[k] < clear2[k]:
             x0 = wp.vec3(xix[k], xiy[k], xiz[k])
             x1 = wp.vec3(xjx[k], xjy[k], xjz[k])

@@ -154,6 +154,23 @@ RingPoints = wp.types.matrix(shape=(32, 4), dtype=float)
 
 
 @wp.func
+def source_ring(s_rule: wp.vec4, s_m: wp.vec3, nphi: int, step: wp.vec2, half: wp.vec2, inv_n: float):
+    """The source cylinder's 2 ``nphi`` ring points (rows x, y; z = 0) and its two rings' moments [A·m²], once per
+    pair: the same numbers every target point's loop would make again (the recurrence of :func:`ring_point`, the
+    weights of :func:`cylinder_ring_rule` ``s_rule``)."""
+    src = RingPoints()
+    cs = wp.vec2(1.0, 0.0)
+    for sp in range(2 * nphi):
+        cs = ring_point(sp, nphi, cs, step, half)
+        sk = sp // nphi
+        src[sp, 0] = s_rule[sk] * cs[0]
+        src[sp, 1] = s_rule[sk] * cs[1]
+    ms0 = s_m * (s_rule[2] * inv_n)
+    ms1 = s_m * (s_rule[3] * inv_n)
+    return src, ms0, ms1
+
+
+@wp.func
 def far_cylinder_pair_wrench(
     s_rule: wp.vec4,
     s_m: wp.vec3,
@@ -172,17 +189,7 @@ def far_cylinder_pair_wrench(
         nphi: points per ring (:func:`ring_points_for_distance`).
     """
     step, half, inv_n, mt_dir, ax, ay = ring_setup(nphi, r_rel, t_m)
-    # the source's ring points (x, y; z = 0) and its two rings' moments, once: the same numbers every target point's
-    # loop would make again (the recurrence of ring_point and the weights)
-    src = RingPoints()
-    cs = wp.vec2(1.0, 0.0)
-    for sp in range(2 * nphi):
-        cs = ring_point(sp, nphi, cs, step, half)
-        sk = sp // nphi
-        src[sp, 0] = s_rule[sk] * cs[0]
-        src[sp, 1] = s_rule[sk] * cs[1]
-    ms0 = s_m * (s_rule[2] * inv_n)
-    ms1 = s_m * (s_rule[3] * inv_n)
+    src, ms0, ms1 = source_ring(s_rule, s_m, nphi, step, half, inv_n)
     force = wp.vec3(0.0)
     torque = wp.vec3(0.0)
     ct = wp.vec2(1.0, 0.0)
@@ -262,15 +269,7 @@ def far_cylinder_pair_wrench_lanes(
     bit (each lane sums over the source points in the scalar loops' order; the target points' force and torque are
     summed in theirs), ~2.7x faster on the CPU. Lanes past the last target point repeat it and are not summed."""
     step, half, inv_n, mt_dir, ax, ay = ring_setup(nphi, r_rel, t_m)
-    src = RingPoints()
-    cs = wp.vec2(1.0, 0.0)
-    for sp in range(2 * nphi):
-        cs = ring_point(sp, nphi, cs, step, half)
-        sk = sp // nphi
-        src[sp, 0] = s_rule[sk] * cs[0]
-        src[sp, 1] = s_rule[sk] * cs[1]
-    ms0 = s_m * (s_rule[2] * inv_n)
-    ms1 = s_m * (s_rule[3] * inv_n)
+    src, ms0, ms1 = source_ring(s_rule, s_m, nphi, step, half, inv_n)
     force = wp.vec3(0.0)
     torque = wp.vec3(0.0)
     ct = wp.vec2(1.0, 0.0)

@@ -612,6 +612,19 @@ def add_wing(world: int, row: int, n: wp.vec3, len2: float, p0: wp.vec3, p1: wp.
 
 
 @wp.func
+def add_hinge_rows(world: int, row: int, torque: float, stiff: float, i0: int, i1: int, i2: int, i3: int, g0: wp.vec3,
+                   g1: wp.vec3, g2: wp.vec3, g3: wp.vec3, with_hessian: bool, w: NewtonScratch):
+    """A hinge's torque along its dihedral's gradient ``g0`` … ``g3`` (vertices ``i0`` … ``i3``) into the rows ``row``
+    selects, and its Gauss–Newton blocks (``stiff`` g gᵀ) when ``with_hessian``."""
+    add_to_row(world, row, i0, g0 * torque, w)
+    add_to_row(world, row, i1, g1 * torque, w)
+    add_to_row(world, row, i2, g2 * torque, w)
+    add_to_row(world, row, i3, g3 * torque, w)
+    if with_hessian:
+        band_add_gauss_newton4(world, w.hess, row, stiff, i0, i1, i2, i3, g0, g1, g2, g3)
+
+
+@wp.func
 def add_hinge(world: int, h: int, row: int, c: WorldCoefficients, m: BarHingeModel, with_hessian: bool,
               s: BarHingeState, w: NewtonScratch):
     """Add hinge ``h`` (:func:`hinge_torque` along the dihedral's gradient, Gauss–Newton: the angle's curvature
@@ -628,12 +641,7 @@ def add_hinge(world: int, h: int, row: int, c: WorldCoefficients, m: BarHingeMod
     psi, g0, g1, g2, g3, n1, n2, len2 = dihedral_angle_gradient_and_normals(x0, x1, x2, x3)
     prev = s.crease_angle[world, h]
     torque, stiff, lh = hinge_torque(prev + wrap_angle(psi - prev), prev, h, c, m)
-    add_to_row(world, row, i0, g0 * torque, w)
-    add_to_row(world, row, i1, g1 * torque, w)
-    add_to_row(world, row, i2, g2 * torque, w)
-    add_to_row(world, row, i3, g3 * torque, w)
-    if with_hessian:
-        band_add_gauss_newton4(world, w.hess, row, stiff, i0, i1, i2, i3, g0, g1, g2, g3)
+    add_hinge_rows(world, row, torque, stiff, i0, i1, i2, i3, g0, g1, g2, g3, with_hessian, w)
     # the wings' normals are the dihedral's own: n1 = (x1 − x0) × (x2 − x0), n2 = (x2 − x3) × (x1 − x3)
     add_wing(world, row, n1, len2, x0, x1, x2, i0, i1, i2, lh, with_hessian, w)
     add_wing(world, row, n2, len2, x3, x2, x1, i3, i2, i1, lh, with_hessian, w)
