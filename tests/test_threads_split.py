@@ -75,28 +75,15 @@ def test_gait_run_over_threads_equals_one_batch():
     assert np.ptp(one["displacement_m"]) > 0  # the worlds do differ: a mixed-up share would show
 
 
-def test_host_work_runs_beside_a_split_and_here_for_one_worker():
-    """beside() returns while its work runs on a thread of its own: that thread and the caller meet at a barrier that
-    only opens if both run at once; for one worker it runs here and now (one core); errors reach .result()."""
-    barrier = threading.Barrier(2, timeout=60)
-
-    def work():
-        barrier.wait()
-        return threading.get_ident(), ws.blas_threads()
-
-    job = ws.beside(work, 5, workers=2)
-    barrier.wait()  # the caller goes on (with its split) while the work runs
-    tid, blas = job.result()
-    assert tid != threading.get_ident() and blas in (None, 1)
-    done = ws.beside(lambda: threading.get_ident(), 5, workers=1)
-    assert done.done() and done.result() == threading.get_ident()
-
-    def failing():
-        raise RuntimeError("host work failed")
-
-    for workers in (1, 2):
-        with pytest.raises(RuntimeError, match="host work failed"):
-            ws.beside(failing, 4, workers=workers).result()
+def test_kernels_load_once_per_device_before_any_share_starts(monkeypatch):
+    """run_shares loads the kernel modules before its threads start (two threads must not load a module at once),
+    and only the first time on a device: a loaded module stays loaded, so later splits skip the one-world run."""
+    calls, starts = [], []
+    monkeypatch.setattr(ws, "_load_kernels", lambda device: calls.append((str(device), len(starts))))
+    monkeypatch.setitem(ws._loaded, "devices", set())
+    for _ in range(3):
+        ws.run_shares(lambda lo, hi: starts.append(lo) or {}, 4, workers=2)
+    assert calls == [("cpu", 0)] and len(starts) == 6
 
 
 def test_blas_runs_one_thread_inside_a_split_whatever_the_workers():
@@ -122,7 +109,7 @@ def test_blas_runs_one_thread_inside_a_split_whatever_the_workers():
 
 
 def test_batched_linear_prediction_equals_the_per_world_one_bit_for_bit():
-    """experiment compression / flexure's linear prediction (host NumPy beside the split) for every world at once:
+    """experiment compression / flexure's linear prediction (host NumPy, in each share after its simulation) for every world at once:
     the per-world reference function's numbers exactly, with every world's hinge and bar stiffness different."""
     from dataclasses import replace
 

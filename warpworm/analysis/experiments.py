@@ -65,7 +65,6 @@ def _dt_substeps(dt, substeps):
 
 from warpworm.analysis.world_split import simulator as _simulator
 from warpworm.analysis.world_split import world_shares  # noqa: F401  (the split's shares; re-exported)
-from warpworm.analysis.world_split import beside
 
 
 def split_run(core, params: WormParams, num_worlds: int, world_axis: dict, *, workers: int | None = 1,
@@ -279,8 +278,10 @@ def force_distance(gaps=None, densities=(1e6, 8e6, 64e6), moment: float = 0.9, s
 
 
 def _quasi_static_core(model, params, *, anchors_moving, direction, displacements, lift, settle, hold, dt,
-                       substeps) -> dict:
-    """The simulation of :func:`_quasi_static` on one batch (one thread's share): raw per-world readings."""
+                       substeps, linear_axis=None) -> dict:
+    """The simulation of :func:`_quasi_static` on one batch (one thread's share): raw per-world readings, and with
+    ``linear_axis`` the share's own linear prediction after it (:func:`_linear_units`): each thread then does the same
+    work for its worlds, with no third thread beside the shares (docs/dynamics.md, "One job on every core")."""
     sim = _simulator(model, dt=dt, substeps=substeps)
     state = sim.initial_state()
     av = model.anchor_vertex.numpy()
@@ -307,12 +308,16 @@ def _quasi_static_core(model, params, *, anchors_moving, direction, displacement
         reac.append((af[:, ~moving] @ u).sum(axis=1))  # and loads the fixed supports along +u
         xs = snaps["positions"][:, av].astype(np.float64) - x0[:, av]
         disp.append((xs[:, moving] @ u).mean(axis=1) - (xs[:, ~moving] @ u).mean(axis=1))
-    return {"force_raw": np.array(reac), "force_pusher_raw": np.array(fm), "displacement": np.array(disp),
-            "prescribed": d, "unstable": snaps["unstable"], "final_positions": snaps["positions"]}
+    out = {"force_raw": np.array(reac), "force_pusher_raw": np.array(fm), "displacement": np.array(disp),
+           "prescribed": d, "unstable": snaps["unstable"], "final_positions": snaps["positions"]}
+    if linear_axis is not None:
+        out["linear_units"] = _linear_units(model, params, moving, linear_axis)
+    return out
 
 
 def _quasi_static(params, num_worlds, anchors, anchor_stiffness, anchors_moving, direction, displacements, *,
-                  lift=0.0, settle=0.2, hold=0.1, dt=None, substeps=None, device="cpu", workers=1) -> dict:
+                  lift=0.0, settle=0.2, hold=0.1, dt=None, substeps=None, device="cpu", workers=1,
+                  linear_axis=None) -> dict:
     """Shared driver: moving anchors' targets stepped by ``displacements`` along ``direction``; other anchors fixed;
     the worlds split over ``workers`` threads (:func:`split_run`).
 
@@ -321,14 +326,15 @@ def _quasi_static(params, num_worlds, anchors, anchor_stiffness, anchors_moving,
     read on the moving anchors (equal at equilibrium; coarser, since the anchor force is k_a times a float32
     position difference and float32 positions are coarser far from the origin), ``displacement (K+1, W)`` (measured
     mean motion of the moving vertices along ``direction``), ``prescribed (K+1,)``, ``unstable (W,)``,
-    ``final_positions (W, V, 3)``.
+    ``final_positions (W, V, 3)``; with ``linear_axis``, ``linear_units (W,)`` [N/m] (:func:`_linear_units`).
     """
     dt, substeps = _dt_substeps(dt, substeps)
-    axis = {"force_raw": 1, "force_pusher_raw": 1, "displacement": 1, "unstable": 0, "final_positions": 0}
+    axis = {"force_raw": 1, "force_pusher_raw": 1, "displacement": 1, "unstable": 0, "final_positions": 0,
+            "linear_units": 0}
     r = split_run(_quasi_static_core, params, num_worlds, axis, workers=workers, device=device,
                   model_kw=dict(anchors=anchors, anchor_stiffness=anchor_stiffness),
                   anchors_moving=np.asarray(anchors_moving), direction=tuple(direction), displacements=displacements,
-                  lift=lift, settle=settle, hold=hold, dt=dt, substeps=substeps)
+                  lift=lift, settle=settle, hold=hold, dt=dt, substeps=substeps, linear_axis=linear_axis)
     r["force"] = r["force_raw"] - r["force_raw"][0]
     r["force_pusher"] = r["force_pusher_raw"] - r["force_pusher_raw"][0]
     return r
@@ -354,16 +360,13 @@ def _stiffness_sweep(hinge_stiffness, base: WormParams | None, overrides: dict):
     return ks, len(ks), replace(base or WormParams(), hinge_stiffness=ks, **kw)
 
 
-def _linear_units(model, params: WormParams, n_fixed: int, n_moved: int, axis: int, workers):
-    """Start the linear prediction (:func:`linear_anchor_responses`) of every world: the moved anchors' summed force
-    along ``axis`` per metre of their offset along ``-axis`` [N/m] (host NumPy, not the simulation), on a thread
-    beside the ``workers`` threads of the simulation (``world_split.beside``); ``.result()`` gives the array (W,)."""
-    def units():
-        off = np.zeros((n_fixed + n_moved, 3))
-        off[n_fixed:, axis] = -1.0
-        return linear_anchor_responses(model, params, off * 1e-6)[:, n_fixed:, axis].sum(axis=1) / 1e-6
-
-    return beside(units, model.num_worlds, 1 if model.device.is_cuda else workers)  # a GPU: one batch
+def _linear_units(model, params: WormParams, moving: np.ndarray, axis: int) -> np.ndarray:
+    """The linear prediction (:func:`linear_anchor_responses`) of every world of ``model``: the summed force along
+    ``axis`` of the anchors ``moving`` (A,) bool per metre of their offset along ``-axis``, the others fixed (W,)
+    [N/m] (host NumPy, independent of the simulation)."""
+    off = np.zeros((len(moving), 3))
+    off[moving, axis] = -1.0
+    return linear_anchor_responses(model, params, off * 1e-6)[:, moving, axis].sum(axis=1) / 1e-6
 
 
 def _rows(a, W: int) -> np.ndarray:
@@ -427,18 +430,14 @@ def compression(hinge_stiffness=DEFAULT_HINGE_SWEEP, max_displacement: float = 2
     (:mod:`warpworm.analysis.material_fit` prescribes a measured table's displacements). ``workers`` threads share the
     worlds (:func:`split_run`; results equal one batch's).
     """
-    from warpworm.sim.model import Model
-
     ks, W, p = _stiffness_sweep(hinge_stiffness, base, overrides)
     n = int(p.n_units)
     tail, head = section_vertices(n, 0), section_vertices(n, 2 * n)
     anchors = np.concatenate([tail, head])
-    model = Model.from_params(p, W, device, anchors=anchors, anchor_stiffness=anchor_stiffness)  # for the prediction
     steps = _steps(max_displacement, increments, displacements)
-    pred = _linear_units(model, p, len(tail), len(head), 0, workers)  # beside the simulation's threads
     r = _quasi_static(p, W, anchors, anchor_stiffness, head, (-1.0, 0.0, 0.0), steps, settle=settle, hold=hold,
-                      dt=dt, substeps=substeps, device=device, workers=workers)
-    lin = r["prescribed"][:, None] * pred.result()  # (K+1, W) [N]
+                      dt=dt, substeps=substeps, device=device, workers=workers, linear_axis=0)
+    lin = r["prescribed"][:, None] * r["linear_units"]  # (K+1, W) [N]
     fmax = r["force"][-1]
     dmax = r["displacement"][-1]
     r.update(hinge_stiffness=ks, linear=lin, summary={
@@ -467,19 +466,15 @@ def flexure(hinge_stiffness=DEFAULT_HINGE_SWEEP, max_deflection: float = 2.0e-3,
     ``displacements`` (K,) [m], ascending and > 0, replaces the uniform ``max_deflection`` / ``increments`` steps.
     ``workers`` threads share the worlds (:func:`split_run`; results equal one batch's).
     """
-    from warpworm.sim.model import Model
-
     ks, W, p = _stiffness_sweep(hinge_stiffness, base, overrides)
     n = int(p.n_units)
     sup = np.concatenate([section_vertices(n, 1, (0, 1)), section_vertices(n, 2 * n - 1, (0, 1))])
     load = section_vertices(n, n)
     anchors = np.concatenate([sup, load])
-    model = Model.from_params(p, W, device, anchors=anchors, anchor_stiffness=anchor_stiffness)  # for the prediction
     steps = _steps(max_deflection, increments, displacements)
-    pred = _linear_units(model, p, len(sup), len(load), 2, workers)  # beside the simulation's threads
     r = _quasi_static(p, W, anchors, anchor_stiffness, load, (0.0, 0.0, -1.0), steps, lift=lift, settle=settle,
-                      hold=hold, dt=dt, substeps=substeps, device=device, workers=workers)
-    lin = r["prescribed"][:, None] * pred.result()  # (K+1, W) [N]
+                      hold=hold, dt=dt, substeps=substeps, device=device, workers=workers, linear_axis=2)
+    lin = r["prescribed"][:, None] * r["linear_units"]  # (K+1, W) [N]
     fmax, dmax = r["force"][-1], r["displacement"][-1]
     r.update(hinge_stiffness=ks, linear=lin, summary={
         "hinge_stiffness_N_per_rad": ks.tolist(),

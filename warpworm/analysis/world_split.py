@@ -16,9 +16,9 @@ recorded into it, not run). :func:`simulator` builds a Simulator with that setti
 NumPy's OpenBLAS runs one thread inside a split, whatever the worker count (:func:`one_blas_thread`): its rounding
 depends on its thread count, so a per-world result computed with BLAS would otherwise depend on the split, and a
 two-thread OpenBLAS spin-waits on small solves (compression's 192 linear predictions: 5-11 CPU-s at 2 BLAS threads
-against 1.1 at one on this 2-core machine). Host work of the caller that does not need the simulation (e.g.
-compression's NumPy prediction) can run beside the split's threads (:func:`beside`), so that the share threads'
-kernels and the caller's NumPy use the cores together rather than one after the other.
+against 1.1 at one on this 2-core machine). Host work per world (e.g. compression's NumPy prediction) belongs in the
+share's own function, after its simulation: each thread then does the same work for its worlds, and no third thread
+competes with the shares for two cores (docs/dynamics.md, "One job on every core").
 
 Used by :func:`warpworm.analysis.gait_runs.run_gait_split` (``simulate``, ``search-gait``) and
 :func:`warpworm.analysis.experiments.split_run` (``experiment``).
@@ -29,7 +29,7 @@ from __future__ import annotations
 import ctypes
 import os
 import threading
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from typing import Callable
 
@@ -37,6 +37,7 @@ import numpy as np
 
 _local = threading.local()
 _blas = {"lock": threading.Lock(), "users": 0, "saved": None, "lib": False}
+_loaded = {"lock": threading.Lock(), "devices": set()}
 
 
 def default_workers() -> int:
@@ -75,7 +76,16 @@ def simulator(model, **kw):
 def load_kernels(device="cpu") -> None:
     """Load the kernel modules a simulation uses on ``device`` (from Warp's cache; compiled when cold), by one step and
     one snapshot of a one-world batch in this thread: exactly the modules the shares will launch, none they will not
-    (the tile solver's, on a cold cache, would cost a compile for nothing)."""
+    (the tile solver's, on a cold cache, would cost a compile for nothing). Once per device and process: a loaded
+    module stays loaded, and the one-world run cost a short job ~10 ms of its serial part each time."""
+    with _loaded["lock"]:
+        if str(device) in _loaded["devices"]:
+            return
+        _load_kernels(device)
+        _loaded["devices"].add(str(device))
+
+
+def _load_kernels(device) -> None:
     from warpworm import quiet_warp
     from warpworm.physics.params import WormParams
     from warpworm.sim.model import Model
@@ -143,33 +153,6 @@ def one_blas_thread():
                 lib[1](_blas["saved"])
 
 
-def beside(fn: Callable[[], object], num_worlds: int, workers: int | None = None) -> Future:
-    """Start ``fn()`` (host work of the caller that does not need the simulation, e.g. compression's NumPy linear
-    prediction) on one thread of its own beside a split of ``num_worlds`` worlds over ``workers`` threads
-    (:func:`run_shares`), one BLAS thread; returns its Future at once. Where that split has one share, ``fn`` runs
-    here and now, so that one worker keeps to one core. One thread, not one per share: NumPy on small arrays holds
-    the GIL most of the time (two threads of compression's prediction used 1.0 core between them, slower than one),
-    while the share threads' kernels release it, so the prediction and the kernels share the cores."""
-    out = Future()
-    if len(world_shares(num_worlds, workers)) == 1:
-        try:
-            with one_blas_thread():
-                out.set_result(fn())
-        except BaseException as e:  # re-raised by out.result(), as from a thread
-            out.set_exception(e)
-        return out
-
-    def run():
-        with one_blas_thread():
-            return fn()
-
-    pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="warpworm-beside")
-    try:
-        return pool.submit(run)
-    finally:
-        pool.shutdown(wait=False)  # the thread ends with fn
-
-
 def run_shares(fn: Callable[[int, int], dict], num_worlds: int, workers: int | None = None,
                device="cpu") -> list[dict]:
     """``fn(lo, hi)`` for the contiguous shares of ``num_worlds`` worlds (:func:`world_shares`), one thread each
@@ -202,5 +185,5 @@ def concat(parts: list[dict], world_axis: dict) -> dict:
             for k in parts[0]}
 
 
-__all__ = ["beside", "blas_threads", "concat", "default_workers", "in_split", "load_kernels", "one_blas_thread",
+__all__ = ["blas_threads", "concat", "default_workers", "in_split", "load_kernels", "one_blas_thread",
            "run_shares", "simulator", "world_shares"]
