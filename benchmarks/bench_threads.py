@@ -12,13 +12,17 @@ Three short interactive jobs at a few hundred worlds, each as the library runs i
   a 0.2 s EPM period (``warpworm search-gait``).
 
 Modes: ``threads1`` (one batch, this thread), ``threads2`` (:mod:`warpworm.analysis.world_split`: two threads of this
-process) and ``processes2`` (the split of before: a ``spawn`` pool of two processes made for the batch and closed
-after it, reproduced here as it was, so both run in the same session). The modes alternate (two rounds), every
-result is checked equal to ``threads1``'s, and each row gives the wall time, the CPU time of this process and its
-children, ``main_cpu_s``: the CPU of the calling thread alone (for threads2: the serial part, what the split leaves
-to one thread; for threads1: everything), ``speedup`` = wall of threads1 / wall of the mode in the same round, and
-``others_cores``: the CPU the other processes of this shared machine used meanwhile (a busy machine cannot give two
-cores to anyone).
+process), ``processes2`` (the split of before: a ``spawn`` pool of two processes made for the batch and closed
+after it, reproduced here as it was, so both run in the same session) and ``pool2`` (the same shares in a pool of two
+processes started and warmed before the timing, that outlives the batches: no GIL, no start-up, so the machine's own
+ceiling for splitting this job in two; what a VM's two cores give two independent processes). The modes alternate
+over the rounds (5; 2 with ``--quick``), every result is checked equal to ``threads1``'s, and each row gives the wall
+time, the CPU time of this process and its children (pool2: this process only), ``main_cpu_s``: the CPU of the calling
+thread alone (for threads2: the serial part, what the split leaves to one thread; for threads1: everything),
+``speedup`` = wall of threads1 / wall of the mode in the same round, and ``others_cores``: the CPU the other
+processes of this shared machine used meanwhile (a busy machine cannot give two cores to anyone; for pool2 it
+counts the pool's own processes). One row per job and mode with ``round = "median"`` gives the median speedup over
+the rounds: on a VM whose speed moves by 10-20 % between seconds, single rounds scatter by as much.
 """
 
 from __future__ import annotations
@@ -27,6 +31,7 @@ import os
 import resource
 import time
 from dataclasses import replace
+from functools import partial
 
 import numpy as np
 
@@ -55,18 +60,15 @@ def _old_gait_share(job):
     return {k: r[k] for k in ("displacement_m", "unstable", "crumpled", "sim_time_s", "metrics", "frames")}
 
 
-def old_run_gait_split(params, num_worlds, cycles, *, workers=None, **kw):
-    """``run_gait_split`` as it was: a spawned pool of ``workers`` processes per call."""
-    import multiprocessing as mp
-
+def old_run_gait_split(params, num_worlds, cycles, *, workers=None, pool=None, **kw):
+    """``run_gait_split`` as it was: a spawned pool of ``workers`` processes per call (or the given warm ``pool``)."""
     from warpworm.physics.params import slice_worlds
 
     bounds = np.linspace(0, num_worlds, workers + 1).astype(int)
     save = kw.pop("save_worlds", 4)
     jobs = [(slice_worlds(params, num_worlds, lo, hi), int(hi - lo), cycles,
              dict(kw, save_worlds=int(max(0, min(save - lo, hi - lo))))) for lo, hi in zip(bounds[:-1], bounds[1:])]
-    with mp.get_context("spawn").Pool(workers) as pool:
-        parts = pool.map(_importable()._old_gait_share, jobs)
+    parts = _map(pool, workers, _importable()._old_gait_share, jobs)
     out = {k: np.concatenate([p[k] for p in parts]) for k in ("displacement_m", "unstable", "crumpled")}
     out["metrics"] = (None if parts[0]["metrics"] is None else
                       {k: np.concatenate([p["metrics"][k] for p in parts]) for k in parts[0]["metrics"]})
@@ -83,19 +85,35 @@ def _old_core_share(job):
     return core(Model.from_params(params, num_worlds, device, **model_kw), params, **run_kw)
 
 
-def old_split_run(core, params, num_worlds, world_axis, *, workers=1, device="cpu", model_kw=None, **run_kw):
-    """``experiments.split_run`` as it was: a spawned pool of ``workers`` processes per call."""
-    import multiprocessing as mp
-
+def old_split_run(core, params, num_worlds, world_axis, *, workers=1, device="cpu", model_kw=None, pool=None,
+                  **run_kw):
+    """``experiments.split_run`` as it was: a spawned pool of ``workers`` processes per call (or the warm ``pool``)."""
     from warpworm.analysis.world_split import world_shares
     from warpworm.physics.params import slice_worlds
 
     jobs = [(core, slice_worlds(params, num_worlds, lo, hi), hi - lo, device, dict(model_kw or {}), run_kw)
             for lo, hi in world_shares(num_worlds, workers)]
-    with mp.get_context("spawn").Pool(len(jobs)) as pool:
-        parts = pool.map(_importable()._old_core_share, jobs)
+    parts = _map(pool, len(jobs), _importable()._old_core_share, jobs)
     return {k: (np.concatenate([q[k] for q in parts], axis=world_axis[k]) if k in world_axis else parts[0][k])
             for k in parts[0]}
+
+
+def _map(pool, workers, fn, jobs):
+    """``pool.map(fn, jobs)`` on the warm ``pool``, or on a spawned pool of ``workers`` made for this call."""
+    import multiprocessing as mp
+
+    if pool is not None:
+        return pool.map(fn, jobs, chunksize=1)
+    with mp.get_context("spawn").Pool(workers) as fresh:
+        return fresh.map(fn, jobs)
+
+
+def _warm_share(_):
+    """Imports and the kernel modules in a pool process, before the timing."""
+    from warpworm.analysis.world_split import load_kernels
+
+    load_kernels("cpu")
+    return os.getpid()
 
 
 # ---------------------------------------------------------------------------------------------------------------------
@@ -118,7 +136,7 @@ def _timed(fn):
     return out, t1 - t0, c1 - c0, max(0.0, (j1 - j0) / hz - (c1 - c0)) / max(t1 - t0, 1e-9), m1 - m0
 
 
-def _tasks(quick: bool):
+def _tasks(quick: bool, pool=None):
     from warpworm.analysis import experiments as ex
     from warpworm.analysis import gait_runs as gr
     from warpworm.analysis import gait_search as gs
@@ -130,14 +148,17 @@ def _tasks(quick: bool):
     grid = gs.parse_grid(f"w=0.012:0.024:{n // 16},a=0.02:0.04:4,h=0.02:0.03:4")
     p_search = replace(gaits.preset_params("omega"), cycle_period=0.2)
 
+    def old(split, mode):  # the process splits: per batch (processes2) or the warm pool (pool2)
+        return partial(split, pool=pool if mode == "pool2" else None)
+
     def simulate(mode):
-        split = old_run_gait_split if mode == "processes2" else gr.run_gait_split
+        split = old(old_run_gait_split, mode) if mode.startswith("p") else gr.run_gait_split
         r = split(p_sim, n, 0.25, workers=1 if mode == "threads1" else 2, fps=30.0, save_worlds=0)
         return r["displacement_m"]
 
     def experiment(mode):
         real = ex.split_run
-        ex.split_run = old_split_run if mode == "processes2" else real
+        ex.split_run = old(old_split_run, mode) if mode.startswith("p") else real
         try:
             r = ex.compression(k, increments=2, hold=0.05, settle=0.05, workers=1 if mode == "threads1" else 2)
         finally:
@@ -146,7 +167,7 @@ def _tasks(quick: bool):
 
     def search(mode):
         real = gr.run_gait_split
-        gr.run_gait_split = old_run_gait_split if mode == "processes2" else real
+        gr.run_gait_split = old(old_run_gait_split, mode) if mode.startswith("p") else real
         try:
             r = gs.search_gait(p_search, grid, 1, workers=1 if mode == "threads1" else 2, fps=25.0)
         finally:
@@ -157,27 +178,37 @@ def _tasks(quick: bool):
 
 
 def run(quick: bool = False) -> list[dict]:
+    import multiprocessing as mp
+
     from warpworm import quiet_warp
     from warpworm.analysis.world_split import load_kernels
 
     quiet_warp()
     load_kernels("cpu")
     rows = []
-    modes = ("threads1", "threads2", "processes2")
-    for name, (fn, worlds) in _tasks(quick).items():
-        fn("threads2")  # warm: the first Model / Simulator of a size, the caches
-        for rnd in range(2):
-            outs, these = {}, []
-            for mode in (modes if rnd == 0 else modes[::-1]):
-                outs[mode], wall, cpu, others, main = _timed(lambda: fn(mode))
-                these.append({"bench": "threads", "job": name, "worlds": worlds, "round": rnd, "mode": mode,
-                              "wall_s": wall, "cpu_s": cpu, "main_cpu_s": main, "others_cores": others})
-            for mode, out in outs.items():  # every split gives the one-batch numbers
-                assert np.array_equal(out, outs["threads1"], equal_nan=True), (name, mode)
-            base = next(r["wall_s"] for r in these if r["mode"] == "threads1")
-            for r in these:
-                r["speedup"] = base / r["wall_s"]
-            rows += these
+    modes = ("threads1", "threads2", "processes2", "pool2")
+    rounds = 2 if quick else 5
+    with mp.get_context("spawn").Pool(2) as pool:
+        pool.map(_importable()._warm_share, range(2), chunksize=1)
+        for name, (fn, worlds) in _tasks(quick, pool).items():
+            for mode in ("threads2", "pool2", "pool2"):  # warm: the first Model / Simulator of a size, the caches
+                fn(mode)
+            job_rows = []
+            for rnd in range(rounds):
+                outs, these = {}, []
+                for mode in (modes if rnd % 2 == 0 else modes[::-1]):
+                    outs[mode], wall, cpu, others, main = _timed(lambda: fn(mode))
+                    these.append({"bench": "threads", "job": name, "worlds": worlds, "round": rnd, "mode": mode,
+                                  "wall_s": wall, "cpu_s": cpu, "main_cpu_s": main, "others_cores": others})
+                for mode, out in outs.items():  # every split gives the one-batch numbers
+                    assert np.array_equal(out, outs["threads1"], equal_nan=True), (name, mode)
+                base = next(r["wall_s"] for r in these if r["mode"] == "threads1")
+                for r in these:
+                    r["speedup"] = base / r["wall_s"]
+                job_rows += these
+            rows += job_rows + [{"bench": "threads", "job": name, "worlds": worlds, "round": "median", "mode": mode,
+                                 "speedup": float(np.median([r["speedup"] for r in job_rows if r["mode"] == mode]))}
+                                for mode in modes[1:]]
     return rows
 
 
