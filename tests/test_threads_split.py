@@ -1,5 +1,5 @@
 """One batch of worlds over the cores as threads of one process (warpworm.analysis.world_split): the shares run at
-the same time on their own threads, each with its own Simulator stepping without CPU graphs, and every per-world
+the same time on their own threads, each with its own Simulator stepping with CPU graphs behind the capture gate, and every per-world
 result (displacements, gait metrics, saved frames) equals the one-batch run bit for bit. Tiny sizes: the speed is
 measured in benchmarks/bench_threads.py, not here."""
 
@@ -22,17 +22,30 @@ def test_shares_are_contiguous_and_bad_counts_are_refused():
         ws.world_shares(0, 2)
 
 
-def test_shares_run_at_once_on_their_own_threads_without_graphs():
-    """A barrier that both shares must reach before either returns: it only opens if they run concurrently."""
+def test_shares_run_at_once_on_their_own_threads_with_graphs_behind_the_capture_gate():
+    """Each share holds the capture gate except where it replays (warpworm.sim.capture_gate): a barrier both shares
+    reach inside ``released()`` opens only if they run at once there, and outside it no two shares are ever inside
+    the gate together (a capture must not see another thread's launches)."""
     from warpworm.physics.params import WormParams
+    from warpworm.sim import capture_gate
     from warpworm.sim.model import Model
 
     barrier = threading.Barrier(2, timeout=60)
-    seen = {}
+    seen, inside, most = {}, [0], [0]
+    lock = threading.Lock()
 
     def share(lo, hi):
         sim = ws.simulator(Model.from_params(WormParams(), hi - lo, "cpu"), dt=0.004, substeps=2)
-        barrier.wait()
+        for _ in range(3):
+            with lock:
+                inside[0] += 1
+                most[0] = max(most[0], inside[0])
+            state = sim.initial_state()  # plain Warp work (arrays from host data): behind the gate
+            with lock:
+                inside[0] -= 1
+            sim.step(state, 3)  # a plain first step and a capture behind the gate, then replays outside it
+            with capture_gate.released():
+                barrier.wait()
         seen[(lo, hi)] = (threading.get_ident(), ws.in_split(), sim.use_graph)
         return {"n": np.array([hi - lo])}
 
@@ -40,7 +53,7 @@ def test_shares_run_at_once_on_their_own_threads_without_graphs():
     assert out["n"].tolist() == [2, 3]
     (t0, s0, g0), (t1, s1, g1) = seen[(0, 2)], seen[(2, 5)]
     assert t0 != t1 and threading.get_ident() not in (t0, t1)
-    assert s0 and s1 and not g0 and not g1
+    assert s0 and s1 and g0 and g1 and most[0] == 1
     assert not ws.in_split()  # the flag does not leak into the caller's thread
 
 

@@ -8,10 +8,11 @@ is paid per share to start (a spawned process paid ~1-1.5 s of Python, ``import 
 that is what made a short job on 2 cores 1.1x one core on a busy machine; benchmarks/bench_threads.py).
 
 Two rules make the threads safe with Warp 1.19: the kernel modules are loaded once before the threads start (Warp
-loads a module on its first launch, without a lock: two threads could load it twice), and a split run steps without
-CPU graphs (a graph capture is process-wide state in Warp: launches of another thread during a capture would be
-recorded into it, not run). :func:`simulator` builds a Simulator with that setting; graphs replay the same trajectory bit for bit
-(tests/test_step_graph.py), so the results do not depend on it.
+loads a module on its first launch, without a lock: two threads could load it twice), and a share holds the capture
+gate (:mod:`warpworm.sim.capture_gate`) except while it replays its step graphs: a graph capture is process-wide
+state in Warp (another thread's launches during it would be recorded into it, not run), a replay records nothing. So
+the shares step with CPU graphs like one batch (graphs replay the same trajectory bit for bit, tests/test_step_graph.py)
+and run at once where a simulation spends its time, in the replays.
 
 NumPy's OpenBLAS runs one thread inside a split, whatever the worker count (:func:`one_blas_thread`): its rounding
 depends on its thread count, so a per-world result computed with BLAS would otherwise depend on the split, and a
@@ -34,6 +35,8 @@ from contextlib import contextmanager
 from typing import Callable
 
 import numpy as np
+
+from warpworm.sim import capture_gate
 
 _local = threading.local()
 _blas = {"lock": threading.Lock(), "users": 0, "saved": None, "lib": False}
@@ -60,16 +63,14 @@ def world_shares(num_worlds: int, workers: int | None) -> list[tuple[int, int]]:
 
 
 def in_split() -> bool:
-    """Whether the calling thread runs a share of a split batch (then it must step without CPU graphs)."""
+    """Whether the calling thread runs a share of a split batch (it holds the capture gate: module docstring)."""
     return getattr(_local, "split", False)
 
 
 def simulator(model, **kw):
-    """``Simulator(model, **kw)``, stepping without graphs inside a split run (module docstring)."""
+    """``Simulator(model, **kw)`` for a share (graphs on, as one batch: the capture gate makes them safe)."""
     from warpworm.sim.simulator import Simulator
 
-    if in_split() and not model.device.is_cuda:
-        kw["use_graph"] = False
     return Simulator(model, **kw)
 
 
@@ -156,7 +157,7 @@ def one_blas_thread():
 def run_shares(fn: Callable[[int, int], dict], num_worlds: int, workers: int | None = None,
                device="cpu") -> list[dict]:
     """``fn(lo, hi)`` for the contiguous shares of ``num_worlds`` worlds (:func:`world_shares`), one thread each
-    (one share: in this thread, graphs allowed); returns their results in world order. ``fn`` builds its own Model
+    (one share: in this thread, no gate); returns their results in world order. ``fn`` builds its own Model
     and Simulator (through :func:`simulator`) for worlds [lo, hi). An exception in a share is re-raised here after
     every share has stopped. NumPy's OpenBLAS runs one thread meanwhile, whatever the shares
     (:func:`one_blas_thread`)."""
@@ -169,7 +170,7 @@ def run_shares(fn: Callable[[int, int], dict], num_worlds: int, workers: int | N
     def share(lo_hi):
         _local.split = True
         try:
-            with one_blas_thread():
+            with one_blas_thread(), capture_gate.hold():
                 return fn(*lo_hi)
         finally:
             _local.split = False

@@ -24,6 +24,7 @@ import numpy as np
 import warp as wp
 
 from warpworm.ids import WORLD_CRUMPLED
+from warpworm.sim import capture_gate
 from warpworm.sim.model import Control, Model, State
 from warpworm.sim.solver import BandSolver, SolverBase, SubstepSettings, put_bounded
 from warpworm.sim.tile_solver import TileSolver
@@ -271,8 +272,9 @@ class Simulator:
                 g = (state, control, capture.graph, control.revision,
                      self.solver.command(state, control, 1 if self.magnet_every_substep else self.substeps))
                 put_bounded(self._graphs, key, g, MAX_GRAPHS)
-            for _ in range(n):
-                wp.capture_launch(g[2])
+            with capture_gate.released():  # a replay records nothing: other threads may launch or capture meanwhile
+                for _ in range(n):
+                    wp.capture_launch(g[2])
             return state
         for _ in range(int(num_steps)):
             self._one_step(state, control, moment)
