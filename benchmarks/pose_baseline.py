@@ -8,7 +8,9 @@ colours and lights, the same labels). Reads the HDF5 shards with h5py only; torc
 Metrics per test set: keypoint error [px] on visible keypoints, PCK@5, head/tail swap rate (the prediction is nearer
 the ground truth turned half a turn about the body's vertical axis), the head/tail-agnostic keypoint error (the
 better of the two), body rotation error by PnP (cv2.solvePnP of the predicted pixels against the training mean of
-``keypoints/body``; median), crease-angle and deformation-ratio MAE against predicting the training mean. Goals
+``keypoints/body``; median), crease-angle and deformation-ratio MAE against predicting the training mean (the crease
+ratio also over the creases seen and not seen, both faces visible by the label depth, and by thirds of the worm's
+length in the image). Goals
 (issue 24): cross-engine agnostic keypoint error <= 1.5x in-domain; swap rate equal within 5 points; crease MAE
 <= 0.6x the mean baseline in-domain.
 
@@ -59,22 +61,56 @@ def generate_sets(a) -> dict[str, Path]:
     return out
 
 
-def load(root: Path) -> dict[str, np.ndarray]:
-    """Every array the benchmark needs, concatenated over the shards (h5py only)."""
+SEEN_KEYS = ("worm/vertices", "depth", "camera/dist")
+"""What :func:`creases_seen` reads besides the camera: the test sets load them (``load(root, SEEN_KEYS)``)."""
+
+
+def load(root: Path, extra: tuple = ()) -> dict[str, np.ndarray]:
+    """Every array the benchmark needs (and ``extra``), concatenated over the shards (h5py only)."""
     import h5py
 
     keys = ("rgb", "keypoints/pixel", "keypoints/visibility", "keypoints/body", "camera/K", "camera/R", "camera/t",
-            "poses/body", "creases/angle", "labels/deformation", "sample_id")
+            "poses/body", "creases/angle", "labels/deformation", "sample_id") + tuple(extra)
     parts: dict[str, list] = {k: [] for k in keys}
-    names = None
+    names = hinges = None
     for p in sorted(root.glob("shard-*.h5")):
         with h5py.File(p, "r") as f:
-            names = json.loads(f.attrs["keypoint_names"])
+            names, hinges = json.loads(f.attrs["keypoint_names"]), np.asarray(f.attrs["crease_hinges"])
             for k in keys:
-                parts[k].append(f[k][...])
-    d = {k: np.concatenate(v) for k, v in parts.items()}
-    d["names"] = names
+                if k in f or k not in extra:  # an optional extra (camera/dist: lens distortion off) may be absent
+                    parts[k].append(f[k][...])
+    d = {k: np.concatenate(v) for k, v in parts.items() if v}
+    d["names"], d["crease_hinges"] = names, hinges
     return d
+
+
+def creases_seen(d: dict, depth_tol: float = 2.0e-3) -> np.ndarray:
+    """(N, C) bool: both triangles of crease c (stencil (i, j, k, l), shared edge j-k) face the camera (|cos| > 0.05)
+    and their centroids pass the depth test at their pixel (the label depth within ``depth_tol`` [m]). A crease with
+    a face turned away or hidden (under the worm, behind a fold or a distractor) shows its angle to no camera."""
+    import cv2
+
+    H = d["crease_hinges"]
+    N, C = len(d["depth"]), len(H)
+    h, w = d["depth"].shape[1:]
+    seen = np.ones((N, C), bool)
+    for n in range(N):
+        V = d["worm/vertices"][n].astype(np.float64)
+        R, t = d["camera/R"][n], d["camera/t"][n]
+        eye = -R.T @ t
+        for a, b, c in ((H[:, 0], H[:, 1], H[:, 2]), (H[:, 1], H[:, 3], H[:, 2])):
+            cen = (V[a] + V[b] + V[c]) / 3.0
+            nrm = np.cross(V[b] - V[a], V[c] - V[a])
+            view = eye - cen
+            cos = np.einsum("ij,ij->i", nrm, view) / (np.linalg.norm(nrm, axis=1) * np.linalg.norm(view, axis=1))
+            dist = d["camera/dist"][n] if "camera/dist" in d else None
+            px = cv2.projectPoints(cen, cv2.Rodrigues(R)[0], t, d["camera/K"][n], dist)[0].reshape(-1, 2)
+            ij = np.round(px).astype(int)
+            inside = (ij[:, 0] >= 0) & (ij[:, 0] < w) & (ij[:, 1] >= 0) & (ij[:, 1] < h)
+            z = np.zeros(C)
+            z[inside] = d["depth"][n][ij[inside, 1], ij[inside, 0]]
+            seen[n] &= (np.abs(cos) > 0.05) & inside & (np.abs(z - (cen @ R.T + t)[:, 2]) < depth_tol)
+    return seen
 
 
 def flip_permutation(names: list[str]) -> np.ndarray:
@@ -265,8 +301,10 @@ def evaluate(uv, creases, ratios, d: dict, flip: np.ndarray, train_stats: dict, 
     swapped = per_flip < per
     agnostic = np.where(swapped[:, None], err_flip, err)
     rot = pnp_rotation_errors(uv, d, body_model)
-    c_err = np.degrees(np.abs(creases - d["creases/angle"])).mean()
-    c_base = np.degrees(np.abs(train_stats["crease_mean"] - d["creases/angle"])).mean()
+    c_abs = np.degrees(np.abs(creases - d["creases/angle"]))
+    c_abs_base = np.degrees(np.abs(train_stats["crease_mean"] - d["creases/angle"]))
+    c_err, c_base = c_abs.mean(), c_abs_base.mean()
+    seen = creases_seen(d) if "depth" in d else None
     r_err = np.abs(ratios - d["labels/deformation"]).mean()
     r_base = np.abs(train_stats["ratio_mean"] - d["labels/deformation"]).mean()
     mean_pos = np.linalg.norm(train_stats["kp_mean"][None] - gt, axis=-1)
@@ -275,7 +313,20 @@ def evaluate(uv, creases, ratios, d: dict, flip: np.ndarray, train_stats: dict, 
         "kp_err_mean_position_px": float(mean_pos[vis].mean()), "pck5": float((err[vis] <= 5.0).mean()),
         "swap_rate": float(swapped[ok].mean()), "pnp_rot_median_deg": float(np.nanmedian(rot)),
         "pnp_failed": int(np.isnan(rot).sum()), "crease_mae_deg": float(c_err), "crease_mae_mean_baseline_deg":
-        float(c_base), "ratio_mae": float(r_err), "ratio_mae_mean_baseline": float(r_base)}
+        float(c_base), "ratio_mae": float(r_err), "ratio_mae_mean_baseline": float(r_base),
+        **({} if seen is None else {
+            "creases_seen_fraction": float(seen.mean()),
+            "crease_ratio_seen": float(c_abs[seen].mean() / c_abs_base[seen].mean()),
+            "crease_ratio_unseen": float(c_abs[~seen].mean() / c_abs_base[~seen].mean())}),
+        "crease_ratio_by_worm_size": _by_size(c_abs.mean(1), c_abs_base.mean(1), gt, d["names"])}
+
+
+def _by_size(err: np.ndarray, base: np.ndarray, kp: np.ndarray, names: list[str]) -> list[float]:
+    """Crease MAE over the mean baseline in the thirds of the test set by the worm's length in the image (head to
+    tail keypoint [px], small to large): whether nearer or wider views show the folds better."""
+    length = np.linalg.norm(kp[:, names.index("head")] - kp[:, names.index("tail")], axis=1)
+    thirds = np.array_split(np.argsort(length, kind="stable"), 3)
+    return [float(err[i].mean() / base[i].mean()) for i in thirds]
 
 
 # ---------------------------------------------------------------------------------------------------------------------
@@ -287,13 +338,19 @@ def table(res: dict) -> str:
             ("body rotation by PnP, median [deg]", "pnp_rot_median_deg", "{:.1f}"),
             ("crease MAE [deg]", "crease_mae_deg", "{:.2f}"),
             ("  training-mean baseline [deg]", "crease_mae_mean_baseline_deg", "{:.2f}"),
+            ("  creases seen (both faces visible)", "creases_seen_fraction", "{:.1%}"),
+            ("  crease MAE / baseline, seen creases", "crease_ratio_seen", "{:.3f}"),
+            ("  crease MAE / baseline, unseen creases", "crease_ratio_unseen", "{:.3f}"),
+            ("  crease MAE / baseline by thirds of the worm's image length", "crease_ratio_by_worm_size", "{}"),
             ("deformation-ratio MAE", "ratio_mae", "{:.4f}"),
             ("  training-mean baseline", "ratio_mae_mean_baseline", "{:.4f}")]
     sets = [k for k in ("test", "test_pt") if k in res]
     head = "| metric | " + " | ".join({"test": "rasterized (in-domain)", "test_pt": "path-traced"}[s] for s in sets)
     lines = [head + " |", "|---" * (len(sets) + 1) + "|"]
     for label, key, fmt in rows:
-        lines.append(f"| {label} | " + " | ".join(fmt.format(res[s][key]) for s in sets) + " |")
+        if all(key in res[s] for s in sets):
+            cell = (lambda v: " / ".join(f"{x:.3f}" for x in v)) if fmt == "{}" else fmt.format
+            lines.append(f"| {label} | " + " | ".join(cell(res[s][key]) for s in sets) + " |")
     return "\n".join(lines)
 
 
@@ -347,7 +404,7 @@ def main(argv=None) -> int:
     flip = flip_permutation(tr["names"])
     res = {}
     for name in [k for k in ("test", "test_pt") if k in paths]:
-        d = load(paths[name])
+        d = load(paths[name], SEEN_KEYS)
         res[name] = evaluate(*predict(model, d, stats), d, flip, stats, body_model)
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
                             cwd=Path(__file__).parent).stdout.strip()
