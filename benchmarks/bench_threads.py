@@ -109,10 +109,12 @@ def _map(pool, workers, fn, jobs):
 
 
 def _warm_share(_):
-    """Imports and the kernel modules in a pool process, before the timing."""
+    """Imports and the kernel modules in a pool process, before the timing (held 1 s, so that the other task of the
+    pair goes to the other process)."""
     from warpworm.analysis.world_split import load_kernels
 
     load_kernels("cpu")
+    time.sleep(1.0)
     return os.getpid()
 
 
@@ -189,7 +191,7 @@ def run(quick: bool = False) -> list[dict]:
     modes = ("threads1", "threads2", "processes2", "pool2")
     rounds = 2 if quick else 5
     with mp.get_context("spawn").Pool(2) as pool:
-        pool.map(_importable()._warm_share, range(2), chunksize=1)
+        assert len(set(pool.map(_importable()._warm_share, range(2), chunksize=1))) == 2  # both processes warm
         for name, (fn, worlds) in _tasks(quick, pool).items():
             for mode in ("threads2", "pool2", "pool2"):  # warm: the first Model / Simulator of a size, the caches
                 fn(mode)

@@ -57,6 +57,22 @@ def test_shares_run_at_once_on_their_own_threads_with_graphs_behind_the_capture_
     assert not ws.in_split()  # the flag does not leak into the caller's thread
 
 
+def test_a_split_inside_a_share_runs_in_that_share():
+    """A share that splits again (a library call that splits, inside a split) runs that split in its own thread:
+    threads of its own would wait for the capture gate the share holds."""
+    out = {}
+
+    def outer(lo, hi):
+        inner = ws.run_shares(lambda a, b: {"t": np.array([threading.get_ident()])}, 4, workers=2)
+        return {"same": np.array([all(p["t"][0] == threading.get_ident() for p in inner)])}
+
+    job = threading.Thread(target=lambda: out.update(r=ws.run_shares(outer, 4, workers=2)), daemon=True)
+    job.start()
+    job.join(60)
+    assert not job.is_alive(), "a split inside a share hung"
+    assert [bool(p["same"][0]) for p in out["r"]] == [True, True]
+
+
 def test_an_error_in_a_share_reaches_the_caller():
     def share(lo, hi):
         if lo > 0:

@@ -280,8 +280,8 @@ def force_distance(gaps=None, densities=(1e6, 8e6, 64e6), moment: float = 0.9, s
 def _quasi_static_core(model, params, *, anchors_moving, direction, displacements, lift, settle, hold, dt,
                        substeps, linear_axis=None) -> dict:
     """The simulation of :func:`_quasi_static` on one batch (one thread's share): raw per-world readings, and with
-    ``linear_axis`` the share's own linear prediction after it (:func:`_linear_units`): each thread then does the same
-    work for its worlds, with no third thread beside the shares (docs/dynamics.md, "One job on every core")."""
+    ``linear_axis`` the share's own linear prediction after it (:func:`_linear_units`): no third thread beside the
+    shares, and one share's prediction overlaps the other's replays (docs/dynamics.md, "One job on every core")."""
     sim = _simulator(model, dt=dt, substeps=substeps)
     state = sim.initial_state()
     av = model.anchor_vertex.numpy()
@@ -437,7 +437,7 @@ def compression(hinge_stiffness=DEFAULT_HINGE_SWEEP, max_displacement: float = 2
     steps = _steps(max_displacement, increments, displacements)
     r = _quasi_static(p, W, anchors, anchor_stiffness, head, (-1.0, 0.0, 0.0), steps, settle=settle, hold=hold,
                       dt=dt, substeps=substeps, device=device, workers=workers, linear_axis=0)
-    lin = r["prescribed"][:, None] * r["linear_units"]  # (K+1, W) [N]
+    lin = r["prescribed"][:, None] * r.pop("linear_units")  # (K+1, W) [N]
     fmax = r["force"][-1]
     dmax = r["displacement"][-1]
     r.update(hinge_stiffness=ks, linear=lin, summary={
@@ -474,7 +474,7 @@ def flexure(hinge_stiffness=DEFAULT_HINGE_SWEEP, max_deflection: float = 2.0e-3,
     steps = _steps(max_deflection, increments, displacements)
     r = _quasi_static(p, W, anchors, anchor_stiffness, load, (0.0, 0.0, -1.0), steps, lift=lift, settle=settle,
                       hold=hold, dt=dt, substeps=substeps, device=device, workers=workers, linear_axis=2)
-    lin = r["prescribed"][:, None] * r["linear_units"]  # (K+1, W) [N]
+    lin = r["prescribed"][:, None] * r.pop("linear_units")  # (K+1, W) [N]
     fmax, dmax = r["force"][-1], r["displacement"][-1]
     r.update(hinge_stiffness=ks, linear=lin, summary={
         "hinge_stiffness_N_per_rad": ks.tolist(),

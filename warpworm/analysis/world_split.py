@@ -10,7 +10,7 @@ that is what made a short job on 2 cores 1.1x one core on a busy machine; benchm
 Two rules make the threads safe with Warp 1.19: the kernel modules are loaded once before the threads start (Warp
 loads a module on its first launch, without a lock: two threads could load it twice), and a share holds the capture
 gate (:mod:`warpworm.sim.capture_gate`) except while it replays its step graphs: a graph capture is process-wide
-state in Warp (another thread's launches during it would be recorded into it, not run), a replay records nothing. So
+state in Warp (another thread's launches during it would be registered into it), a replay touches none of it. So
 the shares step with CPU graphs like one batch (graphs replay the same trajectory bit for bit, tests/test_step_graph.py)
 and run at once where a simulation spends its time, in the replays.
 
@@ -18,8 +18,9 @@ NumPy's OpenBLAS runs one thread inside a split, whatever the worker count (:fun
 depends on its thread count, so a per-world result computed with BLAS would otherwise depend on the split, and a
 two-thread OpenBLAS spin-waits on small solves (compression's 192 linear predictions: 5-11 CPU-s at 2 BLAS threads
 against 1.1 at one on this 2-core machine). Host work per world (e.g. compression's NumPy prediction) belongs in the
-share's own function, after its simulation: each thread then does the same work for its worlds, and no third thread
-competes with the shares for two cores (docs/dynamics.md, "One job on every core").
+share's own function, after its simulation: no third thread competes with the shares for two cores, and a share's
+host work (behind the gate, and mostly holding the GIL anyway) overlaps the other share's replays
+(docs/dynamics.md, "One job on every core").
 
 Used by :func:`warpworm.analysis.gait_runs.run_gait_split` (``simulate``, ``search-gait``) and
 :func:`warpworm.analysis.experiments.split_run` (``experiment``).
@@ -63,12 +64,12 @@ def world_shares(num_worlds: int, workers: int | None) -> list[tuple[int, int]]:
 
 
 def in_split() -> bool:
-    """Whether the calling thread runs a share of a split batch (it holds the capture gate: module docstring)."""
+    """Whether the calling thread runs a share of a split batch (then a split inside it runs in this thread)."""
     return getattr(_local, "split", False)
 
 
 def simulator(model, **kw):
-    """``Simulator(model, **kw)`` for a share (graphs on, as one batch: the capture gate makes them safe)."""
+    """``Simulator(model, **kw)`` for a share: graphs as for one batch (the capture gate makes them safe)."""
     from warpworm.sim.simulator import Simulator
 
     return Simulator(model, **kw)
@@ -162,7 +163,9 @@ def run_shares(fn: Callable[[int, int], dict], num_worlds: int, workers: int | N
     every share has stopped. NumPy's OpenBLAS runs one thread meanwhile, whatever the shares
     (:func:`one_blas_thread`)."""
     shares = world_shares(num_worlds, workers)
-    if len(shares) == 1 or str(device).startswith("cuda"):  # one device queue: a GPU runs the batch as one
+    # one device queue: a GPU runs the batch as one; a split inside a share runs in that share's thread (its threads
+    # would wait for the gate the share holds)
+    if len(shares) == 1 or str(device).startswith("cuda") or in_split():
         with one_blas_thread():
             return [fn(0, int(num_worlds))]
     load_kernels(device)
