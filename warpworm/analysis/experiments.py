@@ -396,8 +396,11 @@ def linear_anchor_responses(model, params: WormParams, target_offsets: np.ndarra
     K = np.zeros((W, 3 * V, 3 * V))
     for s, (i, j) in enumerate(pat.edges):
         blk = kb[:, s, None, None] * (e[:, s, :, None] * e[:, s, None, :])  # np.outer's products, world by world
-        r = np.r_[3 * i:3 * i + 3, 3 * j:3 * j + 3]
-        K[:, r[:, None], r[None, :]] += np.block([[blk, -blk], [-blk, blk]])  # the four distinct 3x3 blocks
+        bi, bj = slice(3 * i, 3 * i + 3), slice(3 * j, 3 * j + 3)
+        K[:, bi, bi] += blk  # the four distinct 3x3 blocks (x - b is x + (-b) to the bit)
+        K[:, bj, bj] += blk
+        K[:, bi, bj] -= blk
+        K[:, bj, bi] -= blk
     g = crease.dihedral_gradients(x, pat.hinges)  # (W, H, 4, 3)
     for h, stencil in enumerate(pat.hinges):
         r = (3 * np.asarray(stencil)[:, None] + np.arange(3)).reshape(-1)  # the 12 nonzero entries of gv
