@@ -4,6 +4,7 @@ result (displacements, gait metrics, saved frames) equals the one-batch run bit 
 measured in benchmarks/bench_threads.py, not here."""
 
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -23,27 +24,21 @@ def test_shares_are_contiguous_and_bad_counts_are_refused():
 
 
 def test_shares_run_at_once_on_their_own_threads_with_graphs_behind_the_capture_gate():
-    """Each share holds the capture gate except where it replays (warpworm.sim.capture_gate): a barrier both shares
-    reach inside ``released()`` opens only if they run at once there, and outside it no two shares are ever inside
-    the gate together (a capture must not see another thread's launches)."""
+    """Each share holds the capture gate shared (warpworm.sim.capture_gate) and steps with CPU graphs: a barrier both
+    shares reach inside their Warp work, and again between replays, opens only if they run at once."""
     from warpworm.physics.params import WormParams
     from warpworm.sim import capture_gate
     from warpworm.sim.model import Model
 
     barrier = threading.Barrier(2, timeout=60)
-    seen, inside, most = {}, [0], [0]
-    lock = threading.Lock()
+    seen = {}
 
     def share(lo, hi):
         sim = ws.simulator(Model.from_params(WormParams(), hi - lo, "cpu"), dt=0.004, substeps=2)
         for _ in range(3):
-            with lock:
-                inside[0] += 1
-                most[0] = max(most[0], inside[0])
-            state = sim.initial_state()  # plain Warp work (arrays from host data): behind the gate
-            with lock:
-                inside[0] -= 1
-            sim.step(state, 3)  # a plain first step and a capture behind the gate, then replays outside it
+            state = sim.initial_state()  # plain Warp work (arrays from host data): both shares at once
+            barrier.wait()
+            sim.step(state, 3)  # a plain first step, a capture alone, then replays
             with capture_gate.released():
                 barrier.wait()
         seen[(lo, hi)] = (threading.get_ident(), ws.in_split(), sim.use_graph)
@@ -53,8 +48,56 @@ def test_shares_run_at_once_on_their_own_threads_with_graphs_behind_the_capture_
     assert out["n"].tolist() == [2, 3]
     (t0, s0, g0), (t1, s1, g1) = seen[(0, 2)], seen[(2, 5)]
     assert t0 != t1 and threading.get_ident() not in (t0, t1)
-    assert s0 and s1 and g0 and g1 and most[0] == 1
+    assert s0 and s1 and g0 and g1  # graphs, not a silent fallback to plain launches
     assert not ws.in_split()  # the flag does not leak into the caller's thread
+
+
+def test_a_capture_waits_for_the_other_threads_warp_work_and_holds_new_work_off():
+    """The gate's order: thread B's capture starts only once thread A is out of its Warp work (here: into a replay),
+    and A's next Warp work and a third thread's first wait until the capture has ended."""
+    from warpworm.sim import capture_gate
+
+    log, lock = [], threading.Lock()
+    a_in, b_in, captured, c_try = (threading.Event() for _ in range(4))
+
+    def note(x):
+        with lock:
+            log.append(x)
+
+    def a():
+        with capture_gate.hold():
+            a_in.set()
+            b_in.wait(10)
+            time.sleep(0.2)  # B is queued for its capture meanwhile
+            note("a work done")
+            with capture_gate.released():  # a replay: the capture may run now
+                captured.wait(10)
+            note("a work again")
+
+    def b():
+        a_in.wait(10)
+        with capture_gate.hold():
+            b_in.set()
+            with capture_gate.capturing():
+                note("b captures")
+                c_try.set()
+                time.sleep(0.2)  # C and A (back from its replay) must wait
+                note("b capture done")
+                captured.set()
+
+    def c():
+        c_try.wait(10)
+        with capture_gate.hold():
+            note("c work")
+
+    threads = [threading.Thread(target=f, daemon=True) for f in (a, b, c)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(30)
+    assert not any(t.is_alive() for t in threads), "the gate deadlocked"
+    assert log[:3] == ["a work done", "b captures", "b capture done"]
+    assert sorted(log[3:]) == ["a work again", "c work"]
 
 
 def test_a_split_inside_a_share_runs_in_that_share():

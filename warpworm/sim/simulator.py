@@ -261,7 +261,7 @@ class Simulator:
                 self._one_step(state, control, moment)
                 n -= 1
                 try:
-                    with wp.ScopedCapture(device=self.model.device) as capture:
+                    with capture_gate.capturing(), wp.ScopedCapture(device=self.model.device) as capture:
                         self._one_step(state, control, moment)
                 except Exception:  # a Warp that cannot capture on this device: plain launches from now on
                     if self.model.device.is_cuda:
@@ -272,7 +272,7 @@ class Simulator:
                 g = (state, control, capture.graph, control.revision,
                      self.solver.command(state, control, 1 if self.magnet_every_substep else self.substeps))
                 put_bounded(self._graphs, key, g, MAX_GRAPHS)
-            with capture_gate.released():  # a replay records nothing: other threads may launch or capture meanwhile
+            with capture_gate.released():  # a replay touches no capture state: others may launch or capture meanwhile
                 for _ in range(n):
                     wp.capture_launch(g[2])
             return state
