@@ -65,6 +65,13 @@ def band_cholesky_solve(world: int, nv: int, bw: int, mat: wp.array3d(dtype=wp.m
     operations in the same order, so the same bits: ~20 % less time in a micro-benchmark)."""
     if bw == UNROLLED_BANDWIDTH:
         return band_cholesky_solve_unrolled(world, nv, mat, rhs)
+    return band_cholesky_solve_loops(world, nv, bw, mat, rhs)
+
+
+@wp.func
+def band_cholesky_solve_loops(world: int, nv: int, bw: int, mat: wp.array3d(dtype=wp.mat33),
+                              rhs: wp.array2d(dtype=wp.vec3)):
+    """:func:`band_cholesky_solve` at any bandwidth ``bw``, loops with variable trip counts."""
     for j in range(nv):
         t = rhs[world, j]
         for k in range(wp.max(0, j - bw), j):
