@@ -125,8 +125,6 @@ def parse_band_colors(text: str | None, key: str = "--band-colors"):
 def dataset_band_colors(path) -> np.ndarray:
     """The band colours (5, 3) a dataset folder was rendered with: its ``config_yaml`` attribute's
     ``render.band_colors`` (the paper's :data:`warpworm.render.scene.BAND_COLORS` when the config left it out)."""
-    import yaml
-
     from warpworm.data import dataset as ds
     from warpworm.render.scene import BAND_COLORS
 
@@ -135,10 +133,9 @@ def dataset_band_colors(path) -> np.ndarray:
     except Exception as exc:  # noqa: BLE001 (any unreadable folder: one clear message)
         raise ValueError(f"--band-colors-from: got {str(path)!r}; expected a dataset folder ({exc})") from None
     try:
-        text = reader.attrs["config_yaml"]
+        cfg = reader.config
     finally:
         reader.close()
-    cfg = yaml.safe_load(text.decode() if isinstance(text, bytes) else str(text)) or {}
     colors = (cfg.get("render") or {}).get("band_colors")
     return BAND_COLORS.copy() if colors is None else np.asarray(colors, np.float64)
 

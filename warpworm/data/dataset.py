@@ -693,6 +693,13 @@ class DatasetReader:
         f = self._file(0)
         return {k: (v.decode() if isinstance(v, bytes) else v) for k, v in f.attrs.items()}
 
+    @property
+    def config(self) -> dict:
+        """The config the dataset was written with (root attribute ``config_yaml``) as a dict ({} where empty)."""
+        import yaml
+
+        return yaml.safe_load(self.attrs["config_yaml"]) or {}
+
     def keys(self) -> list[str]:
         out = []
         self._file(0).visititems(lambda name, obj: out.append(name) if isinstance(obj, h5py.Dataset) else None)

@@ -95,11 +95,7 @@ def object_meshes(reader) -> dict:
 
 
 def _n_units(reader) -> int:
-    import yaml
-
-    text = reader.attrs["config_yaml"]
-    cfg = yaml.safe_load(text.decode() if isinstance(text, bytes) else str(text))
-    return int((cfg.get("sim") or {}).get("n_units", 6))
+    return int((reader.config.get("sim") or {}).get("n_units", 6))
 
 
 SYMMETRIES = {

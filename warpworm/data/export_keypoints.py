@@ -103,17 +103,13 @@ class KeypointExporter:
     """Reads the exported keypoints of samples of one dataset (``reader``: :func:`warpworm.data.dataset.open`)."""
 
     def __init__(self, reader):
-        import yaml
-
         from warpworm.physics import crease
 
         names = json.loads(reader.attrs["keypoint_names"])
         self.reader = reader
         kept = [n for n in DATASET_NAMES if n in names]
         self.take = [names.index(n) for n in kept]
-        text = reader.attrs["config_yaml"]
-        cfg = yaml.safe_load(text.decode() if isinstance(text, bytes) else str(text)) or {}
-        n_units = int((cfg.get("sim") or {}).get("n_units", 6))
+        n_units = int((reader.config.get("sim") or {}).get("n_units", 6))
         rest = crease.build_worm(0.02, 0.008, n_units, l0=0.08).vertices
         # the worm's own mesh (a test's stand-in mesh has other vertices: no dorsal points there)
         same_mesh = np.asarray(reader.attrs["mesh_triangles"]).max() + 1 == len(rest)
