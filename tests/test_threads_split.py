@@ -53,12 +53,13 @@ def test_shares_run_at_once_on_their_own_threads_with_graphs_behind_the_capture_
 
 
 def test_a_capture_waits_for_the_other_threads_warp_work_and_holds_new_work_off():
-    """The gate's order: thread B's capture starts only once thread A is out of its Warp work (here: into a replay),
-    and A's next Warp work and a third thread's first wait until the capture has ended."""
+    """The gate's order: thread B's capture starts only once thread A is out of its Warp work (here: into a replay);
+    a thread C arriving while the capture is queued, and A back from its replay, wait until it has ended (a queued
+    capture goes first); a thread cannot take the gate twice."""
     from warpworm.sim import capture_gate
 
     log, lock = [], threading.Lock()
-    a_in, b_in, captured, c_try = (threading.Event() for _ in range(4))
+    a_in, b_in, a_go, captured = (threading.Event() for _ in range(4))
 
     def note(x):
         with lock:
@@ -67,8 +68,7 @@ def test_a_capture_waits_for_the_other_threads_warp_work_and_holds_new_work_off(
     def a():
         with capture_gate.hold():
             a_in.set()
-            b_in.wait(10)
-            time.sleep(0.2)  # B is queued for its capture meanwhile
+            a_go.wait(10)
             note("a work done")
             with capture_gate.released():  # a replay: the capture may run now
                 captured.wait(10)
@@ -80,30 +80,42 @@ def test_a_capture_waits_for_the_other_threads_warp_work_and_holds_new_work_off(
             b_in.set()
             with capture_gate.capturing():
                 note("b captures")
-                c_try.set()
-                time.sleep(0.2)  # C and A (back from its replay) must wait
+                time.sleep(0.2)  # A (back from its replay) must wait
                 note("b capture done")
                 captured.set()
 
     def c():
-        c_try.wait(10)
         with capture_gate.hold():
             note("c work")
 
-    threads = [threading.Thread(target=f, daemon=True) for f in (a, b, c)]
+    threads = [threading.Thread(target=f, daemon=True) for f in (a, b)]
     for t in threads:
         t.start()
+    b_in.wait(10)
+    t0 = time.monotonic()
+    while capture_gate._state["waiting"] == 0 and time.monotonic() - t0 < 10:  # B's capture queued behind A
+        time.sleep(0.005)
+    threads.append(threading.Thread(target=c, daemon=True))
+    threads[-1].start()
+    time.sleep(0.2)
+    assert log == []  # C waits for the queued capture although only A (shared) is inside
+    a_go.set()
     for t in threads:
         t.join(30)
     assert not any(t.is_alive() for t in threads), "the gate deadlocked"
     assert log[:3] == ["a work done", "b captures", "b capture done"]
     assert sorted(log[3:]) == ["a work again", "c work"]
+    with capture_gate.hold():
+        with pytest.raises(RuntimeError, match="holds the gate already"):
+            with capture_gate.hold():
+                pass
 
 
-def test_a_split_inside_a_share_runs_in_that_share():
+def test_a_split_inside_a_share_runs_in_that_share(monkeypatch):
     """A share that splits again (a library call that splits, inside a split) runs that split in its own thread:
     threads of its own would wait for the capture gate the share holds."""
     out = {}
+    monkeypatch.setattr(ws, "_load_kernels", lambda device: None)  # the timeout below is for the gate, not a compile
 
     def outer(lo, hi):
         inner = ws.run_shares(lambda a, b: {"t": np.array([threading.get_ident()])}, 4, workers=2)

@@ -163,8 +163,8 @@ def run_shares(fn: Callable[[int, int], dict], num_worlds: int, workers: int | N
     every share has stopped. NumPy's OpenBLAS runs one thread meanwhile, whatever the shares
     (:func:`one_blas_thread`)."""
     shares = world_shares(num_worlds, workers)
-    # one device queue: a GPU runs the batch as one; a split inside a share runs in that share's thread (its threads
-    # would wait for the gate the share holds)
+    # one device queue: a GPU runs the batch as one; a split inside a share runs in that share's thread (its own
+    # threads' first capture would wait for the share's hold on the gate, and the share for them)
     if len(shares) == 1 or str(device).startswith("cuda") or in_split():
         with one_blas_thread():
             return [fn(0, int(num_worlds))]

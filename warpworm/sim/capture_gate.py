@@ -43,7 +43,10 @@ def _leave() -> None:
 @contextmanager
 def hold():
     """Hold the gate shared in this thread for the block (a share of a split run), except inside :func:`released`
-    and while this thread captures (:func:`capturing`)."""
+    and while this thread captures (:func:`capturing`). Not re-entrant: a thread already holding it would wait for
+    a queued capture that waits for it (``world_split.run_shares`` runs a split inside a share in its thread)."""
+    if getattr(_local, "held", False):
+        raise RuntimeError("capture_gate.hold: this thread holds the gate already (a split inside a share?)")
     _enter()
     try:
         yield
@@ -74,8 +77,15 @@ def capturing():
     _leave()
     with _cond:
         _state["waiting"] += 1
-        while _state["capturing"] or _state["inside"]:
-            _cond.wait()
+        try:
+            while _state["capturing"] or _state["inside"]:
+                _cond.wait()
+        except BaseException:
+            _state["waiting"] -= 1
+            _cond.notify_all()
+            _local.held = True  # as if re-entered: hold() leaves once
+            _state["inside"] += 1
+            raise
         _state["waiting"] -= 1
         _state["capturing"] = True
     try:
