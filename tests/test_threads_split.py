@@ -29,12 +29,13 @@ def test_shares_run_at_once_on_their_own_threads_with_graphs_behind_the_capture_
     from warpworm.physics.params import WormParams
     from warpworm.sim import capture_gate
     from warpworm.sim.model import Model
+    from warpworm.sim.simulator import Simulator
 
     barrier = threading.Barrier(2, timeout=60)
     seen = {}
 
     def share(lo, hi):
-        sim = ws.simulator(Model.from_params(WormParams(), hi - lo, "cpu"), dt=0.004, substeps=2)
+        sim = Simulator(Model.from_params(WormParams(), hi - lo, "cpu"), dt=0.004, substeps=2)
         for _ in range(3):
             state = sim.initial_state()  # plain Warp work (arrays from host data): both shares at once
             barrier.wait()

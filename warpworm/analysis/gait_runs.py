@@ -39,14 +39,14 @@ def run_gait(params, num_worlds: int, cycles: float, *, device="cpu", dt=None, s
     ``save_worlds`` worlds, or None), model, sim."""
     from warpworm.physics import gaits
     from warpworm.analysis.gait_metrics import gait_metrics
-    from warpworm.analysis.world_split import simulator
     from warpworm.sim.model import Model
+    from warpworm.sim.simulator import Simulator
 
     dt = gaits.DEFAULT_DT if dt is None else dt
     substeps = gaits.DEFAULT_SUBSTEPS if substeps is None else substeps
     t_wall = time.perf_counter()
     model = Model.from_params(params, num_worlds, device)
-    sim = simulator(model, dt=dt, substeps=substeps)
+    sim = Simulator(model, dt=dt, substeps=substeps)
     state = sim.initial_state()
     if settle > 0:
         sim.settle(state, settle)

@@ -68,13 +68,6 @@ def in_split() -> bool:
     return getattr(_local, "split", False)
 
 
-def simulator(model, **kw):
-    """``Simulator(model, **kw)`` for a share: graphs as for one batch (the capture gate makes them safe)."""
-    from warpworm.sim.simulator import Simulator
-
-    return Simulator(model, **kw)
-
-
 def load_kernels(device="cpu") -> None:
     """Load the kernel modules a simulation uses on ``device`` (from Warp's cache; compiled when cold), by one step and
     one snapshot of a one-world batch in this thread: exactly the modules the shares will launch, none they will not
@@ -159,7 +152,7 @@ def run_shares(fn: Callable[[int, int], dict], num_worlds: int, workers: int | N
                device="cpu") -> list[dict]:
     """``fn(lo, hi)`` for the contiguous shares of ``num_worlds`` worlds (:func:`world_shares`), one thread each
     (one share: in this thread, no gate); returns their results in world order. ``fn`` builds its own Model
-    and Simulator (through :func:`simulator`) for worlds [lo, hi). An exception in a share is re-raised here after
+    and Simulator for worlds [lo, hi). An exception in a share is re-raised here after
     every share has stopped. NumPy's OpenBLAS runs one thread meanwhile, whatever the shares
     (:func:`one_blas_thread`)."""
     shares = world_shares(num_worlds, workers)
@@ -190,4 +183,4 @@ def concat(parts: list[dict], world_axis: dict) -> dict:
 
 
 __all__ = ["blas_threads", "concat", "default_workers", "in_split", "load_kernels", "one_blas_thread",
-           "run_shares", "simulator", "world_shares"]
+           "run_shares", "world_shares"]
