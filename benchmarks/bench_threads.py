@@ -179,6 +179,27 @@ def _tasks(quick: bool, pool=None):
     return {"simulate": (simulate, n), "experiment": (experiment, len(k)), "search": (search, n)}
 
 
+def _job_rows(name: str, fn, worlds: int, modes: tuple, rounds: int) -> list[dict]:
+    """One job's rows: ``rounds`` rounds of every mode (the order reversed every other round), each result checked
+    equal to threads1's, the speedups over threads1 of the same round, and a median row per mode."""
+    rows = []
+    for rnd in range(rounds):
+        outs, these = {}, []
+        for mode in (modes if rnd % 2 == 0 else modes[::-1]):
+            outs[mode], wall, cpu, others, main = _timed(lambda: fn(mode))
+            these.append({"bench": "threads", "job": name, "worlds": worlds, "round": rnd, "mode": mode,
+                          "wall_s": wall, "cpu_s": cpu, "main_cpu_s": main, "others_cores": others})
+        for mode, out in outs.items():  # every split gives the one-batch numbers
+            assert np.array_equal(out, outs["threads1"], equal_nan=True), (name, mode)
+        base = next(r["wall_s"] for r in these if r["mode"] == "threads1")
+        for r in these:
+            r["speedup"] = base / r["wall_s"]
+        rows += these
+    return rows + [{"bench": "threads", "job": name, "worlds": worlds, "round": "median", "mode": mode,
+                    "speedup": float(np.median([r["speedup"] for r in rows if r["mode"] == mode]))}
+                   for mode in modes[1:]]
+
+
 def run(quick: bool = False) -> list[dict]:
     import multiprocessing as mp
 
@@ -189,7 +210,6 @@ def run(quick: bool = False) -> list[dict]:
     load_kernels("cpu")
     rows = []
     modes = ("threads1", "threads2", "processes2", "pool2")
-    rounds = 2 if quick else 5
     with mp.get_context("spawn").Pool(2) as pool:
         warm = set()
         for _ in range(10):  # until both processes have loaded (a task held 1 s goes to the idle one)
@@ -199,22 +219,7 @@ def run(quick: bool = False) -> list[dict]:
         for name, (fn, worlds) in _tasks(quick, pool).items():
             for mode in ("threads2", "pool2", "pool2"):  # warm: the first Model / Simulator of a size, the caches
                 fn(mode)
-            job_rows = []
-            for rnd in range(rounds):
-                outs, these = {}, []
-                for mode in (modes if rnd % 2 == 0 else modes[::-1]):
-                    outs[mode], wall, cpu, others, main = _timed(lambda: fn(mode))
-                    these.append({"bench": "threads", "job": name, "worlds": worlds, "round": rnd, "mode": mode,
-                                  "wall_s": wall, "cpu_s": cpu, "main_cpu_s": main, "others_cores": others})
-                for mode, out in outs.items():  # every split gives the one-batch numbers
-                    assert np.array_equal(out, outs["threads1"], equal_nan=True), (name, mode)
-                base = next(r["wall_s"] for r in these if r["mode"] == "threads1")
-                for r in these:
-                    r["speedup"] = base / r["wall_s"]
-                job_rows += these
-            rows += job_rows + [{"bench": "threads", "job": name, "worlds": worlds, "round": "median", "mode": mode,
-                                 "speedup": float(np.median([r["speedup"] for r in job_rows if r["mode"] == mode]))}
-                                for mode in modes[1:]]
+            rows += _job_rows(name, fn, worlds, modes, 2 if quick else 5)
     return rows
 
 

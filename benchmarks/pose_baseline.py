@@ -91,30 +91,29 @@ def creases_seen(d: dict, depth_tol: float = 2.5e-4) -> np.ndarray:
     distractor), and the triangle is not edge-on (|cos| > 0.05 between its normal and the ray). A crease with a face
     out of view shows its angle to no camera. In view, the label depth is the plane's to 0.02 mm (the exact pixel
     centres of the rasterizer's depth pass); hidden, millimetres off: the tolerance sits between."""
-    import cv2
+    from warpworm.render.distortion import distort, undistort
 
     H = d["crease_hinges"]
     N, C = len(d["depth"]), len(H)
     h, w = d["depth"].shape[1:]
+    V = d["worm/vertices"].astype(np.float64)
+    R, K = d["camera/R"], d["camera/K"]
+    dist = (d["camera/dist"] if "camera/dist" in d else np.zeros((N, 5)))[:, None]  # (N, 1, 5)
+    fx, fy, cx, cy = (K[:, 0, 0, None], K[:, 1, 1, None], K[:, 0, 2, None], K[:, 1, 2, None])
     seen = np.ones((N, C), bool)
-    for n in range(N):
-        V = d["worm/vertices"][n].astype(np.float64)
-        R, t, K = d["camera/R"][n], d["camera/t"][n], d["camera/K"][n]
-        dist = d["camera/dist"][n] if "camera/dist" in d else None
-        for a, b, c in ((H[:, 0], H[:, 1], H[:, 2]), (H[:, 1], H[:, 3], H[:, 2])):
-            cen = (V[a] + V[b] + V[c]) / 3.0
-            nrm = np.cross(V[b] - V[a], V[c] - V[a]) @ R.T  # camera frame
-            cen_c = cen @ R.T + t
-            ij = np.round(cv2.projectPoints(cen, cv2.Rodrigues(R)[0], t, K, dist)[0].reshape(-1, 2)).astype(int)
-            ray = np.c_[cv2.undistortPoints(ij.astype(np.float64).reshape(-1, 1, 2), K, dist).reshape(-1, 2),
-                        np.ones(C)]  # the pixel centre's ray (z = 1)
-            along = np.einsum("ij,ij->i", nrm, ray)
-            cos = np.abs(along) / (np.linalg.norm(nrm, axis=1) * np.linalg.norm(ray, axis=1))
-            z_plane = np.einsum("ij,ij->i", nrm, cen_c) / np.where(cos > 0.05, along, 1.0)
-            inside = (ij[:, 0] >= 0) & (ij[:, 0] < w) & (ij[:, 1] >= 0) & (ij[:, 1] < h)
-            z = np.zeros(C)
-            z[inside] = d["depth"][n][ij[inside, 1], ij[inside, 0]]
-            seen[n] &= (cos > 0.05) & inside & (np.abs(z - z_plane) < depth_tol)
+    for a, b, c in ((H[:, 0], H[:, 1], H[:, 2]), (H[:, 1], H[:, 3], H[:, 2])):
+        nrm = np.einsum("nij,ncj->nci", R, np.cross(V[:, b] - V[:, a], V[:, c] - V[:, a]))  # camera frame
+        cen = np.einsum("nij,ncj->nci", R, (V[:, a] + V[:, b] + V[:, c]) / 3.0) + d["camera/t"][:, None]
+        xd, yd = distort(cen[..., 0] / cen[..., 2], cen[..., 1] / cen[..., 2], dist)
+        iu, iv = np.round(fx * xd + cx).astype(int), np.round(fy * yd + cy).astype(int)  # the centroid's pixel
+        rx, ry, _ = undistort((iu - cx) / fx, (iv - cy) / fy, dist)  # that pixel centre's ray (z = 1)
+        ray = np.stack([rx, ry, np.ones_like(rx)], -1)
+        along = (nrm * ray).sum(-1)
+        cos = np.abs(along) / (np.linalg.norm(nrm, axis=-1) * np.linalg.norm(ray, axis=-1))
+        z_plane = (nrm * cen).sum(-1) / np.where(cos > 0.05, along, 1.0)
+        inside = (iu >= 0) & (iu < w) & (iv >= 0) & (iv < h)
+        z = d["depth"][np.arange(N)[:, None], np.clip(iv, 0, h - 1), np.clip(iu, 0, w - 1)]
+        seen &= (cos > 0.05) & inside & (np.abs(z - z_plane) < depth_tol)
     return seen
 
 

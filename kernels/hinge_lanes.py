@@ -20,7 +20,7 @@ import warp as wp
 
 from .band_cholesky import ALL_ROWS
 from .common import (LANES, PANEL_CONTACT_ALTITUDE, SLIVER_ALTITUDE, atan2_f32, fold_range, lanes, lanes_cross,
-                     lanes_dot, lanes_sqrt, wrap_angle)
+                     lanes_dot, lanes_sqrt, on_gpu, wrap_angle)
 from .substep import (BarHingeModel, BarHingeState, NewtonScratch, WorldCoefficients, add_hinge, add_hinge_rows,
                       add_wing, hinge_torque, update_hinge_angles)
 
@@ -140,12 +140,23 @@ def add_hinge_lanes(world: int, h0: int, c: WorldCoefficients, m: BarHingeModel,
 
 
 @wp.func
+def whole_lanes(nh: int) -> int:
+    """How many of ``nh`` hinges go in whole batches of lanes: all but the last nh mod LANES on the CPU, none in a
+    CUDA build (a thread per world has no vector units to fill, and the lanes' CUDA build took NVRTC over 11
+    minutes; with the count a constant 0 there, the compiler drops their code)."""
+    if on_gpu():
+        return 0
+    return (nh / LANES) * LANES
+
+
+@wp.func
 def add_hinges(world: int, c: WorldCoefficients, m: BarHingeModel, with_hessian: bool, s: BarHingeState,
                w: NewtonScratch):
     """Every hinge's :func:`~.substep.add_hinge` (``ALL_ROWS``) in order: whole batches in lanes
-    (:func:`add_hinge_lanes`), the last H mod LANES hinges one by one."""
+    (:func:`add_hinge_lanes`), the last H mod LANES hinges one by one (in a CUDA build all of them:
+    :func:`whole_lanes`)."""
     nh = m.hinges.shape[0]
-    whole = (nh / LANES) * LANES
+    whole = whole_lanes(nh)
     for h0 in range(0, whole, LANES):
         add_hinge_lanes(world, h0, c, m, with_hessian, s, w)
     for h in range(whole, nh):
@@ -155,10 +166,10 @@ def add_hinges(world: int, c: WorldCoefficients, m: BarHingeModel, with_hessian:
 @wp.func
 def update_hinge_angles_lanes(world: int, m: BarHingeModel, fold_tolerance: float, s: BarHingeState) -> int:
     """:func:`~.substep.update_hinge_angles` of every hinge (stride 1), whole batches in lanes, the last H mod LANES
-    hinges by that function: the angles unwrapped to the end of the substep into ``crease_angle``; 1 if the sheet
-    crumpled (:func:`~.common.hinge_angle_at_substep_end`), else 0."""
+    hinges by that function (in a CUDA build all of them: :func:`whole_lanes`): the angles unwrapped to the end of
+    the substep into ``crease_angle``; 1 if the sheet crumpled (:func:`~.common.hinge_angle_at_substep_end`), else 0."""
     nh = m.hinges.shape[0]
-    whole = (nh / LANES) * LANES
+    whole = whole_lanes(nh)
     crumpled = int(0)
     for h0 in range(0, whole, LANES):
         xix, xiy, xiz = gather_column(world, h0, 0, m, s)

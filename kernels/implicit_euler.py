@@ -14,13 +14,12 @@ from __future__ import annotations
 import warp as wp
 
 from .band_cholesky import ALL_ROWS, band_cholesky_factor, band_cholesky_solve
-from .common import freeze_world, on_gpu
+from .common import freeze_world
 from .hinge_lanes import add_hinges, update_hinge_angles_lanes
 from .substep import (  # noqa: F401  (CONTACT_SLIDING, CONTACT_STUCK, friction_force: read from here by tests)
     CONTACT_SLIDING, CONTACT_STUCK, CONTACTS_LANDED, WORLD_CRUMPLED, BarHingeModel, BarHingeState, NewtonScratch,
-    SubstepOptions, WorldCoefficients, add_anchors, add_bar, add_hinge, apply_step, finish_vertices, friction_force,
-    friction_row, inertia_row, predict, project_row, project_rhs, update_contacts, update_hinge_angles,
-    world_coefficients)
+    SubstepOptions, WorldCoefficients, add_anchors, add_bar, apply_step, finish_vertices, friction_force,
+    friction_row, inertia_row, predict, project_row, project_rhs, update_contacts, world_coefficients)
 
 wp.set_module_options({"enable_backward": False})
 
@@ -40,11 +39,7 @@ def elastic_terms(world: int, c: WorldCoefficients, m: BarHingeModel, opt: Subst
     for e in range(m.edges.shape[0]):
         if add_bar(world, e, ALL_ROWS, c, m, opt, with_hessian, s, w) != 0:
             return 1
-    if on_gpu():  # the scalar hinges (the lanes' CUDA build is slow to compile and no faster on a GPU)
-        for h in range(m.hinges.shape[0]):
-            add_hinge(world, h, ALL_ROWS, c, m, with_hessian, s, w)
-    else:
-        add_hinges(world, c, m, with_hessian, s, w)  # 8 at a time in SIMD lanes, the same numbers
+    add_hinges(world, c, m, with_hessian, s, w)  # 8 at a time in SIMD lanes on the CPU, the same numbers
     add_anchors(world, ALL_ROWS, c, m, anchor_target, with_hessian, s, w)
     return 0
 
@@ -180,11 +175,7 @@ def implicit_step(m: BarHingeModel, opt: SubstepOptions, f_ext: wp.array2d(dtype
             bad, statuses_changed = finish_vertices(world, 0, 1, c, m, opt, s, w)
             if statuses_changed != 0:
                 carried = False  # the factor's projection is another contact set's
-            crumpled = int(0)
-            if on_gpu():
-                crumpled = update_hinge_angles(world, 0, 1, m, opt.fold_tolerance, s)
-            else:
-                crumpled = update_hinge_angles_lanes(world, m, opt.fold_tolerance, s)
+            crumpled = update_hinge_angles_lanes(world, m, opt.fold_tolerance, s)
             if bad == 0 and crumpled != 0:
                 freeze_world(world, s.x.shape[1], s.x, s.v, w.x_prev, w.delta, s.unstable)
                 s.unstable[world] = WORLD_CRUMPLED

@@ -110,9 +110,9 @@ def test_force_plate_pulses_repeat_when_the_pass_repeats():
 
 def test_worlds_split_over_threads_equal_one_batch():
     """Worlds never interact: each experiment's arrays from two threads (contiguous world shares, their parameters
-    sliced, each its own Model and Simulator, graphs behind the capture gate) equal the one-batch run exactly. Covers a per-world incline (slope), per-world hinge
-    stiffness with anchors (compression) and per-world gait presets with the force-plate anchors (3 worlds: shares
-    of 2 and 1)."""
+    sliced, each its own Model and Simulator, graphs behind the capture gate) equal the one-batch run exactly.
+    Covers a per-world incline (slope), per-world hinge stiffness with anchors (compression) and per-world gait
+    presets with the force-plate anchors (3 worlds: shares of 2 and 1)."""
     kw = dict(duration=0.02, settle=0.02)
     one, two = (ex.slope((-2.0, 2.0, 3.0), workers=w, **kw) for w in (1, 2))
     for k in ("time", "slide", "predicted", "slides", "unstable"):

@@ -1,7 +1,7 @@
 """One batch of worlds over the cores as threads of one process (warpworm.analysis.world_split): the shares run at
-the same time on their own threads, each with its own Simulator stepping with CPU graphs behind the capture gate, and every per-world
-result (displacements, gait metrics, saved frames) equals the one-batch run bit for bit. Tiny sizes: the speed is
-measured in benchmarks/bench_threads.py, not here."""
+the same time on their own threads, each with its own Simulator stepping with CPU graphs behind the capture gate,
+and every per-world result (displacements, gait metrics, saved frames) equals the one-batch run bit for bit. Tiny
+sizes: the speed is measured in benchmarks/bench_threads.py, not here."""
 
 import threading
 import time
@@ -194,8 +194,9 @@ def test_blas_runs_one_thread_inside_a_split_whatever_the_workers():
 
 
 def test_batched_linear_prediction_equals_the_per_world_one_bit_for_bit():
-    """experiment compression / flexure's linear prediction (host NumPy, in each share after its simulation) for every world at once:
-    the per-world reference function's numbers exactly, with every world's hinge and bar stiffness different."""
+    """experiment compression / flexure's linear prediction (host NumPy, in each share after its simulation) for
+    every world at once: the per-world reference function's numbers exactly, with every world's hinge and bar
+    stiffness different."""
     from dataclasses import replace
 
     from warpworm.analysis import experiments as ex

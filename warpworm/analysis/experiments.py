@@ -35,6 +35,8 @@ from warpworm.physics import crease, gaits
 from warpworm import quiet_warp
 from warpworm.physics import magnets as mg
 from warpworm.physics.params import GAITS, WormParams
+from warpworm.analysis.world_split import world_shares  # noqa: F401  (the split's shares; re-exported)
+from warpworm.sim.simulator import Simulator
 
 EXPERIMENTS = ("force-distance", "compression", "flexure", "slope", "force-plate", "strain", "deformation")
 
@@ -59,12 +61,6 @@ NO_MAGNETS = dict(ipm_moment=np.zeros(3), epm_moment=0.0)
 def _dt_substeps(dt, substeps):
     return (getattr(gaits, "DEFAULT_DT", 4.0e-3) if dt is None else float(dt),
             gaits.DEFAULT_SUBSTEPS if substeps is None else int(substeps))
-
-
-
-
-from warpworm.sim.simulator import Simulator as _Simulator
-from warpworm.analysis.world_split import world_shares  # noqa: F401  (the split's shares; re-exported)
 
 
 def split_run(core, params: WormParams, num_worlds: int, world_axis: dict, *, workers: int | None = 1,
@@ -197,7 +193,7 @@ GAIT_RECORD = ("positions", "bar_strain", "anchor_force", "magnet_pos", "time", 
 def _gait_core(model, params, *, duration, sample_every, settle, dt, substeps, rewind=False) -> dict:
     """Settle, then record the keys of :data:`GAIT_RECORD` every ``sample_every`` steps for ``duration`` [s]
     (``rewind``: each world's sinusoidal path repeats its first pass in place, :class:`warpworm.physics.gaits.EpmPath`)."""
-    sim = _Simulator(model, dt=dt, substeps=substeps)
+    sim = Simulator(model, dt=dt, substeps=substeps)
     if rewind:
         sim.set_path(replace(model.default_path, rewind=np.ones(1)))
     state = sim.initial_state()
@@ -282,7 +278,7 @@ def _quasi_static_core(model, params, *, anchors_moving, direction, displacement
     """The simulation of :func:`_quasi_static` on one batch (one thread's share): raw per-world readings, and with
     ``linear_axis`` the share's own linear prediction after it (:func:`_linear_units`): no third thread beside the
     shares, and one share's prediction overlaps the other's replays (docs/dynamics.md, "One job on every core")."""
-    sim = _Simulator(model, dt=dt, substeps=substeps)
+    sim = Simulator(model, dt=dt, substeps=substeps)
     state = sim.initial_state()
     av = model.anchor_vertex.numpy()
     moving = np.isin(av, anchors_moving)
@@ -498,7 +494,7 @@ def flexure(hinge_stiffness=DEFAULT_HINGE_SWEEP, max_deflection: float = 2.0e-3,
 def _slope_core(model, params, *, frame_times, dt, substeps) -> dict:
     """The simulation of :func:`slope` on one batch: vertex centroids ``(S, W, 3)`` [m] (float64) and world times
     ``(S, W)`` [s] at ``frame_times`` from t = 0, magnets off; ``unstable (W,)`` at the end."""
-    sim = _Simulator(model, dt=dt, substeps=substeps)
+    sim = Simulator(model, dt=dt, substeps=substeps)
     state = sim.initial_state()
     rec = sim.run(state, frame_times, epm=False, keys=("positions", "time", "unstable"), stack=True)
     return {"centroid": rec["positions"].astype(np.float64).mean(axis=2), "time": rec["time"],

@@ -8,19 +8,18 @@ is paid per share to start (a spawned process paid ~1-1.5 s of Python, ``import 
 that is what made a short job on 2 cores 1.1x one core on a busy machine; benchmarks/bench_threads.py).
 
 Two rules make the threads safe with Warp 1.19: the kernel modules are loaded once before the threads start (Warp
-loads a module on its first launch, without a lock: two threads could load it twice), and a share holds the capture
-gate (:mod:`warpworm.sim.capture_gate`) except while it replays its step graphs: a graph capture is process-wide
-state in Warp (another thread's launches during it would be registered into it), a replay touches none of it. So
-the shares step with CPU graphs like one batch (graphs replay the same trajectory bit for bit, tests/test_step_graph.py)
-and run at once where a simulation spends its time, in the replays.
+loads a module on its first launch, without a lock: two threads could load it twice), and the shares hold the
+capture gate (:mod:`warpworm.sim.capture_gate`) shared for their Warp work while a capture takes it alone: a graph
+capture is process-wide state in Warp (another thread's launches during it would be registered into it), a replay
+touches none of it. So the shares step with CPU graphs like one batch (graphs replay the same trajectory bit for
+bit, tests/test_step_graph.py) and run at once but for their captures.
 
 NumPy's OpenBLAS runs one thread inside a split, whatever the worker count (:func:`one_blas_thread`): its rounding
 depends on its thread count, so a per-world result computed with BLAS would otherwise depend on the split, and a
 two-thread OpenBLAS spin-waits on small solves (compression's 192 linear predictions: 5-11 CPU-s at 2 BLAS threads
 against 1.1 at one on this 2-core machine). Host work per world (e.g. compression's NumPy prediction) belongs in the
 share's own function, after its simulation: no third thread competes with the shares for two cores, and a share's
-host work (behind the gate, and mostly holding the GIL anyway) overlaps the other share's replays
-(docs/dynamics.md, "One job on every core").
+host work overlaps the other share's replays (docs/dynamics.md, "One job on every core").
 
 Used by :func:`warpworm.analysis.gait_runs.run_gait_split` (``simulate``, ``search-gait``) and
 :func:`warpworm.analysis.experiments.split_run` (``experiment``).

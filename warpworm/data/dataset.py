@@ -521,7 +521,7 @@ def read_manifest(root) -> dict:
                            "--resume to rebuild it from the shards") from exc
     if not isinstance(m, dict) or m.get("format") != FORMAT or not isinstance(m.get("shards"), list):
         raise DatasetError(f"{mpath}: not a warpworm manifest (expected a JSON object with format "
-                           "'warpworm-dataset' and a shards list); rerun the job with --resume to rebuild it")
+                           f"{FORMAT!r} and a shards list); rerun the job with --resume to rebuild it")
     return m
 
 

@@ -51,7 +51,8 @@ def hold():
     try:
         yield
     finally:
-        _leave()
+        if _local.held:  # not where a capture's wait was interrupted (it left the gate, and did not come back)
+            _leave()
 
 
 @contextmanager
@@ -80,13 +81,9 @@ def capturing():
         try:
             while _state["capturing"] or _state["inside"]:
                 _cond.wait()
-        except BaseException:
+        finally:
             _state["waiting"] -= 1
-            _cond.notify_all()
-            _local.held = True  # as if re-entered: hold() leaves once
-            _state["inside"] += 1
-            raise
-        _state["waiting"] -= 1
+            _cond.notify_all()  # entrants held off by this queued capture (if the wait was interrupted)
         _state["capturing"] = True
     try:
         yield
