@@ -4,20 +4,32 @@ Fits ridge regressions from label features to the 105 crease angles on a trainin
 test set as a fraction of predicting the training mean (the learnability benchmark's baseline): from the exact 3-D
 keypoints in the body frame, from the exact 2-D keypoints (intrinsics, translation and scale removed; linear and
 quadratic features), from those with Gaussian pixel noise of sigma px (what a keypoint detector of that accuracy
-leaves), from the four deformation ratios, and from the worm's geometry and crease stiffness (per world). It says where the crease information lies: if noisy 2-D keypoints
-cannot reach a ratio, a network must read the folds from shading and outline, not from the keypoint layout.
+leaves), from the four deformation ratios, from the worm's geometry and crease stiffness (per world), from the
+2-D projections of all the mesh's vertices (exact and with the same noise: what a detector of every fold vertex
+would give), and from the body-frame normals of the triangles in view (``pose_baseline.faces_seen``; exact and with
+angular noise: what reading the panels' orientation from their shading would give). It says where the crease
+information lies: if noisy 2-D keypoints cannot reach a ratio, a network must read the folds from shading and
+outline, not from the keypoint layout.
 
     python benchmarks/crease_oracle.py out/pose_bench/train out/pose_bench/test [--noise 0.5 1 2 3]
+
+Needs the label depth (``faces_seen``) and the mesh vertices in both sets (every dataset has them).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import sys
+from pathlib import Path
 
 import numpy as np
 
-KEYS = ("creases/angle", "keypoints/body", "keypoints/pixel", "camera/K", "labels/deformation")
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from pose_baseline import faces_seen  # noqa: E402
+
+KEYS = ("creases/angle", "keypoints/body", "keypoints/pixel", "camera/K", "labels/deformation", "camera/R", "camera/t",
+        "worm/vertices", "poses/body", "depth")
 GEOMETRY = ("params/worm.a", "params/worm.b", "params/worm.l0", "params/worm.hinge_stiffness")
 """The worm's randomized geometry [m] and crease stiffness [N/rad]: each world's rest folds follow from them (eq. 7)."""
 
@@ -27,7 +39,37 @@ def load(root: str) -> dict[str, np.ndarray]:
     from warpworm.data import dataset
 
     with dataset.open(root) as ds:
-        return {k: ds.read(k).astype(np.float64) for k in KEYS + GEOMETRY}
+        d = {k: ds.read(k).astype(np.float64) for k in KEYS + GEOMETRY + (("camera/dist",) if "camera/dist" in
+                                                                              ds.keys() else ())}
+        d["mesh_triangles"] = np.asarray(ds.attrs["mesh_triangles"])
+    return d
+
+
+def vertex_pixels(d: dict) -> np.ndarray:
+    """(N, V, 2) [px]: the mesh vertices ``worm/vertices`` projected by each sample's camera (lens distortion
+    included), hidden or not."""
+    from warpworm.render.distortion import distort
+
+    c = np.einsum("nij,ncj->nci", d["camera/R"], d["worm/vertices"]) + d["camera/t"][:, None]
+    dist = d["camera/dist"][:, None] if "camera/dist" in d else np.zeros((len(c), 1, 5))
+    xd, yd = distort(c[..., 0] / c[..., 2], c[..., 1] / c[..., 2], dist)
+    K = d["camera/K"]
+    return np.stack([K[:, 0, 0, None] * xd + K[:, 0, 2, None], K[:, 1, 1, None] * yd + K[:, 1, 2, None]], -1)
+
+
+def normals_in_view(d: dict, rng=None, noise_deg: float = 0.0) -> np.ndarray:
+    """(N, 4T): each mesh triangle's unit normal in the body frame (``poses/body``), with Gaussian angular noise of
+    ``noise_deg`` per component, and its in-view flag; zeros for a triangle out of view."""
+    T = d["mesh_triangles"]
+    V = d["worm/vertices"]
+    n = np.einsum("nji,ncj->nci", d["poses/body"][:, :3, :3], np.cross(V[:, T[:, 1]] - V[:, T[:, 0]],
+                                                                       V[:, T[:, 2]] - V[:, T[:, 0]]))
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    if noise_deg:
+        n = n + rng.normal(0.0, np.radians(noise_deg), n.shape)
+        n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    seen = faces_seen(d, T)
+    return np.c_[(n * seen[..., None]).reshape(len(n), -1), seen]
 
 
 def ridge_ratio(x_tr, y_tr, x_te, y_te, lam: float) -> float:
@@ -77,6 +119,15 @@ def main(argv=None) -> int:
         rows[f"2-D keypoints + {sigma:g} px noise, linear"] = ridge_ratio(n_tr, y_tr, n_te, y_te, 1e-2)
         rows[f"2-D keypoints + {sigma:g} px noise, quadratic"] = ridge_ratio(quadratic(n_tr), y_tr, quadratic(n_te),
                                                                             y_te, 1e-1)
+    v_tr, v_te = vertex_pixels(tr), vertex_pixels(te)
+    for sigma in [0.0] + list(a.noise):
+        n_tr = layout_2d(v_tr + rng.normal(0, sigma, v_tr.shape), tr["camera/K"])
+        n_te = layout_2d(v_te + rng.normal(0, sigma, v_te.shape), te["camera/K"])
+        rows[f"2-D mesh vertices ({v_tr.shape[1]}) + {sigma:g} px noise, quadratic"] = ridge_ratio(
+            quadratic(n_tr), y_tr, quadratic(n_te), y_te, 1e-2)
+    for deg in (0.0, 2.0, 5.0):
+        rows[f"normals of the triangles in view (body frame) + {deg:g} deg noise, linear"] = ridge_ratio(
+            normals_in_view(tr, rng, deg), y_tr, normals_in_view(te, rng, deg), y_te, 1e-3)
     print(f"crease MAE of the training mean on the test set: "
           f"{np.degrees(np.abs(y_tr.mean(0) - y_te).mean()):.2f} deg ({len(y_tr)} train, {len(y_te)} test)")
     print("| oracle (ridge regression) | crease MAE / mean baseline |\n|---|---|")

@@ -14,6 +14,10 @@ scale at the worm, px/m). Goals
 (issue 24): cross-engine agnostic keypoint error <= 1.5x in-domain; swap rate equal within 5 points; crease MAE
 <= 0.6x the mean baseline in-domain.
 
+Two readers of the folds beyond the default head (docs/dataset.md, "Where production's creases are"): ``--head
+triangles`` also samples the features at every mesh triangle, placed from the predicted keypoints; ``--crop S`` reads
+an S x S crop around the worm's box (top-down, COCO's protocol with ground-truth boxes) instead of the whole image.
+
     pip install torch  # CPU wheel is enough
     python benchmarks/pose_baseline.py --config default     # 3072 train / 192 test at 128^2, 3000 steps
     python benchmarks/pose_baseline.py --data out/pose_bench --skip-generate     # reuse generated datasets
@@ -70,51 +74,124 @@ def load(root: Path, extra: tuple = ()) -> dict[str, np.ndarray]:
     import h5py
 
     keys = ("rgb", "keypoints/pixel", "keypoints/visibility", "keypoints/body", "camera/K", "camera/R", "camera/t",
-            "poses/body", "creases/angle", "labels/deformation", "sample_id") + tuple(extra)
+            "poses/body", "creases/angle", "labels/deformation", "labels/bbox_obj", "sample_id") + tuple(extra)
     parts: dict[str, list] = {k: [] for k in keys}
     names = hinges = None
     for p in sorted(root.glob("shard-*.h5")):
         with h5py.File(p, "r") as f:
             names, hinges = json.loads(f.attrs["keypoint_names"]), np.asarray(f.attrs["crease_hinges"])
+            triangles = np.asarray(f.attrs["mesh_triangles"])
             for k in keys:
                 if k in f or k not in extra:  # an optional extra (camera/dist: lens distortion off) may be absent
                     parts[k].append(f[k][...])
     d = {k: np.concatenate(v) for k, v in parts.items() if v}
-    d["names"], d["crease_hinges"] = names, hinges
+    d["names"], d["crease_hinges"], d["mesh_triangles"] = names, hinges, triangles
     return d
 
 
-def creases_seen(d: dict, depth_tol: float = 2.5e-4) -> np.ndarray:
-    """(N, C) bool: both triangles of crease c (stencil (i, j, k, l), shared edge j-k: triangles (i, j, k) and
-    (j, l, k)) are in view at the pixel of their centroid: the label depth there is the depth of the triangle's own
-    plane along that pixel's ray (within ``depth_tol`` [m]), not nearer (hidden under the worm, behind a fold or a
-    distractor), and the triangle is not edge-on (|cos| > 0.05 between its normal and the ray). A crease with a face
-    out of view shows its angle to no camera. In view, the label depth is the plane's to 0.02 mm (the exact pixel
-    centres of the rasterizer's depth pass); hidden, millimetres off: the tolerance sits between."""
+CROP_MARGIN = 1.15
+"""A crop's side over the longer side of the worm's box (``labels/bbox_obj``)."""
+CROP_JITTER = 0.05
+"""The training crops' box jitter (scale, log-normal; centre, in units of the side): a detector's box is not exact."""
+
+
+def crop_to_worm(d: dict, side: int, rng: np.random.Generator | None = None, jitter: float = 0.0) -> dict:
+    """The top-down view of ``d``: each image resampled (bilinear) to a ``side`` x ``side`` crop of the square around
+    the worm's box ``labels/bbox_obj`` (CROP_MARGIN x its longer side; with ``rng``, its scale and centre jittered by
+    ``jitter``, log-normal / in units of the side, as a detector's box would be), keypoints and intrinsics mapped into
+    the crop (pixel centres at integers: u = x0 + (j + 0.5) s / side - 0.5), keypoints outside it marked unseen.
+    Evaluating with the label's box is COCO's top-down keypoint protocol with ground-truth boxes. The depth is
+    dropped (the seen / unseen crease split needs the full image)."""
+    import torch
+
+    box = d["labels/bbox_obj"].astype(np.float64)
+    c = box[:, :2] + box[:, 2:] / 2
+    s = np.maximum(CROP_MARGIN * box[:, 2:].max(1), 16.0)
+    if rng is not None and jitter:
+        s = s * np.exp(rng.normal(0.0, jitter, len(s)))
+        c = c + rng.normal(0.0, jitter, c.shape) * s[:, None]
+    x0 = c - s[:, None] / 2  # native coordinates of the crop's outer corner
+    H, W = d["rgb"].shape[1:3]
+    j = (np.arange(side) + 0.5) / side
+    out = np.empty((len(c), side, side, 3), np.uint8)
+    for a in range(0, len(c), 128):
+        b = slice(a, a + 128)
+        u = x0[b, 0, None] + j * s[b, None] - 0.5  # sample points' native pixel coordinates
+        v = x0[b, 1, None] + j * s[b, None] - 0.5
+        gx, gy = np.broadcast_arrays(((2 * u + 1) / W - 1)[:, None, :], ((2 * v + 1) / H - 1)[:, :, None])
+        img = torch.from_numpy(d["rgb"][b]).permute(0, 3, 1, 2).float()
+        crop = torch.nn.functional.grid_sample(img, torch.from_numpy(np.stack([gx, gy], -1)).float(),
+                                               align_corners=False)
+        out[b] = crop.round().clamp(0, 255).to(torch.uint8).permute(0, 2, 3, 1).numpy()
+    f = side / s
+    e = {k: v for k, v in d.items() if k != "depth"}
+    e["rgb"] = out
+    e["keypoints/pixel"] = (d["keypoints/pixel"] + 0.5 - x0[:, None]) * f[:, None, None] - 0.5
+    K = d["camera/K"].copy()
+    K[:, :2, :2] *= f[:, None, None]
+    K[:, :2, 2] = (d["camera/K"][:, :2, 2] + 0.5 - x0) * f[:, None] - 0.5
+    e["camera/K"] = K
+    kp = e["keypoints/pixel"]
+    outside = ((kp < -0.5) | (kp > side - 0.5)).any(-1)
+    e["keypoints/visibility"] = np.where(outside, 0, d["keypoints/visibility"]).astype(d["keypoints/visibility"].dtype)
+    return e
+
+
+def faces_seen(d: dict, tris: np.ndarray, depth_tol: float = 2.5e-4) -> np.ndarray:
+    """(N, T) bool: triangle t (vertex indices ``tris[t]`` into ``worm/vertices``) is in view at the pixel of its
+    centroid: the label depth there is the depth of the triangle's own plane along that pixel's ray (within
+    ``depth_tol`` [m]), not nearer (hidden under the worm, behind a fold or a distractor), and the triangle is not
+    edge-on (|cos| > 0.05 between its normal and the ray). In view, the label depth is the plane's to 0.02 mm (the
+    exact pixel centres of the rasterizer's depth pass); hidden, millimetres off: the tolerance sits between."""
     from warpworm.render.distortion import distort, undistort
 
-    H = d["crease_hinges"]
-    N, C = len(d["depth"]), len(H)
+    N = len(d["depth"])
     h, w = d["depth"].shape[1:]
     V = d["worm/vertices"].astype(np.float64)
     R, K = d["camera/R"], d["camera/K"]
     dist = (d["camera/dist"] if "camera/dist" in d else np.zeros((N, 5)))[:, None]  # (N, 1, 5)
     fx, fy, cx, cy = (K[:, 0, 0, None], K[:, 1, 1, None], K[:, 0, 2, None], K[:, 1, 2, None])
-    seen = np.ones((N, C), bool)
-    for a, b, c in ((H[:, 0], H[:, 1], H[:, 2]), (H[:, 1], H[:, 3], H[:, 2])):
-        nrm = np.einsum("nij,ncj->nci", R, np.cross(V[:, b] - V[:, a], V[:, c] - V[:, a]))  # camera frame
-        cen = np.einsum("nij,ncj->nci", R, (V[:, a] + V[:, b] + V[:, c]) / 3.0) + d["camera/t"][:, None]
-        xd, yd = distort(cen[..., 0] / cen[..., 2], cen[..., 1] / cen[..., 2], dist)
-        iu, iv = np.round(fx * xd + cx).astype(int), np.round(fy * yd + cy).astype(int)  # the centroid's pixel
-        rx, ry, _ = undistort((iu - cx) / fx, (iv - cy) / fy, dist)  # that pixel centre's ray (z = 1)
-        ray = np.stack([rx, ry, np.ones_like(rx)], -1)
-        along = (nrm * ray).sum(-1)
-        cos = np.abs(along) / (np.linalg.norm(nrm, axis=-1) * np.linalg.norm(ray, axis=-1))
-        z_plane = (nrm * cen).sum(-1) / np.where(cos > 0.05, along, 1.0)
-        inside = (iu >= 0) & (iu < w) & (iv >= 0) & (iv < h)
-        z = d["depth"][np.arange(N)[:, None], np.clip(iv, 0, h - 1), np.clip(iu, 0, w - 1)]
-        seen &= (cos > 0.05) & inside & (np.abs(z - z_plane) < depth_tol)
-    return seen
+    a, b, c = tris[:, 0], tris[:, 1], tris[:, 2]
+    nrm = np.einsum("nij,ncj->nci", R, np.cross(V[:, b] - V[:, a], V[:, c] - V[:, a]))  # camera frame
+    cen = np.einsum("nij,ncj->nci", R, (V[:, a] + V[:, b] + V[:, c]) / 3.0) + d["camera/t"][:, None]
+    xd, yd = distort(cen[..., 0] / cen[..., 2], cen[..., 1] / cen[..., 2], dist)
+    iu, iv = np.round(fx * xd + cx).astype(int), np.round(fy * yd + cy).astype(int)  # the centroid's pixel
+    rx, ry, _ = undistort((iu - cx) / fx, (iv - cy) / fy, dist)  # that pixel centre's ray (z = 1)
+    ray = np.stack([rx, ry, np.ones_like(rx)], -1)
+    along = (nrm * ray).sum(-1)
+    cos = np.abs(along) / (np.linalg.norm(nrm, axis=-1) * np.linalg.norm(ray, axis=-1))
+    z_plane = (nrm * cen).sum(-1) / np.where(cos > 0.05, along, 1.0)
+    inside = (iu >= 0) & (iu < w) & (iv >= 0) & (iv < h)
+    z = d["depth"][np.arange(N)[:, None], np.clip(iv, 0, h - 1), np.clip(iu, 0, w - 1)]
+    return (cos > 0.05) & inside & (np.abs(z - z_plane) < depth_tol)
+
+
+def creases_seen(d: dict, depth_tol: float = 2.5e-4) -> np.ndarray:
+    """(N, C) bool: both triangles of crease c (stencil (i, j, k, l), shared edge j-k: triangles (i, j, k) and
+    (j, l, k)) are in view (:func:`faces_seen`). A crease with a face out of view shows its angle to no camera."""
+    H = d["crease_hinges"]
+    return faces_seen(d, H[:, [0, 1, 2]], depth_tol) & faces_seen(d, H[:, [1, 3, 2]], depth_tol)
+
+
+def triangle_weights(d: dict, k: int = 8, ridge: float = 1e-2) -> np.ndarray:
+    """(T, P) affine weights (rows sum to 1) that place each mesh triangle's centroid from the P keypoints: a ridge
+    fit (``ridge``, in units of the body's RMS size) over its k nearest keypoints on the training set's mean
+    body-frame shape. ``W @ uv`` then puts a point on every panel from keypoints alone: from the exact ones, within
+    0.8 px (median; 90 %: 2.9 px) of the centroid's projection at production's 128², 1.6 px (3.8 px) on the default
+    config's nearer views (the affine approximation of the perspective, and the folds' own motion). The ridge keeps
+    the weights small where the nearest keypoints are near-collinear (least norm: up to 13, which multiplies the
+    keypoints' errors). Reads ``worm/vertices``, ``poses/body``, ``keypoints/body`` and ``mesh_triangles``."""
+    Rb, tb = d["poses/body"][:, :3, :3], d["poses/body"][:, :3, 3]
+    body = np.einsum("nji,ncj->nci", Rb, d["worm/vertices"].astype(np.float64) - tb[:, None])
+    centroids = body[:, d["mesh_triangles"]].mean(2).mean(0)  # (T, 3)
+    kp = d["keypoints/body"].mean(0)  # (P, 3)
+    scale = np.sqrt(((kp - kp.mean(0)) ** 2).sum(1).mean())  # [m]: the fit in units of the body's size
+    W = np.zeros((len(centroids), len(kp)))
+    for t, c in enumerate(centroids):
+        near = np.argsort(np.linalg.norm(kp - c, axis=1))[:k]
+        A = np.r_[(kp[near] - c).T / scale, 10.0 * np.ones((1, len(near)))]  # x, y, z about c; the sum, stiffly
+        W[t, near] = np.linalg.solve(A.T @ A + ridge * np.eye(len(near)), A.T @ np.r_[0.0, 0.0, 0.0, 10.0])
+    return W
 
 
 def flip_permutation(names: list[str]) -> np.ndarray:
@@ -129,7 +206,8 @@ def flip_permutation(names: list[str]) -> np.ndarray:
 
 # ---------------------------------------------------------------------------------------------------------------------
 # model
-def build_model(num_kp: int, num_reg: int, size: int, net_size: int | None = None, head: str = "keypoints"):
+def build_model(num_kp: int, num_reg: int, size: int, net_size: int | None = None, head: str = "keypoints",
+                tri_w: np.ndarray | None = None):
     import torch
     from torch import nn
 
@@ -141,7 +219,9 @@ def build_model(num_kp: int, num_reg: int, size: int, net_size: int | None = Non
         """Stride-4 feature map -> keypoint heatmaps (soft-argmax to pixels); creases + ratios from the globally
         pooled deep features (``head="global"``) or, by default (``head="keypoints"``), also from the stride-4
         features pooled under each keypoint's heatmap and the predicted keypoints' normalized 2-D layout: a fold
-        shows as the shading and outline of the panels next to the keypoints, which a global average washes out."""
+        shows as the shading and outline of the panels next to the keypoints, which a global average washes out.
+        ``head="triangles"`` adds 16 features sampled (bilinearly) at every mesh triangle's image point, placed from
+        the predicted keypoints by ``tri_w`` (:func:`triangle_weights`): the panels' shading, read where each is."""
 
         def __init__(self):
             super().__init__()
@@ -151,7 +231,11 @@ def build_model(num_kp: int, num_reg: int, size: int, net_size: int | None = Non
             self.deep = nn.Sequential(block(48, 64, 2), block(64, 96, 2), nn.AdaptiveAvgPool2d(1), nn.Flatten())
             self.heat = nn.Conv2d(48, num_kp, 1)
             self.head = head
-            n_in = 96 + (num_kp * (48 + 2) if head == "keypoints" else 0)
+            n_in = 96 + (num_kp * (48 + 2) if head in ("keypoints", "triangles") else 0)
+            if head == "triangles":
+                self.register_buffer("tri_w", torch.tensor(tri_w, dtype=torch.float32))
+                self.tri_feat = nn.Conv2d(48, 16, 1)
+                n_in += len(tri_w) * 16
             self.reg = nn.Sequential(nn.Linear(n_in, 256), nn.ReLU(inplace=True), nn.Linear(256, num_reg))
             self.pool = max(1, size // (net_size or size))  # the network sees size / pool pixels (area average)
             self.stride = self.pool * 4.0  # native pixels per heatmap cell
@@ -169,11 +253,17 @@ def build_model(num_kp: int, num_reg: int, size: int, net_size: int | None = Non
             uv = torch.stack([(p.sum(2) * xs).sum(-1), (p.sum(3) * ys).sum(-1)], dim=-1)
             self.cells = (xs, ys)
             z = self.deep(f)
-            if self.head == "keypoints":
+            if self.head in ("keypoints", "triangles"):
                 at_kp = torch.einsum("nkhw,nchw->nkc", p, f).reshape(n, -1)  # features under each heatmap
                 rel = uv - uv.mean(1, keepdim=True)  # the 2-D layout, translation and scale removed
                 rel = rel / rel.pow(2).sum(-1).mean(1).sqrt().clamp(min=1e-3)[:, None, None]
                 z = torch.cat([z, at_kp, rel.reshape(n, -1)], dim=1)
+            if self.head == "triangles":  # grid_sample's [-1, 1] spans the feature map's outer cell edges
+                pts = torch.einsum("tp,npc->ntc", self.tri_w, uv.detach())  # (n, T, 2) native px
+                grid = torch.stack([(pts[..., 0] + 0.5) / (ww * self.stride), (pts[..., 1] + 0.5) / (hh * self.stride)],
+                                   -1) * 2.0 - 1.0
+                at_tri = nn.functional.grid_sample(self.tri_feat(f), grid[:, :, None], align_corners=False)
+                z = torch.cat([z, at_tri.reshape(n, -1)], dim=1)
             return uv, self.reg(z), logp
 
     return Net()
@@ -213,7 +303,8 @@ def train(d: dict, a) -> tuple[object, dict, dict]:
     kp = torch.from_numpy(d["keypoints/pixel"].astype(np.float32))
     w = torch.from_numpy((d["keypoints/visibility"] > 0).astype(np.float32))
     reg = torch.from_numpy(_targets(d, stats))
-    model = build_model(kp.shape[1], reg.shape[1], a.size, a.net_size, a.head)
+    model = build_model(kp.shape[1], reg.shape[1], a.size, a.net_size, a.head,
+                        triangle_weights(d) if a.head == "triangles" else None)
     opt = torch.optim.AdamW(model.parameters(), lr=2e-3, weight_decay=1e-4)
     # cosine decay over the step budget: the last epochs average out the batch noise instead of jumping on it
     sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda i: 0.5 * (1.0 + np.cos(np.pi * min(i / a.steps, 1.0))))
@@ -384,8 +475,12 @@ def main(argv=None) -> int:
     ap.add_argument("--size", type=int, default=128, help="square image side [px]")
     ap.add_argument("--net-size", type=int, default=32,
                     help="side the network sees [px] (images area-averaged down to it; keypoints stay native px)")
-    ap.add_argument("--head", choices=("keypoints", "global"), default="keypoints",
-                    help="crease/ratio head: features under the keypoints + their 2-D layout, or global pooling only")
+    ap.add_argument("--head", choices=("keypoints", "global", "triangles"), default="keypoints",
+                    help="crease/ratio head: features under the keypoints + their 2-D layout, global pooling only, or "
+                         "keypoints + features sampled on every mesh triangle placed from the keypoints")
+    ap.add_argument("--crop", type=int, default=0,
+                    help="top-down: the network reads a CROP x CROP crop around the worm's box (labels/bbox_obj) "
+                         "instead of the whole image (--size: the rendered side); 0: the whole image")
     ap.add_argument("--spp", type=int, default=16, help="path-traced samples per pixel")
     ap.add_argument("--no-pathtraced", action="store_true", help="skip the path-traced test set")
     ap.add_argument("--steps", type=int, default=3000, help="training budget: optimizer steps of --batch images")
@@ -404,14 +499,19 @@ def main(argv=None) -> int:
     paths = generate_sets(a)
     if a.no_pathtraced:
         paths.pop("test_pt")
-    tr = load(paths["train"])
-    model, stats, info = train(tr, a)
+    tr = load(paths["train"], ("worm/vertices",) if a.head == "triangles" else ())
+    if a.crop:  # the network sees the crop at its own resolution
+        tr = crop_to_worm(tr, a.crop, np.random.default_rng(a.seed), CROP_JITTER)
+    model, stats, info = train(tr, argparse.Namespace(**{**vars(a), **({"size": a.crop, "net_size": a.crop}
+                                                                          if a.crop else {})}))
     stats["kp_mean"] = tr["keypoints/pixel"].mean(0)
     body_model = tr["keypoints/body"].mean(0)
     flip = flip_permutation(tr["names"])
     res = {}
     for name in [k for k in ("test", "test_pt") if k in paths]:
         d = load(paths[name], SEEN_KEYS)
+        if a.crop:
+            d = crop_to_worm(d, a.crop)
         res[name] = evaluate(*predict(model, d, stats), d, flip, stats, body_model)
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
                             cwd=Path(__file__).parent).stdout.strip()
