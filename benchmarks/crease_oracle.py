@@ -47,14 +47,13 @@ def load(root: str) -> dict[str, np.ndarray]:
 
 def vertex_pixels(d: dict) -> np.ndarray:
     """(N, V, 2) [px]: the mesh vertices ``worm/vertices`` projected by each sample's camera (lens distortion
-    included), hidden or not."""
-    from warpworm.render.distortion import distort
+    included: ``Cameras.project``), hidden or not."""
+    from warpworm.render.camera import Cameras
 
-    c = np.einsum("nij,ncj->nci", d["camera/R"], d["worm/vertices"]) + d["camera/t"][:, None]
-    dist = d["camera/dist"][:, None] if "camera/dist" in d else np.zeros((len(c), 1, 5))
-    xd, yd = distort(c[..., 0] / c[..., 2], c[..., 1] / c[..., 2], dist)
-    K = d["camera/K"]
-    return np.stack([K[:, 0, 0, None] * xd + K[:, 0, 2, None], K[:, 1, 1, None] * yd + K[:, 1, 2, None]], -1)
+    N = len(d["camera/K"])
+    cams = Cameras(K=d["camera/K"], R=d["camera/R"], t=d["camera/t"], world=np.arange(N), width=0, height=0,
+                   dist=d.get("camera/dist"))
+    return cams.project(np.asarray(d["worm/vertices"], np.float64))[0]
 
 
 def normals_in_view(d: dict, rng=None, noise_deg: float = 0.0) -> np.ndarray:
