@@ -204,6 +204,26 @@ def test_exported_keypoints_are_distinct_points(data_dir):
         assert [p[p[i]] for i in range(16)] == list(range(16))
 
 
+def test_exported_surface_keypoints_project_through_the_lens_as_opencv_does():
+    """The dorsal points the exports add are projected with each camera's lens distortion (``render.distortion``),
+    like the images and the dataset's own keypoints: equal to ``cv2.projectPoints`` with the same coefficients."""
+    import cv2
+
+    from warpworm.data import export_keypoints as ek
+
+    rng = np.random.default_rng(11)
+    pts = rng.uniform(-0.03, 0.03, (3, 5, 3))
+    R = np.stack([cv2.Rodrigues(rng.normal(size=3))[0] for _ in range(3)])
+    t = np.c_[rng.uniform(-0.01, 0.01, (3, 2)), rng.uniform(0.15, 0.3, 3)]
+    K = np.array([[[f, 0.0, 127.5], [0.0, f, 120.0], [0.0, 0.0, 1.0]] for f in (200.0, 260.0, 320.0)])
+    dist = np.c_[rng.uniform(-0.25, 0.25, (3, 2)), rng.uniform(-0.002, 0.002, (3, 2)), np.zeros(3)]
+    uv, z = ek.project(pts, K, R, t, dist)
+    for i in range(3):
+        want = cv2.projectPoints(pts[i], cv2.Rodrigues(R[i])[0], t[i], K[i], dist[i])[0][:, 0]
+        np.testing.assert_allclose(uv[i], want, atol=1e-9)
+        np.testing.assert_allclose(z[i], (pts[i] @ R[i].T + t[i])[:, 2], atol=1e-15)
+
+
 def test_yolo_export_in_ultralytics_format(data_dir, tmp_path):
     import yaml
 

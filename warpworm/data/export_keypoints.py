@@ -77,13 +77,15 @@ def dorsal_vertices(n_units: int, rest_vertices: np.ndarray) -> np.ndarray:
     return np.asarray(out)
 
 
-def project(points: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """World points (N, P, 3) [m] through cameras K, R, t (N, ...) -> pixels (N, P, 2) and camera depth (N, P) [m]."""
-    c = np.einsum("nij,npj->npi", R, points) + t[:, None, :]
-    z = c[..., 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        uv = np.einsum("nij,npj->npi", K, c)[..., :2] / z[..., None]
-    return uv, z
+def project(points: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray,
+            dist: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """World points (N, P, 3) [m] through cameras K, R, t (N, ...) and their lens distortion ``dist`` (N, 5), OpenCV's
+    (k1, k2, p1, p2, k3; None: pinhole), as the renderer draws them -> pixels (N, P, 2) and camera depth (N, P) [m]."""
+    from warpworm.render.camera import Cameras
+
+    cams = Cameras(K=K, R=R, t=t, world=np.arange(len(K)), width=0, height=0, dist=dist)
+    uv, pc = cams.project(np.asarray(points, np.float64))
+    return uv, pc[..., 2]
 
 
 def visibility(uv: np.ndarray, z: np.ndarray, depth: np.ndarray) -> np.ndarray:
@@ -126,6 +128,7 @@ class KeypointExporter:
         if not len(self.dorsal):
             return uv, vis
         verts = r.read("worm/vertices", idx)[:, self.dorsal].astype(np.float64)
-        duv, z = project(verts, r.read("camera/K", idx), r.read("camera/R", idx), r.read("camera/t", idx))
+        dist = r.read("camera/dist", idx) if "camera/dist" in r.keys() else None  # lens distortion on
+        duv, z = project(verts, r.read("camera/K", idx), r.read("camera/R", idx), r.read("camera/t", idx), dist)
         dvis = visibility(duv, z, r.read("depth", idx))
         return np.concatenate([uv, duv], axis=1), np.concatenate([vis, dvis], axis=1)
