@@ -207,7 +207,7 @@ def flip_permutation(names: list[str]) -> np.ndarray:
 # ---------------------------------------------------------------------------------------------------------------------
 # model
 def build_model(num_kp: int, num_reg: int, size: int, net_size: int | None = None, head: str = "keypoints",
-                tri_w: np.ndarray | None = None):
+                tri_w: np.ndarray | None = None, heat_stride: int = 4):
     import torch
     from torch import nn
 
@@ -221,7 +221,9 @@ def build_model(num_kp: int, num_reg: int, size: int, net_size: int | None = Non
         features pooled under each keypoint's heatmap and the predicted keypoints' normalized 2-D layout: a fold
         shows as the shading and outline of the panels next to the keypoints, which a global average washes out.
         ``head="triangles"`` adds 16 features sampled (bilinearly) at every mesh triangle's image point, placed from
-        the predicted keypoints by ``tri_w`` (:func:`triangle_weights`): the panels' shading, read where each is."""
+        the predicted keypoints by ``tri_w`` (:func:`triangle_weights`): the panels' shading, read where each is.
+        ``heat_stride=2``: the heatmaps on a learned 2x upsampling of the stride-4 map (a transposed convolution and
+        a 3x3 block), cells of 2 network pixels, for keypoints finer than a 4-pixel cell's soft-argmax gives."""
 
         def __init__(self):
             super().__init__()
@@ -229,7 +231,13 @@ def build_model(num_kp: int, num_reg: int, size: int, net_size: int | None = Non
             stem = nn.Sequential(nn.Conv2d(3, 32, 4, 4, bias=False), nn.BatchNorm2d(32), nn.ReLU(inplace=True))
             self.body = nn.Sequential(stem, block(32, 48, 1))
             self.deep = nn.Sequential(block(48, 64, 2), block(64, 96, 2), nn.AdaptiveAvgPool2d(1), nn.Flatten())
-            self.heat = nn.Conv2d(48, num_kp, 1)
+            if heat_stride == 2:
+                self.up = nn.Sequential(nn.ConvTranspose2d(48, 32, 4, 2, 1, bias=False), nn.BatchNorm2d(32),
+                                        nn.ReLU(inplace=True), nn.Conv2d(32, 32, 3, 1, 1, bias=False),
+                                        nn.BatchNorm2d(32), nn.ReLU(inplace=True))
+            else:
+                self.up = nn.Identity()
+            self.heat = nn.Conv2d(32 if heat_stride == 2 else 48, num_kp, 1)
             self.head = head
             n_in = 96 + (num_kp * (48 + 2) if head in ("keypoints", "triangles") else 0)
             if head == "triangles":
@@ -238,13 +246,14 @@ def build_model(num_kp: int, num_reg: int, size: int, net_size: int | None = Non
                 n_in += len(tri_w) * 16
             self.reg = nn.Sequential(nn.Linear(n_in, 256), nn.ReLU(inplace=True), nn.Linear(256, num_reg))
             self.pool = max(1, size // (net_size or size))  # the network sees size / pool pixels (area average)
-            self.stride = self.pool * 4.0  # native pixels per heatmap cell
+            self.stride = self.pool * float(heat_stride)  # native pixels per heatmap cell
+            self.heat_stride = heat_stride
 
         def forward(self, x):
             if self.pool > 1:
                 x = nn.functional.avg_pool2d(x, self.pool)
             f = self.body(x)
-            h = self.heat(f)
+            h = self.heat(self.up(f))
             n, k, hh, ww = h.shape
             logp = torch.log_softmax(h.reshape(n, k, -1), dim=-1)
             p = logp.exp().reshape(n, k, hh, ww)
@@ -254,7 +263,8 @@ def build_model(num_kp: int, num_reg: int, size: int, net_size: int | None = Non
             self.cells = (xs, ys)
             z = self.deep(f)
             if self.head in ("keypoints", "triangles"):
-                at_kp = torch.einsum("nkhw,nchw->nkc", p, f).reshape(n, -1)  # features under each heatmap
+                p4 = p if self.heat_stride == 4 else nn.functional.avg_pool2d(p, 2) * 4.0  # the mass per stride-4 cell
+                at_kp = torch.einsum("nkhw,nchw->nkc", p4, f).reshape(n, -1)  # features under each heatmap
                 rel = uv - uv.mean(1, keepdim=True)  # the 2-D layout, translation and scale removed
                 rel = rel / rel.pow(2).sum(-1).mean(1).sqrt().clamp(min=1e-3)[:, None, None]
                 z = torch.cat([z, at_kp, rel.reshape(n, -1)], dim=1)
@@ -304,7 +314,7 @@ def train(d: dict, a) -> tuple[object, dict, dict]:
     w = torch.from_numpy((d["keypoints/visibility"] > 0).astype(np.float32))
     reg = torch.from_numpy(_targets(d, stats))
     model = build_model(kp.shape[1], reg.shape[1], a.size, a.net_size, a.head,
-                        triangle_weights(d) if a.head == "triangles" else None)
+                        triangle_weights(d) if a.head == "triangles" else None, a.heatmap_stride)
     opt = torch.optim.AdamW(model.parameters(), lr=2e-3, weight_decay=1e-4)
     # cosine decay over the step budget: the last epochs average out the batch noise instead of jumping on it
     sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda i: 0.5 * (1.0 + np.cos(np.pi * min(i / a.steps, 1.0))))
@@ -478,6 +488,8 @@ def main(argv=None) -> int:
     ap.add_argument("--head", choices=("keypoints", "global", "triangles"), default="keypoints",
                     help="crease/ratio head: features under the keypoints + their 2-D layout, global pooling only, or "
                          "keypoints + features sampled on every mesh triangle placed from the keypoints")
+    ap.add_argument("--heatmap-stride", type=int, choices=(4, 2), default=4,
+                    help="network pixels per heatmap cell: 4, or 2 through a learned upsampling (finer keypoints)")
     ap.add_argument("--crop", type=int, default=0,
                     help="top-down: the network reads a CROP x CROP crop around the worm's box (labels/bbox_obj) "
                          "instead of the whole image (--size: the rendered side); 0: the whole image")
