@@ -14,9 +14,10 @@ scale at the worm, px/m). Goals
 (issue 24): cross-engine agnostic keypoint error <= 1.5x in-domain; swap rate equal within 5 points; crease MAE
 <= 0.6x the mean baseline in-domain.
 
-Two readers of the folds beyond the default head (docs/dataset.md, "Where production's creases are"): ``--head
+Three readers of the folds beyond the defaults (docs/dataset.md, "Where production's creases are"): ``--head
 triangles`` also samples the features at every mesh triangle, placed from the predicted keypoints; ``--crop S`` reads
-an S x S crop around the worm's box (top-down, COCO's protocol with ground-truth boxes) instead of the whole image.
+an S x S crop around the worm's box (top-down, COCO's protocol with ground-truth boxes) instead of the whole image;
+``--heatmap-stride 2`` puts the heatmaps on a learned 2x upsampling (finer keypoints).
 
     pip install torch  # CPU wheel is enough
     python benchmarks/pose_baseline.py --config default     # 3072 train / 192 test at 128^2, 3000 steps
