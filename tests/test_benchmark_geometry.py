@@ -9,6 +9,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 from crease_oracle import vertex_pixels  # noqa: E402
@@ -60,6 +61,7 @@ def test_triangle_weights_place_each_face_centroid_exactly_when_it_is_an_affine_
 def test_crop_to_worm_maps_pixels_keypoints_and_intrinsics_consistently():
     """A ramp image (red = u, green = v at pixel centres) cropped around a box: each crop pixel holds the native
     coordinates its centre maps to; the cropped keypoints are the pinhole projections with the cropped K."""
+    pytest.importorskip("torch")  # the benchmark's resampling (grid_sample) is torch's, like the whole benchmark
     from pose_baseline import crop_to_worm
 
     H = W = 200
