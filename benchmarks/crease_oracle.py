@@ -46,19 +46,16 @@ def load(root: str) -> dict[str, np.ndarray]:
 
 
 def vertex_pixels(d: dict) -> np.ndarray:
-    """(N, V, 2) [px]: the mesh vertices ``worm/vertices`` projected by each sample's camera (lens distortion
-    included: ``Cameras.project``), hidden or not."""
-    from warpworm.render.camera import Cameras
+    """(N, V, 2) [px]: the mesh vertices ``worm/vertices`` projected by each sample's camera, lens distortion
+    included (the exports' ``export_keypoints.project``), hidden or not."""
+    from warpworm.data.export_keypoints import project
 
-    N = len(d["camera/K"])
-    cams = Cameras(K=d["camera/K"], R=d["camera/R"], t=d["camera/t"], world=np.arange(N), width=0, height=0,
-                   dist=d.get("camera/dist"))
-    return cams.project(np.asarray(d["worm/vertices"], np.float64))[0]
+    return project(d["worm/vertices"], d["camera/K"], d["camera/R"], d["camera/t"], d.get("camera/dist"))[0]
 
 
-def normals_in_view(d: dict, rng=None, noise_deg: float = 0.0) -> np.ndarray:
+def normals_in_view(d: dict, seen: np.ndarray, rng=None, noise_deg: float = 0.0) -> np.ndarray:
     """(N, 4T): each mesh triangle's unit normal in the body frame (``poses/body``), with Gaussian angular noise of
-    ``noise_deg`` per component, and its in-view flag; zeros for a triangle out of view."""
+    ``noise_deg`` per component, and its in-view flag ``seen`` (N, T) (``faces_seen``); zeros out of view."""
     T = d["mesh_triangles"]
     V = d["worm/vertices"]
     n = np.einsum("nji,ncj->nci", d["poses/body"][:, :3, :3], np.cross(V[:, T[:, 1]] - V[:, T[:, 0]],
@@ -67,7 +64,6 @@ def normals_in_view(d: dict, rng=None, noise_deg: float = 0.0) -> np.ndarray:
     if noise_deg:
         n = n + rng.normal(0.0, np.radians(noise_deg), n.shape)
         n /= np.linalg.norm(n, axis=-1, keepdims=True)
-    seen = faces_seen(d, T)
     return np.c_[(n * seen[..., None]).reshape(len(n), -1), seen]
 
 
@@ -124,9 +120,10 @@ def main(argv=None) -> int:
         n_te = layout_2d(v_te + rng.normal(0, sigma, v_te.shape), te["camera/K"])
         rows[f"2-D mesh vertices ({v_tr.shape[1]}) + {sigma:g} px noise, quadratic"] = ridge_ratio(
             quadratic(n_tr), y_tr, quadratic(n_te), y_te, 1e-2)
+    s_tr, s_te = faces_seen(tr, tr["mesh_triangles"]), faces_seen(te, te["mesh_triangles"])
     for deg in (0.0, 2.0, 5.0):
         rows[f"normals of the triangles in view (body frame) + {deg:g} deg noise, linear"] = ridge_ratio(
-            normals_in_view(tr, rng, deg), y_tr, normals_in_view(te, rng, deg), y_te, 1e-3)
+            normals_in_view(tr, s_tr, rng, deg), y_tr, normals_in_view(te, s_te, rng, deg), y_te, 1e-3)
     print(f"crease MAE of the training mean on the test set: "
           f"{np.degrees(np.abs(y_tr.mean(0) - y_te).mean()):.2f} deg ({len(y_tr)} train, {len(y_te)} test)")
     print("| oracle (ridge regression) | crease MAE / mean baseline |\n|---|---|")
