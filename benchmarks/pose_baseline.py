@@ -96,13 +96,17 @@ CROP_JITTER = 0.05
 """The training crops' box jitter (scale, log-normal; centre, in units of the side): a detector's box is not exact."""
 
 
-def crop_to_worm(d: dict, side: int, rng: np.random.Generator | None = None, jitter: float = 0.0) -> dict:
+def crop_to_worm(d: dict, side: int, rng: np.random.Generator | None = None, jitter: float = 0.0,
+                 rotate: float = 0.0, turn: float | None = None) -> dict:
     """The top-down view of ``d``: each image resampled (bilinear) to a ``side`` x ``side`` crop of the square around
     the worm's box ``labels/bbox_obj`` (CROP_MARGIN x its longer side; with ``rng``, its scale and centre jittered by
     ``jitter``, log-normal / in units of the side, as a detector's box would be), keypoints and intrinsics mapped into
     the crop (pixel centres at integers: u = x0 + (j + 0.5) s / side - 0.5), keypoints outside it marked unseen.
     Evaluating with the label's box is COCO's top-down keypoint protocol with ground-truth boxes. The depth is
-    dropped (the seen / unseen crease split needs the full image)."""
+    dropped (the seen / unseen crease split needs the full image). With ``rng`` and ``rotate`` [rad], each crop is
+    also turned in the image plane by a uniform angle in [-rotate, rotate] about its centre (a training
+    augmentation), or by ``turn`` [rad] each (test-time augmentation); a turned crop has no pinhole K, so
+    ``camera/K`` is dropped too."""
     import torch
 
     box = d["labels/bbox_obj"].astype(np.float64)
@@ -112,14 +116,24 @@ def crop_to_worm(d: dict, side: int, rng: np.random.Generator | None = None, jit
         s = s * np.exp(rng.normal(0.0, jitter, len(s)))
         c = c + rng.normal(0.0, jitter, c.shape) * s[:, None]
     x0 = c - s[:, None] / 2  # native coordinates of the crop's outer corner
+    phi = rng.uniform(-rotate, rotate, len(c)) if (rng is not None and rotate) else None
+    if turn is not None:
+        phi = np.full(len(c), float(turn))
     H, W = d["rgb"].shape[1:3]
     j = (np.arange(side) + 0.5) / side
     out = np.empty((len(c), side, side, 3), np.uint8)
     for a in range(0, len(c), 128):
         b = slice(a, a + 128)
-        u = x0[b, 0, None] + j * s[b, None] - 0.5  # sample points' native pixel coordinates
-        v = x0[b, 1, None] + j * s[b, None] - 0.5
-        gx, gy = np.broadcast_arrays(((2 * u + 1) / W - 1)[:, None, :], ((2 * v + 1) / H - 1)[:, :, None])
+        if phi is None:
+            u = x0[b, 0, None] + j * s[b, None] - 0.5  # sample points' native pixel coordinates
+            v = x0[b, 1, None] + j * s[b, None] - 0.5
+            gx, gy = np.broadcast_arrays(((2 * u + 1) / W - 1)[:, None, :], ((2 * v + 1) / H - 1)[:, :, None])
+        else:  # the offset from the centre, (j - 1/2) s, turned by phi
+            cs, sn = np.cos(phi[b])[:, None, None], np.sin(phi[b])[:, None, None]
+            ox, oy = (j[None, None, :] - 0.5) * s[b, None, None], (j[None, :, None] - 0.5) * s[b, None, None]
+            u = c[b, 0, None, None] + cs * ox - sn * oy - 0.5
+            v = c[b, 1, None, None] + sn * ox + cs * oy - 0.5
+            gx, gy = (2 * u + 1) / W - 1, (2 * v + 1) / H - 1
         img = torch.from_numpy(d["rgb"][b]).permute(0, 3, 1, 2).float()
         crop = torch.nn.functional.grid_sample(img, torch.from_numpy(np.stack([gx, gy], -1)).float(),
                                                align_corners=False)
@@ -127,11 +141,18 @@ def crop_to_worm(d: dict, side: int, rng: np.random.Generator | None = None, jit
     f = side / s
     e = {k: v for k, v in d.items() if k != "depth"}
     e["rgb"] = out
-    e["keypoints/pixel"] = (d["keypoints/pixel"] + 0.5 - x0[:, None]) * f[:, None, None] - 0.5
-    K = d["camera/K"].copy()
-    K[:, :2, :2] *= f[:, None, None]
-    K[:, :2, 2] = (d["camera/K"][:, :2, 2] + 0.5 - x0) * f[:, None] - 0.5
-    e["camera/K"] = K
+    if phi is None:
+        e["keypoints/pixel"] = (d["keypoints/pixel"] + 0.5 - x0[:, None]) * f[:, None, None] - 0.5
+        K = d["camera/K"].copy()
+        K[:, :2, :2] *= f[:, None, None]
+        K[:, :2, 2] = (d["camera/K"][:, :2, 2] + 0.5 - x0) * f[:, None] - 0.5
+        e["camera/K"] = K
+    else:  # the offset turned back by -phi, in crop pixels
+        o = d["keypoints/pixel"] + 0.5 - c[:, None]
+        cs, sn = np.cos(phi)[:, None], np.sin(phi)[:, None]
+        e["keypoints/pixel"] = (np.stack([cs * o[..., 0] + sn * o[..., 1], -sn * o[..., 0] + cs * o[..., 1]], -1)
+                                * f[:, None, None] + side / 2 - 0.5)
+        e.pop("camera/K", None)
     kp = e["keypoints/pixel"]
     outside = ((kp < -0.5) | (kp > side - 0.5)).any(-1)
     e["keypoints/visibility"] = np.where(outside, 0, d["keypoints/visibility"]).astype(d["keypoints/visibility"].dtype)
@@ -297,13 +318,19 @@ def heatmap_ce(logp, kp, xs, ys, sigma: float):
     return -(t * logp).sum(-1)
 
 
+CROP_KEYS = ("rgb", "keypoints/pixel", "keypoints/visibility", "camera/K", "labels/bbox_obj")
+"""What :func:`crop_to_worm` reads for a training batch."""
+AUG_EXPOSURE, AUG_WHITE = 0.2, 0.05
+"""``--augment``: log-normal gains of an image (exposure) and of each of its channels (white balance)."""
+
 KP_SCALE = 8.0
 """[px] per unit of the keypoint L1 loss (brings pixels to the heatmap loss's scale)."""
 
 
 def train(d: dict, a) -> tuple[object, dict, dict]:
     """AdamW for ``--steps`` steps (or until ``--budget-s``), cosine-decayed: heatmap cross-entropy + 0.5 x the L1 of
-    the soft-argmax pixels / KP_SCALE on in-image keypoints, + L1 on the normalized creases and ratios."""
+    the soft-argmax pixels / KP_SCALE on in-image keypoints, + L1 on the normalized creases and ratios. With
+    ``--augment --crop S``, ``d`` holds the native images and every batch is cropped afresh."""
     import torch
 
     torch.manual_seed(a.seed)
@@ -313,6 +340,24 @@ def train(d: dict, a) -> tuple[object, dict, dict]:
     x = torch.from_numpy(d["rgb"]).permute(0, 3, 1, 2).contiguous()  # uint8, normalized per batch
     kp = torch.from_numpy(d["keypoints/pixel"].astype(np.float32))
     w = torch.from_numpy((d["keypoints/visibility"] > 0).astype(np.float32))
+    arng, tgen = np.random.default_rng(a.seed + 1), torch.Generator().manual_seed(a.seed + 1)
+
+    def batch(idx):
+        """The images [-1, 1], keypoints [px] and their weights of one batch; with ``--augment``, each image
+        cropped afresh (``--crop``: box jitter and an in-plane turn) and its exposure and white balance drawn."""
+        if not a.augment:
+            return x[idx].float() / 127.5 - 1.0, kp[idx], w[idx]
+        if a.crop:
+            e = crop_to_worm({k: d[k][idx] for k in CROP_KEYS}, a.crop, arng, CROP_JITTER,
+                             np.radians(a.augment_turn))
+            xb = torch.from_numpy(e["rgb"]).permute(0, 3, 1, 2).float()
+            kb = torch.from_numpy(e["keypoints/pixel"].astype(np.float32))
+            wb = torch.from_numpy((e["keypoints/visibility"] > 0).astype(np.float32))
+        else:
+            xb, kb, wb = x[idx].float(), kp[idx], w[idx]
+        gain = torch.exp(AUG_EXPOSURE * torch.randn(len(idx), 1, 1, 1, generator=tgen)
+                         + AUG_WHITE * torch.randn(len(idx), 3, 1, 1, generator=tgen))
+        return (xb * gain / 127.5 - 1.0).clamp(-1.0, 1.0), kb, wb
     reg = torch.from_numpy(_targets(d, stats))
     model = build_model(kp.shape[1], reg.shape[1], a.size, a.net_size, a.head,
                         triangle_weights(d) if a.head == "triangles" else None, a.heatmap_stride)
@@ -327,9 +372,10 @@ def train(d: dict, a) -> tuple[object, dict, dict]:
     while not done():
         model.train()
         for idx in np.array_split(rng.permutation(len(x)), max(1, len(x) // a.batch)):
-            uv, r, logp = model(x[idx].float() / 127.5 - 1.0)
-            l_kp = ((uv - kp[idx]).abs().sum(-1) * w[idx]).sum() / w[idx].sum().clamp(min=1) / KP_SCALE
-            l_heat = (heatmap_ce(logp, kp[idx], *model.cells, model.stride) * w[idx]).sum() / w[idx].sum().clamp(min=1)
+            xb, kb, wb = batch(idx)
+            uv, r, logp = model(xb)
+            l_kp = ((uv - kb).abs().sum(-1) * wb).sum() / wb.sum().clamp(min=1) / KP_SCALE
+            l_heat = (heatmap_ce(logp, kb, *model.cells, model.stride) * wb).sum() / wb.sum().clamp(min=1)
             l_reg = (r - reg[idx]).abs().mean()
             loss = l_heat + 0.5 * l_kp + l_reg
             opt.zero_grad()
@@ -364,6 +410,22 @@ def predict(model, d: dict, stats: dict):
     creases = r[:, :C] * stats["crease_std"] + stats["crease_mean"]
     ratios = r[:, C:] * stats["ratio_std"] + stats["ratio_mean"]
     return uv, creases, ratios
+
+
+def predict_turned(model, d: dict, stats: dict, side: int, turns: int):
+    """:func:`predict` on ``turns`` crops of each image turned by 2 pi k / turns (test-time augmentation of a
+    network trained with ``--augment``): creases and ratios averaged, keypoints turned back into the unturned crop
+    (a turn about the crop's centre) and the per-coordinate median taken (robust to one view's head/tail swap)."""
+    uvs, crs, rts = [], [], []
+    for k in range(turns):
+        phi = 2.0 * np.pi * k / turns
+        uv, cr, rt = predict(model, crop_to_worm(d, side, turn=phi), stats)
+        o = uv + 0.5 - side / 2
+        cs, sn = np.cos(phi), np.sin(phi)
+        uvs.append(np.stack([cs * o[..., 0] - sn * o[..., 1], sn * o[..., 0] + cs * o[..., 1]], -1) + side / 2 - 0.5)
+        crs.append(cr)
+        rts.append(rt)
+    return np.median(uvs, axis=0), np.mean(crs, axis=0), np.mean(rts, axis=0)
 
 
 # ---------------------------------------------------------------------------------------------------------------------
@@ -494,6 +556,15 @@ def main(argv=None) -> int:
     ap.add_argument("--crop", type=int, default=0,
                     help="top-down: the network reads a CROP x CROP crop around the worm's box (labels/bbox_obj) "
                          "instead of the whole image (--size: the rendered side); 0: the whole image")
+    ap.add_argument("--augment", action="store_true",
+                    help="draw every training batch afresh: exposure and white balance, and with --crop the box "
+                         "jitter and an in-plane turn (--augment-turn)")
+    ap.add_argument("--augment-turn", type=float, default=180.0,
+                    help="--augment --crop: the crops' in-plane turn, uniform within +- this [deg]")
+    ap.add_argument("--tta", type=int, default=1,
+                    help="--crop: test on this many turned crops of each image (2 pi k / TTA; for --augment networks)")
+    ap.add_argument("--save-model", help="write the trained network, its target statistics and log here (torch)")
+    ap.add_argument("--load-model", help="evaluate a network written by --save-model instead of training one")
     ap.add_argument("--spp", type=int, default=16, help="path-traced samples per pixel")
     ap.add_argument("--no-pathtraced", action="store_true", help="skip the path-traced test set")
     ap.add_argument("--steps", type=int, default=3000, help="training budget: optimizer steps of --batch images")
@@ -505,7 +576,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "pose_baseline.json"))
     a = ap.parse_args(argv)
     try:
-        import torch  # noqa: F401
+        import torch
     except ImportError:
         print("error: the benchmark needs torch: pip install torch (the CPU wheel is enough)", file=sys.stderr)
         return 2
@@ -513,19 +584,34 @@ def main(argv=None) -> int:
     if a.no_pathtraced:
         paths.pop("test_pt")
     tr = load(paths["train"], ("worm/vertices",) if a.head == "triangles" else ())
+    native = tr
     if a.crop:  # the network sees the crop at its own resolution
         tr = crop_to_worm(tr, a.crop, np.random.default_rng(a.seed), CROP_JITTER)
-    model, stats, info = train(tr, argparse.Namespace(**{**vars(a), **({"size": a.crop, "net_size": a.crop}
-                                                                          if a.crop else {})}))
+    ta = argparse.Namespace(**{**vars(a), **({"size": a.crop, "net_size": a.crop} if a.crop else {})})
+    if a.load_model:  # a network trained before, with the same data and model options
+        saved = torch.load(a.load_model, weights_only=False)
+        model = build_model(len(tr["names"]), len(saved["stats"]["crease_mean"]) + tr["labels/deformation"].shape[1],
+                            ta.size, ta.net_size, a.head, triangle_weights(tr) if a.head == "triangles" else None,
+                            a.heatmap_stride)
+        model.load_state_dict(saved["state"])
+        stats, info = saved["stats"], saved["train"]
+    else:
+        model, stats, info = train(native if (a.crop and a.augment) else tr, ta)
+        if a.save_model:
+            torch.save({"state": model.state_dict(), "stats": dict(stats), "train": info, "args": vars(a)},
+                       a.save_model)
     stats["kp_mean"] = tr["keypoints/pixel"].mean(0)
     body_model = tr["keypoints/body"].mean(0)
     flip = flip_permutation(tr["names"])
     res = {}
     for name in [k for k in ("test", "test_pt") if k in paths]:
         d = load(paths[name], SEEN_KEYS)
+        native_test = d
         if a.crop:
             d = crop_to_worm(d, a.crop)
-        res[name] = evaluate(*predict(model, d, stats), d, flip, stats, body_model)
+        pred = (predict_turned(model, native_test, stats, a.crop, a.tta) if (a.crop and a.tta > 1)
+                else predict(model, d, stats))
+        res[name] = evaluate(*pred, d, flip, stats, body_model)
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
                             cwd=Path(__file__).parent).stdout.strip()
     dirty = bool(subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], capture_output=True,

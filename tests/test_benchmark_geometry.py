@@ -86,3 +86,36 @@ def test_crop_to_worm_maps_pixels_keypoints_and_intrinsics_consistently():
     assert "depth" not in e and e["rgb"].shape == (1, side, side, 3)
     assert e["keypoints/visibility"].tolist() == [[2 if 0 <= p[0] < side and 0 <= p[1] < side else 0
                                                    for p in e["keypoints/pixel"][0]]]
+
+
+def test_turned_crops_keep_every_keypoint_on_the_pixel_it_labels():
+    """Training crops turned in the image plane (``rotate``): sampling the cropped ramp image at each cropped
+    keypoint returns the keypoint's native coordinates (the label stays on its pixel), the map is a similarity
+    (distances scale by side / crop span), and the crops are turned (not the unturned map)."""
+    pytest.importorskip("torch")
+    from pose_baseline import CROP_MARGIN, crop_to_worm
+
+    n, H, W, side = 8, 200, 200, 64
+    u, v = np.meshgrid(np.arange(W, dtype=float), np.arange(H, dtype=float))
+    rgb = np.stack([u, v, np.zeros_like(u)], -1).clip(0, 255).astype(np.uint8)[None].repeat(n, 0)
+    rng = np.random.default_rng(3)
+    kp = np.array([70.0, 80.0]) + rng.uniform(0, 30, (n, 5, 2))
+    box = np.array([[60.0, 70.0, 50.0, 45.0]] * n)
+    d = {"rgb": rgb, "keypoints/pixel": kp, "keypoints/visibility": np.full((n, 5), 2, np.uint8),
+         "camera/K": np.eye(3)[None].repeat(n, 0), "labels/bbox_obj": box.astype(np.float32)}
+    e = crop_to_worm(d, side, np.random.default_rng(0), 0.0, np.pi)
+    assert "camera/K" not in e
+    q = e["keypoints/pixel"]
+    assert (e["keypoints/visibility"] == 2).all()  # all within the crop (box margin, no jitter)
+    img = e["rgb"].astype(float)
+    i0, j0 = np.floor(q[..., 0]).astype(int), np.floor(q[..., 1]).astype(int)
+    fx, fy = (q[..., 0] - i0)[..., None], (q[..., 1] - j0)[..., None]
+    b = np.arange(n)[:, None]
+    val = (img[b, j0, i0] * (1 - fx) * (1 - fy) + img[b, j0, i0 + 1] * fx * (1 - fy)
+           + img[b, j0 + 1, i0] * (1 - fx) * fy + img[b, j0 + 1, i0 + 1] * fx * fy)
+    np.testing.assert_allclose(val[..., :2], kp, atol=0.75)  # uint8 rounding of the ramp: <= 0.5, interpolated
+    scale = side / (CROP_MARGIN * 50.0)
+    dn = np.linalg.norm(kp[:, :, None] - kp[:, None], axis=-1)
+    np.testing.assert_allclose(np.linalg.norm(q[:, :, None] - q[:, None], axis=-1), dn * scale, atol=1e-9)
+    unturned = crop_to_worm(d, side)["keypoints/pixel"]
+    assert np.abs(q - unturned).max() > 5.0
