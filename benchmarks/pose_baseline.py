@@ -559,8 +559,9 @@ def main(argv=None) -> int:
     ap.add_argument("--augment", action="store_true",
                     help="draw every training batch afresh: exposure and white balance, and with --crop the box "
                          "jitter and an in-plane turn (--augment-turn)")
-    ap.add_argument("--augment-turn", type=float, default=180.0,
-                    help="--augment --crop: the crops' in-plane turn, uniform within +- this [deg]")
+    ap.add_argument("--augment-turn", type=float, default=0.0,
+                    help="--augment --crop: the crops' in-plane turn, uniform within +- this [deg] (180 measured "
+                         "worse on production's creases: docs/dataset.md)")
     ap.add_argument("--tta", type=int, default=1,
                     help="--crop: test on this many turned crops of each image (2 pi k / TTA; for --augment networks)")
     ap.add_argument("--save-model", help="write the trained network, its target statistics and log here (torch)")
