@@ -337,7 +337,9 @@ def train(d: dict, a) -> tuple[object, dict, dict]:
     torch.set_num_threads(a.threads)
     stats = {"crease_mean": d["creases/angle"].mean(0), "crease_std": d["creases/angle"].std(0) + 1e-6,
              "ratio_mean": d["labels/deformation"].mean(0), "ratio_std": d["labels/deformation"].std(0) + 1e-6}
-    x = torch.from_numpy(d["rgb"]).permute(0, 3, 1, 2).contiguous()  # uint8, normalized per batch
+    n = len(d["rgb"])
+    # uint8, normalized per batch; --augment --crop crops the native images afresh and needs no channel-first copy
+    x = None if a.augment and a.crop else torch.from_numpy(d["rgb"]).permute(0, 3, 1, 2).contiguous()
     kp = torch.from_numpy(d["keypoints/pixel"].astype(np.float32))
     w = torch.from_numpy((d["keypoints/visibility"] > 0).astype(np.float32))
     arng, tgen = np.random.default_rng(a.seed + 1), torch.Generator().manual_seed(a.seed + 1)
@@ -371,7 +373,7 @@ def train(d: dict, a) -> tuple[object, dict, dict]:
 
     while not done():
         model.train()
-        for idx in np.array_split(rng.permutation(len(x)), max(1, len(x) // a.batch)):
+        for idx in np.array_split(rng.permutation(n), max(1, n // a.batch)):
             xb, kb, wb = batch(idx)
             uv, r, logp = model(xb)
             l_kp = ((uv - kb).abs().sum(-1) * wb).sum() / wb.sum().clamp(min=1) / KP_SCALE
