@@ -77,7 +77,15 @@ def widened_pinhole(cameras, device=None):
     import dataclasses
 
     H, W = int(cameras.height), int(cameras.width)
-    maps = undistort_maps(cameras.K, np.asarray(cameras.dist, dtype=np.float64), W, H, device)  # (N, H, W, 2)
+    dist = np.asarray(cameras.dist, dtype=np.float64)
+    maps = undistort_maps(cameras.K, dist, W, H, device)  # (N, H, W, 2)
+    off = ~np.isfinite(maps).all(axis=(1, 2, 3))
+    if off.any():  # the wider image would have to hold rays that do not exist (a 3 TiB allocation, once)
+        i = int(np.flatnonzero(off)[0])
+        raise ValueError(f"camera {i} of {len(off)} (and {int(off.sum()) - 1} more): its lens (k1, k2, p1, p2, k3) = "
+                         f"{tuple(np.round(dist[i], 5).tolist())} folds back inside its {W}x{H} image (fx "
+                         f"{cameras.K[i, 0, 0]:.1f} px): some pixels see no ray; expected a lens whose radial map "
+                         "rises past the image corners (draw_distortion with K redraws such lenses)")
     lo = np.floor(maps.reshape(-1, 2).min(axis=0)) - 1
     hi = np.ceil(maps.reshape(-1, 2).max(axis=0)) + 1
     ml, mt = int(max(0, -lo[0])), int(max(0, -lo[1]))
@@ -89,16 +97,66 @@ def widened_pinhole(cameras, device=None):
     return wide, (maps[..., 0] + ml).astype(np.float32), (maps[..., 1] + mt).astype(np.float32)
 
 
-__all__ = ["DIST_NAMES", "distort", "draw_distortion", "undistort", "undistort_maps", "widened_pinhole"]
+__all__ = ["DIST_NAMES", "distort", "draw_distortion", "lens_covers_image", "undistort", "undistort_maps",
+           "widened_pinhole"]
+
+COVER_MARGIN = 0.02
+""":func:`lens_covers_image`: how far past the farthest pixel centre (relative) the radial map must still rise."""
+LENS_ATTEMPTS = 16
+""":func:`draw_distortion`: draws per camera before the ranges are refused."""
 
 
-def draw_distortion(render_cfg, seeds: np.ndarray) -> np.ndarray:
-    """Distortion coefficients (n, 5) of cameras with seeds ``seeds`` (n,): k1, k2, k3 uniform in
-    ``render_cfg.distortion_k1/k2/k3`` and p1, p2 each uniform in ``distortion_p`` (stream 0xD157 of the camera's own
-    seed, so a camera draws the same in any batch)."""
+def lens_covers_image(dist: np.ndarray, K: np.ndarray, width: int, height: int) -> np.ndarray:
+    """Whether each lens's radial map ``r -> r (1 + k1 r² + k2 r⁴ + k3 r⁶)`` still rises past the farthest pixel
+    centre of its image (normalized radius, plus ``COVER_MARGIN`` and a bound 3 (|p1| + |p2|) r² on the tangential
+    terms), within three times that radius: (n,) bool. Where the polynomial folds back, OpenCV's model describes no
+    lens (a fitted lens is monotone over its sensor) and the pixels beyond the fold see no ray. ``dist`` (n, 5),
+    ``K`` (n, 3, 3)."""
+    dist, K = np.asarray(dist, np.float64).reshape(-1, 5), np.asarray(K, np.float64).reshape(-1, 3, 3)
+    corners = np.array([[0.0, 0.0], [width - 1.0, 0.0], [0.0, height - 1.0], [width - 1.0, height - 1.0]])
+    x = (corners[None, :, 0] - K[:, 0, 2, None]) / K[:, 0, 0, None]
+    y = (corners[None, :, 1] - K[:, 1, 2, None]) / K[:, 1, 1, None]
+    corner = np.hypot(x, y).max(axis=1)
+    target = corner * (1.0 + COVER_MARGIN) + 3.0 * (np.abs(dist[:, 2]) + np.abs(dist[:, 3])) * corner**2
+    r = np.linspace(0.0, 1.0, 1025)[None] * (3.0 * target[:, None])
+    s = r * r
+    f = r * (1.0 + s * (dist[:, 0, None] + s * (dist[:, 1, None] + s * dist[:, 4, None])))
+    rising = np.logical_and.accumulate(np.diff(f, axis=1) > 0.0, axis=1)  # monotone from 0 up to sample j + 1
+    return np.where(rising, f[:, 1:], 0.0).max(axis=1) >= target
+
+
+def _draw(render_cfg, seeds: np.ndarray, stream: int) -> np.ndarray:
     from warpworm.data.randomize import seed_uniforms
 
-    u = seed_uniforms(np.asarray(seeds).reshape(-1), 0xD157, 5)
+    u = seed_uniforms(seeds, stream, 5)
     r = render_cfg
     ranges = (r.distortion_k1, r.distortion_k2, r.distortion_p, r.distortion_p, r.distortion_k3)
     return np.stack([lo + (hi - lo) * u[:, i] for i, (lo, hi) in enumerate(ranges)], axis=1)
+
+
+def draw_distortion(render_cfg, seeds: np.ndarray, K: np.ndarray | None = None, width: int | None = None,
+                    height: int | None = None) -> np.ndarray:
+    """Distortion coefficients (n, 5) of cameras with seeds ``seeds`` (n,): k1, k2, k3 uniform in
+    ``render_cfg.distortion_k1/k2/k3`` and p1, p2 each uniform in ``distortion_p`` (stream 0xD157 of the camera's own
+    seed, so a camera draws the same in any batch). Given the cameras' ``K`` (n, 3, 3) and image size, a lens that
+    does not cover its image (:func:`lens_covers_image`: strong barrel at a wide field of view) is drawn again from
+    the camera's next stream (0xD1570 + attempt), up to ``LENS_ATTEMPTS`` draws; then a ValueError names the ranges.
+    """
+    seeds = np.asarray(seeds).reshape(-1)
+    dist = _draw(render_cfg, seeds, 0xD157)
+    if K is None:
+        return dist
+    bad = ~lens_covers_image(dist, K, width, height)
+    for attempt in range(1, LENS_ATTEMPTS):
+        if not bad.any():
+            break
+        dist[bad] = _draw(render_cfg, seeds[bad], 0xD1570 + attempt)
+        bad[bad] = ~lens_covers_image(dist[bad], np.asarray(K)[bad], width, height)
+    if bad.any():
+        r = render_cfg
+        raise ValueError(
+            f"render.distortion_k1 {list(r.distortion_k1)}, render.distortion_k2 {list(r.distortion_k2)}, "
+            f"render.distortion_k3 {list(r.distortion_k3)}: {int(bad.sum())} of {len(bad)} cameras drew no lens in "
+            f"{LENS_ATTEMPTS} tries whose radial map rises past the corners of its {width}x{height} image (fx "
+            f"{float(np.asarray(K)[bad][0, 0, 0]):.1f} px); expected milder barrel ranges or a narrower camera.fov_y")
+    return dist

@@ -955,7 +955,8 @@ def undistort_pixels(
 ):
     """For pixel centre (x, y) of distorted image ``img``: the pinhole pixel (same intrinsics ``intr`` = (fx, fy, cx,
     cy)) whose ray it sees, by ``iterations`` Newton steps on OpenCV's lens map with ``dist`` (k1, k2, p1, p2, k3)
-    (float64; the NumPy twin is :func:`warpworm.render.distortion.undistort`). ``pinhole``: (N, H, W)."""
+    (float64; the NumPy twin is :func:`warpworm.render.distortion.undistort`). ``pinhole``: (N, H, W); NaN where
+    Newton's method ends off the lens (residual over 1e-9 or a folded Jacobian: no ray reaches that pixel)."""
     img, y, x = wp.tid()
     k = intr[img]
     xd = (wp.float64(x) - k[2]) / k[0]
@@ -981,4 +982,18 @@ def undistort_pixels(
         det = a * d - b * b
         u = u - (d * fx - b * fy) / det
         v = v - (a * fy - b * fx) / det
+    # where the polynomial folds back before this pixel's radius, no ray reaches it: Newton wanders or lands on the
+    # far (folded) branch; mark it instead of returning a wrong ray
+    r2 = u * u + v * v
+    radial = one + r2 * (k1 + r2 * (k2 + r2 * k3))
+    drad = two * (k1 + r2 * (two * k2 + wp.float64(3.0) * k3 * r2))
+    ex = u * radial + two * p1 * u * v + p2 * (r2 + two * u * u) - xd
+    ey = v * radial + p1 * (r2 + two * v * v) + two * p2 * u * v - yd
+    a = radial + u * u * drad + two * p1 * v + wp.float64(6.0) * p2 * u
+    b = u * v * drad + two * p1 * u + two * p2 * v
+    d = radial + v * v * drad + wp.float64(6.0) * p1 * v + two * p2 * u
+    if not (ex * ex + ey * ey <= wp.float64(1.0e-18) and a > wp.float64(0.0) and a * d - b * b > wp.float64(0.0)):
+        nan = wp.float64(wp.nan)
+        pinhole[img, y, x] = wp.vec2d(nan, nan)
+        return
     pinhole[img, y, x] = wp.vec2d(k[0] * u + k[2], k[1] * v + k[3])

@@ -118,3 +118,66 @@ def test_dataset_stores_and_verifies_the_lens(tmp_path):
 def test_bad_range_refused():
     with pytest.raises(ConfigError, match="render.distortion_k1: got \\[0.1, -0.1\\]"):
         load_config("default", ["render.distortion_k1=[0.1, -0.1]"])
+
+
+def _square_K(corner: float, size: int = 64) -> np.ndarray:
+    """Intrinsics of a size x size camera whose farthest pixel centres lie at normalized radius ``corner``."""
+    c = (size - 1) / 2.0
+    f = c * np.sqrt(2.0) / corner
+    return np.array([[[f, 0.0, c], [0.0, f, c], [0.0, 0.0, 1.0]]])
+
+
+def test_lens_cover_is_the_closed_form_fold():
+    # k1 only: r (1 + k1 r²) rises until r_f = sqrt(-1 / (3 k1)) and reaches (2/3) r_f there; a lens covers its image
+    # when the corners (with COVER_MARGIN) lie below that
+    from warpworm.render.distortion import COVER_MARGIN, lens_covers_image
+
+    for k1 in (-0.25, -0.4):
+        reach = 2.0 / 3.0 * np.sqrt(-1.0 / (3.0 * k1))
+        lens = np.array([[k1, 0.0, 0.0, 0.0, 0.0]])
+        edge = reach / (1.0 + COVER_MARGIN)
+        assert lens_covers_image(lens, _square_K(edge * 0.995), 64, 64)[0]
+        assert not lens_covers_image(lens, _square_K(edge * 1.005), 64, 64)[0]
+    assert lens_covers_image(np.array([[0.05, 0.08, 0.0, 0.0, 0.0]]), _square_K(1.2), 64, 64)[0]  # pincushion rises
+
+
+def test_folded_lens_leaves_its_outer_pixels_without_a_ray():
+    # k1 = -0.25 folds at radius (2/3) sqrt(4/3) = 0.7698; a camera whose corners lie at 0.8 has pixels beyond it:
+    # the Warp inverse marks exactly those NaN (the rest invert to 1e-9), and the renderers' lens path refuses the
+    # camera by name instead of sizing a pinhole image for rays that do not exist (it once asked for 3.35 TiB)
+    from warpworm.render.distortion import widened_pinhole
+
+    K, lens = _square_K(0.8), np.array([[-0.25, 0.0, 0.0, 0.0, 0.0]])
+    maps = undistort_maps(K, lens, 64, 64)[0]
+    v, u = np.mgrid[0:64, 0:64].astype(np.float64)
+    rd = np.hypot((u - K[0, 0, 2]) / K[0, 0, 0], (v - K[0, 1, 2]) / K[0, 1, 1])
+    reach = 2.0 / 3.0 * np.sqrt(4.0 / 3.0)
+    off = np.isnan(maps).any(-1)
+    assert off.any() and np.array_equal(off[np.abs(rd - reach) > 2e-3], (rd > reach)[np.abs(rd - reach) > 2e-3])
+    xu, yu = (maps[~off, 0] - K[0, 0, 2]) / K[0, 0, 0], (maps[~off, 1] - K[0, 1, 2]) / K[0, 1, 1]
+    xd, yd = distort(xu, yu, lens[0])
+    assert np.abs(xd - (u[~off] - K[0, 0, 2]) / K[0, 0, 0]).max() < 1e-9
+    assert np.all(np.hypot(xu, yu) < np.sqrt(4.0 / 3.0))  # the near branch, before the fold
+    cams = dataclasses.replace(sample_cameras(np.arange(1), np.zeros((1, 3, 3)), width=64, height=64), K=K, dist=lens)
+    with pytest.raises(ValueError, match="camera 0 of 1 .* folds back inside its 64x64 image"):
+        widened_pinhole(cams)
+
+
+def test_lens_draws_cover_their_images():
+    # production's ranges at its widest field of view (fov_y 1 rad, corners at 0.77): about 1 lens in 75 folds inside
+    # the image (1 in 1,300 over its fov range) and is drawn again; every other camera keeps the lens it drew before
+    from warpworm.render.distortion import lens_covers_image
+
+    rcfg = load_config("production").render
+    n = 4000
+    K = np.repeat(_square_K(np.tan(0.5) * np.sqrt(2.0) * 255.0 / 256.0, 256), n, axis=0)
+    first = draw_distortion(rcfg, np.arange(n))
+    drawn = draw_distortion(rcfg, np.arange(n), K, 256, 256)
+    covers = lens_covers_image(first, K, 256, 256)
+    assert 0 < (~covers).sum() < 0.03 * n and lens_covers_image(drawn, K, 256, 256).all()
+    assert np.array_equal(drawn[covers], first[covers]) and np.all(drawn[~covers, :4] != first[~covers, :4])
+    lo, hi = np.array([-0.25, -0.02, -0.002, -0.002, 0.0]), np.array([0.05, 0.08, 0.002, 0.002, 0.0])
+    assert np.all((drawn >= lo) & (drawn <= hi))
+    folding = load_config("production", ["render.distortion_k1=[-0.3, -0.28]", "render.distortion_k2=[-0.02, 0]"])
+    with pytest.raises(ValueError, match=r"render.distortion_k1 \[-0.3, -0.28\], .*: 4000 of 4000 cameras drew no lens"):
+        draw_distortion(folding.render, np.arange(n), K, 256, 256)

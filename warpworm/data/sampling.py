@@ -245,7 +245,7 @@ def dataset_cameras(cfg, index: np.ndarray, worm_points: np.ndarray, view: np.nd
     if cfg.render.distortion:  # issue 24: lens distortion per camera, from the camera's seed (stored as camera/dist)
         from warpworm.render.distortion import draw_distortion
 
-        cams.dist = draw_distortion(cfg.render, seeds)
+        cams.dist = draw_distortion(cfg.render, seeds, cams.K, cfg.render.width, cfg.render.height)
     d = cams.draws
     n = len(index)
     values = {
