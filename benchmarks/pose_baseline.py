@@ -329,8 +329,8 @@ KP_SCALE = 8.0
 
 def train(d: dict, a) -> tuple[object, dict, dict]:
     """AdamW for ``--steps`` steps (or until ``--budget-s``), cosine-decayed: heatmap cross-entropy + 0.5 x the L1 of
-    the soft-argmax pixels / KP_SCALE on in-image keypoints, + L1 on the normalized creases and ratios. With
-    ``--augment --crop S``, ``d`` holds the native images and every batch is cropped afresh."""
+    the soft-argmax pixels / KP_SCALE on in-image keypoints, + ``--reg-weight`` x L1 on the normalized creases and
+    ratios. With ``--augment --crop S``, ``d`` holds the native images and every batch is cropped afresh."""
     import torch
 
     torch.manual_seed(a.seed)
@@ -379,7 +379,7 @@ def train(d: dict, a) -> tuple[object, dict, dict]:
             l_kp = ((uv - kb).abs().sum(-1) * wb).sum() / wb.sum().clamp(min=1) / KP_SCALE
             l_heat = (heatmap_ce(logp, kb, *model.cells, model.stride) * wb).sum() / wb.sum().clamp(min=1)
             l_reg = (r - reg[idx]).abs().mean()
-            loss = l_heat + 0.5 * l_kp + l_reg
+            loss = l_heat + 0.5 * l_kp + a.reg_weight * l_reg
             opt.zero_grad()
             loss.backward()
             opt.step()
@@ -564,6 +564,8 @@ def main(argv=None) -> int:
     ap.add_argument("--augment-turn", type=float, default=0.0,
                     help="--augment --crop: the crops' in-plane turn, uniform within +- this [deg] (180 measured "
                          "worse on production's creases: docs/dataset.md)")
+    ap.add_argument("--reg-weight", type=float, default=1.0,
+                    help="weight of the crease + ratio L1 in the training loss (against the keypoints')")
     ap.add_argument("--tta", type=int, default=1,
                     help="--crop: test on this many turned crops of each image (2 pi k / TTA; for --augment networks)")
     ap.add_argument("--save-model", help="write the trained network, its target statistics and log here (torch)")
