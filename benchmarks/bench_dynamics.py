@@ -225,14 +225,15 @@ def solvers_for(device) -> tuple:
     return ("band",)
 
 
-def compare(device: str = "cpu", sizes=None, quick: bool = False, solvers=None) -> list[dict]:
+def compare(device: str = "cpu", sizes=None, quick: bool = False, solvers=None, numpy_reference: bool = True) -> list[dict]:
     """The one table of ``python benchmarks/run.py``: per W (and solver, :func:`solvers_for`), warpworm's whole gait
     steps (analytic magnets) and its substeps alone, then the NumPy reference of the substep and Newton on the same
     mesh, measured in this run.
 
     ``sizes`` default: (1, 64) on the CPU (quick: (1, 16)), (1024, 16384, 65536) on CUDA. The gait step is timed over
     one EPM cycle (a quarter with ``quick`` or on CUDA). The NumPy reference runs at the smallest W only on CUDA (a
-    dense 117-unknown solve per world on the host: 64k worlds would take minutes).
+    dense 117-unknown solve per world on the host: 64k worlds would take minutes); ``numpy_reference=False`` leaves it
+    out (a caller timing one large size at a time).
     """
     quiet_warp()
     wp.init()
@@ -268,6 +269,8 @@ def compare(device: str = "cpu", sizes=None, quick: bool = False, solvers=None) 
             t_sub = timeit(lambda: sim.run_substeps(state, S), device, min_time) / S
             tag = "" if solver == "band" and len(solvers) == 1 else f", {solver}"
             common = {"device": str(model.device), "W": W, "substep_us": 1e6 * sim.dt_sub, "time_base": base}
+            if cuda:  # what this size holds on the GPU (model, state, solver scratch, graphs), mempool bytes in use
+                common["gpu_mem_MiB"] = wp.get_mempool_used_mem_current(device) / 2**20
             rows.append({"system": f"warpworm gait step (analytic magnets{tag})", **common,
                          "step_rate": W * S / t_step, "sim_s_per_wall_s": W * sim.dt / t_step,
                          "newton_steps": mean_steps,
@@ -275,7 +278,7 @@ def compare(device: str = "cpu", sizes=None, quick: bool = False, solvers=None) 
             rows.append({"system": f"warpworm substeps alone{tag.replace(', ', ' (') + ')' if tag else ''}",
                          **common, "step_rate": W / t_sub, "sim_s_per_wall_s": W * sim.dt_sub / t_sub,
                          "note": "implicit substeps to the Newton tolerance"})
-            if solver == solvers[0] and (not cuda or W == min(sizes)):
+            if numpy_reference and solver == solvers[0] and (not cuda or W == min(sizes)):
                 k = reference_newton_steps(sim, mean_steps)
                 t_np = numpy_substep_time(model, sim, state, min_time, newton=k)
                 rows.append({"system": "NumPy reference substep", "device": "cpu", "W": W,

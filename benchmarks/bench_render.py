@@ -82,7 +82,10 @@ def run(quick: bool = False, device=None, threads=(1, 2)) -> list[dict]:
     dev = wp.get_device(device)
     thread_counts = tuple(threads) if dev.is_cpu else (1,)
     # (size, worlds, cameras per world); images per batch = worlds * cameras
-    if quick:
+    if dev.is_cuda:  # batches that fill a GPU (1,024 images at 128² and 256²); the CPU's would time launch latency
+        cases = [(128, 128, 8), (256, 128, 8), (512, 32, 4)]
+        repeats = 5
+    elif quick:
         cases = [(64, 16, 8), (128, 16, 8), (256, 4, 8), (512, 2, 2)]
         repeats = 3
     else:
@@ -160,11 +163,11 @@ def _option_case(overrides: list, opts: dict, states: dict, pattern, cams):
 
 def feature_rows(quick: bool, dev) -> list[dict]:
     """Images/s at the dataset's 128 x 96 with each issue-24 option on and off (posed worms with magnets, the
-    config's looks and lights; 16 worlds x 8 cameras, quick 8 x 8; one thread)."""
+    config's looks and lights; 16 worlds x 8 cameras, quick 8 x 8, on CUDA 128 x 8; one thread)."""
     from warpworm.render import Renderer, sample_cameras
     from warpworm.render.demo import default_pattern, posed_worm_states
 
-    W, C, repeats = (8, 8, 3) if quick else (16, 8, 5)
+    W, C, repeats = (128, 8, 5) if dev.is_cuda else (8, 8, 3) if quick else (16, 8, 5)
     pattern = default_pattern()
     states = posed_worm_states(np.arange(W), pattern)
     N = W * C

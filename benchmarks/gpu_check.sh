@@ -1,21 +1,23 @@
 #!/usr/bin/env bash
-# The one GPU check of warpworm (issue #12 goal 5): CUDA against the CPU on the same inputs, then the benchmark summary
-# (worm-substeps/s at 1k, 16k, 64k worlds, images/s, samples/s) and a per-kernel profile, all written to $OUT.
+# The one GPU check of warpworm (issue #28): CUDA against the CPU on the same inputs (physics, then whole datasets),
+# then speed (worm-substeps/s and GPU memory at 1k, 16k, 64k worlds; images/s; samples/s) and a per-kernel profile,
+# all written to $OUT.
 #
-# warp-lang is not on the GPU machine and nothing can be downloaded there: its wheel (149 MB) travels in three parts of
-# 50 MB (a call carries at most 64 MiB). The machine keeps files only while warm (30 s after a call), so make the four
-# calls BACK TO BACK, nothing in between:
+# warp-lang is not on the GPU machine and nothing can be downloaded there. Its wheel (149 MB) unpacked without its
+# examples and tests, as one tar.xz (98 MB), travels in two parts (a call carries at most 64 MiB). The machine keeps
+# files only while warm (30 s after a call), so make the two calls BACK TO BACK, nothing in between:
 #
-#   here, once:   bash benchmarks/gpu_check.sh prepare           # .whl/warp.part-00 .. -02 (.whl/ is git-ignored)
+#   here, once:   bash benchmarks/gpu_check.sh prepare    # .whl/warp.part-00, -01, warp-site.sha256 (~3 min of xz)
 #   device run 1: command "bash benchmarks/gpu_check.sh stage", carry [".whl/warp.part-00"], timeout_s 120
-#   device run 2: command "bash benchmarks/gpu_check.sh stage", carry [".whl/warp.part-01"], timeout_s 120
-#   device run 3: command "bash benchmarks/gpu_check.sh run",   carry [".whl/warp.part-02"], timeout_s 560
+#   device run 2: command "bash benchmarks/gpu_check.sh run", carry [".whl/warp.part-01", ".whl/warp-site.sha256",
+#                 ".whl/py"], timeout_s 580
 #
-# 'run' refuses (exit 3, in seconds) when the parts of the earlier calls are gone (the machine went back between calls):
-# start again from run 1. 'run' keeps itself within BUDGET_S (default 470 s) by giving each stage what is left, so
-# the call ends inside 8 minutes; each stage's failure is logged and the next stage still runs.
-# Back (at most 8 files): gpu_check.log (everything printed), nvidia-smi.txt, compile.json, cuda_vs_cpu.json,
-# summary.json (benchmarks/run.py --device cuda), profile_cuda.json (benchmarks/profile_step.py --device cuda).
+# 'run' refuses (exit 3, in seconds) when the part of the first call is gone (the machine went back between calls):
+# start again from run 1. 'run' keeps itself within BUDGET_S (default 520 s) by giving each stage what is left, so
+# the call ends inside 9 minutes; each stage's failure is logged and the next stage still runs.
+# Back (at most 8 files): gpu_check.log (everything printed, nvidia-smi's report first), compile.json,
+# cuda_vs_cpu.json, datasets_cuda_vs_cpu.json, dynamics_cuda.json, render.json, headlines_cuda.json,
+# profile_cuda.json.
 set -u
 WHEEL=warp_lang-1.19.0-py3-none-manylinux_2_28_x86_64.whl
 SHA256=c797f5f4aa9925f676e20dd28e5416fee794499f3f3c0a5b66f2d4dfc2de9e32
@@ -33,9 +35,18 @@ prepare)
       -d .whl warp-lang==1.19.0 || exit 1
   fi
   echo "$SHA256  .whl/$WHEEL" | sha256sum -c - || exit 1
-  rm -f .whl/warp.part-*
-  split -b 50M -d -a 2 ".whl/$WHEEL" .whl/warp.part-
+  rm -rf .whl/site .whl/warp.part-* .whl/warp-site.tar.xz .whl/py
+  python3 -m pip download -q --no-deps --only-binary=:all: --python-version 3.12 --implementation cp \
+    --platform manylinux_2_28_x86_64 --platform manylinux_2_17_x86_64 --platform manylinux2014_x86_64 -d .whl/py \
+    pydantic==2.13.4 pydantic-core==2.46.4 annotated-types==0.7.0 typing-inspection==0.4.2 typing-extensions==4.15.0 \
+    || exit 1
+  mkdir -p .whl/site && (cd .whl/site && unzip -q "../$WHEEL" && rm -rf warp/examples warp/tests) || exit 1
+  tar -cf - -C .whl/site . | xz -T0 -9e > .whl/warp-site.tar.xz || exit 1
+  rm -rf .whl/site
+  (cd .whl && sha256sum warp-site.tar.xz > warp-site.sha256)
+  split -b 50M -d -a 2 .whl/warp-site.tar.xz .whl/warp.part-
   ls -la .whl
+  [ "$(ls .whl/warp.part-* | wc -l)" = 2 ] || echo "WARNING: not two parts: add a stage call per extra part"
   git check-ignore -q .whl/ || echo "WARNING: .whl/ is not ignored: it would travel with every call"
   exit 0 ;;
 stage)
@@ -51,7 +62,7 @@ OUT=${OUT:-/tmp/ww_gpu_out}
 mkdir -p "$OUT"
 exec > >(tee -a "$OUT/gpu_check.log") 2>&1
 export PYTHONUNBUFFERED=1
-BUDGET_S=${BUDGET_S:-470}
+BUDGET_S=${BUDGET_S:-520}
 T0=$(date +%s)
 left() { echo $(( BUDGET_S - ($(date +%s) - T0) )); }
 stage() {  # stage NAME MAX_SECONDS CMD...: run CMD under min(MAX, time left), log its status
@@ -65,24 +76,27 @@ stage() {  # stage NAME MAX_SECONDS CMD...: run CMD under min(MAX, time left), l
 
 mkdir -p "$PARTS"
 cp -f .whl/warp.part-* "$PARTS"/ 2>/dev/null
-cat "$PARTS"/warp.part-* > "/tmp/$WHEEL" 2>/dev/null
-if ! echo "$SHA256  /tmp/$WHEEL" | sha256sum -c - ; then
-  echo "the warp wheel is incomplete ($(ls "$PARTS" 2>/dev/null | tr '\n' ' ')): the machine went back between the"
-  echo "calls; make the stage calls (parts 00, 01) and this one again, back to back"
+cat "$PARTS"/warp.part-* > /tmp/warp-site.tar.xz 2>/dev/null
+if ! (cd /tmp && sed 's/ .*warp-site/  warp-site/' "$REPO/.whl/warp-site.sha256" | sha256sum -c -); then
+  echo "warp is incomplete ($(ls "$PARTS" 2>/dev/null | tr '\n' ' ')): the machine went back between the calls;"
+  echo "make the stage call (part 00) and this one again, back to back"
   exit 3
 fi
-nvidia-smi > "$OUT/nvidia-smi.txt" 2>&1
+nvidia-smi
 nvidia-smi --query-gpu=name,memory.total,clocks.sm,clocks.max.sm,driver_version --format=csv
-python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site "/tmp/$WHEEL" \
-  || exit 4
+rm -rf /tmp/site && mkdir -p /tmp/site
+# pydantic (the config schema) is not on the image either: its wheels (2.6 MB) travel in .whl/py
+python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --target /tmp/site .whl/py/*.whl || exit 4
+tar -xJf /tmp/warp-site.tar.xz -C /tmp/site || exit 4
 # warpworm itself: the package layout of pyproject.toml (kernels/, render/, dataset_configs/ inside warpworm), copied
 # (no build: its pins and extras do not apply there; numpy, h5py, opencv, pyyaml, tqdm are on the image)
-rm -rf /tmp/site/warpworm && cp -r warpworm /tmp/site/warpworm && cp -r kernels /tmp/site/warpworm/kernels \
+cp -r warpworm /tmp/site/warpworm && cp -r kernels /tmp/site/warpworm/kernels \
   && cp -r render /tmp/site/warpworm/render && cp -r dataset_configs /tmp/site/warpworm/dataset_configs || exit 4
 export PYTHONPATH=/tmp/site
 cd /tmp  # so that the repository's own warpworm/ folder (without kernels/) does not shadow the copy
 python3 -c "import warp as wp, warpworm, numpy, h5py, cv2, yaml; wp.init(); print('warp', wp.config.version, \
 'devices', [d.alias for d in wp.get_devices()], 'numpy', numpy.__version__)" || exit 5
+python3 -m pip list 2>/dev/null | grep -iE "^(numpy|h5py|opencv|pyyaml|pydantic|tqdm|trimesh|usd|scipy) " 
 
 # 1. compile every kernel module for the GPU, in parallel (NVRTC, sm_90 cubin), timed
 cat > /tmp/ww_compile.py <<'PY'
@@ -174,11 +188,71 @@ json.dump(out, open(os.path.join(os.environ["OUT"], "cuda_vs_cpu.json"), "w"), i
 PY
 stage cuda_vs_cpu 120 python3 /tmp/ww_cuda_vs_cpu.py
 
-# 3. the summary table on the GPU: every solver at 1k / 16k / 64k worlds, images/s, samples/s ($OUT/summary.json)
-stage summary 270 python3 "$REPO/benchmarks/run.py" --device cuda --out "$OUT"
+# 3. whole datasets on CUDA against the CPU, same seed: the default config and production's looks at 128² (the
+#    pipeline promises the same draws -- params, cameras, seeds -- on any device; the physics and pixels are float32
+#    on both, in another instruction order, so they are reported, not judged)
+cat > /tmp/ww_datasets.py <<'PY'
+import json, os, sys, time
+sys.path.insert(0, os.path.join(os.environ["REPO"], "benchmarks"))
+from compare_datasets import compare_folders
+from pathlib import Path
+from warpworm.data.config import load_config
+from warpworm.data.job import generate
+out, root = {}, Path("/tmp/ww_ds")
+for name, extra in (("default", []), ("production", ["render.width=128", "render.height=128"])):
+    for dev in ("cuda:0", "cpu"):
+        cfg = load_config(name, extra + [f"sim.device={dev}", "output.preview=false"], num_samples=32)
+        t0 = time.perf_counter()
+        generate(cfg, root / name / dev.replace(":", ""), progress=False)
+        out[f"{name}_wall_s_{dev}"] = time.perf_counter() - t0
+    res = compare_folders(root / name / "cuda0", root / name / "cpu")
+    same = [r["dataset"] for r in res["rows"] if r["identical"]]
+    out[name] = {"identical": res["identical"], "problems": res["problems"], "n_identical": len(same),
+                 "n_datasets": len(res["rows"]),
+                 "differing": {r["dataset"]: {k: v for k, v in r.items() if k not in ("shard", "dataset")}
+                               for r in res["rows"] if not r["identical"]}}
+    print(name, json.dumps(out[name], indent=1, default=str)[:4000])
+json.dump(out, open(os.path.join(os.environ["OUT"], "datasets_cuda_vs_cpu.json"), "w"), indent=1, default=str)
+PY
+export REPO
+stage datasets 120 python3 /tmp/ww_datasets.py
 
-# 4. per-kernel profile on the GPU (no graph: every launch timed after a synchronize)
-stage profile 60 python3 "$REPO/benchmarks/profile_step.py" --device cuda --worlds 1024 16384 --duration 0.2 \
+# 4. dynamics on the GPU: every solver at 1k / 16k / 64k worlds with the GPU memory each holds, written after each
+#    size ($OUT/dynamics_cuda.json), so that a stage stopped by its limit keeps the sizes it finished
+cat > /tmp/ww_dynamics.py <<'PY'
+import json, os, sys
+sys.path.insert(0, os.path.join(os.environ["REPO"], "benchmarks"))
+import bench_dynamics
+rows = []
+for W in (1024, 16384, 65536):
+    rows += [r for r in bench_dynamics.compare("cuda:0", sizes=(W,), numpy_reference=W == 1024) if r.get("W") == W]
+    json.dump(rows, open(os.path.join(os.environ["OUT"], "dynamics_cuda.json"), "w"), indent=1, default=float)
+    for r in rows[-8:]:
+        print({k: (round(v, 4) if isinstance(v, float) else v) for k, v in r.items() if k != "note"})
+PY
+stage dynamics 200 python3 /tmp/ww_dynamics.py
+
+# 5. the renderer on the GPU: images/s at 128², 256², 512² (1,024 images a batch) against the ray caster, and each
+#    realism option on and off ($OUT/render.json)
+stage render 80 python3 "$REPO/benchmarks/run.py" render --device cuda --out "$OUT"
+
+# 6. samples/s of the pipeline end to end on CUDA: the summary's headline rows ($OUT/headlines_cuda.json)
+cat > /tmp/ww_headlines.py <<'PY'
+import json, os, sys
+sys.path.insert(0, os.path.join(os.environ["REPO"], "benchmarks"))
+rows = []
+for name in ("dataset", "views"):
+    try:
+        rows.append(__import__(f"bench_{name}").headline("cuda:0"))
+    except Exception as exc:
+        rows.append({"system": name, "note": f"failed: {type(exc).__name__}: {exc}"[:300]})
+    print(rows[-1])
+    json.dump(rows, open(os.path.join(os.environ["OUT"], "headlines_cuda.json"), "w"), indent=1, default=float)
+PY
+stage headlines 70 python3 /tmp/ww_headlines.py
+
+# 7. per-kernel profile on the GPU (no graph: every launch timed after a synchronize)
+stage profile 45 python3 "$REPO/benchmarks/profile_step.py" --device cuda --worlds 1024 16384 --duration 0.2 \
   --settle 0.02 --no-levers --out "$OUT/profile_cuda.json"
 
 nvidia-smi --query-gpu=clocks.sm,clocks.max.sm,temperature.gpu,power.draw --format=csv
