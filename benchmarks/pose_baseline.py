@@ -90,25 +90,6 @@ def load(root: Path, extra: tuple = ()) -> dict[str, np.ndarray]:
     return d
 
 
-def add_vertex_keypoints(d: dict) -> dict:
-    """``d`` with the 39 mesh vertices' projections (``crease_oracle.vertex_pixels``: lens included, hidden or not)
-    appended to its keypoints as ``v0`` .. ``v38``, labelled visible where they fall inside the image (a hidden
-    vertex's place follows from the shape around it). ``--vertex-heatmaps`` trains on them as extra heatmap targets:
-    the oracles put production's folds in the vertices' 2-D layout at about 1 px (128²) of precision, and the crease
-    head reads the predicted layout of every keypoint. The reported keypoint metrics stay on the named keypoints."""
-    from crease_oracle import vertex_pixels
-
-    uv = vertex_pixels(d)
-    H, W = d["rgb"].shape[1:3]
-    inside = ((uv >= -0.5) & (uv <= np.array([W, H]) - 0.5)).all(-1)
-    e = dict(d)
-    e["keypoints/pixel"] = np.concatenate([d["keypoints/pixel"], uv], axis=1)
-    e["keypoints/visibility"] = np.concatenate(
-        [d["keypoints/visibility"], np.where(inside, 2, 0).astype(d["keypoints/visibility"].dtype)], axis=1)
-    e["names"] = list(d["names"]) + [f"v{i}" for i in range(uv.shape[1])]
-    return e
-
-
 CROP_MARGIN = 1.15
 """A crop's side over the longer side of the worm's box (``labels/bbox_obj``)."""
 CROP_JITTER = 0.05
@@ -583,9 +564,6 @@ def main(argv=None) -> int:
     ap.add_argument("--augment-turn", type=float, default=0.0,
                     help="--augment --crop: the crops' in-plane turn, uniform within +- this [deg] (180 measured "
                          "worse on production's creases: docs/dataset.md)")
-    ap.add_argument("--vertex-heatmaps", action="store_true",
-                    help="also train heatmaps of the 39 mesh vertices (hidden or not) as keypoints; the crease head "
-                         "reads their predicted layout (metrics stay on the named keypoints)")
     ap.add_argument("--reg-weight", type=float, default=1.0,
                     help="weight of the crease + ratio L1 in the training loss (against the keypoints')")
     ap.add_argument("--tta", type=int, default=1,
@@ -610,12 +588,7 @@ def main(argv=None) -> int:
     paths = generate_sets(a)
     if a.no_pathtraced:
         paths.pop("test_pt")
-    tr = load(paths["train"], ("worm/vertices",) * (a.head == "triangles" or a.vertex_heatmaps)
-              + ("camera/dist",) * a.vertex_heatmaps)
-    num_named = len(tr["names"])  # the metrics' keypoints; --vertex-heatmaps adds the mesh vertices after them
-    flip = flip_permutation(tr["names"])
-    if a.vertex_heatmaps:
-        tr = add_vertex_keypoints(tr)
+    tr = load(paths["train"], ("worm/vertices",) if a.head == "triangles" else ())
     native = tr
     if a.crop:  # the network sees the crop at its own resolution
         tr = crop_to_worm(tr, a.crop, np.random.default_rng(a.seed), CROP_JITTER)
@@ -632,8 +605,9 @@ def main(argv=None) -> int:
         if a.save_model:
             torch.save({"state": model.state_dict(), "stats": dict(stats), "train": info, "args": vars(a)},
                        a.save_model)
-    stats["kp_mean"] = tr["keypoints/pixel"][:, :num_named].mean(0)
+    stats["kp_mean"] = tr["keypoints/pixel"].mean(0)
     body_model = tr["keypoints/body"].mean(0)
+    flip = flip_permutation(tr["names"])
     res = {}
     for name in [k for k in ("test", "test_pt") if k in paths]:
         d = load(paths[name], SEEN_KEYS)
@@ -642,7 +616,7 @@ def main(argv=None) -> int:
             d = crop_to_worm(d, a.crop)
         pred = (predict_turned(model, native_test, stats, a.crop, a.tta) if (a.crop and a.tta > 1)
                 else predict(model, d, stats))
-        res[name] = evaluate(pred[0][:, :num_named], *pred[1:], d, flip, stats, body_model)
+        res[name] = evaluate(*pred, d, flip, stats, body_model)
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
                             cwd=Path(__file__).parent).stdout.strip()
     dirty = bool(subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], capture_output=True,

@@ -119,31 +119,3 @@ def test_turned_crops_keep_every_keypoint_on_the_pixel_it_labels():
     np.testing.assert_allclose(np.linalg.norm(q[:, :, None] - q[:, None], axis=-1), dn * scale, atol=1e-9)
     unturned = crop_to_worm(d, side)["keypoints/pixel"]
     assert np.abs(q - unturned).max() > 5.0
-
-
-def test_vertex_keypoints_follow_the_named_ones_with_opencv_pixels_and_in_image_visibility():
-    """``add_vertex_keypoints`` appends each vertex's cv2.projectPoints pixel after the named keypoints (unchanged),
-    visible exactly where the pixel lies inside the image (hidden or not)."""
-    from pose_baseline import add_vertex_keypoints
-
-    rng = np.random.default_rng(11)
-    N, V, H, W = 3, 39, 96, 128
-    verts = rng.uniform(-0.06, 0.06, (N, V, 3))  # wide enough that some fall outside the 128 x 96 image
-    R = np.stack([_rotation(rng) for _ in range(N)])
-    t = np.c_[np.zeros((N, 2)), np.full(N, 0.12)]
-    K = np.tile([[[120.0, 0.0, 63.5], [0.0, 120.0, 47.5], [0.0, 0.0, 1.0]]], (N, 1, 1))
-    dist = np.tile([[-0.1, 0.02, 0.001, -0.001, 0.0]], (N, 1))
-    named = rng.uniform(0, 90, (N, 16, 2))
-    d = {"worm/vertices": verts, "camera/R": R, "camera/t": t, "camera/K": K, "camera/dist": dist,
-         "rgb": np.zeros((N, H, W, 3), np.uint8), "keypoints/pixel": named,
-         "keypoints/visibility": np.full((N, 16), 2, np.uint8), "names": [f"k{i}" for i in range(16)]}
-    e = add_vertex_keypoints(d)
-    assert e["names"][:16] == d["names"] and e["names"][16:] == [f"v{i}" for i in range(V)]
-    np.testing.assert_array_equal(e["keypoints/pixel"][:, :16], named)
-    vis = e["keypoints/visibility"][:, 16:]
-    for i in range(N):
-        want = cv2.projectPoints(verts[i], cv2.Rodrigues(R[i])[0], t[i], K[i], dist[i])[0][:, 0]
-        np.testing.assert_allclose(e["keypoints/pixel"][i, 16:], want, atol=1e-9)
-        inside = (want[:, 0] >= -0.5) & (want[:, 0] <= W - 0.5) & (want[:, 1] >= -0.5) & (want[:, 1] <= H - 0.5)
-        np.testing.assert_array_equal(vis[i], np.where(inside, 2, 0))
-    assert 0 < (vis == 0).sum() < vis.size  # both cases occur
