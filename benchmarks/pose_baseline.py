@@ -596,6 +596,11 @@ def main(argv=None) -> int:
     except ImportError:
         print("error: the benchmark needs torch: pip install torch (the CPU wheel is enough)", file=sys.stderr)
         return 2
+    # the code this run uses: read at its start (a training takes long; the tree may move on meanwhile)
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                            cwd=Path(__file__).parent).stdout.strip()
+    dirty = bool(subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], capture_output=True,
+                                text=True, cwd=Path(__file__).parent).stdout.strip())
     paths = generate_sets(a)
     if a.no_pathtraced:
         paths.pop("test_pt")
@@ -628,10 +633,6 @@ def main(argv=None) -> int:
         pred = (predict_turned(model, native_test, stats, a.crop, a.tta) if (a.crop and a.tta > 1)
                 else predict(model, d, stats))
         res[name] = evaluate(*pred, d, flip, stats, body_model)
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                            cwd=Path(__file__).parent).stdout.strip()
-    dirty = bool(subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], capture_output=True,
-                                text=True, cwd=Path(__file__).parent).stdout.strip())
     report = {"args": vars(a), "commit": commit, "worktree_modified": dirty,
               "pythonpath": os.environ.get("PYTHONPATH", ""), "train": info, **res,
               "goals": goals(res)}
