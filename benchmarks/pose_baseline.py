@@ -330,8 +330,7 @@ KP_SCALE = 8.0
 def train(d: dict, a) -> tuple[object, dict, dict]:
     """AdamW for ``--steps`` steps (or until ``--budget-s``), cosine-decayed: heatmap cross-entropy + 0.5 x the L1 of
     the soft-argmax pixels / KP_SCALE on in-image keypoints, + ``--reg-weight`` x L1 on the normalized creases and
-    ratios. With ``--augment --crop S``, ``d`` holds the native images and every batch is cropped afresh; with
-    ``--ema D`` the returned network holds the weights' and BatchNorm statistics' moving average."""
+    ratios. With ``--augment --crop S``, ``d`` holds the native images and every batch is cropped afresh."""
     import torch
 
     torch.manual_seed(a.seed)
@@ -365,9 +364,6 @@ def train(d: dict, a) -> tuple[object, dict, dict]:
     model = build_model(kp.shape[1], reg.shape[1], a.size, a.net_size, a.head,
                         triangle_weights(d) if a.head == "triangles" else None, a.heatmap_stride)
     opt = torch.optim.AdamW(model.parameters(), lr=2e-3, weight_decay=1e-4)
-    # --ema D: an exponential moving average of the weights (and BatchNorm statistics) is the network returned
-    ema = (torch.optim.swa_utils.AveragedModel(model, multi_avg_fn=torch.optim.swa_utils.get_ema_multi_avg_fn(a.ema),
-                                               use_buffers=True) if a.ema else None)
     # cosine decay over the step budget: the last epochs average out the batch noise instead of jumping on it
     sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda i: 0.5 * (1.0 + np.cos(np.pi * min(i / a.steps, 1.0))))
     rng = np.random.default_rng(a.seed)
@@ -388,8 +384,6 @@ def train(d: dict, a) -> tuple[object, dict, dict]:
             loss.backward()
             opt.step()
             sched.step()
-            if ema is not None:
-                ema.update_parameters(model)
             steps += 1
             if done():
                 break
@@ -398,8 +392,6 @@ def train(d: dict, a) -> tuple[object, dict, dict]:
                     "reg_loss": float(l_reg.detach())})
         print(f"epoch {epochs}: {log[-1]['s']} s, keypoint L1 {log[-1]['kp_loss_px']:.2f} px, "
               f"creases+ratios L1 {log[-1]['reg_loss']:.3f} (normalized)", flush=True)
-    if ema is not None:  # the averaged copy, with the forward's bookkeeping (cells) of the trained one
-        model.load_state_dict(ema.module.state_dict())
     return model, stats, {"steps": steps, "epochs": epochs, "train_s": round(time.perf_counter() - t0, 1),
                           "log": log}
 
@@ -572,9 +564,6 @@ def main(argv=None) -> int:
     ap.add_argument("--augment-turn", type=float, default=0.0,
                     help="--augment --crop: the crops' in-plane turn, uniform within +- this [deg] (180 measured "
                          "worse on production's creases: docs/dataset.md)")
-    ap.add_argument("--ema", type=float, default=0.0,
-                    help="test the exponential moving average of the weights with this decay per step (e.g. 0.999; "
-                         "0: the last weights)")
     ap.add_argument("--reg-weight", type=float, default=1.0,
                     help="weight of the crease + ratio L1 in the training loss (against the keypoints')")
     ap.add_argument("--tta", type=int, default=1,
