@@ -225,7 +225,8 @@ def solvers_for(device) -> tuple:
     return ("band",)
 
 
-def compare(device: str = "cpu", sizes=None, quick: bool = False, solvers=None, numpy_reference: bool = True) -> list[dict]:
+def compare(device: str = "cpu", sizes=None, quick: bool = False, solvers=None,
+            numpy_reference: bool = True) -> list[dict]:
     """The one table of ``python benchmarks/run.py``: per W (and solver, :func:`solvers_for`), warpworm's whole gait
     steps (analytic magnets) and its substeps alone, then the NumPy reference of the substep and Newton on the same
     mesh, measured in this run.

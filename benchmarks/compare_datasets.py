@@ -4,12 +4,13 @@ Usage::
 
     python3 benchmarks/compare_datasets.py A B [--json OUT.json]
 
-For every HDF5 dataset of every shard (paired by file name) it reports whether the two are byte-identical and, where
-not, the largest absolute difference and the fraction of elements that differ (for images: of pixels). The shards'
-attributes are compared too, except the ones that name the run (timings, host, device). Prints ``IDENTICAL`` when
-everything matches, else a table of what differs; exits 0 either way (a report, not a test) and 2 when the folders
-do not hold the same shards or the same datasets. Used to check that the default dataset is byte-identical after a
-change, and how far a CUDA run lies from the CPU's on the same seed (``benchmarks/gpu_check.sh``).
+For every HDF5 dataset, over every sample in order (the project's ``DatasetReader``: the shards' layout does not
+matter), it reports whether the two are byte-identical and, where not, the largest absolute difference and the
+fraction of elements that differ (for images: of pixels). The attributes are compared too, except the versions of
+the code that wrote them and each shard's place. Prints ``IDENTICAL`` when everything matches, else a list of what
+differs; exits 0 either way (a report, not a test) and 2 when the folders do not hold the same samples or
+datasets. Used to check that the default dataset is byte-identical after a change, and how far a CUDA run lies from
+the CPU's on the same seed (``benchmarks/gpu_check.sh``).
 """
 
 from __future__ import annotations
@@ -22,26 +23,19 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-RUN_ATTRS = ("created", "wall", "time", "host", "device", "seconds", "version")
-"""Attribute name fragments that describe the run rather than the data: skipped."""
+RUN_ATTRS = ("warp_version", "warpworm_version")
+"""Root attributes that name the code that wrote a dataset, not its data: skipped (a comparison across a change)."""
+SHARD_ATTRS = ("shard_index", "first_sample", "count", "shard_size")
+"""Root attributes that describe one shard's place: the comparison is of samples, whatever the sharding."""
 
 
-def _datasets(f: h5py.File) -> dict[str, h5py.Dataset]:
-    out = {}
-    f.visititems(lambda name, obj: out.__setitem__(name, obj) if isinstance(obj, h5py.Dataset) else None)
-    return out
-
-
-def _attrs(f: h5py.File) -> dict[str, object]:
-    out = {}
-
-    def visit(name, obj):
-        for k, v in obj.attrs.items():
-            if not any(s in k.lower() for s in RUN_ATTRS):
-                out[f"{name}@{k}"] = v
-
-    visit("/", f)
-    f.visititems(visit)
+def _attrs(reader) -> dict[str, object]:
+    """The root attributes (``/@name``) and each dataset's (``dataset@name``) of the reader's first shard, less
+    RUN_ATTRS and SHARD_ATTRS."""
+    out = {f"/@{k}": v for k, v in reader.attrs.items() if k not in RUN_ATTRS + SHARD_ATTRS}
+    with h5py.File(reader.shard_paths[0], "r") as f:
+        for key in reader.keys():
+            out.update({f"{key}@{k}": v for k, v in f[key].attrs.items()})
     return out
 
 
@@ -51,38 +45,34 @@ def compare_arrays(a: np.ndarray, b: np.ndarray) -> dict:
         return {"identical": False, "note": f"shape/dtype {a.shape} {a.dtype} vs {b.shape} {b.dtype}"}
     if a.tobytes() == b.tobytes():
         return {"identical": True}
-    if a.dtype.kind in "fiub":
-        x, y = a.astype(np.float64), b.astype(np.float64)
-        diff = x != y
-        if a.dtype.kind == "f":
-            diff &= ~(np.isnan(x) & np.isnan(y))
-        # images (N, H, W[, C]): a pixel differs if any of its channels does
-        per = diff.any(axis=-1) if (a.ndim == 4 and a.shape[-1] in (3, 4)) else diff
-        finite = np.isfinite(x) & np.isfinite(y)
-        return {"identical": False, "max_abs": float(np.abs(x - y)[finite].max(initial=0.0)),
-                "frac_differ": float(per.mean())}
-    return {"identical": False, "frac_differ": float(np.mean(a != b))}
+    if a.dtype.kind not in "fiub":
+        return {"identical": False, "frac_differ": float(np.mean(a != b))}
+    x, y = a.astype(np.float64), b.astype(np.float64)
+    diff = (x != y) & ~(np.isnan(x) & np.isnan(y))
+    per = diff.any(axis=-1) if (a.ndim == 4 and a.shape[-1] in (3, 4)) else diff  # images: a pixel, any channel
+    finite = np.isfinite(x) & np.isfinite(y)
+    return {"identical": False, "max_abs": float(np.abs(x - y)[finite].max(initial=0.0)),
+            "frac_differ": float(per.mean())}
 
 
 def compare_folders(a: Path, b: Path) -> dict:
-    """{"identical": bool, "rows": [...], "problems": [...]} over the shards both folders hold."""
-    shards_a = sorted(p.name for p in a.glob("*.h5"))
-    shards_b = sorted(p.name for p in b.glob("*.h5"))
+    """{"identical": bool, "rows": [...], "problems": [...]}: every dataset over every sample, read through
+    :class:`warpworm.data.dataset.DatasetReader` (so two folders of the same samples in other shards compare equal),
+    and the attributes."""
+    from warpworm.data.dataset import DatasetReader
+
+    ra, rb = DatasetReader(a), DatasetReader(b)
     problems, rows = [], []
-    if shards_a != shards_b:
-        problems.append(f"shards differ: {shards_a} vs {shards_b}")
-    for name in sorted(set(shards_a) & set(shards_b)):
-        with h5py.File(a / name, "r") as fa, h5py.File(b / name, "r") as fb:
-            da, db = _datasets(fa), _datasets(fb)
-            if set(da) != set(db):
-                problems.append(f"{name}: datasets only in one: {sorted(set(da) ^ set(db))}")
-            for key in sorted(set(da) & set(db)):
-                rows.append({"shard": name, "dataset": key, **compare_arrays(da[key][()], db[key][()])})
-            aa, ab = _attrs(fa), _attrs(fb)
-            for key in sorted(set(aa) | set(ab)):
-                va, vb = aa.get(key), ab.get(key)
-                if not np.array_equal(np.asarray(va), np.asarray(vb)):
-                    rows.append({"shard": name, "dataset": key, "identical": False, "note": "attribute"})
+    if len(ra) != len(rb):
+        problems.append(f"samples differ: {len(ra)} vs {len(rb)}")
+    ka, kb = set(ra.keys()), set(rb.keys())
+    if ka != kb:
+        problems.append(f"datasets only in one: {sorted(ka ^ kb)}")
+    if not problems:
+        rows = [{"dataset": key, **compare_arrays(ra.read(key), rb.read(key))} for key in sorted(ka)]
+    aa, ab = _attrs(ra), _attrs(rb)
+    rows += [{"dataset": key, "identical": False, "note": "attribute"} for key in sorted(set(aa) | set(ab))
+             if not np.array_equal(np.asarray(aa.get(key)), np.asarray(ab.get(key)))]
     identical = not problems and all(r["identical"] for r in rows)
     return {"identical": identical, "rows": rows, "problems": problems}
 
@@ -106,8 +96,8 @@ def main(argv=None) -> int:
         print(f"{same} of {len(res['rows'])} datasets identical; differing:")
         for r in differ:
             extra = " ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in r.items()
-                             if k not in ("shard", "dataset", "identical"))
-            print(f"  {r['shard']} {r['dataset']}: {extra}")
+                             if k not in ("dataset", "identical"))
+            print(f"  {r['dataset']}: {extra}")
     return 2 if res["problems"] else 0
 
 

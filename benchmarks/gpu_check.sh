@@ -77,7 +77,7 @@ stage() {  # stage NAME MAX_SECONDS CMD...: run CMD under min(MAX, time left), l
 mkdir -p "$PARTS"
 cp -f .whl/warp.part-* "$PARTS"/ 2>/dev/null
 cat "$PARTS"/warp.part-* > /tmp/warp-site.tar.xz 2>/dev/null
-if ! (cd /tmp && sed 's/ .*warp-site/  warp-site/' "$REPO/.whl/warp-site.sha256" | sha256sum -c -); then
+if ! (cd /tmp && sha256sum -c "$REPO/.whl/warp-site.sha256"); then  # the file names warp-site.tar.xz
   echo "warp is incomplete ($(ls "$PARTS" 2>/dev/null | tr '\n' ' ')): the machine went back between the calls;"
   echo "make the stage call (part 00) and this one again, back to back"
   exit 3
@@ -206,10 +206,9 @@ for name, extra in (("default", []), ("production", ["render.width=128", "render
         generate(cfg, root / name / dev.replace(":", ""), progress=False)
         out[f"{name}_wall_s_{dev}"] = time.perf_counter() - t0
     res = compare_folders(root / name / "cuda0", root / name / "cpu")
-    same = [r["dataset"] for r in res["rows"] if r["identical"]]
-    out[name] = {"identical": res["identical"], "problems": res["problems"], "n_identical": len(same),
-                 "n_datasets": len(res["rows"]),
-                 "differing": {r["dataset"]: {k: v for k, v in r.items() if k not in ("shard", "dataset")}
+    out[name] = {"identical": res["identical"], "problems": res["problems"],
+                 "n_identical": sum(r["identical"] for r in res["rows"]), "n_datasets": len(res["rows"]),
+                 "differing": {r["dataset"]: {k: v for k, v in r.items() if k != "dataset"}
                                for r in res["rows"] if not r["identical"]}}
     print(name, json.dumps(out[name], indent=1, default=str)[:4000])
 json.dump(out, open(os.path.join(os.environ["OUT"], "datasets_cuda_vs_cpu.json"), "w"), indent=1, default=str)
