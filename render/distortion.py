@@ -69,36 +69,52 @@ def undistort_maps(K: np.ndarray, dist: np.ndarray, width: int, height: int, dev
     return out.numpy().reshape(N, height, width, 2)
 
 
-def widened_pinhole(cameras, device=None):
-    """The pinhole cameras a distorted image is warped from (the renderers' lens path): the same K widened by
-    margins that hold the ray of every distorted pixel centre of ``cameras`` (``dist`` (N, 5)), and where each
-    distorted pixel centre lies in that wider image. Returns (cameras with the shifted K, ``dist`` None and the wider
-    ``width``/``height``, mx (N, H, W) float32, my (N, H, W) float32) [px]."""
-    import dataclasses
-
+def lens_margins(cameras) -> tuple[int, int, int, int]:
+    """The widening a lens needs: (left, top, grid width, grid height) [px] of a pinhole image with the cameras' K
+    shifted by (left, top) that holds the ray of every distorted pixel centre of ``cameras`` (``dist`` (N, 5)), with
+    a pixel to spare. The lens map is one-to-one over the image (:func:`lens_covers_image`), so the extreme rays
+    are those of the image's border: only its 2 (W + H) pixel centres are undistorted (NumPy, float64). ValueError
+    when a lens folds back inside its image (no ray reaches some pixels)."""
     H, W = int(cameras.height), int(cameras.width)
     dist = np.asarray(cameras.dist, dtype=np.float64)
-    maps = undistort_maps(cameras.K, dist, W, H, device)  # (N, H, W, 2)
-    off = ~np.isfinite(maps).all(axis=(1, 2, 3))
-    if off.any():  # the wider image would have to hold rays that do not exist (a 3 TiB allocation, once)
+    K = np.asarray(cameras.K, dtype=np.float64)
+    xs, ys = np.arange(W, dtype=np.float64), np.arange(H, dtype=np.float64)
+    bx = np.concatenate([xs, xs, np.zeros(H), np.full(H, W - 1.0)])
+    by = np.concatenate([np.zeros(W), np.full(W, H - 1.0), ys, ys])
+    fx, fy, cx, cy = (K[:, 0, 0, None], K[:, 1, 1, None], K[:, 0, 2, None], K[:, 1, 2, None])
+    u, v, res = undistort((bx[None] - cx) / fx, (by[None] - cy) / fy, dist[:, None, :])
+    off = ~(np.isfinite(u).all(axis=1) & np.isfinite(v).all(axis=1) & (res.max(axis=1, initial=0.0) <= 1e-9))
+    if off.any():  # the wider image would have to hold rays that do not exist
         i = int(np.flatnonzero(off)[0])
         raise ValueError(f"camera {i} of {len(off)} (and {int(off.sum()) - 1} more): its lens (k1, k2, p1, p2, k3) = "
                          f"{tuple(np.round(dist[i], 5).tolist())} folds back inside its {W}x{H} image (fx "
-                         f"{cameras.K[i, 0, 0]:.1f} px): some pixels see no ray; expected a lens whose radial map "
+                         f"{K[i, 0, 0]:.1f} px): some pixels see no ray; expected a lens whose radial map "
                          "rises past the image corners (draw_distortion with K redraws such lenses)")
-    lo = np.floor(maps.reshape(-1, 2).min(axis=0)) - 1
-    hi = np.ceil(maps.reshape(-1, 2).max(axis=0)) + 1
-    ml, mt = int(max(0, -lo[0])), int(max(0, -lo[1]))
-    Wp, Hp = W + ml + int(max(0, hi[0] - (W - 1))), H + mt + int(max(0, hi[1] - (H - 1)))
+    mx, my = fx * u + cx, fy * v + cy
+    lo = np.floor([mx.min(), my.min()]) - 1
+    hi = np.ceil([mx.max(), my.max()]) + 1
+    left, top = int(max(0, -lo[0])), int(max(0, -lo[1]))
+    return left, top, W + left + int(max(0, hi[0] - (W - 1))), H + top + int(max(0, hi[1] - (H - 1)))
+
+
+def widened_pinhole(cameras, device=None):
+    """The pinhole cameras a distorted image is warped from (the path tracer's lens path): the same K widened by
+    :func:`lens_margins`, and where each distorted pixel centre lies in that wider image. Returns (cameras with the
+    shifted K, ``dist`` None and the wider ``width``/``height``, mx (N, H, W) float32, my (N, H, W) float32) [px]."""
+    import dataclasses
+
+    H, W = int(cameras.height), int(cameras.width)
+    left, top, Wp, Hp = lens_margins(cameras)
+    maps = undistort_maps(cameras.K, np.asarray(cameras.dist, dtype=np.float64), W, H, device)  # (N, H, W, 2)
     K = cameras.K.copy()
-    K[:, 0, 2] += ml
-    K[:, 1, 2] += mt
+    K[:, 0, 2] += left
+    K[:, 1, 2] += top
     wide = dataclasses.replace(cameras, K=K, dist=None, width=Wp, height=Hp)
-    return wide, (maps[..., 0] + ml).astype(np.float32), (maps[..., 1] + mt).astype(np.float32)
+    return wide, (maps[..., 0] + left).astype(np.float32), (maps[..., 1] + top).astype(np.float32)
 
 
-__all__ = ["DIST_NAMES", "distort", "draw_distortion", "lens_covers_image", "undistort", "undistort_maps",
-           "widened_pinhole"]
+__all__ = ["DIST_NAMES", "distort", "draw_distortion", "lens_covers_image", "lens_margins", "undistort",
+           "undistort_maps", "widened_pinhole"]
 
 COVER_MARGIN = 0.02
 """:func:`lens_covers_image`: how far past the farthest pixel centre (relative) the radial map must still rise."""

@@ -269,7 +269,10 @@ class Lights:
     ``ambient``: per world. Shadow map ``m`` is a depth image (packed keys of :func:`raster_triangles`, side
     ``map_side``) seen by a pinhole ``map_rot``/``map_trans``/``map_intr`` at the light; world ``w``'s maps are
     ``map_first[w]`` (the sun) and ``map_first[w] + 1 + i`` (point light i); ``map_first[w] < 0``: none (lit).
-    ``map_light_size``: the light's radius [m] as placed for the map (it sets the penumbra).
+    ``map_light_size``: the light's radius [m] as placed for the map (it sets the penumbra). ``map_tile_min``
+    (M, map_tiles²): the smallest key of each ``SHADOW_TILE`` x ``SHADOW_TILE`` block of texels
+    (:func:`shadow_tile_min`), so a point whose blocker search region holds no nearer texel is known lit from a few
+    reads (:func:`region_unblocked`).
     """
 
     ambient: wp.array(dtype=wp.vec3)
@@ -286,6 +289,8 @@ class Lights:
     map_intr: wp.array(dtype=wp.vec4)
     map_light_size: wp.array(dtype=float)
     map_side: int
+    map_tile_min: wp.array2d(dtype=wp.int64)
+    map_tiles: int
 
 
 @wp.func
@@ -298,6 +303,47 @@ def map_depth(L: Lights, m: int, x: int, y: int) -> float:
         if key != _EMPTY:
             z = float(key / _TRI_SCALE) / _DEPTH_SCALE
     return z
+
+
+SHADOW_TILE = 8
+"""Side [texels] of the blocks whose minimum key :func:`shadow_tile_min` keeps."""
+_SHADOW_TILE = wp.constant(SHADOW_TILE)
+
+
+@wp.kernel
+def shadow_tile_min(map_key: wp.array2d(dtype=wp.int64), side: int, tiles: int,
+                    tile_min: wp.array2d(dtype=wp.int64)):
+    """Smallest key of each ``SHADOW_TILE``² block of every shadow map: ``map_key`` (M, side²) ->
+    ``tile_min`` (M, tiles²); launched as (M, tiles²)."""
+    m, b = wp.tid()
+    x0 = (b % tiles) * _SHADOW_TILE
+    y0 = (b / tiles) * _SHADOW_TILE
+    best = _EMPTY
+    for y in range(y0, wp.min(y0 + _SHADOW_TILE, side)):
+        for x in range(x0, wp.min(x0 + _SHADOW_TILE, side)):
+            best = wp.min(best, map_key[m, y * side + x])
+    tile_min[m, b] = best
+
+
+@wp.func
+def region_unblocked(L: Lights, m: int, u: float, v: float, z: float, radius: float) -> bool:
+    """True when no texel :func:`pcf_taps` reads about (u, v) at ``radius`` can hold an occluder nearer than ``z``,
+    judged from the tile minima (a texel wider than the taps on each side, so rounding cannot escape): then the
+    blocker search would find none, and the point is lit. Exact: the same answer as the 16 taps."""
+    s = L.map_side
+    x0 = wp.max(int(wp.floor(u - radius + 0.5)) - 1, 0)
+    x1 = wp.min(int(wp.floor(u + radius + 0.5)) + 1, s - 1)
+    y0 = wp.max(int(wp.floor(v - radius + 0.5)) - 1, 0)
+    y1 = wp.min(int(wp.floor(v + radius + 0.5)) + 1, s - 1)
+    clear = bool(True)
+    if x0 <= x1 and y0 <= y1:
+        for ty in range(y0 / _SHADOW_TILE, y1 / _SHADOW_TILE + 1):
+            for tx in range(x0 / _SHADOW_TILE, x1 / _SHADOW_TILE + 1):
+                key = L.map_tile_min[m, ty * L.map_tiles + tx]
+                if key != _EMPTY:
+                    if float(key / _TRI_SCALE) / _DEPTH_SCALE < z:
+                        clear = False
+    return clear
 
 
 @wp.func
@@ -338,6 +384,8 @@ def light_visibility(L: Lights, m: int, p: wp.vec3, n: wp.vec3) -> float:
     side = float(L.map_side)
     if u < -search - 1.0 or v < -search - 1.0 or u > side + search or v > side + search:
         return 1.0  # outside the map, which covers every caster: nothing between the point and the light
+    if region_unblocked(L, m, u, v, z, search):
+        return 1.0
     blk = pcf_taps(L, m, u, v, z, search)
     if blk[0] == 0.0:
         return 1.0
@@ -639,14 +687,19 @@ def floor_albedo(base: wp.vec3, mat: wp.vec3, inv_tile: float, ft: wp.vec4, fc2:
 
 
 @wp.func(inline=True)
-def shade_floor(look: Look, L: Lights, w: int, first: int, mat: wp.vec3, p: wp.vec3, to_eye: wp.vec3) -> wp.vec3:
-    """Checker + grain in floor coordinates [m] (``mat``): ambient + sun + every point light at ``p``, and, for a
-    glossy plate (floor specular strength > 0), their highlights seen along ``to_eye``."""
-    fn = look.floor_normal[wrow(w, look.floor_normal.shape[0])]
+def floor_albedo_at(look: Look, w: int, mat: wp.vec3) -> wp.vec3:
+    """World ``w``'s floor albedo (checker + grain, :func:`floor_albedo`) at floor coordinates ``mat`` [m]."""
     ft = look.floor_tex[wrow(w, look.floor_tex.shape[0])]
     off = noise_offset(look, w)
-    albedo = floor_albedo(look.albedo[wrow(w, look.albedo.shape[0]), SEG_FLOOR], mat, 1.0 / ft[0], ft,
-                          look.floor_color2[wrow(w, look.floor_color2.shape[0])], look.noise, off[0], off[1])
+    return floor_albedo(look.albedo[wrow(w, look.albedo.shape[0]), SEG_FLOOR], mat, 1.0 / ft[0], ft,
+                        look.floor_color2[wrow(w, look.floor_color2.shape[0])], look.noise, off[0], off[1])
+
+
+@wp.func(inline=True)
+def floor_lit(look: Look, L: Lights, w: int, first: int, albedo: wp.vec3, p: wp.vec3, to_eye: wp.vec3) -> wp.vec3:
+    """The floor of albedo ``albedo`` at ``p``: ambient + sun + every point light, and, for a glossy plate (floor
+    specular strength > 0), their highlights seen along ``to_eye``. Linear in ``albedo`` plus the highlights."""
+    fn = look.floor_normal[wrow(w, look.floor_normal.shape[0])]
     sc = L.sun_color[wrow(w, L.sun_color.shape[0])]
     ndl = wp.max(wp.dot(fn, L.sun_dir[wrow(w, L.sun_dir.shape[0])]), 0.0)
     irr = L.ambient[wrow(w, L.ambient.shape[0])] + sc * shadow_factor(L, first, 0, ndl, p, fn)
@@ -717,26 +770,47 @@ def textured_albedo(base: wp.vec3, label: int, mat: wp.vec3, pt: wp.vec2, noise:
 
 
 @wp.func(inline=True)
-def shade_hit(look: Look, L: Lights, w: int, first: int, label: int, z: float, mat: wp.vec3, n_world: wp.vec3,
-              eye: wp.vec3, d_world: wp.vec3, bg: wp.vec3):
-    """Colour (linear RGB) and unit world normal (0 for background) of the surface ``label`` hit at camera depth
-    ``z`` along ``d_world`` (mesh normal ``n_world``, unnormalized; material coordinates ``mat``)."""
+def surface_albedo(look: Look, w: int, label: int, mat: wp.vec3) -> wp.vec3:
+    """Albedo (linear RGB) of surface ``label`` at material coordinates ``mat``: the floor's checker and grain, the
+    paper and magnets' textures; 0 for the background."""
+    albedo = wp.vec3(0.0)
+    if label == SEG_FLOOR:
+        albedo = floor_albedo_at(look, w, mat)
+    elif label != SEG_BACKGROUND:
+        albedo = object_albedo(look, w, label, mat)
+    return albedo
+
+
+@wp.func(inline=True)
+def shade_surface(look: Look, L: Lights, w: int, first: int, label: int, albedo: wp.vec3, z: float,
+                  n_world: wp.vec3, eye: wp.vec3, d_world: wp.vec3, bg: wp.vec3):
+    """Colour (linear RGB) and unit world normal (0 for background) of surface ``label`` of albedo ``albedo`` hit at
+    camera depth ``z`` along ``d_world`` (mesh normal ``n_world``, unnormalized). Linear in ``albedo`` (plus
+    highlights and sheen), so a pixel's samples on one surface may share it with their mean albedo."""
     color = bg
     nrm = wp.vec3(0.0)
     if label == SEG_FLOOR:
         nrm = look.floor_normal[wrow(w, look.floor_normal.shape[0])]
-        color = shade_floor(look, L, w, first, mat, eye + z * d_world, -d_world)
+        color = floor_lit(look, L, w, first, albedo, eye + z * d_world, -d_world)
     elif label != SEG_BACKGROUND:
         nrm = n_world
         if wp.dot(n_world, -d_world) < 0.0:
             nrm = -n_world  # double-sided sheet: light the side the camera sees
-        base = object_albedo(look, w, label, mat)
         pb = look.paper_bsdf[wrow(w, look.paper_bsdf.shape[0])]
         if label <= SEG_WORM_LAST and (pb[0] > 0.0 or pb[1] > 0.0 or pb[3] > 0.0):
-            color = paper_surface(base, eye + z * d_world, nrm, -d_world, L, w, first, pb)
+            color = paper_surface(albedo, eye + z * d_world, nrm, -d_world, L, w, first, pb)
         else:
-            color = light_surface(base, look.specular[wrow(w, look.specular.shape[0]), label], eye + z * d_world, nrm,
-                                  -d_world, L, w, first)
+            color = light_surface(albedo, look.specular[wrow(w, look.specular.shape[0]), label], eye + z * d_world,
+                                  nrm, -d_world, L, w, first)
+    return color, nrm
+
+
+@wp.func(inline=True)
+def shade_hit(look: Look, L: Lights, w: int, first: int, label: int, z: float, mat: wp.vec3, n_world: wp.vec3,
+              eye: wp.vec3, d_world: wp.vec3, bg: wp.vec3):
+    """:func:`shade_surface` with the surface's own albedo at material coordinates ``mat``."""
+    color, nrm = shade_surface(look, L, w, first, label, surface_albedo(look, w, label, mat), z, n_world, eye,
+                               d_world, bg)
     return color, nrm
 
 
@@ -945,27 +1019,13 @@ def downsample_rgb(
     rgb[img, y * width + x] = wp.vec3ub(to_srgb8(acc[0]), to_srgb8(acc[1]), to_srgb8(acc[2]))
 
 
-@wp.kernel
-def undistort_pixels(
-    intr: wp.array(dtype=wp.vec4d),
-    dist: wp.array2d(dtype=wp.float64),
-    iterations: int,
-    # Data out:
-    pinhole: wp.array3d(dtype=wp.vec2d),
-):
-    """For pixel centre (x, y) of distorted image ``img``: the pinhole pixel (same intrinsics ``intr`` = (fx, fy, cx,
-    cy)) whose ray it sees, by ``iterations`` Newton steps on OpenCV's lens map with ``dist`` (k1, k2, p1, p2, k3)
-    (float64; the NumPy twin is :func:`warpworm.render.distortion.undistort`). ``pinhole``: (N, H, W); NaN where
-    Newton's method ends off the lens (residual over 1e-9 or a folded Jacobian: no ray reaches that pixel)."""
-    img, y, x = wp.tid()
-    k = intr[img]
-    xd = (wp.float64(x) - k[2]) / k[0]
-    yd = (wp.float64(y) - k[3]) / k[1]
-    k1 = dist[img, 0]
-    k2 = dist[img, 1]
-    p1 = dist[img, 2]
-    p2 = dist[img, 3]
-    k3 = dist[img, 4]
+@wp.func
+def lens_inverse(xd: wp.float64, yd: wp.float64, k1: wp.float64, k2: wp.float64, p1: wp.float64, p2: wp.float64,
+                 k3: wp.float64, iterations: int):
+    """The undistorted normalized point (u, v) that OpenCV's lens map (k1, k2, p1, p2, k3) sends to the distorted
+    normalized point (xd, yd), by ``iterations`` Newton steps from (xd, yd) in float64; with the forward map's
+    symmetric Jacobian (a, b, d) = (dxd/du, dxd/dv = dyd/du, dyd/dv) there, and ``ok``: False where Newton's method
+    ends off the lens (residual over 1e-9, or a folded Jacobian: no ray reaches that point)."""
     one = wp.float64(1.0)
     two = wp.float64(2.0)
     u = xd
@@ -982,8 +1042,8 @@ def undistort_pixels(
         det = a * d - b * b
         u = u - (d * fx - b * fy) / det
         v = v - (a * fy - b * fx) / det
-    # where the polynomial folds back before this pixel's radius, no ray reaches it: Newton wanders or lands on the
-    # far (folded) branch; mark it instead of returning a wrong ray
+    # where the polynomial folds back before this point's radius, no ray reaches it: Newton wanders or lands on the
+    # far (folded) branch; say so instead of returning a wrong ray
     r2 = u * u + v * v
     radial = one + r2 * (k1 + r2 * (k2 + r2 * k3))
     drad = two * (k1 + r2 * (two * k2 + wp.float64(3.0) * k3 * r2))
@@ -992,7 +1052,26 @@ def undistort_pixels(
     a = radial + u * u * drad + two * p1 * v + wp.float64(6.0) * p2 * u
     b = u * v * drad + two * p1 * u + two * p2 * v
     d = radial + v * v * drad + wp.float64(6.0) * p1 * v + two * p2 * u
-    if not (ex * ex + ey * ey <= wp.float64(1.0e-18) and a > wp.float64(0.0) and a * d - b * b > wp.float64(0.0)):
+    ok = ex * ex + ey * ey <= wp.float64(1.0e-18) and a > wp.float64(0.0) and a * d - b * b > wp.float64(0.0)
+    return u, v, a, b, d, ok
+
+
+@wp.kernel
+def undistort_pixels(
+    intr: wp.array(dtype=wp.vec4d),
+    dist: wp.array2d(dtype=wp.float64),
+    iterations: int,
+    # Data out:
+    pinhole: wp.array3d(dtype=wp.vec2d),
+):
+    """For pixel centre (x, y) of distorted image ``img``: the pinhole pixel (same intrinsics ``intr`` = (fx, fy, cx,
+    cy)) whose ray it sees, by :func:`lens_inverse` with ``dist`` (k1, k2, p1, p2, k3) (float64; the NumPy twin is
+    :func:`warpworm.render.distortion.undistort`). ``pinhole``: (N, H, W); NaN where no ray reaches that pixel."""
+    img, y, x = wp.tid()
+    k = intr[img]
+    u, v, _a, _b, _d, ok = lens_inverse((wp.float64(x) - k[2]) / k[0], (wp.float64(y) - k[3]) / k[1], dist[img, 0],
+                                       dist[img, 1], dist[img, 2], dist[img, 3], dist[img, 4], iterations)
+    if not ok:
         nan = wp.float64(wp.nan)
         pinhole[img, y, x] = wp.vec2d(nan, nan)
         return

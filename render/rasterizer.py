@@ -1,4 +1,5 @@
-"""Host side of the batched rasterizer: uploads a :class:`SceneBatch` and :class:`Cameras`, launches the two passes.
+"""Host side of the batched rasterizer: uploads a :class:`SceneBatch` and :class:`Cameras` and renders every image
+of the batch on the device in one pass, from the z-buffers to the finished 8-bit pixels.
 
 Usage::
 
@@ -8,9 +9,16 @@ Usage::
     out["depth"]  # (N, H, W) float32, camera z [m], 0 = background
     out["seg"]    # (N, H, W) uint8, ids of docs/render.md
     out["worm_mask"]  # (N, H, W) bool, worm silhouette ignoring occluders (for the visible fraction)
+    dev = renderer.render(scene, cameras, out="device")   # the same as wp.arrays that stay on the device
 
-A batch of N images costs one buffer clear and two kernel launches; very large batches are split into chunks of at
-most ``max_chunk_pixels`` pixels so device memory stays bounded (17 bytes per pixel with normals off).
+A batch costs a fixed number of launches whatever its size: the shadow maps (with ``shadows``), the raster pass
+(one z-buffer at pixel centres, and one ``supersample`` times finer for colour when supersampling or through a
+lens), one resolve pass (labels and colour of every pixel: :mod:`~warpworm.render.raster_kernels` for plain
+pinhole images, :mod:`~warpworm.render.sample_kernels` for supersampled or lens images) and, given ``sensor``
+values, three sensor launches (:mod:`~warpworm.render.sensor_kernels`). The host copies the finished batch once
+(``out="host"``); a JPEG round trip, the one effect that needs a library, runs there afterwards
+(:func:`~warpworm.render.sensor.jpeg_round_trip`). Very large batches are split into chunks of at most
+``max_chunk_pixels`` z-buffer pixels so device memory stays bounded.
 
 Warp runs a CPU kernel on one thread. ``threads > 1`` splits a CPU batch into that many interleaved chunk streams,
 each with its own buffers, launched from Python threads: Warp calls CPU kernels through ctypes, which releases the
@@ -26,8 +34,12 @@ import numpy as np
 import warp as wp
 
 from warpworm.render import raster_kernels as rk
+from warpworm.render import sample_kernels as sk
+from warpworm.render import sensor_kernels as snk
 from warpworm.render.camera import Cameras
+from warpworm.render.distortion import lens_margins
 from warpworm.render.scene import SceneBatch
+from warpworm.render.sensor import SensorBatch, jpeg_round_trip, launch_sensor
 
 
 def _vec_array(a, dtype, device):
@@ -87,8 +99,9 @@ class Renderer:
             shadows: shadows from the sun and every point light (a ``shadow_map`` x ``shadow_map`` depth map per
                 light and world, rasterized by the same pass; soft by percentage-closer filtering).
             supersample: s > 1 anti-aliases RGB: each pixel is the mean (in linear RGB) of s x s samples on a regular
-                grid over its square, rendered as one image s times larger; depth, segmentation, the worm mask and
-                normals still come from one sample at the pixel centre (the s = 1 pass, bit for bit).
+                grid over its square, from a z-buffer s times finer (samples on one surface share its lighting, with
+                their mean albedo); depth, segmentation, the worm mask and normals still come from the pixel centre
+                (the s = 1 pass, bit for bit).
             shadow_map: side [px] of each shadow map; 0: ``max(width, height)`` (the map fits the shadow casters,
                 so a texel is then about a pixel of an image framing the worm).
         """
@@ -107,11 +120,10 @@ class Renderer:
         if int(supersample) < 1:
             raise ValueError(f"supersample: got {supersample}; expected samples per pixel side >= 1")
         self.supersample = int(supersample)
-        self._fine = None
-        self._wide = {}
         self._buffers: dict = {}
         # load the kernels once here: concurrent first launches from several threads would race to load them
-        wp.load_module(rk, device=self.device)
+        for module in (rk, snk):
+            wp.load_module(module, device=self.device)
         self._noise = wp.array(bake_noise(rk.NOISE_SIZE), dtype=float, device=self.device)
 
     # -- uploads -------------------------------------------------------------------------------------------------------
@@ -150,23 +162,26 @@ class Renderer:
             "shade": rk.resolve_shade_plain if not self.shadows and plain_look(a) else rk.resolve_shade,
         }
 
-    def _get_buffers(self, n: int, normals: bool, slot: int = 0) -> dict:
-        key = (n, normals, slot)
+    def _get_buffers(self, n: int, grid: tuple, sub: int, slot: int = 0) -> dict:
+        """Scratch buffers of one chunk stream: ``n`` images on a label grid ``grid`` = (width, height) and, for
+        ``sub`` > 0, a sample grid ``sub`` times finer. Only the current batch shape's buffers are kept."""
+        key = (n, grid, sub, slot)
         if key not in self._buffers:
-            d, H, W = self.device, self.height, self.width
-            # keep only the buffers of the current batch shape (one set per thread slot)
-            self._buffers = {k: v for k, v in self._buffers.items() if k[:2] == (n, normals)}
+            d = self.device
+            gw, gh = grid
+            self._buffers = {k: v for k, v in self._buffers.items() if k[:3] == (n, grid, sub)}
+            fine = gw * gh * sub * sub if sub else 1
             self._buffers[key] = {
-                "zkey": wp.empty((n, H * W), dtype=wp.int64, device=d),
-                "mask": wp.empty((n, H * W), dtype=wp.uint8, device=d),
-                "rgb": wp.empty((n, H * W), dtype=wp.vec3ub, device=d),
-                "depth": wp.empty((n, H * W), dtype=float, device=d),
-                "seg": wp.empty((n, H * W), dtype=wp.uint8, device=d),
-                "normals": wp.empty((n, H * W) if normals else (1, 1), dtype=wp.vec3, device=d),
+                "zkey": wp.empty((n, gw * gh), dtype=wp.int64, device=d),
+                "mask": wp.empty((n, gw * gh), dtype=wp.uint8, device=d),
+                "fine_key": wp.empty((n, fine), dtype=wp.int64, device=d),
+                "fine_mask": wp.empty((n, fine), dtype=wp.uint8, device=d),  # written by the raster pass, unread
                 "image_world": wp.empty(n, dtype=wp.int32, device=d),
                 "cam_rot": wp.empty(n, dtype=wp.mat33, device=d),
                 "cam_trans": wp.empty(n, dtype=wp.vec3, device=d),
                 "cam_intr": wp.empty(n, dtype=wp.vec4, device=d),
+                "fine_intr": wp.empty(n, dtype=wp.vec4, device=d),
+                "cam_dist": wp.zeros((n, 5), dtype=wp.float64, device=d),
                 "cam_gain": wp.empty(n, dtype=wp.vec3, device=d),
             }
         return self._buffers[key]
@@ -179,12 +194,15 @@ class Renderer:
             setattr(lights, name, arr)
         lights.shadows = 0 if maps is None else 1
         lights.map_side = self.shadow_map
+        lights.map_tiles = -(-self.shadow_map // rk.SHADOW_TILE)
         if maps is None:  # never read: placeholders
             maps = {"first": wp.zeros(1, dtype=wp.int32, device=d), "key": wp.zeros((1, 1), dtype=wp.int64, device=d),
                     "rot": wp.zeros(1, dtype=wp.mat33, device=d), "trans": wp.zeros(1, dtype=wp.vec3, device=d),
-                    "intr": wp.zeros(1, dtype=wp.vec4, device=d), "size": wp.zeros(1, dtype=float, device=d)}
+                    "intr": wp.zeros(1, dtype=wp.vec4, device=d), "size": wp.zeros(1, dtype=float, device=d),
+                    "tile_min": wp.zeros((1, 1), dtype=wp.int64, device=d)}
         lights.map_first, lights.map_key, lights.map_rot = maps["first"], maps["key"], maps["rot"]
         lights.map_trans, lights.map_intr, lights.map_light_size = maps["trans"], maps["intr"], maps["size"]
+        lights.map_tile_min = maps["tile_min"]
         return lights
 
     def _shadow_maps(self, s: dict, worlds: np.ndarray) -> rk.Lights:
@@ -207,128 +225,103 @@ class Renderer:
                           wp.array(cams["world"].astype(np.int32), dtype=wp.int32, device=d), maps["rot"],
                           maps["trans"], maps["intr"], S, S, self.near],
                   outputs=[maps["key"], mask])
+        tiles = -(-S // rk.SHADOW_TILE)
+        maps["tile_min"] = wp.empty((M, tiles * tiles), dtype=wp.int64, device=d)
+        wp.launch(rk.shadow_tile_min, dim=(M, tiles * tiles), device=d, inputs=[maps["key"], S, tiles],
+                  outputs=[maps["tile_min"]])
         return self._lights(s["light_arrays"], maps)
 
     # -- rendering -----------------------------------------------------------------------------------------------------
 
-    def render(self, scene: SceneBatch, cameras: Cameras, *, normals: bool = False) -> dict:
+    def render(self, scene: SceneBatch, cameras: Cameras, *, normals: bool = False, sensor: SensorBatch | None = None,
+               out: str = "host") -> dict:
         """Render every camera of ``cameras`` (image i shows world ``cameras.world[i]``).
 
+        Args:
+            normals: also write camera-frame normals.
+            sensor: per-image sensor effects (:class:`~warpworm.render.sensor.SensorBatch`) applied on the device
+                before the copy; its JPEG round trips (quality in 1..99) run on the host afterwards, so they need
+                ``out="host"``.
+            out: ``"host"`` (NumPy arrays) or ``"device"`` (``wp.array``s on the renderer's device, nothing copied:
+                ``wp.to_torch`` hands them to PyTorch without a copy).
+
         Returns:
-            dict of NumPy arrays: ``rgb`` (N, H, W, 3) uint8; ``depth`` (N, H, W) float32 camera z [m], 0 for
-            background; ``seg`` (N, H, W) uint8; ``worm_mask`` (N, H, W) bool (worm silhouette, occluders ignored);
-            ``normals`` (N, H, W, 3) float32 camera-frame unit normals (0 for background) when ``normals=True``.
+            dict: ``rgb`` (N, H, W, 3) uint8; ``depth`` (N, H, W) float32 camera z [m], 0 for background; ``seg``
+            (N, H, W) uint8; ``worm_mask`` (N, H, W) bool (worm silhouette, occluders ignored); ``normals``
+            (N, H, W, 3) float32 camera-frame unit normals (0 for background) when ``normals=True``. With
+            ``out="device"``: ``rgb`` vec3ub (N, H, W), ``depth`` float32, ``seg`` and ``worm_mask`` uint8 (N, H, W),
+            ``normals`` vec3 (N, H, W).
         """
+        if out not in ("host", "device"):
+            raise ValueError(f"out: got {out!r}; expected 'host' or 'device'")
         if cameras.width != self.width or cameras.height != self.height:
             raise ValueError(f"cameras are {cameras.width}x{cameras.height}, renderer is {self.width}x{self.height}")
         if len(cameras) and (cameras.world.min() < 0 or cameras.world.max() >= scene.num_worlds):
             raise ValueError(f"cameras.world must index the scene's {scene.num_worlds} worlds")
         if np.any(np.abs(cameras.K[:, 0, 1]) > 0):
             raise ValueError("skewed intrinsics (K[0, 1] != 0) are not supported")
-        if cameras.dist is not None and np.any(np.asarray(cameras.dist) != 0):
-            return self._render_distorted(scene, cameras, normals)
-        N = len(cameras)
-        H, W = self.height, self.width
-        out = {
-            "rgb": np.empty((N, H, W, 3), np.uint8),
-            "depth": np.empty((N, H, W), np.float32),
-            "seg": np.empty((N, H, W), np.uint8),
-            "worm_mask": np.empty((N, H, W), bool),
-        }
+        N, H, W = len(cameras), self.height, self.width
+        if sensor is not None and len(sensor) != N:
+            raise ValueError(f"sensor: {len(sensor)} images' values for {N} cameras; expected one per camera")
+        if sensor is not None and out == "device" and sensor.needs_jpeg():
+            raise ValueError("sensor: a JPEG round trip (jpeg_quality 1..99) runs on the host; expected out='host' "
+                             "or jpeg_quality 0")
+        lens = cameras.dist is not None and bool(np.any(np.asarray(cameras.dist) != 0))
+        left, top, gw, gh = lens_margins(cameras) if lens and N else (0, 0, W, H)
+        sub = self.supersample if (self.supersample > 1 or lens) else 0  # 0: the plain pixel-centre path
+        d = self.device
+        res = {"rgb": wp.empty((N, H * W), dtype=wp.vec3ub, device=d),
+               "depth": wp.empty((N, H * W), dtype=float, device=d),
+               "seg": wp.empty((N, H * W), dtype=wp.uint8, device=d),
+               "worm_mask": wp.empty((N, H * W), dtype=wp.uint8, device=d),
+               "normals": wp.empty((N, H * W) if normals else (1, 1), dtype=wp.vec3, device=d)}
+        if N:
+            s = self._upload_scene(scene)
+            T = min(self.threads, N)
+            per_image = gw * gh * (1 + sub * sub)
+            if self.shadows:  # the chunk's shadow maps (a world per image at most) count against max_chunk_pixels
+                per_image += (1 + scene.appearance.light_pos.shape[1]) * self.shadow_map ** 2
+            chunk = max(1, min(-(-N // T), self.max_chunk_pixels // per_image))
+            pieces = [(start, min(N, start + chunk)) for start in range(0, N, chunk)]
+            for slot in range(T):  # allocate every stream's buffers before any thread starts
+                self._get_buffers(chunk, (gw, gh), sub, slot)
+            view = (left, top, gw, gh, sub, lens)
+            if sub:  # this (sub, lens) resolve kernel's own module, loaded before any stream launches it
+                wp.load_module(sk.resolve_samples_kernel(sub, lens).module, device=d)
+
+            def stream(slot: int) -> None:
+                for start, stop in pieces[slot::T]:
+                    self._render_chunk(s, cameras, view, start, stop, chunk, normals, slot, res, sensor)
+
+            if T == 1:
+                stream(0)
+            else:
+                with ThreadPoolExecutor(T) as pool:
+                    for f in [pool.submit(stream, slot) for slot in range(T)]:
+                        f.result()
+        if not normals:
+            del res["normals"]
+        if out == "device":
+            return {k: v.reshape((N, H, W)) for k, v in res.items()}
+        host = {"rgb": res["rgb"].numpy().reshape(N, H, W, 3), "depth": res["depth"].numpy().reshape(N, H, W),
+                "seg": res["seg"].numpy().reshape(N, H, W),
+                "worm_mask": res["worm_mask"].numpy().reshape(N, H, W).astype(bool)}
         if normals:
-            out["normals"] = np.empty((N, H, W, 3), np.float32)
-        if N == 0:
-            return out
-        if self.supersample > 1:
-            out["rgb"] = self._supersampled_rgb(scene, cameras)
-        s = self._upload_scene(scene)
-        T = min(self.threads, N)
-        chunk = min(-(-N // T), self.max_chunk_images)
-        if self.shadows:  # the chunk's shadow maps (a world per image at most) count against max_chunk_pixels too
-            per_image = (1 + scene.appearance.light_pos.shape[1]) * self.shadow_map ** 2
-            chunk = max(1, min(chunk, self.max_chunk_pixels // per_image))
-        pieces = [(start, min(N, start + chunk)) for start in range(0, N, chunk)]
-        for slot in range(T):  # allocate every stream's buffers before any thread starts
-            self._get_buffers(chunk, normals, slot)
+            host["normals"] = res["normals"].numpy().reshape(N, H, W, 3)
+        if sensor is not None and sensor.needs_jpeg():
+            host["rgb"] = jpeg_round_trip(host["rgb"], sensor.jpeg_quality)
+        return host
 
-        def stream(slot: int) -> None:
-            for start, stop in pieces[slot::T]:
-                res = self._render_chunk(s, cameras, start, stop, chunk, normals, slot)
-                for k, v in res.items():
-                    if k != "rgb" or self.supersample == 1:  # supersampled RGB came from the fine pass
-                        out[k][start:stop] = v
-
-        if T == 1:
-            stream(0)
-        else:
-            with ThreadPoolExecutor(T) as pool:
-                for f in [pool.submit(stream, slot) for slot in range(T)]:
-                    f.result()
-        return out
-
-    def _render_distorted(self, scene: SceneBatch, cameras: Cameras, normals: bool) -> dict:
-        """Images through ``cameras.dist`` (OpenCV's lens model, :mod:`warpworm.render.distortion`): a pinhole
-        render with the same K, widened by margins so that it holds the ray of every distorted pixel centre, warped:
-        RGB bilinearly (``cv2.remap``), depth, segmentation, the worm mask and normals from the nearest pinhole pixel
-        centre (within half a pixel of the exact ray)."""
-        import cv2
-
-        from warpworm.render.distortion import widened_pinhole
-
-        H, W, N = self.height, self.width, len(cameras)
-        view, mx, my = widened_pinhole(cameras, self.device)
-        Wp, Hp = int(view.width), int(view.height)
-        wide = self._wide.get((Wp, Hp))
-        if wide is None:
-            wide = self._wide[(Wp, Hp)] = Renderer(
-                Wp, Hp, device=self.device, near=self.near, max_chunk_pixels=self.max_chunk_pixels,
-                threads=self.threads, shadows=self.shadows, shadow_map=self.shadow_map or max(W, H),
-                supersample=self.supersample)
-        pin = wide.render(scene, view, normals=normals)
-        ix = np.clip(np.floor(mx + 0.5).astype(np.int64), 0, Wp - 1)
-        iy = np.clip(np.floor(my + 0.5).astype(np.int64), 0, Hp - 1)
-        n = np.arange(N)[:, None, None]
-        out = {k: v[n, iy, ix] for k, v in pin.items() if k != "rgb"}
-        out["rgb"] = np.stack([cv2.remap(pin["rgb"][i], mx[i], my[i], cv2.INTER_LINEAR,
-                                         borderMode=cv2.BORDER_REPLICATE) for i in range(N)]) if N else \
-            np.empty((0, H, W, 3), np.uint8)
-        return {k: out[k] for k in pin}
-
-    def _supersampled_rgb(self, scene: SceneBatch, cameras: Cameras) -> np.ndarray:
-        """RGB (N, H, W, 3) uint8 of s x s samples per pixel: pixel (x, y) averages, in linear RGB (display gamma 2),
-        the samples at ``(x + (i + 0.5) / s - 0.5, y + (j + 0.5) / s - 0.5)``, i, j < s: pixel ``(s x + i, s y + j)``
-        of an image s times larger with ``fx' = s fx``, ``cx' = s cx + (s - 1) / 2`` (likewise y). Rendered in groups
-        of images of at most ``max_chunk_pixels`` fine pixels."""
-        import dataclasses
-
-        sub, H, W = self.supersample, self.height, self.width
-        if self._fine is None:
-            self._fine = Renderer(W * sub, H * sub, device=self.device, near=self.near,
-                                  max_chunk_pixels=self.max_chunk_pixels, threads=self.threads, shadows=self.shadows,
-                                  shadow_map=self.shadow_map)
-        K = cameras.K.copy()
-        K[:, :2, :2] *= sub
-        K[:, :2, 2] = sub * K[:, :2, 2] + (sub - 1) / 2
-        fine = dataclasses.replace(cameras, K=K, width=W * sub, height=H * sub)
-        N = len(cameras)
-        rgb = np.empty((N, H, W, 3), np.uint8)
-        group = max(1, self.max_chunk_pixels // (H * W * sub * sub))
-        for a in range(0, N, group):
-            b = min(N, a + group)
-            img = self._fine.render(scene, fine.take(slice(a, b)))["rgb"]
-            src = wp.array(img.reshape(b - a, -1, 3), dtype=wp.vec3ub, device=self.device)
-            dst = wp.empty((b - a, H * W), dtype=wp.vec3ub, device=self.device)
-            wp.launch(rk.downsample_rgb, dim=(b - a, H, W), inputs=[src, sub, W], outputs=[dst], device=self.device)
-            rgb[a:b] = dst.numpy().reshape(b - a, H, W, 3)
-        return rgb
-
-    def _render_chunk(self, s: dict, cameras: Cameras, start: int, stop: int, chunk: int, normals: bool,
-                      slot: int = 0) -> dict:
+    def _render_chunk(self, s: dict, cameras: Cameras, view: tuple, start: int, stop: int, chunk: int, normals: bool,
+                      slot: int, res: dict, sensor: SensorBatch | None) -> None:
+        """Images ``start:stop`` into the outputs ``res`` (device arrays (N, H*W)): camera uploads, shadow maps,
+        raster pass(es), resolve, sensor."""
+        left, top, gw, gh, sub, lens = view
         n = stop - start
-        b = self._get_buffers(chunk, normals, slot)
-        intr = np.zeros((chunk, 4), np.float32)
+        b = self._get_buffers(chunk, (gw, gh), sub, slot)
         K = cameras.K[start:stop]
-        intr[:n] = np.stack([K[:, 0, 0], K[:, 1, 1], K[:, 0, 2], K[:, 1, 2]], axis=1)
+        intr = np.zeros((chunk, 4), np.float32)
+        intr[:n] = np.stack([K[:, 0, 0], K[:, 1, 1], K[:, 0, 2] + left, K[:, 1, 2] + top], axis=1)
         rot = np.zeros((chunk, 3, 3), np.float32)
         rot[:n] = cameras.R[start:stop]
         trans = np.zeros((chunk, 3), np.float32)
@@ -343,35 +336,55 @@ class Renderer:
         b["cam_rot"].assign(rot)
         b["cam_trans"].assign(trans)
         b["image_world"].assign(world)
-        b["zkey"].fill_(rk.EMPTY_KEY)
-        b["mask"].zero_()
         d = self.device
+        out = {k: v[start:stop] for k, v in res.items() if k != "normals" or normals}
+        out_normals = out["normals"] if normals else res["normals"]  # else a 1-element dummy, never written
         lights = s["lights"]
-        # supersampled: this pass gives the labels only (RGB comes from the fine pass), so no shading, no shadow maps
-        labels_only = self.supersample > 1
-        if self.shadows and not labels_only:
+        if self.shadows:
             lights = self._shadow_maps(s, np.unique(world[:n]))
-        common = [b["image_world"], b["cam_rot"], b["cam_trans"], b["cam_intr"]]
-        wp.launch(rk.raster_triangles, dim=(n, s["triangles"].shape[0]), device=d,
-                  inputs=[s["triangles"], s["tri_label"], s["vertices"], *common, self.width, self.height, self.near],
-                  outputs=[b["zkey"], b["mask"]])
-        # CPU: a thread per image row (per-thread overhead and per-row setup paid once); GPU: a thread per pixel
-        span = self.width if d.is_cpu else 1
-        wp.launch(rk.resolve_labels if labels_only else s["shade"], dim=(n, self.height, (self.width + span - 1) // span), device=d,
-                  inputs=[s["triangles"], s["tri_label"], s["look"], lights, s["vertices"], s["texcoords"], *common,
-                          b["zkey"], self.width, self.height, span, int(normals), b["cam_gain"]],
-                  outputs=[b["rgb"], b["depth"], b["seg"], b["normals"]])
-        H, W = self.height, self.width
-        res = {
-            "depth": b["depth"].numpy()[:n].reshape(n, H, W),
-            "seg": b["seg"].numpy()[:n].reshape(n, H, W),
-            "worm_mask": b["mask"].numpy()[:n].reshape(n, H, W).astype(bool),
-        }
-        if normals:
-            res["normals"] = b["normals"].numpy()[:n].reshape(n, H, W, 3)
-        if not labels_only:
-            res["rgb"] = b["rgb"].numpy()[:n].reshape(n, H, W, 3)
-        return res
+        common = [b["image_world"], b["cam_rot"], b["cam_trans"]]
+        tris = s["triangles"].shape[0]
+        if sub == 0:  # plain pinhole images: raster at pixel centres straight into the outputs, resolve and shade
+            b["zkey"].fill_(rk.EMPTY_KEY)
+            out["worm_mask"].zero_()
+            wp.launch(rk.raster_triangles, dim=(n, tris), device=d,
+                      inputs=[s["triangles"], s["tri_label"], s["vertices"], *common, b["cam_intr"], gw, gh,
+                              self.near],
+                      outputs=[b["zkey"], out["worm_mask"]])
+            # CPU: a thread per image row (per-thread overhead and per-row setup paid once); GPU: a thread per pixel
+            span = self.width if d.is_cpu else 1
+            wp.launch(s["shade"], dim=(n, self.height, (self.width + span - 1) // span), device=d,
+                      inputs=[s["triangles"], s["tri_label"], s["look"], lights, s["vertices"], s["texcoords"],
+                              *common, b["cam_intr"], b["zkey"], self.width, self.height, span, int(normals),
+                              b["cam_gain"]],
+                      outputs=[out["rgb"], out["depth"], out["seg"], out_normals])
+        else:  # supersampled and/or through a lens: a label grid, a sample grid, one resolve of both
+            fine = np.zeros((chunk, 4), np.float32)
+            fine[:n] = intr[:n] * sub
+            fine[:n, 2:] += 0.5 * (sub - 1)
+            b["fine_intr"].assign(fine)
+            if lens:
+                dist = np.zeros((chunk, 5), np.float64)
+                dist[:n] = cameras.dist[start:stop]
+                b["cam_dist"].assign(dist)
+            b["zkey"].fill_(rk.EMPTY_KEY)
+            b["mask"].zero_()
+            b["fine_key"].fill_(rk.EMPTY_KEY)
+            wp.launch(rk.raster_triangles, dim=(n, tris), device=d,
+                      inputs=[s["triangles"], s["tri_label"], s["vertices"], *common, b["cam_intr"], gw, gh,
+                              self.near],
+                      outputs=[b["zkey"], b["mask"]])
+            wp.launch(rk.raster_triangles, dim=(n, tris), device=d,
+                      inputs=[s["triangles"], s["tri_label"], s["vertices"], *common, b["fine_intr"], gw * sub,
+                              gh * sub, self.near],
+                      outputs=[b["fine_key"], b["fine_mask"]])
+            wp.launch(sk.resolve_samples_kernel(sub, lens), dim=(n, self.height, self.width), device=d,
+                      inputs=[s["triangles"], s["tri_label"], s["look"], lights, s["vertices"], s["texcoords"],
+                              *common, b["cam_intr"], b["cam_dist"], b["cam_gain"], b["zkey"], b["mask"],
+                              b["fine_key"], self.width, self.height, gw, gh, left, top, int(normals)],
+                      outputs=[out["rgb"], out["depth"], out["seg"], out["worm_mask"], out_normals])
+        if sensor is not None:
+            launch_sensor(out["rgb"], sensor.take(slice(start, stop)), self.width, self.height, d)
 
 
 def shadow_cameras(scene: SceneBatch, worlds: np.ndarray, side: int) -> dict:

@@ -1,16 +1,21 @@
-"""Seeded camera-sensor effects with OpenCV: colour jitter, defocus blur, noise, JPEG round trip.
+"""Seeded camera-sensor effects: colour jitter, defocus blur, noise on the device; a JPEG round trip on the host.
 
-Each image ``i`` draws its effect parameters and noise from its own ``seeds[i]`` (``np.random.default_rng([seed,
-0x5E75])``), so it comes out the same in any batch. Effects act on RGB only; depth, segmentation and labels are
-unchanged (blur and JPEG move no geometry). The loop over images is OpenCV's per-image API.
+Each image ``i`` draws its effect parameters from its own ``seeds[i]`` (``np.random.default_rng([seed, 0x5E75])``)
+unless they are given, and its noise from Warp's counter-based generator keyed by the same seed, so it comes out the
+same in any batch and on any device. Effects act on RGB only; depth, segmentation and labels are unchanged (blur and
+JPEG move no geometry). The renderer applies them inside its pass (``Renderer.render(..., sensor=SensorBatch)``);
+:func:`apply_sensor` does the same to images already on the host.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import cv2
 import numpy as np
+import warp as wp
+
+from warpworm.render import sensor_kernels as snk
 
 
 @dataclass
@@ -57,55 +62,144 @@ def _draws(u: np.ndarray, cfg: SensorConfig) -> dict:
             "jpeg_quality": int(round(draw(cfg.jpeg_quality, 11))) if u[10] < cfg.jpeg_probability else 0}
 
 
-def apply_sensor(rgb: np.ndarray, seeds, config: SensorConfig | None = None, *, values: dict | None = None
-                 ) -> np.ndarray:
-    """Sensor effects on a batch ``rgb`` (N, H, W, 3) uint8 with one seed per image; returns a new array.
+@dataclass
+class SensorBatch:
+    """Per-image sensor values of a batch of N images, each an (N,) array (the names of :data:`SENSOR_PARAMS`), and
+    each image's noise ``seed``. Build one with :meth:`from_values` or :meth:`draw`."""
 
-    ``values``: explicit per-image effect values (name of :data:`SENSOR_PARAMS` -> (N,) array) instead of drawing
-    them from ``config`` (e.g. values drawn by a dataset's own distributions); pixel noise still comes from each
-    image's seed. Neutral colour values (gains 1, hue 0) skip the colour conversions.
-    """
-    cfg = SensorConfig() if config is None else config
-    seeds = np.asarray(seeds).reshape(-1)
-    if len(seeds) != len(rgb):
-        raise ValueError(f"need one seed per image: {len(seeds)} seeds for {len(rgb)} images")
-    if values is not None:
+    wb_r: np.ndarray
+    wb_g: np.ndarray
+    wb_b: np.ndarray
+    hue_deg: np.ndarray
+    saturation: np.ndarray
+    contrast: np.ndarray
+    brightness: np.ndarray
+    blur_sigma: np.ndarray
+    noise_sigma: np.ndarray
+    shot_noise: np.ndarray
+    jpeg_quality: np.ndarray
+    seed: np.ndarray
+    """(N,) int32: the image's noise stream (from its sample seed, :func:`noise_seeds`)."""
+
+    def __len__(self) -> int:
+        return len(self.seed)
+
+    @classmethod
+    def from_values(cls, values: dict, seeds) -> "SensorBatch":
+        """Explicit values (name of :data:`SENSOR_PARAMS` -> scalar or (N,) array) for images with ``seeds`` (N,)."""
+        seeds = np.asarray(seeds).reshape(-1)
         missing = [k for k in SENSOR_PARAMS if k not in values]
         if missing:
             raise ValueError(f"values: missing {missing}; expected every name of SENSOR_PARAMS")
-        values = {k: np.broadcast_to(np.asarray(values[k]), (len(rgb),)) for k in SENSOR_PARAMS}
-    out = np.empty_like(rgb)
-    for i in range(len(rgb)):
-        rng = np.random.default_rng([int(seeds[i]), 0x5E75])
-        u = rng.uniform(size=12)  # drawn even with explicit values, so the noise stream is the same either way
-        v = _draws(u, cfg) if values is None else {k: values[k][i] for k in SENSOR_PARAMS}
-        img = rgb[i].astype(np.float32) / 255.0
-        # colour: white balance, saturation and hue (HSV), contrast, brightness
-        wb = np.array([v["wb_r"], v["wb_g"], v["wb_b"]], np.float32)
-        if np.any(wb != 1):
-            img *= wb
-            np.clip(img, 0, 1, out=img)
-        if v["hue_deg"] != 0 or v["saturation"] != 1:
-            hsv = cv2.cvtColor(img, cv2.COLOR_RGB2HSV)  # float: H in [0, 360)
-            hsv[..., 0] = (hsv[..., 0] + v["hue_deg"]) % 360.0
-            hsv[..., 1] = np.clip(hsv[..., 1] * v["saturation"], 0, 1)
-            img = cv2.cvtColor(hsv, cv2.COLOR_HSV2RGB)
-        img = (img - 0.5) * v["contrast"] + 0.5 + v["brightness"]
-        sigma = float(v["blur_sigma"])
-        if sigma > 0.05:
-            img = cv2.GaussianBlur(img, (0, 0), sigmaX=sigma)
-        ns, ss = float(v["noise_sigma"]), float(v["shot_noise"])
-        if ns > 0 or ss > 0:
-            # (a scalar std when there is no shot noise: same values, no per-pixel sqrt)
-            std = ns + ss * np.sqrt(np.clip(img, 0, 1)) if ss > 0 else img.dtype.type(ns)
-            img = img + rng.standard_normal(img.shape).astype(np.float32) * std
-        img8 = (np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8)
-        q = int(v["jpeg_quality"])
-        if 0 < q < 100:
-            ok, buf = cv2.imencode(".jpg", img8[..., ::-1], [cv2.IMWRITE_JPEG_QUALITY, q])
-            img8 = cv2.imdecode(buf, cv2.IMREAD_COLOR)[..., ::-1]
-        out[i] = img8
+        v = {k: np.broadcast_to(np.asarray(values[k]), (len(seeds),)) for k in SENSOR_PARAMS}
+        return cls(**v, seed=noise_seeds(seeds))
+
+    @classmethod
+    def draw(cls, seeds, config: "SensorConfig | None" = None) -> "SensorBatch":
+        """Values drawn from ``config``'s ranges by each image's seed (12 uniforms of ``[seed, 0x5E75]``)."""
+        cfg = SensorConfig() if config is None else config
+        seeds = np.asarray(seeds).reshape(-1)
+        u = np.array([np.random.default_rng([int(s), 0x5E75]).uniform(size=12) for s in seeds]).reshape(-1, 12)
+        draws = [_draws(row, cfg) for row in u]
+        return cls.from_values({k: np.array([d[k] for d in draws]) for k in SENSOR_PARAMS}, seeds)
+
+    def take(self, index) -> "SensorBatch":
+        """The values of images ``index`` (a slice or indices)."""
+        return SensorBatch(**{f.name: np.asarray(getattr(self, f.name))[index] for f in fields(self)})
+
+    def needs_jpeg(self) -> bool:
+        """Whether any image has a JPEG round trip (quality 1..99)."""
+        q = np.asarray(self.jpeg_quality)
+        return bool(np.any((q > 0) & (q < 100)))
+
+
+def noise_seeds(seeds) -> np.ndarray:
+    """Each image's 31-bit noise seed from its (any-width) integer seed: a multiplicative hash of the seed and the
+    sensor's stream tag 0x5E75. (N,) int32."""
+    s = np.asarray(seeds).reshape(-1).astype(np.uint64)
+    with np.errstate(over="ignore"):
+        h = (s ^ np.uint64(0x5E75)) * np.uint64(0x9E3779B97F4A7C15)
+        h ^= h >> np.uint64(31)
+    return (h & np.uint64(0x7FFFFFFF)).astype(np.int32)
+
+
+def gaussian_taps(sigma: np.ndarray, max_radius: int) -> tuple[np.ndarray, np.ndarray]:
+    """Each image's blur kernel as ``cv2.GaussianBlur(img, (0, 0), sigma)`` builds it for float images: side
+    ``round(8 sigma + 1) | 1``, weights ``exp(-x² / (2 sigma²))`` normalized in float64, stored as float32. Returns
+    (weights (N, 2 R + 1) centred at column R, radius (N,) int32); radius 0 (no blur) where sigma <= 0.05.
+    ``max_radius``: a bound (one less than the image's shorter side, for the mirrored border)."""
+    sigma = np.asarray(sigma, np.float64).reshape(-1)
+    on = sigma > 0.05
+    ksize = np.where(on, np.rint(sigma * 8.0 + 1.0).astype(np.int64) | 1, 1)
+    radius = np.minimum((ksize - 1) // 2, max_radius)
+    R = int(radius.max(initial=0))
+    x = np.arange(-R, R + 1, dtype=np.float64)[None]
+    s = np.where(on, sigma, 1.0)[:, None]
+    w = np.where(np.abs(x) <= radius[:, None], np.exp(-0.5 / (s * s) * x * x), 0.0)
+    w /= w.sum(axis=1, keepdims=True)
+    return w.astype(np.float32), radius.astype(np.int32)
+
+
+def launch_sensor(rgb, batch: SensorBatch, width: int, height: int, device) -> None:
+    """The device effects of ``batch`` on ``rgb`` (a ``wp.array`` (N, H*W) of vec3ub, in place): colour, blur along
+    rows, blur along columns + noise + quantization: three launches whatever N."""
+    n = len(batch)
+    if n == 0:
+        return
+    d = device
+    f32 = np.float32
+    wb = wp.array(np.stack([batch.wb_r, batch.wb_g, batch.wb_b], axis=1).astype(f32), dtype=wp.vec3, device=d)
+    hscb = wp.array(np.stack([batch.hue_deg, batch.saturation, batch.contrast, batch.brightness], axis=1).astype(f32),
+                    dtype=wp.vec4, device=d)
+    w, r = gaussian_taps(batch.blur_sigma, min(width, height) - 1)
+    weights = wp.array(w, dtype=float, device=d)
+    radius = wp.array(r, dtype=wp.int32, device=d)
+    noise = wp.array(np.stack([batch.noise_sigma, batch.shot_noise], axis=1).astype(f32), dtype=wp.vec2, device=d)
+    seed = wp.array(np.asarray(batch.seed, np.int32), dtype=wp.int32, device=d)
+    a = wp.empty((n, width * height), dtype=wp.vec3, device=d)
+    b = wp.empty((n, width * height), dtype=wp.vec3, device=d)
+    wp.launch(snk.sensor_colour, dim=(n, width * height), inputs=[rgb, wb, hscb], outputs=[a], device=d)
+    wp.launch(snk.sensor_blur_rows, dim=(n, height, width), inputs=[a, weights, radius, width], outputs=[b], device=d)
+    wp.launch(snk.sensor_blur_cols_noise, dim=(n, height, width),
+              inputs=[b, weights, radius, noise, seed, width, height], outputs=[rgb], device=d)
+
+
+def jpeg_round_trip(rgb: np.ndarray, quality) -> np.ndarray:
+    """A JPEG encode + decode (OpenCV, 4:2:0) of each image (N, H, W, 3) uint8 whose ``quality`` (N,) is in 1..99;
+    the others pass unchanged. The one sensor effect that needs a library: it runs on the host after the batch's
+    copy, about 1 ms per 256² image here (docs/render.md)."""
+    q = np.asarray(quality).astype(np.int64).reshape(-1)
+    sel = np.flatnonzero((q > 0) & (q < 100))
+    if len(sel) == 0:
+        return rgb
+    out = rgb.copy()
+    for i in sel:
+        ok, buf = cv2.imencode(".jpg", np.ascontiguousarray(rgb[i][..., ::-1]), [cv2.IMWRITE_JPEG_QUALITY, int(q[i])])
+        out[i] = cv2.imdecode(buf, cv2.IMREAD_COLOR)[..., ::-1]
     return out
+
+
+def apply_sensor(rgb: np.ndarray, seeds, config: SensorConfig | None = None, *, values: dict | None = None,
+                 device=None) -> np.ndarray:
+    """Sensor effects on a batch ``rgb`` (N, H, W, 3) uint8 already on the host, one seed per image; returns a new
+    array. The renderer's own kernels (:func:`launch_sensor`) on ``device`` (default: the CPU), then the JPEG round
+    trips.
+
+    ``values``: explicit per-image effect values (name of :data:`SENSOR_PARAMS` -> (N,) array) instead of drawing
+    them from ``config`` (e.g. values drawn by a dataset's own distributions); pixel noise still comes from each
+    image's seed.
+    """
+    seeds = np.asarray(seeds).reshape(-1)
+    if len(seeds) != len(rgb):
+        raise ValueError(f"need one seed per image: {len(seeds)} seeds for {len(rgb)} images")
+    batch = SensorBatch.draw(seeds, config) if values is None else SensorBatch.from_values(values, seeds)
+    N, H, W = rgb.shape[:3]
+    if N == 0:
+        return rgb.copy()
+    d = wp.get_device("cpu" if device is None else device)
+    img = wp.array(np.ascontiguousarray(rgb, dtype=np.uint8).reshape(N, H * W, 3), dtype=wp.vec3ub, device=d)
+    launch_sensor(img, batch, W, H, d)
+    return jpeg_round_trip(img.numpy().reshape(N, H, W, 3), batch.jpeg_quality)
 
 
 def exposure_gains(render_cfg, seeds) -> tuple[np.ndarray, dict] | None:

@@ -78,19 +78,13 @@ def test_warped_images_match_rays_through_the_lens():
         dirs[i] = np.concatenate([und[:, 0], np.ones((H * W, 1))], 1).reshape(H, W, 3)
     ref = RayCaster(W, H).render(scene, cams, directions=dirs)
     agree = out["seg"] == ref["seg"]
-    # labels come from the pinhole pixel centre nearest to each distorted pixel's ray (within half a pixel): the
-    # segmentation differs only along edges, the depth by at most the depth change across a pixel
-    assert agree.mean() > 0.985
+    # labels come from the triangle, among the four pinhole texels around each distorted pixel's ray, that the ray
+    # hits, its depth on the exact ray: measured 99.957 % of pixels agree (the earlier nearest-texel warp: 99.67 %),
+    # and where they agree the depth matches to float32 rounding but for 1 pixel in 26,000 (a triangle no texel kept)
+    assert agree.mean() > 0.999
     dz = np.abs(out["depth"] - ref["depth"])
-    step = np.zeros_like(dz)
-    rd = ref["depth"]
-    step[:, 1:-1, 1:-1] = np.max([np.abs(rd[:, 1:-1, 1:-1] - rd[:, 1:-1, :-2]), np.abs(rd[:, 1:-1, 1:-1] - rd[:, 1:-1, 2:]),
-                                  np.abs(rd[:, 1:-1, 1:-1] - rd[:, :-2, 1:-1]), np.abs(rd[:, 1:-1, 1:-1] - rd[:, 2:, 1:-1])],
-                                 axis=0)
-    inner = agree.copy()
-    inner[:, [0, -1]] = False
-    inner[:, :, [0, -1]] = False
-    assert np.all(dz[inner] <= step[inner] + 1e-4)
+    assert (dz[agree] <= 1e-5).mean() > 0.9998
+    assert dz[agree].max() < 1e-3
     # the barrel lens bends the straight floor edge: without distortion the segmentation differs more from the rays
     assert (Renderer(W, H).render(scene, dataclasses.replace(cams, dist=None))["seg"] == ref["seg"]).mean() \
         < agree.mean()

@@ -74,8 +74,8 @@ class WarpStages:
     Simulation: ``Model.from_params`` -> ``Simulator(dt, substeps)`` -> ``settle(settle_time)`` -> ``step`` to each
     frame time -> ``snapshot``. A world flagged unstable at any frame is reported unstable.
     Rendering: ``render.build_scene`` (worm sheet, IPM disks, EPM bar, floor) with an appearance built from the drawn
-    ``light/color/texture`` values, ``Renderer.render``, then sensor effects (:func:`warpworm.render.sensor.apply_sensor`
-    with the drawn ``sensor.*`` values, :func:`warpworm.data.sampling.sensor_values`) and labels in the dataset's form
+    ``light/color/texture`` values, ``Renderer.render`` with the drawn ``sensor.*`` values applied in its pass
+    (:class:`warpworm.render.sensor.SensorBatch`, :func:`warpworm.data.sampling.sensor_values`) and labels in the dataset's form
     (:func:`warpworm.render.labels.schema_labels`).
     """
 
@@ -124,8 +124,12 @@ class WarpStages:
                 max_workers = len(os.sched_getaffinity(0))
             except AttributeError:  # pragma: no cover - not Linux
                 max_workers = os.cpu_count() or 1
-        names = self.kernel_modules()
-        wp.force_load(device=cfg.sim.device, modules=[wp.get_module(n) for n in names], max_workers=max_workers)
+        from warpworm.render.sample_kernels import resolve_samples_kernel
+
+        modules = [wp.get_module(n) for n in self.kernel_modules()]
+        if cfg.render.supersample > 1 or cfg.render.distortion:  # the config's own resolve kernel (a module of its own)
+            modules.append(resolve_samples_kernel(cfg.render.supersample, cfg.render.distortion).module)
+        wp.force_load(device=cfg.sim.device, modules=modules, max_workers=max_workers)
 
     def _pattern(self, n_units: int):
         from warpworm.physics import crease
@@ -192,29 +196,31 @@ class WarpStages:
             appearance=appearance_from_draws(appearance, seeds, cfg.render.band_colors),
             extra_mesh=distractor_mesh(appearance, B, params.floor_incline))  # render.distractors (None: off)
         from warpworm.render.labels import schema_labels
-        from warpworm.render.sensor import apply_sensor
+        from warpworm.render.sensor import SensorBatch, apply_sensor, exposure_gains
 
         cams = dataclasses.replace(cameras, world=np.arange(B, dtype=np.int32))
-        from warpworm.render.sensor import exposure_gains
-
         gains = exposure_gains(cfg.render, seeds)  # render.exposure / white_balance: None when off
         if gains is not None:
             cams.gain = gains[0]
-        img = self._renderer(cfg).render(scene, cams)
+        engine = pathtraced_samples(cfg, seeds)  # None: the option is off (nothing more is written)
+        # the sensor runs inside the renderer's pass, unless the RGB is replaced first (motion blur, path tracing)
+        replaced = cfg.render.motion_blur > 0 or (engine is not None and engine.any())
+        sensor = SensorBatch.from_values(sensor_values(appearance), seeds)
+        img = self._renderer(cfg).render(scene, cams, sensor=None if replaced else sensor)
+        rgb = img["rgb"]
         if cfg.render.motion_blur > 0:  # RGB over the shutter from the simulated velocities; labels at the frame
             from warpworm.render.motion import motion_blurred_rgb
 
-            img["rgb"] = motion_blurred_rgb(self._renderer(cfg), scene, cams, frame, cfg.render.motion_blur,
-                                            cfg.render.motion_blur_samples)
-        engine = pathtraced_samples(cfg, seeds)  # None: the option is off (nothing more is written)
-        rgb = img["rgb"]
+            rgb = motion_blurred_rgb(self._renderer(cfg), scene, cams, frame, cfg.render.motion_blur,
+                                     cfg.render.motion_blur_samples)
         if engine is not None and engine.any():  # RGB only: labels stay the rasterizer's exact passes
             from warpworm.render.pathtrace import render_pathtraced
 
             sel = np.flatnonzero(engine)
             rgb = rgb.copy()
             rgb[sel] = render_pathtraced(scene, cams.take(sel), spp=cfg.render.pathtraced_spp, seeds=seeds[sel])
-        rgb = apply_sensor(rgb, seeds, values=sensor_values(appearance))
+        if replaced:
+            rgb = apply_sensor(rgb, seeds, values=sensor_values(appearance), device=cfg.sim.device)
         labels = schema_labels(frame, pattern, cams, img, rest_positions=frame.get("rest_positions"),
                                ipm_diameter=params.ipm_diameter, ipm_thickness=params.ipm_thickness)
         out = {"rgb": rgb, "depth": img["depth"], "segmentation": img["seg"], **labels}

@@ -1,0 +1,317 @@
+"""The resolve pass of supersampled and lens images: every output pixel's labels and anti-aliased colour in one
+launch over (image, row, column), on CPU and CUDA alike.
+
+It reads two z-buffers that :func:`~warpworm.render.raster_kernels.raster_triangles` filled for the batch: a
+*label grid* (the pinhole image at pixel centres; with a lens, widened to hold every pixel's ray) and a *sample
+grid* ``s`` times finer. An output pixel
+
+- finds the pinhole point it sees: itself, or through the lens the undistorted direction of its distorted centre
+  (:func:`~warpworm.render.raster_kernels.lens_inverse`, float64), with the lens map's Jacobian for the samples;
+- takes its labels (depth, segmentation, normal) from the label grid: without a lens its own texel's key (the plain
+  pass's labels bit for bit); through a lens, of the four texels around its ray, the nearest triangle that the ray
+  hits (:func:`covering_key`), its depth on the exact ray; the worm mask from the nearest texel;
+- takes ``s x s`` colour samples on a regular grid over its square (through the lens, each sample's pinhole
+  position from the Jacobian), each from the sample grid's nearest key; samples that land on one surface (triangle,
+  floor or background) share one lighting evaluation (shadows included) with their mean albedo (the shading is
+  linear in albedo), so texture is supersampled while lights and shadows cost about once per surface per pixel;
+- averages in linear RGB, applies the camera's gain and writes 8-bit display values (gamma 2).
+"""
+
+from __future__ import annotations
+
+import warp as wp
+
+from warpworm.render.raster_kernels import (
+    _EMPTY,
+    _TRI_SCALE,
+    SEG_BACKGROUND,
+    SEG_EPM,
+    SEG_FLOOR,
+    Lights,
+    Look,
+    depth_plane,
+    edge_fn,
+    floor_row,
+    lens_inverse,
+    mesh_surface,
+    nearer_floor,
+    project,
+    shade_hit,
+    shade_surface,
+    surface_albedo,
+    to_srgb8,
+    wrow,
+)
+
+wp.set_module_options({"enable_backward": False})
+
+SURFACE_FLOOR = wp.constant(-2)
+SURFACE_BACKGROUND = wp.constant(-1)
+"""Surface ids of a sample that is not on a triangle (triangles are their index >= 0)."""
+
+
+@wp.func
+def ray_frame(Rt: wp.mat33, k: wp.vec4, py: float):
+    """World ray of row ``py`` through intrinsics ``k``: d(px) = d0 + px dx (a point at camera depth z lies at
+    eye + z d): (d0, dx), the same float operations as the plain resolve pass."""
+    return Rt * wp.vec3(-k[2] / k[0], (py - k[3]) / k[1], 1.0), Rt * wp.vec3(1.0 / k[0], 0.0, 0.0)
+
+
+@wp.func
+def grid_key(keys: wp.array2d(dtype=wp.int64), img: int, px: float, py: float, gw: int, gh: int) -> wp.int64:
+    """The z-buffer key of the grid texel nearest to point (px, py) [texels] of a ``gw`` x ``gh`` grid (clamped)."""
+    ix = wp.clamp(int(wp.floor(px + 0.5)), 0, gw - 1)
+    iy = wp.clamp(int(wp.floor(py + 0.5)), 0, gh - 1)
+    return keys[img, iy * gw + ix]
+
+
+@wp.func
+def covering_key(keys: wp.array2d(dtype=wp.int64), img: int, px: float, py: float, gw: int, gh: int,
+                 triangles: wp.array(dtype=wp.vec3i), vertices: wp.array2d(dtype=wp.vec3), w: int, R: wp.mat33,
+                 t: wp.vec3, k: wp.vec4) -> wp.int64:
+    """The key of the nearest triangle, among those kept by the four grid texels around point (px, py), whose
+    projection contains the point: the surface the exact ray at (px, py) hits when it is one of them (a lens's rays
+    fall between texel centres); EMPTY when none contains it (the floor or the background)."""
+    best = _EMPTY
+    best_z = float(1.0e30)
+    x0 = int(wp.floor(px))
+    y0 = int(wp.floor(py))
+    for dy in range(2):
+        for dx in range(2):
+            ix = wp.clamp(x0 + dx, 0, gw - 1)
+            iy = wp.clamp(y0 + dy, 0, gh - 1)
+            key = keys[img, iy * gw + ix]
+            if key != _EMPTY and key != best:
+                f = triangles[int(key % _TRI_SCALE)]
+                p0 = R * vertices[w, f[0]] + t
+                p1 = R * vertices[w, f[1]] + t
+                p2 = R * vertices[w, f[2]] + t
+                q0 = project(p0, k)
+                q1 = project(p1, k)
+                q2 = project(p2, k)
+                area = edge_fn(q0[0], q0[1], q1[0], q1[1], q2[0], q2[1])
+                e0 = edge_fn(q1[0], q1[1], q2[0], q2[1], px, py) * area
+                e1 = edge_fn(q2[0], q2[1], q0[0], q0[1], px, py) * area
+                e2 = edge_fn(q0[0], q0[1], q1[0], q1[1], px, py) * area
+                if area != 0.0 and e0 >= 0.0 and e1 >= 0.0 and e2 >= 0.0:
+                    plane = depth_plane(p0, p1, p2, k)
+                    z = plane[0] / (plane[1] * px + plane[2] * py + plane[3])
+                    if z < best_z:
+                        best_z = z
+                        best = key
+    return best
+
+
+def make_resolve_samples(sub: int, lens: bool):
+    """The resolve kernel for ``sub`` x ``sub`` colour samples per pixel, through a lens (``lens``) or not; both are
+    compile-time switches (one kernel per combination)."""
+    ss = sub * sub
+    ivec = wp.types.vector(length=ss, dtype=wp.int32)
+    fvec = wp.types.vector(length=ss, dtype=float)
+    inv_ss = 1.0 / float(ss)
+    half_sub = 0.5 * float(sub - 1)
+
+    @wp.func
+    def sample_point(x: int, y: int, i: int, j: int, u0: float, v0: float, jac: wp.vec4):
+        """Sample (i, j) of output pixel (x, y) in the sample grid's coordinates [texels]."""
+        fx = float(0.0)
+        fy = float(0.0)
+        if wp.static(lens):
+            ox = (float(i) + 0.5) / float(sub) - 0.5
+            oy = (float(j) + 0.5) / float(sub) - 0.5
+            fx = float(sub) * (u0 + jac[0] * ox + jac[1] * oy) + half_sub
+            fy = float(sub) * (v0 + jac[2] * ox + jac[3] * oy) + half_sub
+        else:
+            fx = float(sub * x + i)
+            fy = float(sub * y + j)
+        return fx, fy
+
+    # a module of its own: each (sub, lens) is compiled on first use only
+    @wp.kernel(name=f"resolve_samples_s{sub}_{'lens' if lens else 'pinhole'}", module="unique")
+    def resolve_samples(
+        # Model:
+        triangles: wp.array(dtype=wp.vec3i), tri_label: wp.array(dtype=wp.int32),
+        look: Look, lights: Lights,
+        # Data in:
+        vertices: wp.array2d(dtype=wp.vec3), texcoords: wp.array2d(dtype=wp.vec3),
+        image_world: wp.array(dtype=wp.int32),
+        cam_rot: wp.array(dtype=wp.mat33), cam_trans: wp.array(dtype=wp.vec3), cam_intr: wp.array(dtype=wp.vec4),
+        cam_dist: wp.array2d(dtype=wp.float64), cam_gain: wp.array(dtype=wp.vec3),
+        label_key: wp.array2d(dtype=wp.int64), label_mask: wp.array2d(dtype=wp.uint8),
+        sample_key: wp.array2d(dtype=wp.int64),
+        width: int, height: int, grid_w: int, grid_h: int, margin_x: int, margin_y: int, write_normals: int,
+        # Data out:
+        rgb: wp.array2d(dtype=wp.vec3ub), depth: wp.array2d(dtype=float), seg: wp.array2d(dtype=wp.uint8),
+        worm_mask: wp.array2d(dtype=wp.uint8), normals: wp.array2d(dtype=wp.vec3),
+    ):
+        """One output pixel (x, y) of image ``img``; launched as (N, height, width).
+
+        ``cam_intr`` (N,): the label grid's pinhole (fx, fy, cx, cy) [px] (``grid_w`` x ``grid_h``; with a lens,
+        the output's K shifted by the widening margins ``margin_x``, ``margin_y`` [px]); ``cam_dist`` (N, 5) OpenCV's (k1, k2, p1, p2, k3) (read
+        only with a lens); ``label_key``/``label_mask`` (N, grid_h * grid_w) and ``sample_key`` (N, sub² grid_h *
+        grid_w) the raster pass's keys and worm silhouette. Outputs (N, height * width): 8-bit ``rgb``, camera
+        ``depth`` [m] (0: background), ``seg`` ids, ``worm_mask``, camera-frame ``normals`` when ``write_normals``.
+        """
+        img, y, x = wp.tid()
+        pix = y * width + x
+        w = image_world[img]
+        R = cam_rot[img]
+        t = cam_trans[img]
+        k = cam_intr[img]
+        Rt = wp.transpose(R)
+        eye = -(Rt * t)
+        fn = look.floor_normal[wrow(w, look.floor_normal.shape[0])]
+        fa = look.floor_axis[wrow(w, look.floor_axis.shape[0])]
+        fo = look.floor_origin[wrow(w, look.floor_origin.shape[0])]
+        fh = look.floor_half[wrow(w, look.floor_half.shape[0])]
+        bg = wp.lerp(look.bg_top[wrow(w, look.bg_top.shape[0])], look.bg_bottom[wrow(w, look.bg_bottom.shape[0])],
+                     float(y) / float(height))
+        first = int(-1)
+        if lights.shadows != 0:
+            first = lights.map_first[w]
+
+        # the pinhole point the pixel centre sees, and d(pinhole px) / d(output px) for its samples
+        u0 = float(x)
+        v0 = float(y)
+        jac = wp.vec4(1.0, 0.0, 0.0, 1.0)
+        ok = bool(True)
+        if wp.static(lens):
+            kd = wp.vec4d(wp.float64(k[0]), wp.float64(k[1]), wp.float64(k[2]), wp.float64(k[3]))
+            # the output's principal point is the label grid's less the widening margins
+            u, v, a, b, d, ok = lens_inverse((wp.float64(x + margin_x) - kd[2]) / kd[0],
+                                             (wp.float64(y + margin_y) - kd[3]) / kd[1],
+                                             cam_dist[img, 0], cam_dist[img, 1], cam_dist[img, 2],
+                                             cam_dist[img, 3], cam_dist[img, 4], 8)
+            u0 = float(kd[0] * u + kd[2])
+            v0 = float(kd[1] * v + kd[3])
+            inv_det = 1.0 / float(a * d - b * b)
+            fxy = k[0] / k[1]
+            jac = wp.vec4(float(d) * inv_det, -float(b) * inv_det * fxy, -float(b) * inv_det / fxy,
+                          float(a) * inv_det)
+        if not ok:  # no ray reaches this pixel (the host refuses such lenses; a guard, never data)
+            rgb[img, pix] = wp.vec3ub(wp.uint8(0), wp.uint8(0), wp.uint8(0))
+            depth[img, pix] = 0.0
+            seg[img, pix] = wp.uint8(SEG_BACKGROUND)
+            worm_mask[img, pix] = wp.uint8(0)
+            if write_normals != 0:
+                normals[img, pix] = wp.vec3(0.0)
+            return
+
+        # labels: the label grid's nearest key, the surface on the exact ray (the plain pass's ops without a lens)
+        d0, dx = ray_frame(Rt, k, v0)
+        d_world = d0 + u0 * dx
+        fr = floor_row(fn, fa, fo, fh, eye, d0, dx)
+        lkey = grid_key(label_key, img, u0, v0, grid_w, grid_h)
+        if wp.static(lens):  # between texel centres: the texels' triangle that the exact ray hits
+            lkey = covering_key(label_key, img, u0, v0, grid_w, grid_h, triangles, vertices, w, R, t, k)
+        mz, mlabel, n_world, mmat = mesh_surface(lkey, triangles, tri_label, vertices, texcoords, w, R, t, k, u0,
+                                                 v0, eye, d_world)
+        best_z, label, mat = nearer_floor(fr, u0, mz, mlabel, mmat)
+        if write_normals != 0:
+            nrm = wp.vec3(0.0)
+            if label == SEG_FLOOR:
+                nrm = fn
+            elif label != SEG_BACKGROUND:
+                nrm = n_world
+                if wp.dot(n_world, -d_world) < 0.0:
+                    nrm = -n_world
+            normals[img, pix] = R * nrm
+        if label == SEG_BACKGROUND:
+            best_z = 0.0
+        depth[img, pix] = best_z
+        out_label = label
+        if out_label > SEG_EPM:
+            out_label = SEG_FLOOR  # a distractor object (its own albedo row): static scene, the floor's id
+        seg[img, pix] = wp.uint8(out_label)
+        worm_mask[img, pix] = label_mask[img, grid_key_index(u0, v0, grid_w, grid_h)]
+
+        # colour: sub x sub samples, grouped by the surface they land on
+        kf = wp.vec4(k[0] * float(sub), k[1] * float(sub), k[2] * float(sub) + half_sub, k[3] * float(sub) + half_sub)
+        fw = grid_w * sub
+        fhgt = grid_h * sub
+        transmit = look.floor_transmit[wrow(w, look.floor_transmit.shape[0])]
+        gid = ivec()
+        gfirst = ivec()
+        gcount = ivec()
+        gr = fvec()
+        gg = fvec()
+        gb = fvec()
+        ng = int(0)
+        for j in range(sub):
+            for i in range(sub):
+                fx, fy = sample_point(x, y, i, j, u0, v0, jac)
+                key = grid_key(sample_key, img, fx, fy, fw, fhgt)
+                s0, sdx = ray_frame(Rt, kf, fy)
+                sd = s0 + fx * sdx
+                sfr = floor_row(fn, fa, fo, fh, eye, s0, sdx)
+                smz, smlabel, sn, smat = mesh_surface(key, triangles, tri_label, vertices, texcoords, w, R, t, kf, fx,
+                                                      fy, eye, sd)
+                sz, slabel, smat2 = nearer_floor(sfr, fx, smz, smlabel, smat)
+                sid = int(SURFACE_BACKGROUND)
+                if slabel == SEG_FLOOR:
+                    sid = int(SURFACE_FLOOR)
+                elif slabel != SEG_BACKGROUND:
+                    sid = int(key % _TRI_SCALE)
+                alb = surface_albedo(look, w, slabel, smat2)
+                g = int(-1)
+                for q in range(ng):
+                    if gid[q] == sid:
+                        g = q
+                if g < 0:
+                    g = ng
+                    gid[g] = sid
+                    gfirst[g] = j * sub + i
+                    gcount[g] = 0
+                    gr[g] = 0.0
+                    gg[g] = 0.0
+                    gb[g] = 0.0
+                    ng = ng + 1
+                gcount[g] = gcount[g] + 1
+                gr[g] = gr[g] + alb[0]
+                gg[g] = gg[g] + alb[1]
+                gb[g] = gb[g] + alb[2]
+        gain = cam_gain[img]
+        acc = wp.vec3(0.0)
+        for g in range(ng):
+            first_sample = gfirst[g]
+            fx, fy = sample_point(x, y, first_sample % sub, first_sample / sub, u0, v0, jac)
+            key = grid_key(sample_key, img, fx, fy, fw, fhgt)
+            s0, sdx = ray_frame(Rt, kf, fy)
+            sd = s0 + fx * sdx
+            sfr = floor_row(fn, fa, fo, fh, eye, s0, sdx)
+            smz, smlabel, sn, smat = mesh_surface(key, triangles, tri_label, vertices, texcoords, w, R, t, kf, fx, fy,
+                                                  eye, sd)
+            sz, slabel, smat2 = nearer_floor(sfr, fx, smz, smlabel, smat)
+            inv_n = 1.0 / float(gcount[g])
+            alb = wp.vec3(gr[g] * inv_n, gg[g] * inv_n, gb[g] * inv_n)
+            color, _nrm = shade_surface(look, lights, w, first, slabel, alb, sz, sn, eye, sd, bg)
+            if slabel != smlabel and smlabel != SEG_BACKGROUND and transmit > 0.0:
+                # a clear plate (render.plate_materials: acrylic): the mesh under it (the EPM) shows through
+                under, _n = shade_hit(look, lights, w, first, smlabel, smz, smat, sn, eye, sd, bg)
+                color = wp.lerp(color, under, transmit)
+            color = wp.cw_mul(color, gain)
+            color = wp.vec3(wp.clamp(color[0], 0.0, 1.0), wp.clamp(color[1], 0.0, 1.0), wp.clamp(color[2], 0.0, 1.0))
+            acc = acc + color * float(gcount[g])
+        acc = acc * inv_ss
+        rgb[img, pix] = wp.vec3ub(to_srgb8(acc[0]), to_srgb8(acc[1]), to_srgb8(acc[2]))
+
+    return resolve_samples
+
+
+@wp.func
+def grid_key_index(px: float, py: float, gw: int, gh: int) -> int:
+    """Index of the grid texel nearest to (px, py) (clamped), as :func:`grid_key` reads it."""
+    ix = wp.clamp(int(wp.floor(px + 0.5)), 0, gw - 1)
+    iy = wp.clamp(int(wp.floor(py + 0.5)), 0, gh - 1)
+    return iy * gw + ix
+
+
+_KERNELS: dict = {}
+
+
+def resolve_samples_kernel(sub: int, lens: bool):
+    """The (cached) :func:`make_resolve_samples` kernel for ``sub`` samples per side and a lens or not."""
+    key = (int(sub), bool(lens))
+    if key not in _KERNELS:
+        _KERNELS[key] = make_resolve_samples(*key)
+    return _KERNELS[key]

@@ -1,0 +1,181 @@
+"""Camera-sensor effects as three launches over a whole batch of 8-bit images, in the order a camera applies them:
+colour (white balance, hue and saturation, contrast, brightness), a Gaussian defocus blur (rows, then columns) and
+read + shot noise with the final quantization. Each image has its own values; the arithmetic follows OpenCV's
+(``cv2.cvtColor`` float HSV, ``cv2.GaussianBlur`` with ``ksize (0, 0)``: kernel side ``round(8 sigma + 1) | 1``,
+``BORDER_REFLECT_101``), so the host reference (:func:`warpworm.render.sensor.apply_sensor_opencv`) agrees to
+float rounding. Noise comes from Warp's counter-based generator keyed by each image's seed and pixel.
+"""
+
+from __future__ import annotations
+
+import warp as wp
+
+wp.set_module_options({"enable_backward": False})
+
+FLT_EPSILON = wp.constant(1.1920929e-07)
+
+
+@wp.func
+def rgb_to_hsv(c: wp.vec3) -> wp.vec3:
+    """OpenCV's float RGB -> HSV: H in [0, 360) [deg], S and V in [0, 1]."""
+    r = c[0]
+    g = c[1]
+    b = c[2]
+    v = wp.max(wp.max(r, g), b)
+    vmin = wp.min(wp.min(r, g), b)
+    diff = v - vmin
+    s = diff / (wp.abs(v) + FLT_EPSILON)
+    diff = 60.0 / (diff + FLT_EPSILON)
+    h = float(0.0)
+    if v == r:
+        h = (g - b) * diff
+    elif v == g:
+        h = (b - r) * diff + 120.0
+    else:
+        h = (r - g) * diff + 240.0
+    if h < 0.0:
+        h += 360.0
+    return wp.vec3(h, s, v)
+
+
+@wp.func
+def hsv_to_rgb(c: wp.vec3) -> wp.vec3:
+    """OpenCV's float HSV -> RGB (H in degrees)."""
+    h = c[0]
+    s = c[1]
+    v = c[2]
+    out = wp.vec3(v, v, v)
+    if s != 0.0:
+        h = h * (1.0 / 60.0)
+        while h < 0.0:
+            h += 6.0
+        while h >= 6.0:
+            h -= 6.0
+        sector = int(wp.floor(h))
+        h -= float(sector)
+        if sector < 0 or sector >= 6:
+            sector = 0
+            h = 0.0
+        t0 = v
+        t1 = v * (1.0 - s)
+        t2 = v * (1.0 - s * h)
+        t3 = v * (1.0 - s * (1.0 - h))
+        # OpenCV's sector table {1,3,0}, {1,0,2}, {3,0,1}, {0,2,1}, {0,1,3}, {2,1,0} picks (b, g, r) from (t0..t3)
+        if sector == 0:
+            out = wp.vec3(t0, t3, t1)
+        elif sector == 1:
+            out = wp.vec3(t2, t0, t1)
+        elif sector == 2:
+            out = wp.vec3(t1, t0, t3)
+        elif sector == 3:
+            out = wp.vec3(t1, t2, t0)
+        elif sector == 4:
+            out = wp.vec3(t3, t1, t0)
+        else:
+            out = wp.vec3(t0, t1, t2)
+    return out
+
+
+@wp.kernel
+def sensor_colour(
+    rgb: wp.array2d(dtype=wp.vec3ub),
+    white_balance: wp.array(dtype=wp.vec3),
+    hue_sat_con_bri: wp.array(dtype=wp.vec4),
+    # Data out:
+    out: wp.array2d(dtype=wp.vec3),
+):
+    """Colour effects of pixel ``pix`` of image ``img`` (launched (N, H*W)): 8-bit display RGB -> [0, 1], per-channel
+    gains (clipped to [0, 1] when not all 1), hue shift [deg] and saturation gain through HSV (skipped when neutral),
+    then ``(c - 0.5) contrast + 0.5 + brightness`` (not clipped: blur and noise come first)."""
+    img, pix = wp.tid()
+    p = rgb[img, pix]
+    c = wp.vec3(float(p[0]), float(p[1]), float(p[2])) * (1.0 / 255.0)
+    wb = white_balance[img]
+    if wb[0] != 1.0 or wb[1] != 1.0 or wb[2] != 1.0:
+        c = wp.cw_mul(c, wb)
+        c = wp.vec3(wp.clamp(c[0], 0.0, 1.0), wp.clamp(c[1], 0.0, 1.0), wp.clamp(c[2], 0.0, 1.0))
+    hscb = hue_sat_con_bri[img]
+    if hscb[0] != 0.0 or hscb[1] != 1.0:
+        hsv = rgb_to_hsv(c)
+        h = wp.mod(hsv[0] + hscb[0], 360.0)
+        if h < 0.0:
+            h += 360.0
+        c = hsv_to_rgb(wp.vec3(h, wp.clamp(hsv[1] * hscb[1], 0.0, 1.0), hsv[2]))
+    out[img, pix] = (c - wp.vec3(0.5)) * hscb[2] + wp.vec3(0.5 + hscb[3])
+
+
+@wp.func
+def reflect101(i: int, n: int) -> int:
+    """OpenCV's BORDER_REFLECT_101 index (gfedcb|abcdefgh|gfedcba) for a tap within one image side of the edge."""
+    j = i
+    if j < 0:
+        j = -j
+    if j >= n:
+        j = 2 * n - 2 - j
+    return wp.clamp(j, 0, n - 1)
+
+
+@wp.func
+def blur_taps(src: wp.array2d(dtype=wp.vec3), img: int, base: int, pos: int, n: int, stride: int,
+              weights: wp.array2d(dtype=float), radius: int) -> wp.vec3:
+    """Symmetric 1-D Gaussian at ``pos`` of a line of ``n`` pixels (``base + i * stride``): the centre tap plus
+    each pair of mirrored taps, as OpenCV's symmetric row and column filters sum them."""
+    acc = src[img, base + pos * stride] * weights[img, radius]
+    for d in range(1, radius + 1):
+        a = src[img, base + reflect101(pos - d, n) * stride]
+        b = src[img, base + reflect101(pos + d, n) * stride]
+        acc = acc + (a + b) * weights[img, radius + d]
+    return acc
+
+
+@wp.kernel
+def sensor_blur_rows(
+    src: wp.array2d(dtype=wp.vec3),
+    weights: wp.array2d(dtype=float),
+    radius: wp.array(dtype=wp.int32),
+    width: int,
+    # Data out:
+    dst: wp.array2d(dtype=wp.vec3),
+):
+    """The blur along rows (launched (N, H, W)); ``weights`` (N, 2 R + 1) each image's kernel centred at column R,
+    ``radius`` (N,) its half side (0: copy)."""
+    img, y, x = wp.tid()
+    r = radius[img]
+    if r == 0:
+        dst[img, y * width + x] = src[img, y * width + x]
+    else:
+        dst[img, y * width + x] = blur_taps(src, img, y * width, x, width, 1, weights, r)
+
+
+@wp.kernel
+def sensor_blur_cols_noise(
+    src: wp.array2d(dtype=wp.vec3),
+    weights: wp.array2d(dtype=float),
+    radius: wp.array(dtype=wp.int32),
+    noise: wp.array(dtype=wp.vec2),
+    seed: wp.array(dtype=wp.int32),
+    width: int,
+    height: int,
+    # Data out:
+    rgb: wp.array2d(dtype=wp.vec3ub),
+):
+    """The blur along columns, then noise of std ``noise[img][0] + noise[img][1] sqrt(clip(c, 0, 1))`` (read and
+    shot, fractions of full scale; a normal draw per channel from ``seed[img]`` and the pixel) and the 8-bit
+    quantization ``floor(clip(c, 0, 1) 255 + 0.5)`` (launched (N, H, W))."""
+    img, y, x = wp.tid()
+    pix = y * width + x
+    r = radius[img]
+    c = src[img, pix]
+    if r != 0:
+        c = blur_taps(src, img, x, y, height, width, weights, r)
+    ns = noise[img]
+    if ns[0] > 0.0 or ns[1] > 0.0:
+        state = wp.rand_init(seed[img], 3 * pix)
+        for ch in range(3):
+            std = ns[0]
+            if ns[1] > 0.0:
+                std = ns[0] + ns[1] * wp.sqrt(wp.clamp(c[ch], 0.0, 1.0))
+            c[ch] = c[ch] + wp.randn(state) * std
+    rgb[img, pix] = wp.vec3ub(wp.uint8(int(wp.clamp(c[0], 0.0, 1.0) * 255.0 + 0.5)),
+                              wp.uint8(int(wp.clamp(c[1], 0.0, 1.0) * 255.0 + 0.5)),
+                              wp.uint8(int(wp.clamp(c[2], 0.0, 1.0) * 255.0 + 0.5)))
