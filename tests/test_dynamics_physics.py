@@ -94,7 +94,9 @@ def test_incline_above_friction_angle_slides_with_coulomb_acceleration(mu_s, mu_
     keep = ts > 0.05  # after the contact transient of the first substeps
     acc = -2.0 * np.polyfit(ts[keep], s[keep], 2)[0]  # down the slope
     expected = g * (np.sin(beta) - mu_k * np.cos(beta))
-    assert abs(acc - expected) < 0.05 * expected, f"a = {acc:.4f} m/s², expected {expected:.4f}"
+    # measured 0.8e-5 to 9.3e-5 of the expected over these six cases (docs/dynamics.md: 0.01-0.1 %); a 1 % error in
+    # the normal force moves a by ~3 % here, so 5e-4 (≤ 5.4x the largest measured) leaves no room for one
+    assert abs(acc - expected) < 5e-4 * expected, f"a = {acc:.5f} m/s², expected {expected:.5f}"
 
 
 def _slide_acceleration(p, substeps: int = 2, seconds: float = 0.4) -> float:
@@ -118,7 +120,7 @@ def _slide_acceleration(p, substeps: int = 2, seconds: float = 0.4) -> float:
 def test_backward_friction_ratio_holds_a_worm_head_up_and_not_head_down():
     """A skin that grips twice as hard tail-ward (``friction_backward_ratio`` 2): on a 20° slope, steeper than
     atan μs = 15.0° but not than atan 2μs = 28.2°, the worm facing uphill (sliding down would be tail-ward) holds,
-    and facing downhill (head-ward) slides with Coulomb's g (sin β − μk cos β) of the head-ward μk, to 5 %."""
+    and facing downhill (head-ward) slides with Coulomb's g (sin β − μk cos β) of the head-ward μk, to 0.05 %."""
     mu_s, mu_k, ratio = 0.268, 0.24, 2.0
     beta = np.deg2rad(20.0)
     kw = dict(mu_static=mu_s, mu_kinetic=mu_k, friction_backward_ratio=ratio, damping=0.0, **NO_MAGNETS,
@@ -133,19 +135,21 @@ def test_backward_friction_ratio_holds_a_worm_head_up_and_not_head_down():
     assert slide < 1e-4, f"head-up worm crept {slide * 1e3:.4f} mm over 2 s at 20 deg with a 2x tail-ward grip"
     acc = _slide_acceleration(WormParams(floor_incline=-beta, **kw))
     expected = 9.81 * (np.sin(beta) - mu_k * np.cos(beta))
-    assert abs(acc - expected) < 0.05 * expected, f"head-down a = {acc:.4f} m/s², expected {expected:.4f}"
+    # measured 1.2e-6 of the expected; 5e-4 as the isotropic slides' (a skin profile off by 1 % at θ = 0 fails it)
+    assert abs(acc - expected) < 5e-4 * expected, f"head-down a = {acc:.5f} m/s², expected {expected:.5f}"
 
 
 def test_backward_friction_ratio_scales_the_tailward_kinetic_friction():
     """Past atan(2 μs) (30° here) the head-up worm slides tail-ward against twice the kinetic friction:
-    g (sin β − 2 μk cos β), to 5 % (with the isotropic μk it would be 2.2× that)."""
+    g (sin β − 2 μk cos β), to 0.05 % (with the isotropic μk it would be 2.2× that)."""
     mu_s, mu_k, ratio = 0.268, 0.24, 2.0
     beta = np.deg2rad(30.0)
     p = WormParams(mu_static=mu_s, mu_kinetic=mu_k, friction_backward_ratio=ratio, floor_incline=beta, damping=0.0,
                    **NO_MAGNETS, **RIGID_SHEET)
     acc = _slide_acceleration(p)
     expected = 9.81 * (np.sin(beta) - ratio * mu_k * np.cos(beta))
-    assert abs(acc - expected) < 0.05 * expected, f"a = {acc:.4f} m/s², expected {expected:.4f}"
+    # measured 1.4e-4 of the expected (3.6x under the bound)
+    assert abs(acc - expected) < 5e-4 * expected, f"a = {acc:.5f} m/s², expected {expected:.5f}"
 
 
 def test_free_fall_matches_g():
