@@ -46,10 +46,16 @@ def test_flexure_anchor_forces_balance_weight_and_grow_with_deflection():
     r = ex.flexure((0.02,), max_deflection=1.0e-3, increments=2, hold=0.15, settle=0.1)
     # anchor forces (as applied by the solver: Simulator.snapshot) hold the weight at the unloaded start
     # (supports' share minus the load pad's pull; the load pad also carries some)
+    import trimesh
+
     from warpworm.sim.model import Model
 
-    weight = float(Model.from_params(ex.replace(ex.WormParams(), **ex.NO_MAGNETS), 1, "cpu").vertex_mass_host.sum()
-                   * 9.81)
+    # the weight from the masses' definitions (sheet density × trimesh's area, the IPMs' ρ π r² h), not the model's
+    p = ex.replace(ex.WormParams(), **ex.NO_MAGNETS)
+    model = Model.from_params(p, 1, "cpu")
+    area = trimesh.Trimesh(model.rest_positions_host[0], model.pattern.triangles, process=False).area
+    ipm = p.magnet_mass_density * np.pi * (p.ipm_diameter / 2) ** 2 * p.ipm_thickness
+    weight = float((p.sheet_density * area + len(model.pattern.mount_vertices) * ipm) * 9.81)
     held = r["force_raw"][0, 0] - r["force_pusher_raw"][0, 0]
     assert abs(held / weight - 1.0) < 0.05, (held, weight)
     assert np.all(np.diff(r["force"][:, 0]) > 0), r["force"]
