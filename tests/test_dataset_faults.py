@@ -389,10 +389,33 @@ def test_coco_export_structure_and_cocoeval(tmp_path):
     for ann in gt.dataset["annotations"]:  # the RLE decodes to the dataset's visible worm pixels
         seg = rd[ann["image_id"]]["segmentation"]
         assert np.array_equal(gt.annToMask(ann).astype(bool), (seg >= 2) & (seg <= 6))
-    dt = gt.loadRes([dict(a, score=1.0) for a in gt.dataset["annotations"]])
+    # pycocotools scores a detection off by a known shift d: its OKS is the closed form over the visible keypoints,
+    # mean exp(−d² / (2 s² (2σ)²)) with s² the worm's visible pixel count from the segmentation (not the export's
+    # area) and σ each keypoint's own sigma by name (export_keypoints.OKS_SIGMAS, not the file's list); so a wrong
+    # area, a sigma list out of the keypoints' order or a wrong visibility flag fails here (the ground truth against
+    # itself scored AP 1 whatever the file said)
+    sig = np.array([ek.OKS_SIGMAS[n] for n in coco["categories"][0]["keypoints"]])
+    shift = {}
+    dets = []
+    for a in gt.dataset["annotations"]:
+        kp = np.array(a["keypoints"], float).reshape(-1, 3)
+        shift[a["id"]] = 0.05 * np.sqrt(a["area"])  # px along x: OKS ~0.6-0.9 for these sigmas
+        kp[kp[:, 2] > 0, 0] += shift[a["id"]]
+        dets.append(dict(a, keypoints=kp.reshape(-1).tolist(), score=1.0))
+    dt = gt.loadRes(dets)
     ev = COCOeval(gt, dt, "keypoints")
-    ev.params.kpt_oks_sigmas = np.array(coco["info"]["kpt_oks_sigmas"])
+    ev.params.kpt_oks_sigmas = np.array(coco["info"]["kpt_oks_sigmas"])  # as a user sets them: from the file
     ev.evaluate()
-    ev.accumulate()
-    ev.summarize()
-    assert ev.stats[0] == 1.0  # AP of the ground truth against itself
+    checked = 0
+    for a in gt.dataset["annotations"]:
+        vis = np.array(a["keypoints"]).reshape(-1, 3)[:, 2] > 0
+        if not vis.any():
+            continue
+        seg = rd[a["image_id"]]["segmentation"]
+        s2 = float(((seg >= 2) & (seg <= 6)).sum())
+        expected = np.mean(np.exp(-shift[a["id"]] ** 2 / (2.0 * s2 * (2.0 * sig[vis]) ** 2)))
+        got = np.asarray(ev.ious[(a["image_id"], a["category_id"])])
+        # both float64 (pycocotools adds eps to the area): 1e-12 is rounding, far under any export error
+        assert got.shape == (1, 1) and got[0, 0] == pytest.approx(expected, rel=1e-12), (got, expected)
+        checked += 1
+    assert checked >= 2
