@@ -3,6 +3,7 @@ shards and manifests, a second job on a locked folder, SIGTERM / SIGINT / SIGKIL
 plus the schema table, the shard plan for workers, `warpworm verify`, the COCO export and the CUDA-warning-free start."""
 
 import argparse
+import builtins
 import errno
 import json
 import os
@@ -144,6 +145,45 @@ def test_read_only_folder_mid_job_permission_error(tmp_path, monkeypatch):
     with pytest.raises(ds.DatasetWriteError, match=r"shard-00001\.h5.*Permission denied.*writable.*--resume"):
         run(tiny(), out)
     assert _only_final_files(out) == ["manifest.json", "shard-00000.h5"]
+
+
+@pytest.mark.skipif(not os.access("/dev/full", os.W_OK), reason="no writable /dev/full on this machine")
+def test_real_enospc_from_dev_full_mid_shard(tmp_path, monkeypatch):
+    """A real ENOSPC, raised by the kernel: once shard 2's file holds 2 kB, its bytes go to /dev/full (every write
+    there fails with ENOSPC) through the writer's own file object, so the OSError takes the writer's path (no error
+    made up by the test): one line naming the shard, the OS's reason and the advice, the finished shards intact, the
+    temporary gone, and --resume completes the job. Runs where ``mount`` is not
+    allowed (the tmpfs test below needs root)."""
+    out = tmp_path / "d"
+    real_init = ds._FailSafeFile.__init__
+    full = []
+
+    def init(self, path):
+        real_init(self, path)
+        if "shard-00002" in Path(path).name:
+            raw = self.raw
+            dev_full = builtins.open("/dev/full", "wb", buffering=0)
+            full.append(dev_full)
+
+            def raw_write(b):
+                return (dev_full if raw.tell() > 2000 else raw).write(b)
+
+            self._raw_write = raw_write
+
+    monkeypatch.setattr(ds._FailSafeFile, "__init__", init)
+    with pytest.raises(ds.DatasetWriteError) as ei:
+        run(tiny(), out)
+    assert full, "shard 2 was never opened"
+    assert ei.value.errno == errno.ENOSPC
+    msg = str(ei.value.strerror)
+    assert "\n" not in msg and "shard-00002.h5" in msg and os.strerror(errno.ENOSPC) in msg and "free space" in msg
+    assert "--resume" in msg, msg
+    assert _only_final_files(out) == ["manifest.json", "shard-00000.h5", "shard-00001.h5"]
+    monkeypatch.undo()
+    for f in full:
+        f.close()
+    run(tiny(), out, resume=True)
+    assert _verify(out) == (0, []) and len(ds.open(out)) == 22
 
 
 def test_real_full_tmpfs_exit_code_3(tmp_path, ref):
