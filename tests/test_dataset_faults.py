@@ -333,21 +333,21 @@ def _interrupt_once(out, sig, workers, resume, rng):
     if proc.returncode == 0:
         return False  # finished before the signal
     if sig == signal.SIGKILL:
-        assert proc.returncode == -signal.SIGKILL
-        time.sleep(1.0)  # orphaned workers' watchdog (0.5 s)
+        assert proc.returncode == -signal.SIGKILL  # orphaned workers exit by their watchdog (0.5 s): waited below
     else:
         assert proc.returncode == 128 + sig, (sig, proc.returncode, err)
         assert "stopped: interrupted by" in err and "--resume" in err, err
         assert not list(out.glob(".*.tmp-*")), list(out.iterdir())
         m = json.loads((out / "manifest.json").read_text())
         assert sorted(s["file"] for s in m["shards"]) == sorted(p.name for p in out.glob("shard-*.h5"))
-    for _ in range(20):  # no live process of the job is left in its session (exited ones may be zombies
+    t_end = time.monotonic() + 30.0  # a ceiling against a hang, not a timing: the loop ends when the session empties
+    while True:  # no live process of the job is left in its session (exited ones may be zombies
         ps = subprocess.run(["ps", "-o", "stat=,pid=,args=", "-s", str(proc.pid)], capture_output=True, text=True)
         live = [ln for ln in ps.stdout.splitlines() if ln.strip() and not ln.strip().startswith("Z")]
-        if not live:  # (un-reaped where pid 1 does not reap orphans, as in this container)
+        if not live or time.monotonic() > t_end:  # (un-reaped where pid 1 does not reap orphans, as here)
             break
-        time.sleep(0.1)
-    else:
+        time.sleep(0.05)
+    if live:
         raise AssertionError(f"interrupted job ({sig.name}) left live processes: {live}")
     return delivered
 
