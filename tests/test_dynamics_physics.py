@@ -70,7 +70,9 @@ def test_incline_below_friction_angle_does_not_creep(mu_s, mu_k, substeps):
     sim.step(state, 500, epm=False)  # 2 s
     x1 = sim.snapshot(state)["positions"]
     slide = np.linalg.norm(_com(x1) - _com(x0), axis=-1).max()
-    assert slide < 1e-4, f"worm crept {slide * 1e3:.4f} mm over 2 s at {np.rad2deg(beta):.2f} deg"
+    # measured 1.55-1.81e-5 m over 2 s in all six cases: the regularised static friction's creep, ~ε = 1e-5 m/s
+    # (Simulator slip_speed) times tan β / μs; 5e-5 m is 2.8x that (a tenfold creep speed fails)
+    assert slide < 5e-5, f"worm crept {slide * 1e3:.4f} mm over 2 s at {np.rad2deg(beta):.2f} deg"
 
 
 @pytest.mark.parametrize("substeps", [1, 2, 40], ids=["2ms", "1ms", "50us"])
