@@ -10,7 +10,7 @@ Rows of :func:`run` (one per device, magnet model and W), in the gait setting (p
 - ``wrench_ms_per_world``: one magnetic-wrench evaluation (poses, wrench, distribution) per world;
 - ``realtime_factor``: simulated seconds per second per world at the step rate (>= 1: real time for W = 1);
 - ``sim_s_per_wall_s``: simulated worm-seconds per second of the whole batch (W × realtime_factor);
-- ``numpy_substep_rate`` and ``speedup_vs_numpy``: the same substep in NumPy (``numpy_substep.py``, float64: the
+- ``numpy_substep_rate`` and ``speedup_vs_numpy``: the same substep in NumPy (``tests/numpy_reference.py``, float64: the
   implicit step with a dense batched ``np.linalg.solve``, floor contact left out);
 - ``launches_per_substep``, ``bytes_per_world``; ``time_base``.
 
@@ -36,6 +36,7 @@ import warp as wp
 from warpworm import quiet_warp
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # numpy_reference: the tests' NumPy substep
 
 NEWTON_MESH = "39 vertices, 111 bars, 105 hinges"
 
@@ -124,9 +125,11 @@ def bench_one(W: int, magnet_model: str, device: str, with_numpy: bool, min_time
 def numpy_substep_time(model, sim, state, min_time: float, newton: int | None = None) -> float:
     """Process CPU time [s] of one NumPy reference substep of all ``model``'s worlds with ``newton`` Newton steps
     (default the simulator's most; NumPy's BLAS may use threads: they count too)."""
-    from numpy_substep import NumpyImplicit
+    from numpy_reference import NumpyImplicit
 
-    ref = NumpyImplicit(model, sim.dt_sub, newton=sim.newton if newton is None else newton)
+    # floor=False: the reference's vectorised substep without the floor (its floor code loops over vertices in
+    # Python: a test's truth, not a speed reference), the same work it timed before the floor was added
+    ref = NumpyImplicit(model, sim.dt_sub, newton=sim.newton if newton is None else newton, floor=False)
     x, v, a = ref.init(state, sim.control)
     f = state.external_force.numpy().astype(np.float64)
     return timeit(lambda: ref.substep(x, v, a, f), "cpu", min_time, max_reps=50)

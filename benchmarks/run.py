@@ -2,7 +2,7 @@
 """Benchmark runner.
 
 ``python benchmarks/run.py [--quick] [--device DEV] [--out DIR]`` (no names): the summary, ONE table measured in one
-run: warpworm's gait step and substep rates beside the NumPy reference of the substep (``numpy_substep.py``) and
+run: warpworm's gait step and substep rates beside the NumPy reference of the substep (``tests/numpy_reference.py``) and
 Newton on the same mesh (a "not installed" row unless the optional ``newton`` package is importable), then the
 renderer's images/s and the dataset pipeline's samples/s (one and four camera views per frame). On ``--device cuda`` the dynamics rows are at 1k, 16k and
 64k worlds. Written to ``DIR/summary.json``.

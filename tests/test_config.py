@@ -3,7 +3,6 @@ expected; overrides; packaged configs."""
 
 import dataclasses
 import math
-import os
 import subprocess
 import sys
 
@@ -194,7 +193,9 @@ def test_cli_bad_config_exits_2_and_writes_nothing(tmp_path):
     r = subprocess.run([sys.executable, "-m", "warpworm", "generate", "default", "--out", "/proc/ww"],
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and "--out" in r.stderr and "writable" in r.stderr
-    assert os.environ.get("X") is None
+    # one line naming the refused folder and why (the OS's reason), and nothing on stdout: refused before any work
+    assert r.stderr.count("\n") == 1 and "got '/proc/ww'" in r.stderr and "No such file or directory" in r.stderr
+    assert r.stdout == ""
 
 
 # The order of every randomize group as the datasets written before issue 25 list it in each shard's config_yaml

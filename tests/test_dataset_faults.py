@@ -3,6 +3,7 @@ shards and manifests, a second job on a locked folder, SIGTERM / SIGINT / SIGKIL
 plus the schema table, the shard plan for workers, `warpworm verify`, the COCO export and the CUDA-warning-free start."""
 
 import argparse
+import builtins
 import errno
 import json
 import os
@@ -144,6 +145,45 @@ def test_read_only_folder_mid_job_permission_error(tmp_path, monkeypatch):
     with pytest.raises(ds.DatasetWriteError, match=r"shard-00001\.h5.*Permission denied.*writable.*--resume"):
         run(tiny(), out)
     assert _only_final_files(out) == ["manifest.json", "shard-00000.h5"]
+
+
+@pytest.mark.skipif(not os.access("/dev/full", os.W_OK), reason="no writable /dev/full on this machine")
+def test_real_enospc_from_dev_full_mid_shard(tmp_path, monkeypatch):
+    """A real ENOSPC, raised by the kernel: once shard 2's file holds 2 kB, its bytes go to /dev/full (every write
+    there fails with ENOSPC) through the writer's own file object, so the OSError takes the writer's path (no error
+    made up by the test): one line naming the shard, the OS's reason and the advice, the finished shards intact, the
+    temporary gone, and --resume completes the job. Runs where ``mount`` is not
+    allowed (the tmpfs test below needs root)."""
+    out = tmp_path / "d"
+    real_init = ds._FailSafeFile.__init__
+    full = []
+
+    def init(self, path):
+        real_init(self, path)
+        if "shard-00002" in Path(path).name:
+            raw = self.raw
+            dev_full = builtins.open("/dev/full", "wb", buffering=0)
+            full.append(dev_full)
+
+            def raw_write(b):
+                return (dev_full if raw.tell() > 2000 else raw).write(b)
+
+            self._raw_write = raw_write
+
+    monkeypatch.setattr(ds._FailSafeFile, "__init__", init)
+    with pytest.raises(ds.DatasetWriteError) as ei:
+        run(tiny(), out)
+    assert full, "shard 2 was never opened"
+    assert ei.value.errno == errno.ENOSPC
+    msg = str(ei.value.strerror)
+    assert "\n" not in msg and "shard-00002.h5" in msg and os.strerror(errno.ENOSPC) in msg and "free space" in msg
+    assert "--resume" in msg, msg
+    assert _only_final_files(out) == ["manifest.json", "shard-00000.h5", "shard-00001.h5"]
+    monkeypatch.undo()
+    for f in full:
+        f.close()
+    run(tiny(), out, resume=True)
+    assert _verify(out) == (0, []) and len(ds.open(out)) == 22
 
 
 def test_real_full_tmpfs_exit_code_3(tmp_path, ref):
@@ -293,21 +333,21 @@ def _interrupt_once(out, sig, workers, resume, rng):
     if proc.returncode == 0:
         return False  # finished before the signal
     if sig == signal.SIGKILL:
-        assert proc.returncode == -signal.SIGKILL
-        time.sleep(1.0)  # orphaned workers' watchdog (0.5 s)
+        assert proc.returncode == -signal.SIGKILL  # orphaned workers exit by their watchdog (0.5 s): waited below
     else:
         assert proc.returncode == 128 + sig, (sig, proc.returncode, err)
         assert "stopped: interrupted by" in err and "--resume" in err, err
         assert not list(out.glob(".*.tmp-*")), list(out.iterdir())
         m = json.loads((out / "manifest.json").read_text())
         assert sorted(s["file"] for s in m["shards"]) == sorted(p.name for p in out.glob("shard-*.h5"))
-    for _ in range(20):  # no live process of the job is left in its session (exited ones may be zombies
+    t_end = time.monotonic() + 30.0  # a ceiling against a hang, not a timing: the loop ends when the session empties
+    while True:  # no live process of the job is left in its session (exited ones may be zombies
         ps = subprocess.run(["ps", "-o", "stat=,pid=,args=", "-s", str(proc.pid)], capture_output=True, text=True)
         live = [ln for ln in ps.stdout.splitlines() if ln.strip() and not ln.strip().startswith("Z")]
-        if not live:  # (un-reaped where pid 1 does not reap orphans, as in this container)
+        if not live or time.monotonic() > t_end:  # (un-reaped where pid 1 does not reap orphans, as here)
             break
-        time.sleep(0.1)
-    else:
+        time.sleep(0.05)
+    if live:
         raise AssertionError(f"interrupted job ({sig.name}) left live processes: {live}")
     return delivered
 
@@ -389,10 +429,33 @@ def test_coco_export_structure_and_cocoeval(tmp_path):
     for ann in gt.dataset["annotations"]:  # the RLE decodes to the dataset's visible worm pixels
         seg = rd[ann["image_id"]]["segmentation"]
         assert np.array_equal(gt.annToMask(ann).astype(bool), (seg >= 2) & (seg <= 6))
-    dt = gt.loadRes([dict(a, score=1.0) for a in gt.dataset["annotations"]])
+    # pycocotools scores a detection off by a known shift d: its OKS is the closed form over the visible keypoints,
+    # mean exp(−d² / (2 s² (2σ)²)) with s² the worm's visible pixel count from the segmentation (not the export's
+    # area) and σ each keypoint's own sigma by name (export_keypoints.OKS_SIGMAS, not the file's list); so a wrong
+    # area, a sigma list out of the keypoints' order or a wrong visibility flag fails here (the ground truth against
+    # itself scored AP 1 whatever the file said)
+    sig = np.array([ek.OKS_SIGMAS[n] for n in coco["categories"][0]["keypoints"]])
+    shift = {}
+    dets = []
+    for a in gt.dataset["annotations"]:
+        kp = np.array(a["keypoints"], float).reshape(-1, 3)
+        shift[a["id"]] = 0.05 * np.sqrt(a["area"])  # px along x: OKS ~0.6-0.9 for these sigmas
+        kp[kp[:, 2] > 0, 0] += shift[a["id"]]
+        dets.append(dict(a, keypoints=kp.reshape(-1).tolist(), score=1.0))
+    dt = gt.loadRes(dets)
     ev = COCOeval(gt, dt, "keypoints")
-    ev.params.kpt_oks_sigmas = np.array(coco["info"]["kpt_oks_sigmas"])
+    ev.params.kpt_oks_sigmas = np.array(coco["info"]["kpt_oks_sigmas"])  # as a user sets them: from the file
     ev.evaluate()
-    ev.accumulate()
-    ev.summarize()
-    assert ev.stats[0] == 1.0  # AP of the ground truth against itself
+    checked = 0
+    for a in gt.dataset["annotations"]:
+        vis = np.array(a["keypoints"]).reshape(-1, 3)[:, 2] > 0
+        if not vis.any():
+            continue
+        seg = rd[a["image_id"]]["segmentation"]
+        s2 = float(((seg >= 2) & (seg <= 6)).sum())
+        expected = np.mean(np.exp(-shift[a["id"]] ** 2 / (2.0 * s2 * (2.0 * sig[vis]) ** 2)))
+        got = np.asarray(ev.ious[(a["image_id"], a["category_id"])])
+        # both float64 (pycocotools adds eps to the area): 1e-12 is rounding, far under any export error
+        assert got.shape == (1, 1) and got[0, 0] == pytest.approx(expected, rel=1e-12), (got, expected)
+        checked += 1
+    assert checked >= 2

@@ -117,8 +117,10 @@ def _env(**extra):
     return env
 
 
-BUDGET_S = 110.0
-"""The whole test, cluster start to cleanup, stays under this (every wait is cut to what is left of it)."""
+BUDGET_S = 300.0
+"""A ceiling against a hang, not a timing: every wait in the test is on an event (a log line, a file, a process
+exit) and is cut to what is left of this. It was 110 s, which a loaded 2-core machine could exceed with nothing
+wrong (measured ~25-40 s unloaded: the test prints its phases)."""
 
 
 def _wait(cond, timeout, deadline, procs=()):

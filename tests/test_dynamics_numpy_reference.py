@@ -1,4 +1,4 @@
-"""The implicit Warp substep against the independent NumPy implementation in benchmarks/numpy_substep.py (float64),
+"""The implicit Warp substep against the independent NumPy implementation in tests/numpy_reference.py (float64),
 and the kernel's dihedral angle and gradient against the crease module's NumPy versions and finite differences."""
 
 from __future__ import annotations
@@ -17,8 +17,8 @@ from warpworm.sim.model import Model
 from warpworm.sim.simulator import Simulator
 
 quiet_warp()
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-from numpy_substep import NumpyImplicit  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from numpy_reference import NumpyImplicit  # noqa: E402
 
 
 @wp.kernel
@@ -164,3 +164,60 @@ def test_implicit_fold_through_limit_matches_numpy_and_pushes_back():
         assert np.abs(state.crease_angle.numpy() - ang).max() < 3e-5
         turned[ratio] = float(np.mean(state.crease_angle.numpy()[0, flip] - a0))
     assert turned[0.3] > 1e-3 and abs(turned[0.0]) < 1e-5, turned
+
+
+@pytest.mark.parametrize("gait", ["inchworm", "peristaltic"])
+def test_warp_gait_substeps_on_the_floor_match_numpy_reference(gait):
+    """A whole gait substep on the floor, contacts and friction included: two worlds 0.12 s into a preset gait
+    (magnets on, vertices sliding and stuck on the floor), 10 substeps of the kernel at its default tolerance and
+    chord steps against the NumPy reference (tests/numpy_reference.py: its own floor code) iterated to its fixed
+    point. The contact statuses agree vertex by vertex, and positions, velocities, crease angles and the floor's
+    force (normal + friction) agree to small multiples of the float32 agreement measured."""
+    p = gaits.preset_params(gait)
+    model = Model.from_params(p, 2, "cpu")
+    sim = Simulator(model, dt=2e-3, substeps=4)
+    state = sim.initial_state()
+    sim.step(state, 60)
+    sim.update_magnets(state)
+    ref = NumpyImplicit(model, sim.dt_sub, newton=20, slip_speed=sim.settings.slip_speed)
+    x, v, ang = ref.init(state, sim.control)
+    start = np.bincount(ref.contact.ravel(), minlength=4)
+    assert start[1] > 0 and start[2] > 0, start  # some vertices slide, some stick: both friction laws are compared
+    x0 = x.copy()
+    f = state.external_force.numpy().astype(np.float64)
+    sim.run_substeps(state, 10)
+    for _ in range(10):
+        x, v, ang = ref.substep(x, v, ang, f)
+    assert not state.unstable.numpy().any()
+    assert np.array_equal(state.contact.numpy(), ref.contact)
+    # measured (inchworm / peristaltic): x 1.0e-3 / 1.8e-3 of the motion (3.2e-5 / 1.2e-5 m), v 1.3e-3 / 7.6e-3 of
+    # the fastest vertex, floor force 1.2e-3 / 0.9e-3 of the largest, angles 2.8e-6 / 2.2e-6 rad
+    moved = np.abs(x - x0).max()
+    assert np.abs(state.positions.numpy() - x).max() < 5e-3 * moved, (np.abs(state.positions.numpy() - x).max(), moved)
+    dv = np.abs(state.velocities.numpy() - v).max()
+    assert dv < 2e-2 * np.abs(v).max(), (dv, np.abs(v).max())
+    dff = np.abs(state.floor_force.numpy() - ref.floor_force).max()
+    assert dff < 5e-3 * np.abs(ref.floor_force).max(), (dff, np.abs(ref.floor_force).max())
+    assert np.abs(state.crease_angle.numpy() - ang).max() < 1e-5
+
+
+def test_reference_without_floor_is_the_floor_reference_off_the_floor():
+    """The benchmark's ``floor=False`` reference (vectorised, no floor code) and the full one agree in float64 for a
+    worm off the floor (5 substeps, measured to rounding), so the benchmark times the tested substep's work."""
+    p = gaits.preset_params("inchworm", hinge_damping=1e-4, damping=2.0)
+    model = Model.from_params(p, 2, "cpu")
+    sim = Simulator(model, dt=2e-3, substeps=4)
+    state = sim.initial_state()
+    state.positions.assign(state.positions.numpy() + np.array([0.0, 0.0, 0.03], np.float32))
+    sim.step(state, 2)
+    sim.update_magnets(state)
+    f = state.external_force.numpy().astype(np.float64)
+    out = []
+    for floor in (True, False):
+        ref = NumpyImplicit(model, sim.dt_sub, newton=4, floor=floor)
+        x, v, a = ref.init(state, sim.control)
+        for _ in range(5):
+            x, v, a = ref.substep(x, v, a, f)
+        out.append((x, v, a))
+    for u, w in zip(*out):
+        assert np.abs(u - w).max() <= 1e-12 * max(1.0, np.abs(u).max()), np.abs(u - w).max()

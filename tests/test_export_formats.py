@@ -100,7 +100,19 @@ def test_bop_export_follows_the_spec(data_dir, tmp_path):
     assert info["1"]["size_x"] == pytest.approx(1e3 * l0, rel=1e-6)  # the rest worm, in mm, along its body x
     assert info["1"]["size_y"] == pytest.approx(1e3 * a, rel=1e-6)
     assert info["1"]["symmetries_discrete"] == [np.diag([-1.0, -1, 1, 1]).reshape(-1).tolist()]
-    assert worm.is_watertight or len(worm.faces) > 10
+    # the worm model is the dataset's own sheet: its triangles, each vertex used, each edge in one or two triangles
+    # (an open tube is not watertight, so that is no check); its area the rest sheet's (build_worm) in mm²
+    tri = np.asarray(rd.attrs["mesh_triangles"])
+    assert np.array_equal(worm.faces, tri) and len(worm.vertices) == tri.max() + 1 == len(np.unique(tri))
+    edges = np.sort(worm.edges, axis=1)
+    assert np.unique(edges, axis=0, return_counts=True)[1].max() <= 2
+    from warpworm.physics import crease
+
+    b = float(rd.read("params/worm.b", [0])[0])
+    rest = crease.build_worm(a, b, int((rd.config.get("sim") or {}).get("n_units", 6)), l0=l0)
+    rest_area = 0.5 * np.linalg.norm(np.cross(*(rest.vertices[tri[:, k]] - rest.vertices[tri[:, 0]]
+                                                for k in (1, 2))), axis=-1).sum()
+    assert worm.area == pytest.approx(1e6 * rest_area, rel=1e-7)  # ASCII PLY digits: measured 1.5e-8
     # the worm model placed by the exported pose lands on the dataset's vertices where the worm is at rest-like
     cam = loads_strict((out / "camera.json").read_text())
     assert {"fx", "fy", "cx", "cy", "width", "height", "depth_scale"} <= set(cam)
@@ -261,14 +273,57 @@ def test_yolo_export_in_ultralytics_format(data_dir, tmp_path):
             on = vis[0] > 0
             assert np.allclose(kp[on, 0] * W, uv[0, on, 0], atol=1e-4) and np.all(kp[~on, :2] == 0)
     assert parts["train"].isdisjoint(parts["val"])  # whole trajectories on one side
-    try:
-        from ultralytics.data.dataset import YOLODataset
-        from ultralytics.data.utils import check_det_dataset
-    except ImportError:
-        return  # the format above is Ultralytics' documented one; its own loader where it is installed
+
+
+def test_ultralytics_loads_the_yolo_export_and_trains(data_dir, tmp_path, monkeypatch):
+    """Ultralytics' own loader reads our YOLO-pose export (every label row, keypoints in pixels as ours) and its
+    trainer runs: a pose model built from its YAML (no weights downloaded) trains one epoch (2 steps of batch 2) on
+    the export and reports a finite loss. Needs the ``interop-yolo`` extra (torch: see docs/testing.md)."""
+    # before its first import: its settings file (and datasets folder) in the test's folder, not ~/.config
+    monkeypatch.setenv("YOLO_CONFIG_DIR", str(tmp_path / "ycfg"))
+    monkeypatch.setenv("YOLO_OFFLINE", "1")
+    pytest.importorskip("ultralytics", reason="ultralytics not installed (its own extra, heavy: pip install -e "
+                                              "'.[interop-yolo]'; docs/testing.md)")
+    from ultralytics import YOLO
+    from ultralytics.data.dataset import YOLODataset
+    from ultralytics.data.utils import check_det_dataset
+
+    from warpworm.data import export_keypoints as ek
+
+    out = tmp_path / "yolo"
+    assert _cli("export-yolo", data_dir, out, "--val-fraction", "0.5").returncode == 0
     data = check_det_dataset(str(out / "dataset.yaml"))
-    dset = YOLODataset(img_path=data["train"], data=data, task="pose", augment=False, imgsz=64)
-    assert dset.labels[0]["keypoints"].shape[1:] == (16, 3)
+    assert data["kpt_shape"] == [16, 3] and data["nc"] == 1
+    rd = ds.open(data_dir)
+    kpx = ek.KeypointExporter(rd)
+    n_labels = 0
+    for part in ("train", "val"):
+        dset = YOLODataset(img_path=data[part], data=data, task="pose", augment=False, imgsz=64)
+        for lab in dset.labels:
+            sid = int(Path(lab["im_file"]).stem)
+            uv, vis = kpx.read([sid])
+            if len(lab["cls"]) == 0:
+                assert rd[sid]["labels/bbox_visib"][2] == 0
+                continue
+            n_labels += 1
+            H, W = lab["shape"]
+            kp = lab["keypoints"][0]  # normalised (16, 3), as Ultralytics keeps them
+            on = vis[0] > 0
+            assert np.array_equal(kp[:, 2] > 0, on)
+            # the label text's 6 decimals of the normalised coordinate: 0.5e-6 x 64 px = 3.2e-5 px at most
+            assert np.abs(kp[on, 0] * W - uv[0, on, 0]).max() < 1e-4
+            assert np.abs(kp[on, 1] * H - uv[0, on, 1]).max() < 1e-4
+    assert n_labels >= 4
+    model = YOLO("yolov8n-pose.yaml")  # built from its YAML: random weights, nothing downloaded
+    model.train(data=str(out / "dataset.yaml"), epochs=1, imgsz=64, batch=2, workers=0, device="cpu", plots=False,
+                val=False, amp=False, project=str(tmp_path / "runs"), name="t", exist_ok=True, verbose=False,
+                pretrained=False)
+    loss = model.trainer.tloss  # the epoch's mean losses (a tensor, or a dict of them in newer releases)
+    parts = list(loss.values()) if isinstance(loss, dict) else [loss]
+    values = np.concatenate([np.ravel(np.asarray(v.detach().cpu() if hasattr(v, "detach") else v, float))
+                             for v in parts])
+    assert tuple(model.trainer.model.kpt_shape) == (16, 3)
+    assert values.size >= 4 and np.all(np.isfinite(values)) and values.sum() > 0, loss
 
 
 def test_simulate_trajectory_to_usd(tmp_path):

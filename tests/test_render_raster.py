@@ -117,6 +117,48 @@ def test_cube_at_known_pose(device):
     assert np.allclose(out["depth"][0][~expected], height, atol=1e-6)
 
 
+def _edge_distance_px(scene, cams, n, px, py):
+    """Distance [px] from the pixel centres (px, py) of image ``n`` to the nearest projected edge of its world's
+    reference mesh (the ray caster's triangles, floor included; pinhole cameras)."""
+    v, f, _ = scene.reference_mesh(int(cams.world[n]))
+    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    K, R, t = cams.K[n], cams.R[n], cams.t[n]
+    a, b = v[e[:, 0]] @ R.T + t, v[e[:, 1]] @ R.T + t
+    front = (a[:, 2] > 1e-6) & (b[:, 2] > 1e-6)  # edges crossing the camera plane: none in these scenes
+    f_c = np.array([K[0, 0], K[1, 1]])
+    c_c = np.array([K[0, 2], K[1, 2]])
+    pa = a[front, :2] / a[front, 2:] * f_c + c_c
+    pb = b[front, :2] / b[front, 2:] * f_c + c_c
+    q = np.stack([px, py], -1)[:, None]
+    d = pb - pa
+    s = np.clip(np.sum((q - pa) * d, -1) / np.maximum(np.sum(d * d, -1), 1e-30), 0.0, 1.0)
+    return np.linalg.norm(q - (pa + s[..., None] * d), axis=-1).min(axis=1)
+
+
+EDGE_EPS_PX = 1e-3
+"""Raster and ray caster may disagree only on a pixel whose centre lies within this of a projected triangle edge
+[px]: there the top-left rule and the BVH's own edge test may each claim it. Measured: no pixel disagreed on 165,888
+(6 worlds x 3 cameras x 96²) nor on the inclined-floor or posed-plate scenes; 1e-3 px is float32's rounding of the
+edge functions at these sizes (~1e-5 px) with room, and a dropped or moved triangle fails at once."""
+
+DEPTH_TOL_M = 5e-6
+"""Depth agreement [m] where both see the same surface: measured 1.4e-6 m at most (float32 perspective-correct
+interpolation against the BVH's ray parameter; median 1.5e-8), so ~3.5x."""
+
+
+def _assert_agree_off_edges(out, ref, scene, cams):
+    """Segmentation equal, and depth within :data:`DEPTH_TOL_M`, on every pixel farther than :data:`EDGE_EPS_PX`
+    from a projected edge."""
+    assert cams.dist is None
+    bad = (out["seg"] != ref["seg"]) | (np.abs(out["depth"] - ref["depth"]) > DEPTH_TOL_M)
+    for n in np.flatnonzero(bad.any(axis=(1, 2))):
+        yy, xx = np.nonzero(bad[n])
+        dist = _edge_distance_px(scene, cams, n, xx.astype(np.float64), yy.astype(np.float64))
+        far = dist > EDGE_EPS_PX
+        assert not far.any(), (f"image {n}: {far.sum()} pixels disagree away from every edge, e.g. (x, y) = "
+                               f"{list(zip(xx[far][:5], yy[far][:5]))} at {dist[far][:5]} px")
+
+
 def _random_worm_batch(num_worlds, cams_per_world, size, seed):
     pattern = default_pattern()
     states = posed_worm_states(seed * 1000 + np.arange(num_worlds), pattern)
@@ -135,15 +177,10 @@ def test_depth_and_segmentation_match_ray_caster(device):
     _, _, scene, cams = _random_worm_batch(num_worlds=6, cams_per_world=3, size=96, seed=3)
     out = Renderer(96, 96, device=device).render(scene, cams)
     ref = RayCaster(96, 96, device=device).render(scene, cams)
-    both = (out["depth"] > 0) | (ref["depth"] > 0)
-    depth_ok = np.abs(out["depth"] - ref["depth"]) <= 1e-4
-    seg_ok = out["seg"] == ref["seg"]
     worm = (ref["seg"] >= 2) & (ref["seg"] <= 10)
     assert worm.sum() > 2000  # the scenes do show the worm and magnets
-    assert depth_ok.mean() >= 0.995, f"depth agrees on {depth_ok.mean():.5f} of pixels"
-    assert depth_ok[both].mean() >= 0.995
-    assert seg_ok.mean() >= 0.995, f"segmentation agrees on {seg_ok.mean():.5f} of pixels"
-    assert seg_ok[worm].mean() >= 0.99
+    # disagreement only where a pixel centre lies on an edge (it let 0.5 % of all pixels differ: a dropped triangle)
+    _assert_agree_off_edges(out, ref, scene, cams)
     # every segmentation id the ray caster sees on the worm appears in the raster too
     assert set(np.unique(ref["seg"][worm])) <= set(np.unique(out["seg"]))
 
@@ -158,8 +195,7 @@ def test_inclined_floor_matches_ray_caster():
                           distance=(0.3, 0.6))
     out = Renderer(64, 64).render(scene, cams)
     ref = RayCaster(64, 64).render(scene, cams)
-    assert (np.abs(out["depth"] - ref["depth"]) <= 1e-4).mean() >= 0.995
-    assert (out["seg"] == ref["seg"]).mean() >= 0.995
+    _assert_agree_off_edges(out, ref, scene, cams)
     assert (out["seg"] == 0).any() or (out["seg"] == 1).all()
 
 

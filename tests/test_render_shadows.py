@@ -91,6 +91,30 @@ def _visibility(scene_on, scene_dark):
     return (lit[mask] - dark[mask]) / den, p
 
 
+def _check_shadow_region(vis, truth, scene_on, mean_bound):
+    """Errors where the shadow is, not diluted over the floor: on the umbra (truth 0) dilated by one pixel, the mean
+    |vis − truth| stays under ``mean_bound`` and no pixel is off by half the light or more; on the whole floor no
+    pixel is off by half the light or more (one wholly wrong pixel fails: the old floor-wide mean let ~90 pass)."""
+    import cv2
+
+    _, seg = _linear(scene_on, True)
+    mask = seg == 1
+    err = np.zeros(mask.shape)
+    err[mask] = np.abs(vis - truth)
+    umbra = np.zeros(mask.shape, np.uint8)
+    umbra[mask] = truth == 0.0
+    region = cv2.dilate(umbra, np.ones((3, 3), np.uint8)).astype(bool) & mask
+    assert region.sum() > umbra.sum() > 30
+    assert err[region].mean() < mean_bound, (err[region].mean(), mean_bound)
+    assert err[region].max() < 0.5 and err[mask].max() < 0.5, (err[region].max(), err[mask].max())
+
+
+# Bounds on the dilated umbra's mean error, ~3x what was measured (0.0048 for the 2 mm light, 0.0167 for the 2 cm one,
+# 0.0203 for the sun; the largest single pixel 0.19 / 0.18 / 0.33, on the umbra's rim): a filtered (PCF) lookup of the
+# same shadow maps softens the rim by a texel at most, which these bounds leave room for.
+UMBRA_MEAN_BOUND = {0.002: 0.015, 0.02: 0.05, "sun": 0.06}
+
+
 @pytest.mark.parametrize("size", [0.002, 0.02])
 def test_point_light_shadow_matches_ray_cast_penumbra(size):
     lp = np.array([0.06, 0.03, 0.25])
@@ -101,7 +125,7 @@ def test_point_light_shadow_matches_ray_cast_penumbra(size):
     assert np.mean(vis[lit] > 0.9) > 0.99 and np.mean(vis[umbra] < 0.1) > 0.98
     # the soft band: between the fully lit and the fully hidden rays, as wide as the truth's within a factor of 2
     soft, soft_truth = np.sum((vis > 0.1) & (vis < 0.9)), np.sum((truth > 0.1) & (truth < 0.9))
-    assert np.abs(vis - truth).mean() < 0.01  # measured 1e-4 (2 mm light), 0.0018 (2 cm), 0.0007 (sun)
+    _check_shadow_region(vis, truth, _scene(lp, size, 0.04), UMBRA_MEAN_BOUND[size])
     if size > 0.01:
         assert 0.5 * soft_truth <= soft <= 2.0 * soft_truth, (soft, soft_truth)
 
@@ -118,7 +142,7 @@ def test_directional_light_shadow_matches_ray_cast():
     lit, umbra = truth == 1.0, truth == 0.0
     assert umbra.sum() > 30
     assert np.mean(vis[lit] > 0.9) > 0.99 and np.mean(vis[umbra] < 0.1) > 0.98
-    assert np.abs(vis - truth).mean() < 0.01  # measured 1e-4 (2 mm light), 0.0018 (2 cm), 0.0007 (sun)
+    _check_shadow_region(vis, truth, _scene([0, 0, 1], 0.01, 0.0, sun_dir=sd, sun_color=0.8), UMBRA_MEAN_BOUND["sun"])
 
 
 def test_lit_surfaces_do_not_shadow_themselves():

@@ -163,9 +163,9 @@ def test_posed_plate_floor_matches_ray_caster_and_checker():
     cams = make_cameras(intrinsics(150, 150, 47.5, 47.5), R, t, [0, 1], 96, 96)
     out = Renderer(96, 96).render(scene, cams)
     ref = RayCaster(96, 96).render(scene, cams)
-    assert np.mean(out["seg"] == ref["seg"]) > 0.995
-    both = (out["depth"] > 0) & (ref["depth"] > 0)
-    assert np.abs(out["depth"] - ref["depth"])[both].max() < 1e-4
+    from test_render_raster import _assert_agree_off_edges
+
+    _assert_agree_off_edges(out, ref, scene, cams)  # was: 0.5 % of the pixels may differ, depth to 0.1 mm
     # checker parity at each floor pixel's point, in the posed plate's axes
     for i, (yaw, ou, ov) in enumerate(a.plate):
         floor = out["seg"][i] == 1

@@ -4,7 +4,6 @@ and every per-world result (displacements, gait metrics, saved frames) equals th
 sizes: the speed is measured in benchmarks/bench_threads.py, not here."""
 
 import threading
-import time
 
 import numpy as np
 import pytest
@@ -53,7 +52,7 @@ def test_shares_run_at_once_on_their_own_threads_with_graphs_behind_the_capture_
     assert not ws.in_split()  # the flag does not leak into the caller's thread
 
 
-def test_a_capture_waits_for_the_other_threads_warp_work_and_holds_new_work_off():
+def test_a_capture_waits_for_the_other_threads_warp_work_and_holds_new_work_off(monkeypatch):
     """The gate's order: thread B's capture starts only once thread A is out of its Warp work (here: into a replay);
     a thread C arriving while the capture is queued, and A back from its replay, wait until it has ended (a queued
     capture goes first); a thread cannot take the gate twice."""
@@ -61,6 +60,20 @@ def test_a_capture_waits_for_the_other_threads_warp_work_and_holds_new_work_off(
 
     log, lock = [], threading.Lock()
     a_in, b_in, a_go, captured = (threading.Event() for _ in range(4))
+    # events instead of sleeps: the gate's condition reports who waits on it, and whether a capture runs then
+    blocked = {name: threading.Event() for name in "bc"}  # that thread waited at the gate
+    c_held_by_capture = threading.Event()  # C waited while B's capture ran
+
+    class Gate(threading.Condition):
+        def wait(self, timeout=None):
+            name = threading.current_thread().name
+            if name in blocked:
+                blocked[name].set()
+            if name == "c" and capture_gate._state["capturing"]:
+                c_held_by_capture.set()
+            return super().wait(timeout)
+
+    monkeypatch.setattr(capture_gate, "_cond", Gate())
 
     def note(x):
         with lock:
@@ -81,7 +94,9 @@ def test_a_capture_waits_for_the_other_threads_warp_work_and_holds_new_work_off(
             b_in.set()
             with capture_gate.capturing():
                 note("b captures")
-                time.sleep(0.2)  # A (back from its replay) must wait
+                # C, woken by the capture's start (the notify comes with ``capturing`` set), waits again; a gate
+                # letting it in would log 'c work' here
+                assert c_held_by_capture.wait(10)
                 note("b capture done")
                 captured.set()
 
@@ -89,17 +104,15 @@ def test_a_capture_waits_for_the_other_threads_warp_work_and_holds_new_work_off(
         with capture_gate.hold():
             note("c work")
 
-    threads = [threading.Thread(target=f, daemon=True) for f in (a, b)]
+    threads = [threading.Thread(target=f, name=n, daemon=True) for f, n in ((a, "a"), (b, "b"))]
     for t in threads:
         t.start()
-    b_in.wait(10)
-    t0 = time.monotonic()
-    while capture_gate._state["waiting"] == 0 and time.monotonic() - t0 < 10:  # B's capture queued behind A
-        time.sleep(0.005)
-    threads.append(threading.Thread(target=c, daemon=True))
+    assert b_in.wait(10)
+    assert blocked["b"].wait(10) and capture_gate._state["waiting"] == 1  # B's capture queued behind A
+    threads.append(threading.Thread(target=c, name="c", daemon=True))
     threads[-1].start()
-    time.sleep(0.2)
-    assert log == []  # C waits for the queued capture although only A (shared) is inside
+    assert blocked["c"].wait(10)  # C is held at the gate by the queued capture although only A (shared) is inside
+    assert log == []
     a_go.set()
     for t in threads:
         t.join(30)
