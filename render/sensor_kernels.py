@@ -119,12 +119,14 @@ def reflect101(i: int, n: int) -> int:
 def blur_taps(src: wp.array2d(dtype=wp.vec3), img: int, base: int, pos: int, n: int, stride: int,
               weights: wp.array2d(dtype=float), radius: int) -> wp.vec3:
     """Symmetric 1-D Gaussian at ``pos`` of a line of ``n`` pixels (``base + i * stride``): the centre tap plus
-    each pair of mirrored taps, as OpenCV's symmetric row and column filters sum them."""
-    acc = src[img, base + pos * stride] * weights[img, radius]
+    each pair of mirrored taps, as OpenCV's symmetric row and column filters sum them. ``weights`` (N, 2 R + 1):
+    every image's kernel centred at column R (the batch's widest), ``radius`` <= R this image's."""
+    c = weights.shape[1] / 2
+    acc = src[img, base + pos * stride] * weights[img, c]
     for d in range(1, radius + 1):
         a = src[img, base + reflect101(pos - d, n) * stride]
         b = src[img, base + reflect101(pos + d, n) * stride]
-        acc = acc + (a + b) * weights[img, radius + d]
+        acc = acc + (a + b) * weights[img, c + d]
     return acc
 
 

@@ -56,6 +56,16 @@ def test_blur_is_opencvs_gaussian(sigma):
     assert (np.abs(apply_sensor(img, [1, 2], values=w).astype(int) - ref) > 0).mean() > 0.02
 
 
+def test_each_image_its_own_blur():
+    # a batch of different sigmas (kernels of different sides, one without blur): each image as OpenCV blurs it alone
+    img = _images(4)
+    v = _values(4, blur_sigma=[0.24, 0.0, 0.8, 1.7], contrast=1.05)
+    out = apply_sensor(img, [1, 2, 3, 4], values=v)
+    ref = np.stack([_opencv(img[i], v, i) for i in range(4)])
+    diff = np.abs(out.astype(int) - ref)
+    assert diff.max() <= 1 and (diff > 0).mean() < 0.005
+
+
 def test_taps_are_opencvs_kernel():
     for sigma in (0.3, 0.6, 0.8, 1.3, 2.5):
         w, r = gaussian_taps(np.array([sigma]), 50)
