@@ -33,115 +33,20 @@ from pydantic_core import PydanticCustomError
 from typing_extensions import TypedDict
 
 from warpworm.data import randomize as rnd
-from warpworm.physics.params import GAITS, MAGNET_MODELS, WormParams
+from warpworm.errors import ConfigError
+from warpworm.physics.param_specs import WORM_SPECS, ParamSpec
+from warpworm.physics.param_specs import check_worm_params, worm_param_problems  # noqa: F401  shim (issue 42): old path
+from warpworm.physics.param_specs import fmt_value as _fmt
 
 
-class ConfigError(ValueError):
-    """Invalid configuration; ``errors`` holds one message per problem ("path: got X; expected Y")."""
-
-    def __init__(self, errors: list[str]):
-        self.errors = list(errors)
-        # one problem: one line (what a command prints after "error: "); several: one line each
-        super().__init__(self.errors[0] if len(self.errors) == 1 else
-                         f"{len(self.errors)} problems:\n  " + "\n  ".join(self.errors))
-
-
-# ---------------------------------------------------------------------------------------------------------------------
-# Randomizable parameters: group -> name -> (default distribution, unit, allowed range, doc).
-@dataclass(frozen=True)
-class ParamSpec:
-    default: Any
-    unit: str
-    low: float | None = None  # inclusive bounds a value may take (None: unbounded)
-    high: float | None = None
-    values: tuple | None = None  # allowed values for discrete parameters
-    doc: str = ""
-    positive: bool = False  # strictly > 0
-    preset: bool = False  # NaN (the default) means "the gait preset's value" (warpworm.physics.gaits.GAIT_PRESETS)
-    ranges_only: bool = False  # a constant or {uniform: [lo, hi]} only (the camera sampler's ranges)
-    constant_only: bool = False  # a setting, not a distribution
-    integer: bool = False  # whole numbers only
-
-
-_WP = WormParams()
 _PI = math.pi
 
 
-def _worm_specs() -> dict[str, ParamSpec]:
-    s = {
-        "a": ParamSpec(_WP.a, "m", positive=True, doc="side of the triangular cross-section"),
-        "b": ParamSpec(_WP.b, "m", positive=True, doc="panel length along the worm, unfolded"),
-        "l0": ParamSpec(_WP.l0, "m", positive=True, doc="rest length of the worm (sets the rest fold angle, eq. 7)"),
-        "sheet_density": ParamSpec(_WP.sheet_density, "kg/m^2", positive=True, doc="areal density of the sheet"),
-        "hinge_stiffness": ParamSpec(_WP.hinge_stiffness, "N*m/rad/m", positive=True, doc="crease stiffness k_alpha"),
-        "bar_stiffness": ParamSpec(_WP.bar_stiffness, "N", positive=True, doc="bar axial rigidity EA"),
-        "valley_bar_stiffness": ParamSpec(_WP.valley_bar_stiffness, "N", positive=True,
-                                          doc="axial rigidity EA of the valley-ring bars (panel bending; lets the tube fold)"),
-        "damping": ParamSpec(_WP.damping, "1/s", low=0.0, doc="linear velocity damping rate"),
-        "mu_static": ParamSpec(_WP.mu_static, "1", low=0.0, doc="static friction coefficient"),
-        "mu_kinetic": ParamSpec(_WP.mu_kinetic, "1", low=0.0,
-                                doc="kinetic friction coefficient (clipped to <= mu_static per sample)"),
-        "friction_backward_ratio": ParamSpec(_WP.friction_backward_ratio, "1", positive=True,
-                                             doc="friction tail-ward over head-ward (1: isotropic, the paper's)"),
-        "floor_incline": ParamSpec(_WP.floor_incline, "rad", low=-_PI / 2, high=_PI / 2, doc="floor slope about +y"),
-        "gravity": ParamSpec(_WP.gravity, "m/s^2", low=0.0, doc="gravitational acceleration"),
-        "dipole_density": ParamSpec(_WP.dipole_density, "1/m^3", positive=True, doc="dipoles per m^3 ('dipoles')"),
-        "magnet_mass_density": ParamSpec(_WP.magnet_mass_density, "kg/m^3", positive=True, doc="magnet density"),
-        "epm_moment": ParamSpec(_WP.epm_moment, "A*m^2", low=0.0, doc="EPM dipole moment magnitude"),
-        "epm_size_x": ParamSpec(float(_WP.epm_size[0]), "m", positive=True, doc="EPM extent along its x"),
-        "epm_size_y": ParamSpec(float(_WP.epm_size[1]), "m", positive=True, doc="EPM extent along its y"),
-        "epm_size_z": ParamSpec(float(_WP.epm_size[2]), "m", positive=True, doc="EPM extent along its z (moment)"),
-        "ipm_moment_tail": ParamSpec(float(_WP.ipm_moment[0]), "A*m^2", low=0.0, doc="tail IPM moment"),
-        "ipm_moment_centre": ParamSpec(float(_WP.ipm_moment[1]), "A*m^2", low=0.0, doc="centre IPM moment"),
-        "ipm_moment_head": ParamSpec(float(_WP.ipm_moment[2]), "A*m^2", low=0.0, doc="head IPM moment"),
-        "ipm_diameter": ParamSpec(_WP.ipm_diameter, "m", positive=True, doc="IPM disk diameter"),
-        "ipm_thickness": ParamSpec(_WP.ipm_thickness, "m", positive=True, doc="IPM disk thickness"),
-        "wavelength": ParamSpec(_WP.wavelength, "m", low=0.0, doc="EPM path wavelength w"),
-        "amplitude": ParamSpec(_WP.amplitude, "m", low=0.0, doc="EPM path amplitude a"),
-        "closest_approach": ParamSpec(_WP.closest_approach, "m", low=0.0, doc="EPM closest approach h"),
-        "orientation": ParamSpec(_WP.orientation, "rad", preset=True,
-                                 doc="EPM moment angle theta (NaN: the gait preset)"),
-        "cycle_period": ParamSpec(_WP.cycle_period, "s", positive=True, doc="duration of one EPM cycle"),
-        # Batch-shared in the solver; randomizing them splits a batch into groups (one solver model per group).
-        "gait": ParamSpec(_WP.gait, "", values=GAITS, doc="EPM path preset"),
-        "backward": ParamSpec(_WP.backward, "", values=(False, True), doc="drive toward -x"),
-        "magnet_model": ParamSpec(_WP.magnet_model, "", values=MAGNET_MODELS, doc="magnet force model"),
-    }
-    # Path (and other) fields that the gait presets tune default to NaN = "the preset's value for the sample's gait",
-    # so a config that only names a gait gets the tuned path (resolved per sample in warpworm.data.sampling.draw_worm).
-    from warpworm.physics.gaits import GAIT_PRESETS
-
-    for key in sorted({k for preset in GAIT_PRESETS.values() for k in preset}):
-        if key in s:
-            s[key] = dataclasses.replace(s[key], default=float("nan"), preset=True,
-                                         doc=s[key].doc + " (default NaN: the gait preset's value)")
-    s["hinge_damping"] = ParamSpec(_WP.hinge_damping, "N*m*s/rad/m", low=0.0, doc="crease damping c_alpha")
-    # Any other scalar WormParams field is randomizable too (constant at its default unless configured), so a field
-    # added to the parameter contract is never silently unreachable from configs.
-    for f in fields(WormParams):
-        v = getattr(_WP, f.name)
-        if f.name not in s and f.name not in ("n_units", "epm_size", "ipm_moment") and isinstance(v, (int, float)) \
-                and not isinstance(v, bool):
-            s[f.name] = ParamSpec(float(v), "see warpworm.physics.params", doc=f"WormParams.{f.name}")
-    # bounds for some of those, set in place (the order of PARAM_SPECS is the order of every shard's config_yaml: a
-    # resumed dataset compares it as text)
-    s["support_thickness"] = ParamSpec(_WP.support_thickness, "m", low=0.0,
-                                       doc="support plate the worm walks on; the EPM moves beneath it")
-    s["closest_approach_scale"] = ParamSpec(_WP.closest_approach_scale, "1", positive=True,
-                                            doc="closest approach h x this (after the gait preset)")
-    s["wavelength_scale"] = ParamSpec(_WP.wavelength_scale, "1", positive=True,
-                                      doc="wavelength w x this (after the gait preset)")
-    s["waist_close_strain"] = ParamSpec(_WP.waist_close_strain, "1", low=0.0, high=1.0,
-                                        doc="how far a waist bar may shorten before it turns rigid (strain)")
-    s["waist_stop_strain"] = ParamSpec(_WP.waist_stop_strain, "1", low=0.0,
-                                       doc="stretch beyond which a waist bar turns rigid (strain)")
-    s["fold_limit_stiffness"] = ParamSpec(_WP.fold_limit_stiffness, "N*m/rad/m", low=0.0,
-                                          doc="barrier stiffness of a crease past its fold range")
-    return s
-
-
+# ---------------------------------------------------------------------------------------------------------------------
+# Randomizable parameters: group -> name -> ParamSpec (default distribution, unit, allowed range, doc). The worm's
+# group is the parameter contract itself (warpworm.physics.param_specs.WORM_SPECS).
 PARAM_SPECS: dict[str, dict[str, ParamSpec]] = {
-    "worm": _worm_specs(),
+    "worm": WORM_SPECS,
     # The camera group is what warpworm.render.sample_cameras takes: ranges (a constant or {uniform: [lo, hi]}) that it
     # draws from per attempt, redrawing views where less than min_in_frame of the worm is inside the image.
     "camera": {
@@ -202,10 +107,6 @@ BATCH_SHARED = ("worm.magnet_model",)
 
 
 # ---------------------------------------------------------------------------------------------------------------------
-def _fmt(v) -> str:
-    return repr(v) if not isinstance(v, str) else f"'{v}'"
-
-
 def _problem(detail: str, path: str | None = None) -> PydanticCustomError:
     """A check of ours failing: ``detail`` is "got X; expected Y"; ``path`` names the key when it is not the one
     being validated (a check relating two keys)."""
@@ -675,65 +576,6 @@ def _message(e: dict) -> str:
         ctx = {k: int(v) if isinstance(v, float) and v.is_integer() else v for k, v in ctx.items()}
         expected = _EXPECTED[kind].format(**ctx) if kind in _EXPECTED else e["msg"]
     return f"{path}: got {_fmt(e['input'])}; expected {expected}"
-
-
-# ---------------------------------------------------------------------------------------------------------------------
-# One validation for every entry point: the commands that take no config (simulate, search-gait, experiment, render)
-# and the Python API (warpworm.sim.model.Model.from_params) check their values by the rules above.
-_VECTOR_PARTS = {"epm_size_x": ("epm_size", 0), "epm_size_y": ("epm_size", 1), "epm_size_z": ("epm_size", 2),
-                 "ipm_moment_tail": ("ipm_moment", 0), "ipm_moment_centre": ("ipm_moment", 1),
-                 "ipm_moment_head": ("ipm_moment", 2)}
-
-
-def _value_problem(values, spec: ParamSpec) -> str | None:
-    """What is wrong with the values (one per world) of a parameter of ``spec`` ("got X; expected Y"), or None."""
-    if spec.values is not None:
-        bad = [v for v in np.atleast_1d(np.asarray(values, dtype=object)).tolist() if v not in spec.values]
-        return f"got {_fmt(bad[0])}; expected one of {list(spec.values)}" if bad else None
-    try:
-        a = np.asarray(values, np.float64).reshape(-1)
-    except (TypeError, ValueError):
-        return f"got {_fmt(values)}; expected a number [{spec.unit}]"
-    nan = np.isnan(a)
-    if nan.any() and not spec.preset:  # NaN = "the gait preset's value", only where a preset gives one
-        return f"got nan; expected a number [{spec.unit}]"
-    a = a[~nan]
-    checks = [(~np.isfinite(a), "a finite number"), (a <= 0 if spec.positive else a != a, "values > 0"),
-              (a < spec.low if spec.low is not None else a != a, f"values >= {spec.low}"),
-              (a > spec.high if spec.high is not None else a != a, f"values <= {spec.high}")]
-    for bad, what in checks:
-        if bad.any():
-            return f"got {_fmt(float(a[bad][0]))}; expected {what} [{spec.unit}]"
-    return None
-
-
-def worm_param_problems(params: WormParams) -> list[str]:
-    """Every value of ``params`` (shared or one per world) checked by the rules of ``randomize.worm.*``
-    (:data:`PARAM_SPECS`); one "worm.<field>: got X; expected Y" per problem (empty: all hold)."""
-    out = []
-    for name, spec in PARAM_SPECS["worm"].items():
-        if name in _VECTOR_PARTS:
-            field_name, k = _VECTOR_PARTS[name]
-            v = np.asarray(getattr(params, field_name), np.float64)
-            v = v[..., k] if v.ndim and v.shape[-1] == 3 else v
-        elif hasattr(params, name):
-            v = getattr(params, name)
-        else:
-            continue
-        problem = _value_problem(v, spec)
-        if problem:
-            out.append(f"worm.{name}: {problem}")
-    if not (isinstance(params.n_units, (int, np.integer)) and params.n_units >= 1):
-        out.append(f"worm.n_units: got {_fmt(params.n_units)}; expected a whole number >= 1")
-    return out
-
-
-def check_worm_params(params: WormParams) -> WormParams:
-    """``params`` if every value holds the config's rules (:func:`worm_param_problems`), else :class:`ConfigError`."""
-    problems = worm_param_problems(params)
-    if problems:
-        raise ConfigError(problems)
-    return params
 
 
 @functools.cache
