@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from warpworm import rng
 from warpworm.data import randomize as rnd
 from warpworm.physics.params import WormParams
 
@@ -122,12 +123,12 @@ def appearance_draws(cfg, traj: np.ndarray) -> dict[str, np.ndarray]:
     app = {}
     for g in APPEARANCE_GROUPS:
         app.update(draw_group(cfg, g, traj).values)
-    app["texture.seed"] = rnd.derived_seed(rnd.sample_keys(cfg.seed, traj), "texture") % (2**31 - 1)
+    app["texture.seed"] = rng.derived_seed(rng.sample_keys(cfg.seed, traj), "texture") % (2**31 - 1)
     r = cfg.render  # issue 24: the plate's pose and material, the lights, distractors (per trajectory)
     if r.plate_pose or r.lights != "fixed" or r.distractors[1] > 0 or r.plate_materials != ["matte"] or r.paper_bsdf:
         from warpworm.render.placement import placement_draws
 
-        app.update(placement_draws(cfg.render, rnd.sample_keys(cfg.seed, traj)))
+        app.update(placement_draws(cfg.render, rng.sample_keys(cfg.seed, traj)))
     return app
 
 
@@ -179,7 +180,7 @@ def sample_appearance(cfg, index: np.ndarray):
     """The renderer's :class:`~warpworm.render.Appearance` of ``index`` (n,) trajectories (or any ids) drawn from the
     config's ``light / color / texture`` distributions: the look a dataset job gives those trajectories."""
     index = np.asarray(index, dtype=np.int64).reshape(-1)
-    return appearance_from_draws(appearance_draws(cfg, index), rnd.derived_seed(rnd.sample_keys(cfg.seed, index)),
+    return appearance_from_draws(appearance_draws(cfg, index), rng.derived_seed(rng.sample_keys(cfg.seed, index)),
                                  cfg.render.band_colors)
 
 
@@ -227,12 +228,12 @@ def dataset_cameras(cfg, index: np.ndarray, worm_points: np.ndarray, view: np.nd
 
     c = cfg.randomize["camera"]
     index = np.asarray(index, dtype=np.int64)
-    keys = rnd.sample_keys(cfg.seed, index)
-    seeds = rnd.derived_seed(keys, "camera")
+    keys = rng.sample_keys(cfg.seed, index)
+    seeds = rng.derived_seed(keys, "camera")
     if view is not None:
         view = np.asarray(view, dtype=np.int64)
         for v in np.unique(view[view > 0]):
-            seeds[view == v] = rnd.derived_seed(keys[view == v], f"camera.view{int(v)}")
+            seeds[view == v] = rng.derived_seed(keys[view == v], f"camera.view{int(v)}")
     pts = np.asarray(worm_points, dtype=np.float64)
     target = pts.mean(axis=1)
     deg = lambda name: tuple(np.rad2deg(_range(c[name])))  # noqa: E731

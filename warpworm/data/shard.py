@@ -25,8 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from warpworm import ids, rng
 from warpworm.data import dataset as ds
-from warpworm import ids
 from warpworm.data import randomize as rnd
 from warpworm.data.config import BATCH_SHARED, DatasetConfig
 from warpworm.data.sampling import appearance_draws, dataset_cameras, draw_worm, worm_params
@@ -288,7 +288,7 @@ def _render_rows(stages, cfg: DatasetConfig, batch: _Trajectories, sid: np.ndarr
         cam_draws = _take(batch.cam_draws, csel)
         cams = batch.cams.take(csel)
     cams.world = np.arange(len(sid), dtype=np.int32)
-    seeds = rnd.derived_seed(rnd.sample_keys(cfg.seed, sid))
+    seeds = rng.derived_seed(rng.sample_keys(cfg.seed, sid))
     app = _take(batch.appearance, tsel)
     t0 = time.perf_counter()
     out = stages.render_batch(fr, worm_params(cfg, batch.draws, tsel), cams, app, seeds, cfg)
