@@ -24,6 +24,8 @@ import numpy as np
 import warp as wp
 
 from warpworm.ids import WORLD_CRUMPLED
+from warpworm.kernels import magnet_pose
+from warpworm.physics.magnets import launch_world_wrenches, pair_wrench_scratch
 from warpworm.sim import capture_gate
 from warpworm.sim.model import Control, Model, State
 from warpworm.sim.solver import BandSolver, SolverBase, SubstepSettings, put_bounded
@@ -31,16 +33,15 @@ from warpworm.sim.tile_solver import TileSolver
 from warpworm.transforms import quat_wxyz_to_matrix, quat_xyzw_to_wxyz
 
 
-def launch_world_wrenches(model: Model, state: State, moment: wp.array, *, epm_wrench: bool = True,
-                          force_out: wp.array | None = None, torque_out: wp.array | None = None,
-                          pair_scratch: tuple[wp.array, wp.array] | None = None) -> None:
-    """Net magnetic force and torque on every magnet of every world (the one place the magnet API is called), into
-    ``state.magnet_force`` / ``magnet_torque`` unless other outputs are given. ``epm_wrench=False`` leaves the EPM's
-    own wrench (slot 0) zero and spends nothing on it: the dynamics needs only the IPMs'. ``pair_scratch``: the
-    caller's (:func:`warpworm.physics.magnets.pair_wrench_scratch`), else one per call."""
-    from warpworm.physics.magnets import launch_world_wrenches as _launch
-
-    _launch(
+def model_wrenches(model: Model, state: State, moment: wp.array, *, epm_wrench: bool = True,
+                   force_out: wp.array | None = None, torque_out: wp.array | None = None,
+                   pair_scratch: tuple[wp.array, wp.array] | None = None) -> None:
+    """:func:`warpworm.physics.magnets.launch_world_wrenches` on a model's magnets in a state (the simulator's one
+    call of the magnet API): net force and torque on every magnet of every world, into ``state.magnet_force`` /
+    ``magnet_torque`` unless other outputs are given. ``epm_wrench=False`` leaves the EPM's own wrench (slot 0) zero
+    and spends nothing on it: the dynamics needs only the IPMs'. ``pair_scratch``: the caller's
+    (:func:`warpworm.physics.magnets.pair_wrench_scratch`), else one per call."""
+    launch_world_wrenches(
         model.magnet_model,
         model.magnet_shape,
         model.magnet_size,
@@ -129,9 +130,6 @@ class Simulator:
         slip_speed: float = 1.0e-5,
         solver: str = "band",
     ):
-        from warpworm.kernels import magnet_pose
-
-        self._kpose = magnet_pose
         if solver not in SOLVERS:
             raise ValueError(f"solver: got {solver!r}; expected one of {SOLVERS}")
         self.model = model
@@ -156,8 +154,6 @@ class Simulator:
         self.solver = make_solver(solver, model, self.settings)
         """The substep solver (:class:`~warpworm.sim.solver.SolverBase`), owner of its scratch."""
         W, dev = model.num_worlds, model.device
-        from warpworm.physics.magnets import pair_wrench_scratch
-
         # the magnet pairs' wrenches between the wrench's two launches: allocated here, before any graph capture
         M = model.magnet_shape.shape[1]  # EPM and the three IPMs
         self._pair_scratch = pair_wrench_scratch(W, M, dev)
@@ -193,7 +189,7 @@ class Simulator:
 
     # ------------------------------------------------------------------------------------------------------------
     def _magnet_poses(self, state: State, control: Control) -> None:
-        m, k = self.model, self._kpose
+        m, k = self.model, magnet_pose  # k: the pose kernels
         W = m.num_worlds
         if control.path.kind == "sine":
             wp.launch(k.epm_sine_pose, dim=W, inputs=[control.sine, self.dt_sub, state.step_count],
@@ -215,9 +211,9 @@ class Simulator:
     def _wrench(self, state: State, control: Control, moment: wp.array) -> None:
         m = self.model
         self._magnet_poses(state, control)
-        launch_world_wrenches(m, state, moment, epm_wrench=False, pair_scratch=self._pair_scratch)
+        model_wrenches(m, state, moment, epm_wrench=False, pair_scratch=self._pair_scratch)
         state.external_force.zero_()
-        wp.launch(self._kpose.distribute_wrench, dim=(m.num_worlds, 3),
+        wp.launch(magnet_pose.distribute_wrench, dim=(m.num_worlds, 3),
                   inputs=[m.mount_vertices, state.positions, state.magnet_pos, state.magnet_force,
                           state.magnet_torque],
                   outputs=[state.external_force], device=m.device)
@@ -344,7 +340,7 @@ class Simulator:
         # the whole wrench at these poses, the EPM's included (the dynamics skips it), with the magnets of the last
         # step (the EPM parked after settle)
         f_snap, t_snap = self._snapshot_wrench
-        launch_world_wrenches(m, state, self._last_moment, force_out=f_snap, torque_out=t_snap,
+        model_wrenches(m, state, self._last_moment, force_out=f_snap, torque_out=t_snap,
                               pair_scratch=self._pair_scratch)
         # .numpy() aliases device memory on the CPU: copy, so a snapshot never changes after it is taken
         x = state.positions.numpy().copy()
