@@ -8,11 +8,14 @@ whatever they measure (the gait presets are still being tuned).
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from warpworm.analysis import experiments as ex
+from warpworm.physics import gaits
+from warpworm.physics.params import WormParams
 
 
 def test_force_distance_analytic_equals_table():
@@ -48,7 +51,7 @@ def test_flexure_anchor_forces_balance_weight_and_grow_with_deflection():
     # (supports' share minus the load pad's pull; the load pad also carries some)
     from warpworm.sim.model import Model
 
-    weight = float(Model.from_params(ex.replace(ex.WormParams(), **ex.NO_MAGNETS), 1, "cpu").vertex_mass_host.sum()
+    weight = float(Model.from_params(replace(WormParams(), **ex.NO_MAGNETS), 1, "cpu").vertex_mass_host.sum()
                    * 9.81)
     held = r["force_raw"][0, 0] - r["force_pusher_raw"][0, 0]
     assert abs(held / weight - 1.0) < 0.05, (held, weight)
@@ -191,7 +194,7 @@ def test_set_overrides_name_the_item_and_reach_the_worlds(tmp_path, capsys):
         assert main(["experiment", "force-plate", "--set", bad, "--out", str(tmp_path / "x")]) == 2
         assert bad in capsys.readouterr().err
     assert not (tmp_path / "x").exists()
-    model, _ = ex._gait_model(["peristaltic"], base=ex.replace(ex.WormParams(), closest_approach_scale=1.1))
-    model0, _ = ex._gait_model(["peristaltic"])
+    model, _ = ex.gait_model(["peristaltic"], base=replace(WormParams(), closest_approach_scale=1.1))
+    model0, _ = ex.gait_model(["peristaltic"])
     depth = model.default_path.depth - model0.default_path.depth
-    np.testing.assert_allclose(depth, 0.1 * ex.gaits.GAIT_PRESETS["peristaltic"]["closest_approach"], rtol=1e-9)
+    np.testing.assert_allclose(depth, 0.1 * gaits.GAIT_PRESETS["peristaltic"]["closest_approach"], rtol=1e-9)
