@@ -17,6 +17,8 @@ LABEL_FLAT = wp.constant(ids.FLAT)
 LABEL_MOUNTAIN = wp.constant(ids.MOUNTAIN)
 LABEL_VALLEY = wp.constant(ids.VALLEY)
 WORLD_EXPLODED = wp.constant(ids.WORLD_EXPLODED)
+SHAPE_CUBOID = wp.constant(ids.SHAPE_CUBOID)
+SHAPE_CYLINDER = wp.constant(ids.SHAPE_CYLINDER)
 
 PI = wp.constant(3.14159265358979)
 TWO_PI = wp.constant(6.28318530717959)

@@ -465,7 +465,7 @@ __all__ = [
 def dipole_grid(magnet: Magnet, density: float = DEFAULT_DENSITY) -> np.ndarray:
     """The 'dipoles' model's grid of ``magnet`` at ``density`` [1/m³]: points (N, 3) [m] in the magnet frame.
 
-    Mirrors the kernels' on-the-fly generation (``kernels/magnet_fields.py``: ``dipole_grid_*``, same order); every
+    Mirrors the kernels' on-the-fly generation (``kernels/magnet_dipoles.py``: ``dipole_grid_*``, same order); every
     point stands for a cell of equal volume and carries ``magnet.moment / N``. Cuboid: cell centres of an
     n_x × n_y × n_z lattice, n_i = max(1, round(size_i · density^(1/3))). Cylinder: n_z mid-height layers, each an
     equal-area polar partition (rings of width ≈ h, sectors of area ≈ h²) with the dipoles on radii that keep the
