@@ -120,14 +120,14 @@ class Simulator:
         substeps: int = 8,
         *,
         magnet_every_substep: bool = False,
-        strain_limit: float = 0.5,
-        fold_tolerance: float = np.radians(5.0),
-        speed_limit: float = 20.0,
+        strain_limit: float = SubstepSettings.strain_limit,
+        fold_tolerance: float = SubstepSettings.fold_tolerance,
+        speed_limit: float = SubstepSettings.speed_limit,
         use_graph: bool | None = None,
-        newton: int = 24,
+        newton: int = SubstepSettings.newton,
         chord: bool | None = None,
-        newton_tol: float = 1.0e-4,
-        slip_speed: float = 1.0e-5,
+        newton_tol: float = SubstepSettings.newton_tol,
+        slip_speed: float = SubstepSettings.slip_speed,
         solver: str = "band",
     ):
         if solver not in SOLVERS:
@@ -221,18 +221,18 @@ class Simulator:
     def run_substeps(self, state: State, num_substeps: int, control: Control | None = None) -> State:
         """Advance every world by ``num_substeps`` solver substeps under the magnetic force already in
         ``state.external_force`` (no wrench or pose update: for checks of the solver alone)."""
-        self.solver.step(state, control or self.control, int(num_substeps))
+        self.solver.step(state, int(num_substeps), control or self.control)
         return state
 
     def _one_step(self, state: State, control: Control, moment: wp.array) -> None:
         if self.magnet_every_substep:
-            cmd = self.solver.command(state, control, 1)
+            cmd = self.solver.command(state, 1, control)
             for _ in range(self.substeps):
                 self._wrench(state, control, moment)
                 cmd.launch()
         else:
             self._wrench(state, control, moment)
-            self.solver.command(state, control, self.substeps).launch()
+            self.solver.command(state, self.substeps, control).launch()
 
     # ------------------------------------------------------------------------------------------------------------
     def step(self, state: State, num_steps: int = 1, control: Control | None = None, *, epm: bool = True) -> State:
@@ -266,7 +266,7 @@ class Simulator:
                     return self.step(state, n, control, epm=epm)
                 # the graph keeps the recorded substep command it replays alive, whatever the solver drops
                 g = (state, control, capture.graph, control.revision,
-                     self.solver.command(state, control, 1 if self.magnet_every_substep else self.substeps))
+                     self.solver.command(state, 1 if self.magnet_every_substep else self.substeps, control))
                 put_bounded(self._graphs, key, g, MAX_GRAPHS)
             with capture_gate.released():  # a replay touches no capture state: others may launch or capture meanwhile
                 for _ in range(n):

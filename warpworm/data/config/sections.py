@@ -11,6 +11,7 @@ import numpy as np
 from pydantic import AfterValidator, ConfigDict, Field, ValidationInfo
 from pydantic_core import PydanticCustomError
 
+from warpworm.physics.gaits import DEFAULT_DT, DEFAULT_SUBSTEPS
 from warpworm.physics.param_specs import fmt_value as _fmt
 
 
@@ -71,9 +72,9 @@ class SimConfig:
     __pydantic_config__ = SECTION
     worlds: Annotated[Int, Field(ge=1)] = 64
     """W: worlds simulated at once in one solver batch."""
-    dt: Annotated[Num, Field(gt=0)] = 0.004
+    dt: Annotated[Num, Field(gt=0)] = DEFAULT_DT
     """Solver time step [s] (the gait runs' warpworm.physics.gaits.DEFAULT_DT)."""
-    substeps: Annotated[Int, Field(ge=1)] = 2
+    substeps: Annotated[Int, Field(ge=1)] = DEFAULT_SUBSTEPS
     """Solver substeps per time step."""
     settle_time: Annotated[Num, Field(ge=0)] = 0.3
     """Time [s] the worm settles under gravity with the EPM parked at the path start."""
