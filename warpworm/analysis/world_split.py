@@ -36,7 +36,11 @@ from typing import Callable
 
 import numpy as np
 
+from warpworm import quiet_warp
+from warpworm.physics.params import WormParams
 from warpworm.sim import capture_gate
+from warpworm.sim.model import Model
+from warpworm.sim.simulator import Simulator
 
 _local = threading.local()
 _blas = {"lock": threading.Lock(), "users": 0, "saved": None, "lib": False}
@@ -80,11 +84,6 @@ def load_kernels(device="cpu") -> None:
 
 
 def _load_kernels(device) -> None:
-    from warpworm import quiet_warp
-    from warpworm.physics.params import WormParams
-    from warpworm.sim.model import Model
-    from warpworm.sim.simulator import Simulator
-
     quiet_warp()
     sim = Simulator(Model.from_params(WormParams(), 1, device), dt=0.004, substeps=2, use_graph=False)
     state = sim.initial_state()

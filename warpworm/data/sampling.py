@@ -15,11 +15,16 @@ What each draw is keyed by (so that any shard size, worker count, engine or devi
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from warpworm import rng
 from warpworm.data import randomize as rnd
+from warpworm.data.config import ConfigError, load_config
+from warpworm.physics.gaits import GAIT_PRESETS, gait_theta
 from warpworm.physics.params import WormParams
+from warpworm.render import default_appearance, hsv_to_rgb, sample_cameras
 
 _WORM_VECTOR = {"epm_size": ("epm_size_x", "epm_size_y", "epm_size_z"),
                 "ipm_moment": ("ipm_moment_tail", "ipm_moment_centre", "ipm_moment_head")}
@@ -41,8 +46,6 @@ def draw_worm(cfg, traj: np.ndarray, attempt: np.ndarray) -> rnd.Draws:
 def _fill_gait_presets(d: rnd.Draws) -> None:
     """NaN = "the gait preset's value" (:data:`warpworm.physics.gaits.GAIT_PRESETS`), resolved in place per sample's gait;
     a NaN orientation becomes the preset's EPM moment angle for the sample's gait and direction."""
-    from warpworm.physics.gaits import GAIT_PRESETS, gait_theta
-
     gait = np.asarray(d["worm.gait"]).astype(str)
     for g, preset in GAIT_PRESETS.items():
         sel = gait == g
@@ -89,10 +92,6 @@ def randomized_params(cfg_name_or_cfg, num_worlds: int, seed: int) -> WormParams
     ``gait`` and ``backward`` come out per world ((W,) arrays) when they differ between worlds; ``magnet_model`` is
     one value per solver batch, so a config whose draws give it two values is refused, naming the field.
     """
-    import dataclasses
-
-    from warpworm.data.config import ConfigError, load_config
-
     cfg = load_config(cfg_name_or_cfg) if isinstance(cfg_name_or_cfg, str) else cfg_name_or_cfg
     if int(num_worlds) < 1:
         raise ConfigError([f"num_worlds: got {num_worlds}; expected >= 1"])
@@ -135,8 +134,6 @@ def appearance_draws(cfg, traj: np.ndarray) -> dict[str, np.ndarray]:
 def appearance_from_draws(app: dict, seeds: np.ndarray, band_colors=None):
     """The renderer's :class:`~warpworm.render.Appearance` from the drawn ``light/color/texture`` values (B,) each;
     ``band_colors`` (5, 3): the bands' display colours (``render.band_colors``; None: the paper's)."""
-    from warpworm.render import default_appearance, hsv_to_rgb
-
     B = len(seeds)
     a = default_appearance(B)
     worm = hsv_to_rgb(app["color.worm_hue"], app["color.worm_saturation"], app["color.worm_value"])
@@ -224,8 +221,6 @@ def dataset_cameras(cfg, index: np.ndarray, worm_points: np.ndarray, view: np.nd
     Returns (cameras, ``camera.*`` values (n,) each as stored in ``params/``: the kept view's distance,
     elevation, azimuth, roll, fov_y [rad], look-at offset length [m], its in-frame fraction, max_tries).
     """
-    from warpworm.render import sample_cameras
-
     c = cfg.randomize["camera"]
     index = np.asarray(index, dtype=np.int64)
     keys = rng.sample_keys(cfg.seed, index)

@@ -37,6 +37,8 @@ from pathlib import Path
 
 import numpy as np
 
+from warpworm import transforms as tf
+from warpworm.data import dataset as ds
 from warpworm.physics.params import WormParams
 
 TIME_CODES_PER_SECOND = 100.0
@@ -80,8 +82,6 @@ def tracks_from_dataset(root, trajectories=(0,)) -> list[Track]:
     """Tracks of the given trajectory ids of a dataset folder: one frame per simulated frame (with
     ``render.views_per_frame`` K > 1 a frame is K samples of one physical state: the first one's state is taken) and
     one :class:`ViewCamera` per view."""
-    from warpworm.data import dataset as ds
-
     r = ds.open(root)
     try:
         a = r.attrs
@@ -141,8 +141,6 @@ def _read_arrays(path: Path) -> dict:
 
 def tracks_from_trajectory(path, worlds=(0,)) -> list[Track]:
     """Tracks of worlds ``worlds`` of a trajectory file (.npz or .h5; keys in the module docstring)."""
-    from warpworm import transforms as tf
-
     path = Path(path)
     d = _read_arrays(path)
     if "time" not in d and "times" in d:  # `warpworm simulate`'s trajectory.npz names it `times`
@@ -207,14 +205,14 @@ def _strain_colour(strain: np.ndarray) -> np.ndarray:
 
 def _gf_matrix(T: np.ndarray):
     """4x4 column-vector transform (object -> world) -> Gf.Matrix4d (USD uses row vectors: transpose)."""
-    from pxr import Gf
+    from pxr import Gf  # start-up time: USD loads on first use
 
     return Gf.Matrix4d(*np.asarray(T, np.float64).T.reshape(-1).tolist())
 
 
 def _define_floor(stage, incline: float, floor_half: float) -> None:
     """A square in the inclined plane (normal (-sin i, 0, cos i)), as in the simulator and renderer."""
-    from pxr import Gf, UsdGeom, Vt
+    from pxr import Gf, UsdGeom, Vt  # start-up time: USD loads on first use
 
     u = np.array([np.cos(incline), 0.0, np.sin(incline)])
     v = np.array([0.0, 1.0, 0.0])
@@ -229,7 +227,7 @@ def _define_floor(stage, incline: float, floor_half: float) -> None:
 
 def _define_worm(stage, root: str, tr: Track, codes) -> None:
     """The worm's mesh, time-sampled points and extent, and per-vertex crease / strain primvars."""
-    from pxr import Gf, Sdf, UsdGeom, Vt
+    from pxr import Gf, Sdf, UsdGeom, Vt  # start-up time: USD loads on first use
 
     V = tr.points.shape[1]
     mesh = UsdGeom.Mesh.Define(stage, f"{root}/Worm")
@@ -264,7 +262,7 @@ def _define_worm(stage, root: str, tr: Track, codes) -> None:
 
 def _define_magnets(stage, root: str, tr: Track, codes) -> None:
     """The EPM (a cube scaled to its extents) and the IPMs (cylinders), each a time-sampled transform."""
-    from pxr import Gf, UsdGeom
+    from pxr import Gf, UsdGeom  # start-up time: USD loads on first use
 
     for slot, name in enumerate(MAGNET_NAMES):
         mx = UsdGeom.Xform.Define(stage, f"{root}/{name}")
@@ -289,7 +287,7 @@ def _define_magnets(stage, root: str, tr: Track, codes) -> None:
 def _define_camera(stage, root: str, cam: ViewCamera) -> None:
     """A dataset view's OpenCV pinhole camera as a USD camera: fixed values if it does not move over the frames,
     else time-sampled at the frames' times."""
-    from pxr import Gf, Usd, UsdGeom
+    from pxr import Gf, Usd, UsdGeom  # start-up time: USD loads on first use
 
     w, h = cam.width, cam.height
     c2w = np.broadcast_to(np.eye(4), (len(cam.time), 4, 4)).copy()
@@ -320,7 +318,7 @@ def _define_camera(stage, root: str, cam: ViewCamera) -> None:
 
 def write_stage(tracks: list[Track], path, *, spacing: float = 0.0, floor_half: float = 0.3) -> Path:
     """Write a time-sampled USD stage (``.usda`` or ``.usdc``) of ``tracks``; returns the path."""
-    from pxr import Gf, Usd, UsdGeom
+    from pxr import Gf, Usd, UsdGeom  # start-up time: USD loads on first use
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -356,7 +354,7 @@ def compliance_errors(path, *, include_warnings: bool = False) -> list[str]:
     ``pxr.UsdUtils.ComplianceChecker`` where the installed USD has it (usd-core <= 25.x); USD 26 removed it in favour of
     the ``UsdValidation`` framework (what ``usdchecker`` runs now), so there every registered validator is run.
     """
-    from pxr import Usd, UsdUtils
+    from pxr import Usd, UsdUtils  # start-up time: USD loads on first use
 
     if hasattr(UsdUtils, "ComplianceChecker"):
         checker = UsdUtils.ComplianceChecker(arkit=False, skipARKitRootLayerCheck=False, rootPackageOnly=False,
@@ -364,7 +362,7 @@ def compliance_errors(path, *, include_warnings: bool = False) -> list[str]:
         checker.CheckCompliance(str(path))
         out = list(checker.GetErrors()) + list(checker.GetFailedChecks())
         return out + (list(checker.GetWarnings()) if include_warnings else [])
-    from pxr import UsdValidation
+    from pxr import UsdValidation  # start-up time: USD loads on first use
 
     validators = UsdValidation.ValidationRegistry().GetOrLoadAllValidators()
     errors = UsdValidation.ValidationContext(validators).Validate(Usd.Stage.Open(str(path)))
@@ -377,7 +375,7 @@ def compliance_errors(path, *, include_warnings: bool = False) -> list[str]:
 
 def read_points(path, prim: str = "/World/w000/Worm") -> tuple[np.ndarray, np.ndarray]:
     """(times [s] (F,), points (F, V, 3)) of a worm mesh read back from a stage."""
-    from pxr import Usd, UsdGeom
+    from pxr import Usd, UsdGeom  # start-up time: USD loads on first use
 
     stage = Usd.Stage.Open(str(path))
     attr = UsdGeom.Mesh(stage.GetPrimAtPath(prim)).GetPointsAttr()

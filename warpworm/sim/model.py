@@ -22,10 +22,11 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from warpworm.ids import SHAPE_CUBOID, SHAPE_CYLINDER
+from warpworm.kernels import magnet_pose
 from warpworm.physics import crease, gaits
 from warpworm.physics.param_specs import check_worm_params
 from warpworm.physics.params import MAGNET_MODELS, WormParams, per_world
-from warpworm.ids import SHAPE_CUBOID, SHAPE_CYLINDER
 from warpworm.transforms import axis_angle_to_matrix, matrix_to_quat_wxyz, quat_wxyz_to_xyzw
 
 
@@ -99,8 +100,6 @@ class Control:
     (``KeyframePath``); ``anchor_target`` [m] (W, A) vec3; ``revision`` (int, bumped by :meth:`set_path`)."""
 
     def __init__(self, model: "Model", path: "gaits.EpmPath | None" = None):
-        from warpworm.kernels import magnet_pose
-
         self._kpose = magnet_pose
         self.device = model.device
         self.num_worlds, self.num_anchors = model.num_worlds, model.num_anchors

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from warpworm.kernels import substep
+from warpworm.kernels import implicit_euler, substep
 from warpworm.physics import crease
 
 MAX_COMMANDS = 8
@@ -158,8 +158,6 @@ class BandSolver(SolverBase):
     (:func:`warpworm.kernels.implicit_euler.implicit_step`)."""
 
     def _record(self, state, control, num_substeps: int):
-        from warpworm.kernels import implicit_euler
-
         return wp.launch(implicit_euler.implicit_step, dim=self.model.num_worlds,
                          inputs=[self.model_arrays, self.options(num_substeps), state.external_force,
                                  control.anchor_target, state_struct(state), self.scratch],

@@ -8,13 +8,12 @@ import re
 import tempfile
 from pathlib import Path
 
+from warpworm.data.dataset.schema import FORMAT
 from warpworm.errors import ConfigError
 
 
 def _is_warpworm_manifest(path: Path) -> bool:
     """Whether ``path`` is a warpworm dataset's manifest (another tool's manifest.json is not)."""
-    from warpworm.data.dataset.schema import FORMAT  # start-up time: the dataset package loads h5py
-
     try:
         return json.loads(path.read_text()).get("format") == FORMAT
     except (OSError, ValueError, AttributeError, UnicodeDecodeError):

@@ -11,6 +11,7 @@ import numpy as np
 from pydantic import AfterValidator, ConfigDict, Field, ValidationInfo
 from pydantic_core import PydanticCustomError
 
+from warpworm import quiet_warp
 from warpworm.physics.gaits import DEFAULT_DT, DEFAULT_SUBSTEPS
 from warpworm.physics.param_specs import fmt_value as _fmt
 
@@ -49,8 +50,6 @@ def _check_device(ident: str) -> str:
     """"auto" -> the first GPU if there is one, else the CPU (stored so in the config); refused unless Warp can run on
     it here (so a CUDA config fails before any work on a machine without a GPU, not in a worker's traceback)."""
     import warp as wp  # start-up time: Warp loads only when a config names a device
-
-    from warpworm import quiet_warp
 
     quiet_warp()
     if ident == "auto":

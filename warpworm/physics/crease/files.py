@@ -21,7 +21,7 @@ def load_pattern(path, labels=None, **kwargs) -> CreasePattern:
     ``labels`` as in :meth:`CreasePattern.from_trimesh` (None infers mountain / valley / flat from the geometry);
     ``kwargs`` go to it too. A GLB written by :func:`export_mesh` is read back from its ``surface`` node.
     """
-    import trimesh
+    import trimesh  # start-up time: trimesh loads on first use
 
     loaded = trimesh.load(str(path), process=False)
     if isinstance(loaded, trimesh.Scene):
@@ -72,7 +72,7 @@ def export_mesh(pattern: CreasePattern, path, positions: np.ndarray | None = Non
     their order), then the crease prisms, with face colours; pass ``creases=False`` for a bare surface.
     ``crease_width`` [m] defaults to 0.4 % of the surface's bounding-box diagonal.
     """
-    import trimesh
+    import trimesh  # start-up time: trimesh loads on first use
 
     path = Path(path)
     x = pattern.vertices if positions is None else np.asarray(positions, dtype=np.float64).reshape(-1, 3)

@@ -118,7 +118,7 @@ class CreasePattern:
 
     def to_trimesh(self, positions: np.ndarray | None = None):
         """The surface as a ``trimesh.Trimesh`` (no processing, so vertex and face order are kept)."""
-        import trimesh
+        import trimesh  # start-up time: trimesh loads on first use
 
         x = self.vertices if positions is None else np.asarray(positions, dtype=np.float64)
         return trimesh.Trimesh(vertices=x, faces=self.triangles, process=False)
