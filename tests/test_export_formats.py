@@ -272,7 +272,7 @@ def test_yolo_export_in_ultralytics_format(data_dir, tmp_path):
 
 
 def test_simulate_trajectory_to_usd(tmp_path):
-    from warpworm.data.usd_export import read_points
+    from warpworm.data.export_usd import read_points
 
     r = _warpworm("simulate", "--cycles", "1", "--settle", "0.02", "--magnet-model", "analytic", "--fps", "10",
                   "--out", tmp_path / "sim")
