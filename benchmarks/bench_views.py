@@ -110,18 +110,21 @@ def headline(device: str = "cpu", quick: bool = False) -> dict:
     """One row for the summary table of ``benchmarks/run.py``: the ``dataset`` row's job (default config, its short
     physics, 128x96, W = 16 on the CPU, 4 on ``quick``) rendered by 4 cameras per frame; on CUDA 256 worlds, so that
     the row writes the 4096 samples of the dataset row's 1024 worlds (the host's gzip bounds both there)."""
-    import bench_dataset as bd
-
+    from warpworm.data.config import load_config
     from warpworm.data.job import generate
+
+    def cfg_of(overrides, **top):  # the dataset row's config (benchmarks/bench_dataset.py): default, short physics
+        short = ["output.preview=false", "sim.settle_time=0.008", "sim.frame_times=[0.008, 0.016, 0.024, 0.032]"]
+        return load_config("default", [*short, *overrides], **top)
 
     K, F = 4, 4
     W = 1024 // K if str(device).startswith("cuda") else (4 if quick else 16)
     tmp = Path(tempfile.mkdtemp(prefix="ww-views-headline-"))
     try:
-        generate(bd._cfg([f"sim.device={device}", "sim.worlds=2", "shard_size=8", "render.width=32",
-                          "render.height=24"], num_samples=8), tmp / "warm", progress=False, log=lambda m: None)
-        cfg = bd._cfg([f"sim.device={device}", f"sim.worlds={W}", f"shard_size={W * F * K}",
-                       f"render.views_per_frame={K}"], num_samples=W * F * K)
+        generate(cfg_of([f"sim.device={device}", "sim.worlds=2", "shard_size=8", "render.width=32",
+                         "render.height=24"], num_samples=8), tmp / "warm", progress=False, log=lambda m: None)
+        cfg = cfg_of([f"sim.device={device}", f"sim.worlds={W}", f"shard_size={W * F * K}",
+                      f"render.views_per_frame={K}"], num_samples=W * F * K)
         t0 = time.perf_counter()
         generate(cfg, tmp / "d", progress=False, log=lambda m: None)
         total = time.perf_counter() - t0
