@@ -33,8 +33,8 @@ TWO_PI = wp.constant(6.28318530717959)
 """)
 def on_gpu() -> bool:
     """True in a kernel's CUDA build, False in its CPU build (a preprocessor test, constant after inlining): lets a
-    kernel take its CPU-only path (the SIMD lanes of :mod:`.hinge_lanes`), whose CUDA build is of no use on a GPU (a
-    thread per world, no vector units) and took NVRTC over 11 minutes, while the CUDA build compiles the scalar code."""
+    kernel take its CPU-only path (the SIMD lanes of :mod:`.hinge_lanes`) on the CPU and its scalar code on a GPU, where
+    a thread per world has no vector units to fill (docs/dynamics.md, "Notes moved from the code")."""
     ...
 
 

@@ -25,8 +25,8 @@ from .magnet_far_pair import far_pair_wrench
 def _cpu_flags_without_slp_cap(flags: str | None) -> str | None:
     """Warp's CPU compiler flags less its cap on the SLP vectorizer's recursion depth (``-slp-recursion-max-depth=4``;
     LLVM's default is 12): only without it do the ring rule's lanes (:func:`.magnet_far_pair.ring_dipoles_on_lanes`)
-    compile to whole SIMD expressions (3 IPM pairs per world 7.1 -> 2.7 µs, against 4.9 µs with the cap; the same
-    operations, so the same bits). ``None`` (LLVM's defaults already) stays None."""
+    compile to whole SIMD expressions (the same operations, so the same bits; the timings: docs/dynamics.md, "Notes
+    moved from the code"). ``None`` (LLVM's defaults already) stays None."""
     if flags is None:
         return None
     return " ".join(f for f in flags.split() if not f.startswith("-mllvm=-slp-recursion-max-depth"))

@@ -251,9 +251,8 @@ class Simulator:
             if n > 0 and (g is None or g[0] is not state or g[1] is not control or g[3] != control.revision):
                 # the first step of a new graph runs as plain launches, so that whatever a first launch creates
                 # lazily (a Warp module, the wrench's quadrature arrays, a tile solver's scratch) exists before the
-                # capture: an array made from host data inside a capture gets its copy recorded, not done, and on
-                # the CPU the replay then copied from freed host memory (garbage quadrature, worlds exploding in
-                # every later run of the process; tests/test_step_graph.py)
+                # capture: inside a capture, an array made from host data has its copy recorded, not done
+                # (tests/test_step_graph.py; docs/dynamics.md, "Notes moved from the code")
                 self._one_step(state, control, moment)
                 n -= 1
                 try:
