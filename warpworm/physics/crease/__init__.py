@@ -45,18 +45,18 @@ mechanisms, axial shortening among them, with every other bar at zero strain to 
 shortening with the other bars under 4e-6 strain, the valley rings at −10 … +6 %). Physically that is the paper's
 faces bending near the mid creases. So the solver should give the VALLEY-labelled bars a much lower axial stiffness.
 
-Modules: ``pattern`` (CreasePattern), ``worm`` (build_worm, rest_alpha, ...), ``geometry`` (dihedral angles and
-gradients, lengths, rigidity, mount frames), ``topology`` (edges, hinges, segments, keypoints), ``files``
-(load_pattern, export_mesh). Every public name is importable from here.
+Modules: ``pattern`` (CreasePattern, mount_poses, compression_mode), ``worm`` (build_worm, rest_alpha, ...),
+``geometry`` (dihedral angles and gradients, lengths, rigidity, mount frames), ``topology`` (edges, hinges,
+segments, keypoints), ``files`` (load_pattern, export_mesh). Every public name is importable from here.
 """
 
 from __future__ import annotations
 
 from warpworm.ids import BOUNDARY, FLAT, MOUNTAIN, VALLEY
 from warpworm.physics.crease.files import export_mesh, load_pattern
-from warpworm.physics.crease.geometry import (compression_mode, dihedral_angles, dihedral_gradients, edge_lengths,
-                                              frame_from_vertices, mount_poses, rigidity_matrix)
-from warpworm.physics.crease.pattern import LABEL_NAMES, MOUNT_NAMES, CreasePattern
+from warpworm.physics.crease.geometry import (dihedral_angles, dihedral_gradients, edge_lengths, frame_from_vertices,
+                                              rigidity_matrix)
+from warpworm.physics.crease.pattern import LABEL_NAMES, MOUNT_NAMES, CreasePattern, compression_mode, mount_poses
 from warpworm.physics.crease.topology import NUM_SEGMENTS
 from warpworm.physics.crease.worm import (build_worm, rest_alpha, unit_length, worm_rest_state, worm_triangles,
                                           worm_vertices)

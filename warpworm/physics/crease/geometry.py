@@ -1,14 +1,9 @@
 """Batched NumPy geometry of a crease pattern's shapes: signed dihedral angles and their gradients, bar lengths, the
-rigidity matrix and the compression mode, the frames the IPM mounts are placed in."""
+rigidity matrix, the frames the IPM mounts are placed in."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
-
-if TYPE_CHECKING:  # annotations only (pattern imports this module)
-    from warpworm.physics.crease.pattern import CreasePattern
 
 
 def dihedral_angles(positions: np.ndarray, hinges: np.ndarray) -> np.ndarray:
@@ -70,41 +65,6 @@ def rigidity_matrix(positions: np.ndarray, edges: np.ndarray) -> np.ndarray:
     return C.reshape(E, 3 * V)
 
 
-def compression_mode(pattern: CreasePattern, released: np.ndarray | None = None):
-    """Cheapest small axial shortening of a pattern in its rest pose (linear bar-and-hinge analysis, bars only).
-
-    Finds the vertex displacement u (V, 3) that shortens the distance tail -> head keypoint (along x) by 1 m per
-    metre of displacement, with no rigid motion, minimising the bar energy Σ_e (Δl_e)² / l_e (equal axial rigidity
-    EA) over the bars not ``released`` (mask (E,)). Returns (u (V, 3), strain per bar (E,) [1/m of shortening],
-    energy Σ l ε² over the kept bars [1/m]; the axial stiffness is EA times it).
-
-    For the worm with every bar kept the tube is isostatic (rank 3V − 6) and the energy is finite (≈ 4.3 m⁻¹ for
-    the defaults: 4.3e4 N/m at EA = 1e4 N); with ``released = edge_label == VALLEY`` it is ≈ 0: a mechanism.
-    """
-    x = pattern.vertices
-    V = len(x)
-    keep = np.ones(pattern.num_edges, bool) if released is None else ~np.asarray(released, bool)
-    C = rigidity_matrix(x, pattern.edges)
-    L = pattern.edge_rest_length
-    K = C[keep].T @ (C[keep] / L[keep, None])
-    names = pattern.keypoint_names
-    g = np.zeros((V, 3))
-    for name, sgn in (("head", 1.0), ("tail", -1.0)):  # x(head) − x(tail), a weighted mean of vertices
-        p = names.index(name)
-        np.add.at(g[:, 0], pattern.keypoint_vertices[p], sgn * pattern.keypoint_weights[p])
-    rigid = [np.tile(np.eye(3)[c], V) for c in range(3)]
-    rigid += [np.cross(np.eye(3)[c], x - x.mean(0)).ravel() for c in range(3)]
-    G = np.vstack([g.ravel()] + rigid)
-    rhs = np.zeros(len(G))
-    rhs[0] = -1.0
-    kkt = np.block([[K, G.T], [G, np.zeros((len(G), len(G)))]])
-    sol = np.linalg.lstsq(kkt, np.r_[np.zeros(3 * V), rhs], rcond=None)[0]
-    u = sol[: 3 * V]
-    strain = (C @ u) / L
-    energy = float(np.sum(L[keep] * strain[keep] ** 2))
-    return u.reshape(V, 3), strain, energy
-
-
 def frame_from_vertices(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Body frame of a ring of mount vertices: points (..., K, 3) -> origin (..., 3) [m], R (..., 3, 3) (frame -> world).
 
@@ -123,13 +83,3 @@ def frame_from_vertices(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     ey = y / np.linalg.norm(y, axis=-1, keepdims=True)
     ez = np.cross(ex, ey)
     return origin, np.stack([ex, ey, ez], axis=-1)
-
-
-def mount_poses(pattern: CreasePattern, positions: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """World poses of the IPMs for positions (..., V, 3) (default: rest): pos (..., M, 3) [m], rot (..., M, 3, 3)
-    (magnet -> world; the magnet's own +z is its moment direction)."""
-    x = pattern.vertices if positions is None else np.asarray(positions, dtype=np.float64)
-    origin, R = frame_from_vertices(x[..., pattern.mount_vertices, :])
-    pos = origin + np.einsum("...mij,mj->...mi", R, pattern.mount_local_pos)
-    rot = np.einsum("...mij,mjk->...mik", R, pattern.mount_local_rot)
-    return pos, rot
