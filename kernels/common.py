@@ -1,5 +1,5 @@
 """Shared ``@wp.func`` helpers and constants of the dynamics kernels (:mod:`warpworm.kernels.substep`,
-:mod:`warpworm.kernels.magnet_pose`): per-world parameters, angle wrapping, hinge fold ranges, freezing a diverging
+:mod:`warpworm.kernels.magnet_pose`): angle wrapping, hinge fold ranges, freezing a diverging
 world, the dihedral angle of a hinge with its gradient, and vectors of :data:`LANES` float32 with the vec3 operations
 done lane by lane (:mod:`warpworm.kernels.hinge_lanes`, :mod:`warpworm.kernels.magnet_far_pair`).
 
@@ -36,12 +36,6 @@ def on_gpu() -> bool:
     kernel take its CPU-only path (the SIMD lanes of :mod:`.hinge_lanes`) on the CPU and its scalar code on a GPU, where
     a thread per world has no vector units to fill (docs/dynamics.md, "Notes moved from the code")."""
     ...
-
-
-@wp.func
-def pw(p: wp.array(dtype=float), world: int) -> float:
-    """Per-world scalar: one shared value or one per world."""
-    return p[world % p.shape[0]]
 
 
 @wp.func
