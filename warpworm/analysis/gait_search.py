@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import csv
 import itertools
+import warnings
 from dataclasses import replace
 
 import numpy as np
@@ -116,8 +117,6 @@ def write_csv(path, result: dict) -> None:
     scal = [k for k, v in m.items() if np.asarray(v).ndim == 1]
     ratio = [f"ratio_min_{i}" for i in range(4)]
     with np.errstate(all="ignore"):
-        import warnings
-
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN rows: no contraction in any cycle
             hold = np.nanmax(m["end_hold_ratio"], axis=1)

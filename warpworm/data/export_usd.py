@@ -1,7 +1,6 @@
 """Time-sampled USD stages of worm worlds, from a dataset folder or a saved trajectory.
 
 Stage layout (``metersPerUnit = 1``, ``upAxis = Z``, ``timeCodesPerSecond = 100``: time code = simulated time × 100)::
-
     /World                              Xform (defaultPrim)
     /World/Floor                        Mesh: a square on the (inclined) floor plane
     /World/w000                         Xform, one per exported world (offset along +y by ``spacing``)
@@ -35,6 +34,7 @@ import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
+import h5py
 import numpy as np
 
 from warpworm import transforms as tf
@@ -129,7 +129,6 @@ def _read_arrays(path: Path) -> dict:
         if path.suffix == ".npz":
             with np.load(path, allow_pickle=False) as z:
                 return {k: z[k] for k in z.files}
-        import h5py
 
         with h5py.File(path, "r") as f:
             d = {}

@@ -2,7 +2,6 @@
 counter-based generator of :mod:`warpworm.data.randomize`, and turned into what the simulator and renderer take.
 
 What each draw is keyed by (so that any shard size, worker count, engine or device gives the same samples):
-
 * physics (``worm.*``): (seed, trajectory, attempt) -- :func:`draw_worm`, :func:`worm_params`;
 * appearance (``light.*``, ``color.*``, ``texture.*``) and sensor values (``sensor.*``): (seed, trajectory) --
   :func:`appearance_draws`, turned into the renderer's inputs by :func:`appearance_from_draws` and
@@ -25,6 +24,9 @@ from warpworm.data.config import ConfigError, load_config
 from warpworm.physics.gaits import GAIT_PRESETS, gait_theta
 from warpworm.physics.params import WormParams
 from warpworm.render import default_appearance, hsv_to_rgb, sample_cameras
+from warpworm.render.distortion import draw_distortion
+from warpworm.render.placement import place, placement_draws
+from warpworm.render.scene import BAND_COLORS
 
 _WORM_VECTOR = {"epm_size": ("epm_size_x", "epm_size_y", "epm_size_z"),
                 "ipm_moment": ("ipm_moment_tail", "ipm_moment_centre", "ipm_moment_head")}
@@ -125,8 +127,6 @@ def appearance_draws(cfg, traj: np.ndarray) -> dict[str, np.ndarray]:
     app["texture.seed"] = rng.derived_seed(rng.sample_keys(cfg.seed, traj), "texture") % (2**31 - 1)
     r = cfg.render  # issue 24: the plate's pose and material, the lights, distractors (per trajectory)
     if r.plate_pose or r.lights != "fixed" or r.distractors[1] > 0 or r.plate_materials != ["matte"] or r.paper_bsdf:
-        from warpworm.render.placement import placement_draws
-
         app.update(placement_draws(cfg.render, rng.sample_keys(cfg.seed, traj)))
     return app
 
@@ -153,8 +153,6 @@ def appearance_from_draws(app: dict, seeds: np.ndarray, band_colors=None):
     a.paper_tex = np.stack([np.where(fibre, 0.25, 0.0), np.where(fibre, 0.10, 0.0)], axis=1)
     bands = np.asarray(app["texture.worm"]).astype(str) == "bands"
     if bands.any():  # the paper's marker bands (§IV-E): one colour per segment, flat paint
-        from warpworm.render.scene import BAND_COLORS
-
         c = BAND_COLORS if band_colors is None else np.asarray(band_colors, np.float64)
         a.albedo[bands, 2:7] = c[None] ** 2
         a.paper_tex[bands] = 0.0
@@ -167,8 +165,6 @@ def appearance_from_draws(app: dict, seeds: np.ndarray, band_colors=None):
     bg = app["color.background_value"][:, None] * np.ones(3)
     a.bg_top, a.bg_bottom = bg, 0.6 * bg
     if any(k.startswith(("plate.", "lights.", "distractors.", "paper.")) for k in app):  # drawn when asked
-        from warpworm.render.placement import place
-
         a = place(a, app)
     return a
 
@@ -239,8 +235,6 @@ def dataset_cameras(cfg, index: np.ndarray, worm_points: np.ndarray, view: np.nd
         aspect_jitter=0.0, principal_jitter=0.0, min_in_frame=_range(c["min_in_frame"])[0],
         max_tries=int(_range(c["max_tries"])[0]))
     if cfg.render.distortion:  # issue 24: lens distortion per camera, from the camera's seed (stored as camera/dist)
-        from warpworm.render.distortion import draw_distortion
-
         cams.dist = draw_distortion(cfg.render, seeds, cams.K, cfg.render.width, cfg.render.height)
     d = cams.draws
     n = len(index)

@@ -23,13 +23,14 @@ import multiprocessing as mp
 import os
 import queue as queue_mod
 import signal
+import sys
 import threading
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from typing import Callable
 
 from warpworm.data import signal_hold
-from warpworm.data.dataset import clean_temporaries, shard_name
+from warpworm.data.dataset import DatasetWriteError, clean_temporaries, shard_name
 from warpworm.data.shard import Interrupted, run_shard
 from warpworm.data.stages import load_stages
 
@@ -95,8 +96,6 @@ def _warm(cfg, stages) -> None:
     try:
         warm(cfg)
     except Exception as exc:  # noqa: BLE001 - a failed warm-up only costs time; the shards report real errors
-        import sys
-
         print(f"warning: kernel warm-up failed ({type(exc).__name__}: {exc}); modules load on first use",
               file=sys.stderr)
 
@@ -160,7 +159,6 @@ def _run_local_pool(cfg, out, todo, stages, workers, on_progress, on_shard):
                 except Exception as exc:  # noqa: BLE001 - re-raised with the recovery advice
                     for f in pending:
                         f.cancel()
-                    from warpworm.data.dataset import DatasetWriteError
 
                     if isinstance(exc, DatasetWriteError):  # disk full in a worker: its own one-line message
                         _stop_workers(pool)
