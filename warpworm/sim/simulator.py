@@ -25,6 +25,7 @@ import warp as wp
 
 from warpworm.ids import WORLD_CRUMPLED
 from warpworm.kernels import magnet_pose
+from warpworm.physics.gaits import DEFAULT_DT, DEFAULT_SUBSTEPS
 from warpworm.physics.magnets import launch_world_wrenches, pair_wrench_scratch
 from warpworm.sim import capture_gate
 from warpworm.sim.model import Control, Model, State
@@ -88,8 +89,10 @@ class Simulator:
 
     Args:
         model: the batch.
-        dt: step [s]: the magnetic wrench and the EPM pose are refreshed once per step.
-        substeps: substeps per step (``dt / substeps`` the substep; 2 ms, the gaits' default, is accurate for them).
+        dt: step [s]: the magnetic wrench and the EPM pose are refreshed once per step (default the gait runs',
+            :data:`warpworm.physics.gaits.DEFAULT_DT`).
+        substeps: substeps per step (``dt / substeps`` the substep; default
+            :data:`~warpworm.physics.gaits.DEFAULT_SUBSTEPS`: 2 ms substeps, accurate for the gaits).
         magnet_every_substep: re-evaluate the magnetic wrench every substep (slower; for dt studies).
         strain_limit: a bar strained beyond |ΔL/L0| this flags its world unstable (the soft waist bars at
             ``max(strain_limit, 0.9)``).
@@ -116,8 +119,8 @@ class Simulator:
     def __init__(
         self,
         model: Model,
-        dt: float = 2.0e-3,
-        substeps: int = 8,
+        dt: float = DEFAULT_DT,
+        substeps: int = DEFAULT_SUBSTEPS,
         *,
         magnet_every_substep: bool = False,
         strain_limit: float = SubstepSettings.strain_limit,
