@@ -28,14 +28,11 @@ from __future__ import annotations
 
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 import warp as wp
 
 from warpworm import quiet_warp
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 NEWTON_MESH = "39 vertices, 111 bars, 105 hinges"
 

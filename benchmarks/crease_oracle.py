@@ -20,13 +20,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from pose_baseline import faces_seen  # noqa: E402
+from pose_baseline import faces_seen  # a sibling script: Python puts benchmarks/ first on sys.path
 
 KEYS = ("creases/angle", "keypoints/body", "keypoints/pixel", "camera/K", "labels/deformation", "camera/R", "camera/t",
         "worm/vertices", "poses/body", "depth")

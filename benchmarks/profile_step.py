@@ -131,8 +131,7 @@ def profile_run(W: int, *, duration: float, settle: float, skip: float = 1.0, ma
         sim.step(state, n_steps)
         wp.synchronize_device(model.device)
         wall, cpu = time.perf_counter() - t0, time.thread_time() - c0
-    sys.path.insert(0, str(HERE))
-    from bench_dynamics import mean_newton_steps  # one definition for the benchmarks
+    from bench_dynamics import mean_newton_steps  # one definition for the benchmarks (a sibling script)
 
     mean_newton = mean_newton_steps(sim, n_steps * sim.substeps)
     mean_factors = mean_newton_steps(sim, n_steps * sim.substeps, "factors")
@@ -297,8 +296,7 @@ def launch_floor(device: str = "cpu", reps: int = 200) -> float:
 
 
 def _table(rows: list[dict], cols: list[str]) -> str:
-    sys.path.insert(0, str(HERE))
-    from run import table
+    from run import table  # a sibling script
 
     return table([{c: r.get(c, "") for c in cols} for r in rows])
 
