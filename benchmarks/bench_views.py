@@ -21,6 +21,9 @@ import tempfile
 import time
 from pathlib import Path
 
+from warpworm.data.config import load_config
+from warpworm.data.job import generate
+
 NOTES = ("samples_s: samples per wall second of the job (one process); speedup: over K = 1 of the same config in "
          "this run; samples_per_cpu_s / speedup_cpu: the same per CPU second of the process; others_cores: CPU the other processes used during the row (shared machine)")
 
@@ -51,8 +54,6 @@ CONFIGS = {
 
 
 def _cfg(name: str, k: int, trajectories: int, quick: bool):
-    from warpworm.data.config import load_config
-
     src, over, _ = CONFIGS[name]
     if quick:
         over = over + ["sim.settle_time=0.1", "render.width=64", "render.height=48"]
@@ -63,8 +64,6 @@ def _cfg(name: str, k: int, trajectories: int, quick: bool):
 
 
 def bench_config(name: str, quick: bool = False) -> list[dict]:
-    from warpworm.data.job import generate
-
     trajectories = 4 if quick else CONFIGS[name][2]
     rows, base = [], None
     for k in KS:
@@ -86,8 +85,6 @@ def bench_config(name: str, quick: bool = False) -> list[dict]:
 
 
 def run(quick: bool = False) -> list[dict]:
-    from warpworm.data.job import generate
-
     # load (compile on a cold cache) every kernel once, outside the timed rows
     tmp = Path(tempfile.mkdtemp(prefix="ww-views-warm-"))
     try:
@@ -110,9 +107,6 @@ def headline(device: str = "cpu", quick: bool = False) -> dict:
     """One row for the summary table of ``benchmarks/run.py``: the ``dataset`` row's job (default config, its short
     physics, 128x96, W = 16 on the CPU, 4 on ``quick``) rendered by 4 cameras per frame; on CUDA 256 worlds, so that
     the row writes the 4096 samples of the dataset row's 1024 worlds (the host's gzip bounds both there)."""
-    from warpworm.data.config import load_config
-    from warpworm.data.job import generate
-
     def cfg_of(overrides, **top):  # the dataset row's config (benchmarks/bench_dataset.py): default, short physics
         short = ["output.preview=false", "sim.settle_time=0.008", "sim.frame_times=[0.008, 0.016, 0.024, 0.032]"]
         return load_config("default", [*short, *overrides], **top)

@@ -34,6 +34,17 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
+import warp as wp
+
+from warpworm import quiet_warp
+from warpworm.kernels import implicit_euler as ie
+from warpworm.kernels import substep as sub
+from warpworm.kernels.band_cholesky import ALL_ROWS, band_cholesky_factor, band_cholesky_solve
+from warpworm.kernels.hinge_lanes import add_hinges, update_hinge_angles_lanes
+from warpworm.physics import gaits
+from warpworm.sim.model import Model
+from warpworm.sim.simulator import Simulator
+from warpworm.sim.solver import state_struct
 
 HERE = Path(__file__).resolve().parent
 
@@ -57,8 +68,6 @@ def launch_timers():
     the figure to read: a CPU kernel runs on the launching thread, and on a shared machine the wall time also counts
     the time other processes held the core (seen here: wall up to 3x the CPU time under a load of 3.7 on 2 cores).
     """
-    import warp as wp
-
     acc: dict = defaultdict(lambda: [0.0, 0.0, 0])
     orig_launch, orig_cmd = wp.launch, wp.Launch.launch
 
@@ -91,10 +100,6 @@ def _build(W: int, magnet_model: str, device: str, newton: int | None = None, ne
            gait: str = "peristaltic", sim_kw: dict | None = None):
     """The gait preset's model and simulator (default peristaltic); no CUDA graph (each launch must be seen to be timed: the
     profile's whole-run figures on CUDA are therefore without graph replay, see ``benchmarks/run.py`` for those)."""
-    from warpworm.physics import gaits
-    from warpworm.sim.model import Model
-    from warpworm.sim.simulator import Simulator
-
     model = Model.from_params(gaits.preset_params(gait, magnet_model=magnet_model), W, device)
     kw = {} if newton is None else {"newton": newton}
     kw.update(sim_kw or {})
@@ -115,8 +120,6 @@ def profile_run(W: int, *, duration: float, settle: float, skip: float = 1.0, ma
     transient stay out); ``us_*`` and ``share`` are CPU time of the launching thread on the CPU (what one dedicated
     core delivers), wall time on CUDA; the rates are per that time (``*_wall`` beside them: per wall second).
     """
-    import warp as wp
-
     model, sim = _build(W, magnet_model, device, gait=gait, sim_kw=sim_kw)
     state = sim.initial_state()
     sim.step(state, 1, epm=False)  # compile every kernel before anything is timed
@@ -170,13 +173,6 @@ PARTS = ("gradient", "gradient + Hessian", "hinges' gradient", "inertia + bars' 
 def _parts_kernel():
     """A kernel running part ``part`` of a Newton step ``reps`` times per world (:data:`PARTS`), with the substep's
     own functions, on the scratch of a simulator (``hess0`` / ``grad0``: an assembled band and right-hand side)."""
-    import warp as wp
-
-    from warpworm.kernels import implicit_euler as ie
-    from warpworm.kernels import substep as sub
-    from warpworm.kernels.hinge_lanes import add_hinges, update_hinge_angles_lanes
-    from warpworm.kernels.band_cholesky import ALL_ROWS, band_cholesky_factor, band_cholesky_solve
-
     @wp.kernel
     def parts(part: int, reps: int, m: sub.BarHingeModel, opt: sub.SubstepOptions,
               anchor_target: wp.array2d(dtype=wp.vec3), s: sub.BarHingeState, w: sub.NewtonScratch,
@@ -223,10 +219,6 @@ def _parts_kernel():
 def parts_cost(W: int, gait: str = "omega", at: float = 1.5, reps: int = 20, tries: int = 7) -> list[dict]:
     """µs of thread CPU per world and call of each of :data:`PARTS` on the ``gait`` preset's state ``at`` [s] into
     the gait (CPU; the least of ``tries`` launches of ``reps`` calls each, the parts interleaved)."""
-    import warp as wp
-
-    from warpworm.sim.solver import state_struct
-
     kernel = _parts_kernel()
     model, sim = _build(W, "analytic", "cpu", gait=gait)
     state = sim.initial_state()
@@ -276,8 +268,6 @@ def newton_cost(W: int, newtons=(2, 3, 4), device: str = "cpu", steps: int = 15)
 
 def launch_floor(device: str = "cpu", reps: int = 200) -> float:
     """Median wall time [µs] of launching a one-thread kernel that writes one float: the fixed cost of a launch."""
-    import warp as wp
-
     @wp.kernel
     def _noop(a: wp.array(dtype=float)):
         a[wp.tid()] = 1.0
@@ -325,10 +315,8 @@ def main(argv=None) -> int:
         ap.error(f"--skip: expected >= 0 [s], got {args.skip}")
     if not args.duration > 0:
         ap.error(f"--duration: expected > 0 [s], got {args.duration}")
-    from warpworm import quiet_warp
 
     quiet_warp()
-    import warp as wp
 
     wp.init()
     if args.parts:

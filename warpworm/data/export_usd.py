@@ -1,6 +1,7 @@
 """Time-sampled USD stages of worm worlds, from a dataset folder or a saved trajectory.
 
 Stage layout (``metersPerUnit = 1``, ``upAxis = Z``, ``timeCodesPerSecond = 100``: time code = simulated time × 100)::
+
     /World                              Xform (defaultPrim)
     /World/Floor                        Mesh: a square on the (inclined) floor plane
     /World/w000                         Xform, one per exported world (offset along +y by ``spacing``)

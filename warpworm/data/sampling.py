@@ -2,6 +2,7 @@
 counter-based generator of :mod:`warpworm.data.randomize`, and turned into what the simulator and renderer take.
 
 What each draw is keyed by (so that any shard size, worker count, engine or device gives the same samples):
+
 * physics (``worm.*``): (seed, trajectory, attempt) -- :func:`draw_worm`, :func:`worm_params`;
 * appearance (``light.*``, ``color.*``, ``texture.*``) and sensor values (``sensor.*``): (seed, trajectory) --
   :func:`appearance_draws`, turned into the renderer's inputs by :func:`appearance_from_draws` and
