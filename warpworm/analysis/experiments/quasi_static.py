@@ -178,8 +178,8 @@ def linear_anchor_responses(model, params: WormParams, target_offsets: np.ndarra
     """:func:`linear_anchor_response` of every world at once, bit for bit (W, A, 3) [N] (model's anchor stiffness):
     every world's stiffness matrix takes the same additions in the same order (one per bar, hinge and anchor, each a
     block of every world at once; the zero entries of a hinge's 3V x 3V outer product added nothing), at about a tenth
-    of the per-world loop's CPU (which was half of ``experiment compression``'s at 192 worlds, holding the GIL;
-    docs/dynamics.md). tests/test_threads_split.py checks it against the per-world function."""
+    of the per-world loop's CPU (docs/dynamics.md, "Notes moved from the code"). tests/test_threads_split.py checks it
+    against the per-world function."""
     pat, W, V = model.pattern, model.num_worlds, model.num_vertices
     x = np.asarray(model.rest_positions_host, np.float64)  # (W, V, 3)
     per_world = lambda v: np.broadcast_to(np.asarray(v, np.float64), (W,))  # noqa: E731  (a parameter: scalar or (W,))
