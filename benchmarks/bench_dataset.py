@@ -16,12 +16,23 @@ from __future__ import annotations
 
 import os
 import shutil
+import subprocess
+import sys
 import tempfile
 import threading
 import time
 from pathlib import Path
 
+import cv2
+import h5py
 import numpy as np
+
+from warpworm.data import dataset as ds
+from warpworm.data import workers as wk
+from warpworm.data.config import load_config
+from warpworm.data.job import generate
+from warpworm.data.sampling import dataset_cameras, draw_group, draw_worm, worm_params
+from warpworm.data.stages import WarpStages
 
 NOTES = ("storage: bytes/sample and samples/s per image codec; end_to_end: overhead = 1 - (sim + render) / total; "
          "workers: speedup of 2 processes over 1; memory: RSS growth over the job (see module docstring)")
@@ -30,8 +41,6 @@ SHORT = ["sim.settle_time=0.008", "sim.frame_times=[0.008, 0.016, 0.024, 0.032]"
 
 
 def _cfg(overrides, **top):
-    from warpworm.data.config import load_config
-
     return load_config("default", ["output.preview=false", *SHORT, *overrides], **top)
 
 
@@ -43,9 +52,6 @@ def _rss_mb() -> float:
 # ---------------------------------------------------------------------------------------------------------------------
 def bench_storage(samples: dict, reps_read: int = 200) -> list[dict]:
     """samples: rgb (N,H,W,3) u8, depth (N,H,W) f32, segmentation (N,H,W) u8."""
-    import cv2
-    import h5py
-
     N = samples["rgb"].shape[0]
     rows = []
     rng = np.random.default_rng(0)
@@ -104,11 +110,6 @@ def bench_storage(samples: dict, reps_read: int = 200) -> list[dict]:
 # ---------------------------------------------------------------------------------------------------------------------
 def bench_end_to_end(W: int, width: int = 128, height: int = 96) -> tuple[dict, dict]:
     """One shard of W trajectories x 4 frames through generate(), and the same stages timed alone."""
-    from warpworm.data import dataset as ds
-    from warpworm.data.job import generate
-    from warpworm.data.sampling import dataset_cameras, draw_group, draw_worm, worm_params
-    from warpworm.data.stages import WarpStages
-
     F = 4
     cfg = _cfg([f"sim.worlds={W}", f"shard_size={W * F}", f"render.width={width}", f"render.height={height}"],
                num_samples=W * F)
@@ -149,9 +150,6 @@ def bench_end_to_end(W: int, width: int = 128, height: int = 96) -> tuple[dict, 
 def bench_workers(num_shards: int, W: int) -> dict:
     """The same job as a fresh ``warpworm generate`` process with --workers 1 and 2 (both pay Python/Warp start-up, as a
     user does; an in-process comparison would bill only the spawned workers' start-up)."""
-    import subprocess
-    import sys
-
     F = 4
     args = ["--num", str(num_shards * W * F), "--no-progress", "--no-preview", f"sim.worlds={W}",
             f"shard_size={W * F}", "render.width=64", "render.height=48", *SHORT]
@@ -171,9 +169,6 @@ def bench_workers(num_shards: int, W: int) -> dict:
 
 
 def bench_memory(num_shards: int, W: int) -> dict:
-    from warpworm.data import workers as wk
-    from warpworm.data.job import generate
-
     F = 4
     cfg = _cfg([f"sim.worlds={W}", f"shard_size={W * F}", "render.width=64", "render.height=48"],
                num_samples=num_shards * W * F)
@@ -215,8 +210,6 @@ def bench_memory(num_shards: int, W: int) -> dict:
 
 
 def run(quick: bool = False) -> list[dict]:
-    from warpworm.data.job import generate
-
     # warm the kernel cache so that compile time is not billed to the first measurement
     tmp = Path(tempfile.mkdtemp(prefix="ww-warm-"))
     generate(_cfg(["sim.worlds=2", "shard_size=8", "render.width=32", "render.height=24"], num_samples=8),
@@ -242,8 +235,6 @@ def headline(device: str = "cpu", quick: bool = False) -> dict:
     end (simulate, render 128x96, write HDF5) on ``device`` with the default config's short physics (:data:`SHORT`),
     after a warm-up job that compiles the kernels: W = 16 worlds on the CPU (quick: 4), 1024 on CUDA (4096 samples,
     one shard: gzip on the host, not the GPU, bounds it)."""
-    from warpworm.data.job import generate
-
     W = 1024 if str(device).startswith("cuda") else (4 if quick else 16)
     F = 4
     dev = [f"sim.device={device}"]

@@ -27,16 +27,21 @@ the NumPy reference and Newton (or a "not installed" row), all measured in the s
 from __future__ import annotations
 
 import sys
-import time
 from pathlib import Path
+import time
 
 import numpy as np
 import warp as wp
 
 from warpworm import quiet_warp
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # numpy_reference: the tests' NumPy substep
+# the tests' NumPy reference substep (tests/numpy_reference.py) is this benchmark's reference: tests/ is no package
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+
+from warpworm.physics import gaits  # noqa: E402
+from warpworm.sim import simulator
+from warpworm.sim.model import Model
+from warpworm.sim.simulator import Simulator
 
 NEWTON_MESH = "39 vertices, 111 bars, 105 hinges"
 
@@ -79,10 +84,6 @@ def reference_newton_steps(sim, mean_steps: float) -> int:
 
 def gait_sim(W: int, magnet_model: str = "analytic", device: str = "cpu", solver: str = "band"):
     """The peristaltic preset on ``W`` worlds at the gait setting, settled briefly: (model, sim, state)."""
-    from warpworm.physics import gaits
-    from warpworm.sim.model import Model
-    from warpworm.sim.simulator import Simulator
-
     model = Model.from_params(gaits.preset_params("peristaltic", magnet_model=magnet_model), W, device)
     kw = {} if solver == "band" else {"solver": solver}  # the one-thread-per-world band solve is the default
     sim = Simulator(model, dt=gaits.DEFAULT_DT, substeps=gaits.DEFAULT_SUBSTEPS, **kw)
@@ -149,8 +150,6 @@ def newton_row(device: str = "cpu", *, dt: float = 5.0e-5, hinge_scale: float = 
         import newton
     except ImportError:
         return {**base, "substep_us": "", "note": "not installed (pip install newton: optional, not a dependency)"}
-    from warpworm.physics import gaits
-    from warpworm.sim.model import Model
 
     model = Model.from_params(gaits.preset_params("peristaltic"), 1, "cpu")
     pat = model.pattern
@@ -221,8 +220,6 @@ def newton_row(device: str = "cpu", *, dt: float = 5.0e-5, hinge_scale: float = 
 def solvers_for(device) -> tuple:
     """The solvers to compare: every ``simulator.SOLVERS`` entry on CUDA (the tile paths are the GPU's), the default
     band solve on the CPU."""
-    from warpworm.sim import simulator
-
     if wp.get_device(device).is_cuda:
         return tuple(getattr(simulator, "SOLVERS", ("band",)))
     return ("band",)

@@ -4,50 +4,39 @@ Each world: EPM 10×10×40 mm cuboid (3.6 A·m²) above three 10 mm × 1 mm axia
 layout with small random perturbations; the net force and torque on all four magnets from the other three
 (12 ordered pair wrenches per world), by one ``launch_world_wrenches`` call (6 unordered pair evaluations, each
 pair's reaction the other magnet's share); ``epm`` = False rows write the EPM's wrench as zero (``epm_wrench=False``,
-what the dynamics uses; the same work today, 9 ordered pairs in a baseline revision's kernel).
+what the dynamics uses; the same work).
 
 Columns: ``ms_per_call`` (process CPU time, best of repeats, after a warm-up that includes compilation: Warp runs a
 CPU launch on the calling thread, and on a shared machine CPU time leaves out the time the scheduler gave to other
 processes, which wall time would count; the best repeat is the least disturbed one), ``us_per_world``,
-``pairs_per_s`` (point-dipole pair interactions evaluated per second, 'dipoles' model: 9,648 per world at 64/cm³
-today, each serving both magnets; 19,296 per world, 10,080 without the EPM's wrench, in a baseline revision's
-per-target kernel), ``vs_nbody`` (that rate over the plain inverse-square n-body kernel's, timed in launches
+``pairs_per_s`` (point-dipole pair interactions evaluated per second, 'dipoles' model: 9,648 per world at 64/cm³,
+each serving both magnets), ``vs_nbody`` (that rate over the plain inverse-square n-body kernel's, timed in launches
 interleaved with the row's repeats; ``vs_dipole_nbody``: over the plain point-dipole force+field n-body row of the
 same run), ``field_evals_per_s`` ('analytic', the closed-form row: source-field evaluations at quadrature points).
 magpylib rows run ``getFT`` for the same 12 pair wrenches per world (meshing 1000 cells per target, ~1e-4
 agreement) for small W only; ``magpylib_est`` rows extrapolate that per-world cost linearly to larger W and are
 labelled as estimates.
 
-Before/after in one run: with ``WARPWORM_BENCH_BASELINE=<git revision>`` in the environment, the kernel modules of
-that revision (``kernels/magnet_fields.py``, ``kernels/magnet_wrench.py`` and, where it has one,
-``kernels/magnet_far_pair.py``, read with ``git show``) are loaded under
-another module name and timed on the same worlds in the same run (rows ``warpworm@<rev>``; ``speedup`` = their
-time over today's at the same model and W).
+A before/after comparison runs this file on each of two checkouts (docs/magnets.md keeps the measured ones).
 """
 
 from __future__ import annotations
 
-import importlib
-import os
-import shutil
-import subprocess
-import sys
-import tempfile
 import time
-from pathlib import Path
 
 import numpy as np
 import warp as wp
 
 from warpworm import quiet_warp
+from warpworm.physics import magnets as mg
+from warpworm.transforms import matrix_to_quat_wxyz, quat_wxyz_to_xyzw
 
 NBODY_BODIES = 2048
 NOTES = ("pairs_per_s: point-dipole pair interactions evaluated per second ('dipoles'; today 9,648 per world at "
          "64/cm³, each unordered magnet pair once, its reaction the other magnet's share, so epm=False costs the same; "
-         "a baseline revision's per-target kernel: 19,296, 10,080 without the EPM's wrench); vs_nbody: that rate over "
+         "vs_nbody: that rate over "
          "the inverse-square n-body kernel's, timed interleaved with the row (vs_dipole_nbody: over the point-dipole "
-         "force+field n-body row). speedup: the warpworm@<rev> row's time over this one's (WARPWORM_BENCH_BASELINE). "
-         "magpylib_est rows are "
+         "force+field n-body row). magpylib_est rows are "
          "linear extrapolations of the measured magpylib per-world cost, not measurements.")
 
 
@@ -143,7 +132,7 @@ def _nbody_rows(device, repeats=5):
 
 
 def _worlds(W, seed=0):
-    from scipy.spatial.transform import Rotation
+    from scipy.spatial.transform import Rotation  # optional dependency: scipy (the test extra)
 
     rng = np.random.default_rng(seed)
     pos = np.zeros((W, 4, 3))
@@ -160,8 +149,6 @@ def _worlds(W, seed=0):
 
 
 def _magnets():
-    from warpworm.physics import magnets as mg
-
     epm = mg.Cuboid((0.01, 0.01, 0.04), moment=3.6)
     ipm = mg.Cylinder(0.01, 0.001, moment=0.9e6 * np.pi * 0.005**2 * 0.001)
     return [epm, ipm, ipm, ipm]
@@ -180,8 +167,6 @@ def _time(fn, repeats):
 def _dipole_pairs_per_world(magnets, density, targets=range(4)):
     """Point-dipole pairs of the wrench on ``targets`` from all the other magnets (each magnet's own sum over its
     sources, as a baseline revision's kernel computes them)."""
-    from warpworm.physics import magnets as mg
-
     n = [len(mg.dipole_grid(m, density)) for m in magnets]
     return sum(n[i] * n[j] for i in targets for j in range(4) if i != j)
 
@@ -220,8 +205,8 @@ def _analytic_evals_per_world(pos, rot, magnets, quad_order, max_panels):
 
 
 def _magpylib_world(magnets, pos, rot, meshing=1000):
-    import magpylib as magpy
-    from scipy.spatial.transform import Rotation
+    import magpylib as magpy  # optional dependency: magpylib (the test extra)
+    from scipy.spatial.transform import Rotation  # optional dependency: scipy (the test extra)
 
     def make(m, p, R):
         o = Rotation.from_matrix(R)
@@ -238,64 +223,22 @@ def _magpylib_world(magnets, pos, rot, meshing=1000):
             magpy.getFT(sources, objs[i], pivot="centroid", meshing=meshing)
 
 
-def _baseline_kernels(rev: str):
-    """``world_wrench_kernel`` of git revision ``rev``, loaded from that revision's kernel files as another module."""
-    root = Path(__file__).resolve().parents[1]
-    tmp = Path(tempfile.mkdtemp(prefix="warpworm_bench_baseline_"))
-    name = "warpworm_baseline_" + "".join(c if c.isalnum() else "_" for c in rev)
-    pkg = tmp / name
-    pkg.mkdir()
-    (pkg / "__init__.py").write_text("")
-    for f in ("magnet_fields", "magnet_wrench", "magnet_far_pair"):
-        src = subprocess.run(["git", "show", f"{rev}:kernels/{f}.py"], cwd=root, capture_output=True, text=True)
-        if src.returncode != 0:
-            if f == "magnet_far_pair":  # revisions before the far-field ring rule have no such module
-                continue
-            raise ValueError(f"WARPWORM_BENCH_BASELINE={rev!r}: git show failed: {src.stderr.strip()}")
-        (pkg / f"{f}.py").write_text(src.stdout)
-    sys.path.insert(0, str(tmp))
-    try:
-        module = importlib.import_module(f"{name}.magnet_wrench")
-    finally:
-        sys.path.remove(str(tmp))
-    return module.world_wrench_kernel, tmp
-
-
-def _launcher(kernel, model_arr, arrays, device, epm, far=True):
-    """One world-wrench call: today's (``kernel`` None: :func:`warpworm.physics.magnets.launch_world_wrenches`, the pair
-    kernels) or a baseline revision's ``world_wrench_kernel``, with or without ``epm_wrench``; ``far`` = the ring
-    rules, where the kernel has them."""
-    from warpworm.physics import magnets as mg
-
+def _launcher(model_arr, arrays, device, epm, far=True):
+    """One world-wrench call (:func:`warpworm.physics.magnets.launch_world_wrenches`, the pair kernels), with or
+    without ``epm_wrench``; ``far`` = the ring rules."""
     a = arrays
-    if kernel is None:
-        scratch = mg.pair_wrench_scratch(*a["pos"].shape, device)
-
-        def today():
-            mg.launch_world_wrenches(model_arr, a["shape"], a["size"], a["moment"], a["pos"], a["rot"], a["force_out"],
-                                     a["torque_out"], a["density"], device, epm_wrench=epm, far_field=far,
-                                     pair_scratch=scratch)
-            wp.synchronize_device(device)
-
-        return today
-    gl_x, gl_w = mg._gauss_legendre(mg.DEFAULT_QUAD_ORDER, str(device))
-    labels = [arg.label for arg in kernel.adj.args]
-    far_flag = [int(far)] if "far_field" in labels else []
-    flag = [int(epm)] if "epm_wrench" in labels else []
-    inputs = [model_arr, a["shape"], a["size"], a["moment"], a["density"], gl_x, gl_w, mg.DEFAULT_MAX_PANELS,
-              *far_flag, *flag, a["pos"], a["rot"]]
+    scratch = mg.pair_wrench_scratch(*a["pos"].shape, device)
 
     def call():
-        wp.launch(kernel, dim=a["pos"].shape, inputs=inputs, outputs=[a["force_out"], a["torque_out"]], device=device)
+        mg.launch_world_wrenches(model_arr, a["shape"], a["size"], a["moment"], a["pos"], a["rot"], a["force_out"],
+                                 a["torque_out"], a["density"], device, epm_wrench=epm, far_field=far,
+                                 pair_scratch=scratch)
         wp.synchronize_device(device)
 
     return call
 
 
 def run(quick: bool = False) -> list[dict]:
-    from warpworm.physics import magnets as mg
-    from warpworm.transforms import matrix_to_quat_wxyz, quat_wxyz_to_xyzw
-
     quiet_warp()
     wp.init()
     device = wp.get_device("cpu")
@@ -303,67 +246,51 @@ def run(quick: bool = False) -> list[dict]:
     magnets = _magnets()
     density = 64e6
     pairs_per_world = _dipole_pairs_per_world(magnets, density)
-    pairs_no_epm = pairs_per_world - _dipole_pairs_per_world(magnets, density, targets=[0])
-    pairs_today = pairs_per_world // 2  # each unordered pair once (its reaction the other magnet's share): 9,648
-    baseline_rev = os.environ.get("WARPWORM_BENCH_BASELINE", "").strip()
-    variants = [("warpworm", None, True), ("warpworm", None, False)]
-    tmp = None
-    if baseline_rev:
-        base_kernel, tmp = _baseline_kernels(baseline_rev)
-        variants.insert(0, (f"warpworm@{baseline_rev}", base_kernel, True))
+    pairs_evaluated = pairs_per_world // 2  # each unordered pair once (its reaction the other magnet's share): 9,648
+    variants = [("warpworm", True), ("warpworm", False)]
     rows = _nbody_rows(device)
     ref_call, ref_pairs = _nbody_call(device)
-    try:
-        for model in ("dipoles", "analytic"):
-            model_arr = wp.array([mg.MODELS[model]], dtype=wp.int32, device=device)
-            for W in sizes:
-                pos, rot = _worlds(W)
-                q = quat_wxyz_to_xyzw(matrix_to_quat_wxyz(rot.reshape(-1, 3, 3))).reshape(W, 4, 4)
-                arrays = dict(
-                    shape=wp.array(np.array([[m.shape for m in magnets]], np.int32), dtype=wp.int32, device=device),
-                    size=wp.array(np.array([[m.size for m in magnets]], np.float32), dtype=wp.vec3, device=device),
-                    moment=wp.array(np.array([[m.moment for m in magnets]], np.float32), dtype=wp.vec3,
-                                    device=device),
-                    pos=wp.array(pos.astype(np.float32), dtype=wp.vec3, device=device),
-                    rot=wp.array(q.astype(np.float32), dtype=wp.quat, device=device),
-                    force_out=wp.zeros((W, 4), dtype=wp.vec3, device=device),
-                    torque_out=wp.zeros((W, 4), dtype=wp.vec3, device=device),
-                    density=wp.array([density], dtype=wp.float32, device=device),
-                )
-                repeats = 3 if W * 12 > 3000 else 10
-                base_t = None
-                closed_t = None
-                # 'analytic' also once with every pair in closed form (no far-field ring rule): the rule's gain
-                runs = [(impl, kernel, epm, True) for impl, kernel, epm in variants]
-                if model == "analytic":
-                    runs.insert(0, ("warpworm closed form", None, False, False))
-                for impl, kernel, epm, far in runs:
-                    call = _launcher(kernel, model_arr, arrays, device, epm, far)
-                    if model == "dipoles":
-                        t, t_ref = _time_interleaved(call, ref_call, max(repeats, 5))
-                    else:
-                        t = _time(call, repeats)
-                    row = {"impl": impl, "model": model, "epm": epm, "W": W, "ms_per_call": 1e3 * t,
-                           "us_per_world": 1e6 * t / W, "pair_wrenches_per_s": (12 if epm else 9) * W / t}
-                    if not far:
-                        closed_t = t
-                    elif impl != "warpworm":
-                        base_t = t
-                    elif base_t is not None:
-                        row["speedup"] = base_t / t
-                    if far and not epm and closed_t is not None and impl == "warpworm":
-                        row["vs_closed_form"] = closed_t / t
-                    if model == "dipoles":
-                        evaluated = pairs_today if kernel is None else (pairs_per_world if epm else pairs_no_epm)
-                        row["pairs_per_s"] = evaluated * W / t
-                        row["vs_nbody"] = row["pairs_per_s"] / (ref_pairs / t_ref)
-                    elif not far:
-                        row["field_evals_per_s"] = _analytic_evals_per_world(
-                            pos, rot, magnets, mg.DEFAULT_QUAD_ORDER, mg.DEFAULT_MAX_PANELS) * W / t
-                    rows.append(row)
-    finally:
-        if tmp is not None:
-            shutil.rmtree(tmp, ignore_errors=True)
+    for model in ("dipoles", "analytic"):
+        model_arr = wp.array([mg.MODELS[model]], dtype=wp.int32, device=device)
+        for W in sizes:
+            pos, rot = _worlds(W)
+            q = quat_wxyz_to_xyzw(matrix_to_quat_wxyz(rot.reshape(-1, 3, 3))).reshape(W, 4, 4)
+            arrays = dict(
+                shape=wp.array(np.array([[m.shape for m in magnets]], np.int32), dtype=wp.int32, device=device),
+                size=wp.array(np.array([[m.size for m in magnets]], np.float32), dtype=wp.vec3, device=device),
+                moment=wp.array(np.array([[m.moment for m in magnets]], np.float32), dtype=wp.vec3,
+                                device=device),
+                pos=wp.array(pos.astype(np.float32), dtype=wp.vec3, device=device),
+                rot=wp.array(q.astype(np.float32), dtype=wp.quat, device=device),
+                force_out=wp.zeros((W, 4), dtype=wp.vec3, device=device),
+                torque_out=wp.zeros((W, 4), dtype=wp.vec3, device=device),
+                density=wp.array([density], dtype=wp.float32, device=device),
+            )
+            repeats = 3 if W * 12 > 3000 else 10
+            closed_t = None
+            # 'analytic' also once with every pair in closed form (no far-field ring rule): the rule's gain
+            runs = [(impl, epm, True) for impl, epm in variants]
+            if model == "analytic":
+                runs.insert(0, ("warpworm closed form", False, False))
+            for impl, epm, far in runs:
+                call = _launcher(model_arr, arrays, device, epm, far)
+                if model == "dipoles":
+                    t, t_ref = _time_interleaved(call, ref_call, max(repeats, 5))
+                else:
+                    t = _time(call, repeats)
+                row = {"impl": impl, "model": model, "epm": epm, "W": W, "ms_per_call": 1e3 * t,
+                       "us_per_world": 1e6 * t / W, "pair_wrenches_per_s": (12 if epm else 9) * W / t}
+                if not far:
+                    closed_t = t
+                if far and not epm and closed_t is not None and impl == "warpworm":
+                    row["vs_closed_form"] = closed_t / t
+                if model == "dipoles":
+                    row["pairs_per_s"] = pairs_evaluated * W / t
+                    row["vs_nbody"] = row["pairs_per_s"] / (ref_pairs / t_ref)
+                elif not far:
+                    row["field_evals_per_s"] = _analytic_evals_per_world(
+                        pos, rot, magnets, mg.DEFAULT_QUAD_ORDER, mg.DEFAULT_MAX_PANELS) * W / t
+                rows.append(row)
     # the point-dipole reference once more, after (the faster of the two measurements: conservative on a shared
     # machine); vs_nbody was measured against an inverse-square launch interleaved with each row's repeats
     for ref, again in zip(rows[:2], _nbody_rows(device)):

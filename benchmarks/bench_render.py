@@ -16,14 +16,18 @@ import dataclasses
 import time
 
 import numpy as np
+import warp as wp
+
+from warpworm import quiet_warp
+from warpworm.data.config import load_config
+from warpworm.data.sampling import appearance_draws, sample_appearance
+from warpworm.render import Renderer, build_scene, sample_cameras
+from warpworm.render.demo import default_pattern, posed_worm_states
+from warpworm.render.placement import distractor_mesh
+from warpworm.render.raycast import RayCaster
 
 
 def _scene(num_worlds: int, seed: int = 0):
-    from warpworm.data.config import load_config
-    from warpworm.render import build_scene
-    from warpworm.render.demo import default_pattern, posed_worm_states
-    from warpworm.data.sampling import sample_appearance
-
     pattern = default_pattern()
     states = posed_worm_states(seed * 100003 + np.arange(num_worlds), pattern)
     scene = build_scene(states["positions"], pattern.triangles, pattern.triangle_segment,
@@ -45,8 +49,6 @@ def _best_time(fn, repeats: int, cpu: bool = False):
 
 def _machine_ns_per_element(device) -> float:
     """ns per element of a trivial kernel (DESIGN-NOTES: about 2 ns on this machine when idle): a load gauge."""
-    import warp as wp
-
     @wp.kernel
     def fill(a: wp.array(dtype=float)):
         i = wp.tid()
@@ -70,13 +72,6 @@ def run(quick: bool = False, device=None, threads=(1, 2)) -> list[dict]:
     ``threads`` > 1 renders interleaved chunks from Python threads (CPU only; one process). The ray caster always
     runs single-threaded (one launch).
     """
-    import warp as wp
-
-    from warpworm.render import Renderer, sample_cameras
-    from warpworm.render.raycast import RayCaster
-
-    from warpworm import quiet_warp
-
     quiet_warp()
     wp.init()
     dev = wp.get_device(device)
@@ -141,11 +136,6 @@ def _option_case(overrides: list, opts: dict, states: dict, pattern, cams):
     distractors) over the posed worms ``states``; ``cams`` with the case's ``gain`` (exposure x white balance) and
     ``dist`` (lens) applied; and the rest of ``opts`` (Renderer options). Returns (appearance, scene, cameras,
     options)."""
-    from warpworm.data.config import load_config
-    from warpworm.data.sampling import appearance_draws, sample_appearance
-    from warpworm.render import build_scene
-    from warpworm.render.placement import distractor_mesh
-
     W, N = len(states["positions"]), len(cams)
     cfg = load_config("default", overrides)
     app = sample_appearance(cfg, np.arange(W))
@@ -164,9 +154,6 @@ def _option_case(overrides: list, opts: dict, states: dict, pattern, cams):
 def feature_rows(quick: bool, dev) -> list[dict]:
     """Images/s at the dataset's 128 x 96 with each issue-24 option on and off (posed worms with magnets, the
     config's looks and lights; 16 worlds x 8 cameras, quick 8 x 8, on CUDA 128 x 8; one thread)."""
-    from warpworm.render import Renderer, sample_cameras
-    from warpworm.render.demo import default_pattern, posed_worm_states
-
     W, C, repeats = (128, 8, 5) if dev.is_cuda else (8, 8, 3) if quick else (16, 8, 5)
     pattern = default_pattern()
     states = posed_worm_states(np.arange(W), pattern)
@@ -190,9 +177,6 @@ def plain_rows(sizes=(128, 256), worlds: int = 32, cameras: int = 4, repeats: in
     """Images per CPU-second of the default look (the plain resolve kernel): ``worlds`` posed worms x ``cameras``,
     best of ``repeats`` renders (``python3 benchmarks/bench_render.py --plain``; the A/B measurement of
     docs/render.md's plain-path table)."""
-    from warpworm import quiet_warp
-    from warpworm.render import Renderer, sample_cameras
-
     quiet_warp()
     states, scene = _scene(worlds)
     idx = np.repeat(np.arange(worlds), cameras)
@@ -217,10 +201,6 @@ def production_rows(size: int = 256, worlds: int = 8, cameras: int = 2, repeats:
     """CPU ms per image of the default look, production's looks, + shadows, and production's whole set (+ shadows,
     supersample 2, a lens of k1 -0.25, k2 0.08, gains), ``size``² px, posed worms (``python3
     benchmarks/bench_render.py --production``; best of ``repeats``, CPU time of this process)."""
-    from warpworm import quiet_warp
-    from warpworm.render import Renderer, sample_cameras
-    from warpworm.render.demo import default_pattern, posed_worm_states
-
     quiet_warp()
     dist = (-0.25, 0.08, 0.002, -0.002, 0.0)
     cases = [("default look", [], {}), ("production looks", PRODUCTION_LOOKS, {"gain": True}),
@@ -246,11 +226,6 @@ def headline(device=None, quick: bool = False) -> dict:
     """One row for the summary table of ``benchmarks/run.py``: images/s of the rasterizer (RGB + depth +
     segmentation, host copies included) on ``device``: 128² px, 16 worlds × 8 cameras on the CPU (quick: 4 × 8);
     256² px, 512 worlds × 8 cameras on CUDA (4096 images per batch, enough to fill the GPU)."""
-    import warp as wp
-
-    from warpworm import quiet_warp
-    from warpworm.render import Renderer, sample_cameras
-
     quiet_warp()
     wp.init()
     dev = wp.get_device(device)

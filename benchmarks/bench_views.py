@@ -21,6 +21,9 @@ import tempfile
 import time
 from pathlib import Path
 
+from warpworm.data.config import load_config
+from warpworm.data.job import generate
+
 NOTES = ("samples_s: samples per wall second of the job (one process); speedup: over K = 1 of the same config in "
          "this run; samples_per_cpu_s / speedup_cpu: the same per CPU second of the process; others_cores: CPU the other processes used during the row (shared machine)")
 
@@ -51,8 +54,6 @@ CONFIGS = {
 
 
 def _cfg(name: str, k: int, trajectories: int, quick: bool):
-    from warpworm.data.config import load_config
-
     src, over, _ = CONFIGS[name]
     if quick:
         over = over + ["sim.settle_time=0.1", "render.width=64", "render.height=48"]
@@ -63,8 +64,6 @@ def _cfg(name: str, k: int, trajectories: int, quick: bool):
 
 
 def bench_config(name: str, quick: bool = False) -> list[dict]:
-    from warpworm.data.job import generate
-
     trajectories = 4 if quick else CONFIGS[name][2]
     rows, base = [], None
     for k in KS:
@@ -86,8 +85,6 @@ def bench_config(name: str, quick: bool = False) -> list[dict]:
 
 
 def run(quick: bool = False) -> list[dict]:
-    from warpworm.data.job import generate
-
     # load (compile on a cold cache) every kernel once, outside the timed rows
     tmp = Path(tempfile.mkdtemp(prefix="ww-views-warm-"))
     try:
@@ -110,18 +107,18 @@ def headline(device: str = "cpu", quick: bool = False) -> dict:
     """One row for the summary table of ``benchmarks/run.py``: the ``dataset`` row's job (default config, its short
     physics, 128x96, W = 16 on the CPU, 4 on ``quick``) rendered by 4 cameras per frame; on CUDA 256 worlds, so that
     the row writes the 4096 samples of the dataset row's 1024 worlds (the host's gzip bounds both there)."""
-    import bench_dataset as bd
-
-    from warpworm.data.job import generate
+    def cfg_of(overrides, **top):  # the dataset row's config (benchmarks/bench_dataset.py): default, short physics
+        short = ["output.preview=false", "sim.settle_time=0.008", "sim.frame_times=[0.008, 0.016, 0.024, 0.032]"]
+        return load_config("default", [*short, *overrides], **top)
 
     K, F = 4, 4
     W = 1024 // K if str(device).startswith("cuda") else (4 if quick else 16)
     tmp = Path(tempfile.mkdtemp(prefix="ww-views-headline-"))
     try:
-        generate(bd._cfg([f"sim.device={device}", "sim.worlds=2", "shard_size=8", "render.width=32",
-                          "render.height=24"], num_samples=8), tmp / "warm", progress=False, log=lambda m: None)
-        cfg = bd._cfg([f"sim.device={device}", f"sim.worlds={W}", f"shard_size={W * F * K}",
-                       f"render.views_per_frame={K}"], num_samples=W * F * K)
+        generate(cfg_of([f"sim.device={device}", "sim.worlds=2", "shard_size=8", "render.width=32",
+                         "render.height=24"], num_samples=8), tmp / "warm", progress=False, log=lambda m: None)
+        cfg = cfg_of([f"sim.device={device}", f"sim.worlds={W}", f"shard_size={W * F * K}",
+                      f"render.views_per_frame={K}"], num_samples=W * F * K)
         t0 = time.perf_counter()
         generate(cfg, tmp / "d", progress=False, log=lambda m: None)
         total = time.perf_counter() - t0

@@ -23,6 +23,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from warpworm.data.dataset import DatasetReader
+
 RUN_ATTRS = ("warp_version", "warpworm_version")
 """Root attributes that name the code that wrote a dataset, not its data: skipped (a comparison across a change)."""
 SHARD_ATTRS = ("shard_index", "first_sample", "count", "shard_size")
@@ -59,8 +61,6 @@ def compare_folders(a: Path, b: Path) -> dict:
     """{"identical": bool, "rows": [...], "problems": [...]}: every dataset over every sample, read through
     :class:`warpworm.data.dataset.DatasetReader` (so two folders of the same samples in other shards compare equal),
     and the attributes."""
-    from warpworm.data.dataset import DatasetReader
-
     ra, rb = DatasetReader(a), DatasetReader(b)
     problems, rows = [], []
     if len(ra) != len(rb):

@@ -20,13 +20,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
-from pathlib import Path
 
 import numpy as np
+from pose_baseline import faces_seen  # a sibling script: Python puts benchmarks/ first on sys.path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from pose_baseline import faces_seen  # noqa: E402
+from warpworm.data import dataset
+from warpworm.data.export_keypoints import project
 
 KEYS = ("creases/angle", "keypoints/body", "keypoints/pixel", "camera/K", "labels/deformation", "camera/R", "camera/t",
         "worm/vertices", "poses/body", "depth")
@@ -36,8 +35,6 @@ GEOMETRY = ("params/worm.a", "params/worm.b", "params/worm.l0", "params/worm.hin
 
 def load(root: str) -> dict[str, np.ndarray]:
     """The arrays in KEYS and GEOMETRY of dataset folder ``root``, every sample in order, as float64."""
-    from warpworm.data import dataset
-
     with dataset.open(root) as ds:
         d = {k: ds.read(k).astype(np.float64) for k in KEYS + GEOMETRY + (("camera/dist",) if "camera/dist" in
                                                                               ds.keys() else ())}
@@ -48,8 +45,6 @@ def load(root: str) -> dict[str, np.ndarray]:
 def vertex_pixels(d: dict) -> np.ndarray:
     """(N, V, 2) [px]: the mesh vertices ``worm/vertices`` projected by each sample's camera, lens distortion
     included (the exports' ``export_keypoints.project``), hidden or not."""
-    from warpworm.data.export_keypoints import project
-
     return project(d["worm/vertices"], d["camera/K"], d["camera/R"], d["camera/t"], d.get("camera/dist"))[0]
 
 

@@ -19,11 +19,12 @@ from pathlib import Path
 
 import numpy as np
 
+from warpworm.physics import crease
+from warpworm.physics.params import WormParams
+from warpworm.render.camera import look_at
+
 
 def rest_worm():
-    from warpworm.physics import crease
-    from warpworm.physics.params import WormParams
-
     w = WormParams()
     return crease.build_worm(w.a, w.b, w.n_units, l0=w.l0)
 
@@ -44,8 +45,6 @@ def wing_motion(pattern, fold_rad: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 def camera(distance, elevation, azimuth, centre, fov_y, width, height):
-    from warpworm.render.camera import look_at
-
     d = np.array([np.cos(elevation) * np.cos(azimuth), np.cos(elevation) * np.sin(azimuth), np.sin(elevation)])
     R, t = look_at(centre + distance * d, centre)
     f = (height / 2.0) / np.tan(fov_y / 2.0)

@@ -31,13 +31,14 @@ from pathlib import Path
 
 import numpy as np
 
+from warpworm import quiet_warp
+from warpworm.analysis.gait_search import search_gait
+from warpworm.physics import gaits
+from warpworm.physics.params import parse_overrides
+
 
 def main(argv=None) -> int:
     from gait_grid import gait_grid_parser, grid_from_arguments
-    from warpworm.physics import gaits
-    from warpworm import quiet_warp
-    from warpworm.analysis.gait_search import search_gait
-    from warpworm.physics.params import parse_overrides
 
     ap = gait_grid_parser(__doc__, cycles_default=5, name="gait_cycles")
     ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",

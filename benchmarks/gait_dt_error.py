@@ -27,13 +27,14 @@ from pathlib import Path
 
 import numpy as np
 
+from warpworm import quiet_warp
+from warpworm.analysis.gait_runs import run_gait_split
+from warpworm.analysis.gait_search import grid_points
+from warpworm.physics import gaits
+
 
 def main(argv=None) -> int:
     from gait_grid import gait_grid_parser, grid_from_arguments
-    from warpworm.physics import gaits
-    from warpworm import quiet_warp
-    from warpworm.analysis.gait_runs import run_gait_split
-    from warpworm.analysis.gait_search import grid_points
 
     ap = gait_grid_parser(__doc__, cycles_default=5.0, cycles_type=float, name="gait_dt_error")
     ap.add_argument("--substeps", default="2,4,8", help="substeps per 4 ms step of the runs compared (default 2,4,8)")

@@ -3,7 +3,11 @@
 
 from __future__ import annotations
 
+import argparse
+
 import numpy as np
+
+from warpworm.physics import gaits
 
 GRID_FLAGS = {"w": "wavelength", "a": "amplitude", "h": "closest_approach"}
 """Flag -> the WormParams field it grids (values given in millimetres)."""
@@ -34,10 +38,6 @@ def grid_from_arguments(args) -> dict[str, np.ndarray]:
 def gait_grid_parser(doc: str, *, cycles_default, cycles_type=int, name: str = ""):
     """The parser the grid benchmarks start from: the gait, ``--w/--a/--h``, ``--cycles``, ``--backward``,
     ``--workers`` and ``--out`` (default ``benchmarks/results/<name>_<gait>.json``); each adds its own flags."""
-    import argparse
-
-    from warpworm.physics import gaits
-
     ap = argparse.ArgumentParser(description=doc.splitlines()[0])
     ap.add_argument("gait", choices=gaits.GAITS)
     add_grid_arguments(ap)

@@ -26,16 +26,17 @@ from pathlib import Path
 
 import numpy as np
 
+from warpworm import quiet_warp
+from warpworm.analysis.gait_runs import run_gait
+from warpworm.physics import gaits
+from warpworm.physics.params import parse_overrides
+
 SETTINGS = [(mm, back, dt, sub) for mm in ("analytic", "dipoles") for back in (False, True)
             for dt, sub in ((4e-3, 2), (2e-3, 2))]
 
 
 def main(argv=None) -> int:
     from gait_grid import add_grid_arguments, grid_from_arguments
-    from warpworm.physics import gaits
-    from warpworm import quiet_warp
-    from warpworm.analysis.gait_runs import run_gait
-    from warpworm.physics.params import parse_overrides
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("gait", choices=gaits.GAITS)

@@ -27,15 +27,15 @@ from dataclasses import replace
 
 import numpy as np
 
+from warpworm import quiet_warp
+from warpworm.analysis.gait_metrics import end_centres, segment_ratios
+from warpworm.physics import gaits
+from warpworm.physics.params import EPM, IPM_CENTRE, IPM_HEAD
+from warpworm.sim.model import Model
+from warpworm.sim.simulator import Simulator
+
 
 def main(argv=None) -> int:
-    from warpworm.physics import gaits
-    from warpworm import quiet_warp
-    from warpworm.analysis.gait_metrics import end_centres, segment_ratios
-    from warpworm.sim.model import Model
-    from warpworm.physics.params import EPM, IPM_CENTRE, IPM_HEAD
-    from warpworm.sim.simulator import Simulator
-
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("gait", choices=gaits.GAITS)
     ap.add_argument("--place", required=True,

@@ -36,7 +36,11 @@ import sys
 import time
 from pathlib import Path
 
+import cv2
+import h5py
 import numpy as np
+
+from warpworm.render.distortion import distort, undistort
 
 TEST_SHIFT = ["randomize.camera.distance={uniform: [0.16, 0.24]}", "randomize.light.intensity={uniform: [0.4, 0.7]}",
               "randomize.light.ambient={uniform: [0.1, 0.25]}"]
@@ -72,8 +76,6 @@ SEEN_KEYS = ("worm/vertices", "depth", "camera/dist")
 
 def load(root: Path, extra: tuple = ()) -> dict[str, np.ndarray]:
     """Every array the benchmark needs (and ``extra``), concatenated over the shards (h5py only)."""
-    import h5py
-
     keys = ("rgb", "keypoints/pixel", "keypoints/visibility", "keypoints/body", "camera/K", "camera/R", "camera/t",
             "poses/body", "creases/angle", "labels/deformation", "labels/bbox_obj", "sample_id") + tuple(extra)
     parts: dict[str, list] = {k: [] for k in keys}
@@ -107,7 +109,7 @@ def crop_to_worm(d: dict, side: int, rng: np.random.Generator | None = None, jit
     also turned in the image plane by a uniform angle in [-rotate, rotate] about its centre (a training
     augmentation), or by ``turn`` [rad] each (test-time augmentation); a turned crop has no pinhole K, so
     ``camera/K`` is dropped too."""
-    import torch
+    import torch  # optional dependency: torch
 
     box = d["labels/bbox_obj"].astype(np.float64)
     c = box[:, :2] + box[:, 2:] / 2
@@ -165,8 +167,6 @@ def faces_seen(d: dict, tris: np.ndarray, depth_tol: float = 2.5e-4) -> np.ndarr
     ``depth_tol`` [m]), not nearer (hidden under the worm, behind a fold or a distractor), and the triangle is not
     edge-on (|cos| > 0.05 between its normal and the ray). In view, the label depth is the plane's to 0.02 mm (the
     exact pixel centres of the rasterizer's depth pass); hidden, millimetres off: the tolerance sits between."""
-    from warpworm.render.distortion import distort, undistort
-
     N = len(d["depth"])
     h, w = d["depth"].shape[1:]
     V = d["worm/vertices"].astype(np.float64)
@@ -230,8 +230,8 @@ def flip_permutation(names: list[str]) -> np.ndarray:
 # model
 def build_model(num_kp: int, num_reg: int, size: int, net_size: int | None = None, head: str = "keypoints",
                 tri_w: np.ndarray | None = None, heat_stride: int = 4):
-    import torch
-    from torch import nn
+    import torch  # optional dependency: torch
+    from torch import nn  # optional dependency: torch
 
     def block(cin, cout, stride):
         return nn.Sequential(nn.Conv2d(cin, cout, 3, stride, 1, bias=False), nn.BatchNorm2d(cout), nn.ReLU(inplace=True),
@@ -311,7 +311,7 @@ def heatmap_ce(logp, kp, xs, ys, sigma: float):
     """Cross-entropy of the predicted cell distribution ``logp`` (n, k, cells) against a Gaussian of ``sigma`` [px]
     around each true keypoint ``kp`` (n, k, 2) [px] on the cell centres ``xs``, ``ys``: (n, k). Supervises every cell
     directly (faster to learn from scratch than the soft-argmax's coordinate alone)."""
-    import torch
+    import torch  # optional dependency: torch
 
     d2 = (xs[None, None, None, :] - kp[..., 0, None, None]) ** 2 + (ys[None, None, :, None] - kp[..., 1, None, None]) ** 2
     t = torch.softmax(-d2.reshape(*kp.shape[:2], -1) / (2 * sigma**2), dim=-1)
@@ -331,7 +331,7 @@ def train(d: dict, a) -> tuple[object, dict, dict]:
     """AdamW for ``--steps`` steps (or until ``--budget-s``), cosine-decayed: heatmap cross-entropy + 0.5 x the L1 of
     the soft-argmax pixels / KP_SCALE on in-image keypoints, + ``--reg-weight`` x L1 on the normalized creases and
     ratios. With ``--augment --crop S``, ``d`` holds the native images and every batch is cropped afresh."""
-    import torch
+    import torch  # optional dependency: torch
 
     torch.manual_seed(a.seed)
     torch.set_num_threads(a.threads)
@@ -397,7 +397,7 @@ def train(d: dict, a) -> tuple[object, dict, dict]:
 
 
 def predict(model, d: dict, stats: dict):
-    import torch
+    import torch  # optional dependency: torch
 
     model.eval()
     uvs, regs = [], []
@@ -435,8 +435,6 @@ def predict_turned(model, d: dict, stats: dict, side: int, turns: int):
 def pnp_rotation_errors(uv: np.ndarray, d: dict, body_model: np.ndarray) -> np.ndarray:
     """Angle [deg] between the body rotation in the camera frame from cv2.solvePnP (predicted pixels of in-image
     keypoints, 3-D points = the training mean of keypoints/body) and the true one; NaN where PnP fails."""
-    import cv2
-
     out = np.full(len(uv), np.nan)
     for i in range(len(uv)):
         m = d["keypoints/visibility"][i] > 0
@@ -581,7 +579,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "pose_baseline.json"))
     a = ap.parse_args(argv)
     try:
-        import torch
+        import torch  # optional dependency: torch
     except ImportError:
         print("error: the benchmark needs torch: pip install torch (the CPU wheel is enough)", file=sys.stderr)
         return 2

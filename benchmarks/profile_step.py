@@ -17,8 +17,6 @@ Usage::
 
     python benchmarks/profile_step.py [--worlds 1 64] [--gait peristaltic omega inchworm] [--duration 1.0]
         [--out benchmarks/results/profile_step.json]
-    python benchmarks/profile_step.py --alternate REV --worlds 64 --gait peristaltic omega inchworm [--pairs 3]
-        [--repeats 3]  # the code at REV against this tree, alternated run by run
     python benchmarks/profile_step.py --parts --worlds 64 --gait omega  # a Newton step's parts, each alone
 
 Prints one table per world count and writes the JSON (rows + metadata).
@@ -36,6 +34,17 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
+import warp as wp
+
+from warpworm import quiet_warp
+from warpworm.kernels import implicit_euler as ie
+from warpworm.kernels import substep as sub
+from warpworm.kernels.band_cholesky import ALL_ROWS, band_cholesky_factor, band_cholesky_solve
+from warpworm.kernels.hinge_lanes import add_hinges, update_hinge_angles_lanes
+from warpworm.physics import gaits
+from warpworm.sim.model import Model
+from warpworm.sim.simulator import Simulator
+from warpworm.sim.solver import state_struct
 
 HERE = Path(__file__).resolve().parent
 
@@ -59,8 +68,6 @@ def launch_timers():
     the figure to read: a CPU kernel runs on the launching thread, and on a shared machine the wall time also counts
     the time other processes held the core (seen here: wall up to 3x the CPU time under a load of 3.7 on 2 cores).
     """
-    import warp as wp
-
     acc: dict = defaultdict(lambda: [0.0, 0.0, 0])
     orig_launch, orig_cmd = wp.launch, wp.Launch.launch
 
@@ -93,10 +100,6 @@ def _build(W: int, magnet_model: str, device: str, newton: int | None = None, ne
            gait: str = "peristaltic", sim_kw: dict | None = None):
     """The gait preset's model and simulator (default peristaltic); no CUDA graph (each launch must be seen to be timed: the
     profile's whole-run figures on CUDA are therefore without graph replay, see ``benchmarks/run.py`` for those)."""
-    from warpworm.physics import gaits
-    from warpworm.sim.model import Model
-    from warpworm.sim.simulator import Simulator
-
     model = Model.from_params(gaits.preset_params(gait, magnet_model=magnet_model), W, device)
     kw = {} if newton is None else {"newton": newton}
     kw.update(sim_kw or {})
@@ -117,8 +120,6 @@ def profile_run(W: int, *, duration: float, settle: float, skip: float = 1.0, ma
     transient stay out); ``us_*`` and ``share`` are CPU time of the launching thread on the CPU (what one dedicated
     core delivers), wall time on CUDA; the rates are per that time (``*_wall`` beside them: per wall second).
     """
-    import warp as wp
-
     model, sim = _build(W, magnet_model, device, gait=gait, sim_kw=sim_kw)
     state = sim.initial_state()
     sim.step(state, 1, epm=False)  # compile every kernel before anything is timed
@@ -133,8 +134,7 @@ def profile_run(W: int, *, duration: float, settle: float, skip: float = 1.0, ma
         sim.step(state, n_steps)
         wp.synchronize_device(model.device)
         wall, cpu = time.perf_counter() - t0, time.thread_time() - c0
-    sys.path.insert(0, str(HERE))
-    from bench_dynamics import mean_newton_steps  # one definition for the benchmarks
+    from bench_dynamics import mean_newton_steps  # one definition for the benchmarks (a sibling script)
 
     mean_newton = mean_newton_steps(sim, n_steps * sim.substeps)
     mean_factors = mean_newton_steps(sim, n_steps * sim.substeps, "factors")
@@ -173,13 +173,6 @@ PARTS = ("gradient", "gradient + Hessian", "hinges' gradient", "inertia + bars' 
 def _parts_kernel():
     """A kernel running part ``part`` of a Newton step ``reps`` times per world (:data:`PARTS`), with the substep's
     own functions, on the scratch of a simulator (``hess0`` / ``grad0``: an assembled band and right-hand side)."""
-    import warp as wp
-
-    from warpworm.kernels import implicit_euler as ie
-    from warpworm.kernels import substep as sub
-    from warpworm.kernels.hinge_lanes import add_hinges, update_hinge_angles_lanes
-    from warpworm.kernels.band_cholesky import ALL_ROWS, band_cholesky_factor, band_cholesky_solve
-
     @wp.kernel
     def parts(part: int, reps: int, m: sub.BarHingeModel, opt: sub.SubstepOptions,
               anchor_target: wp.array2d(dtype=wp.vec3), s: sub.BarHingeState, w: sub.NewtonScratch,
@@ -226,10 +219,6 @@ def _parts_kernel():
 def parts_cost(W: int, gait: str = "omega", at: float = 1.5, reps: int = 20, tries: int = 7) -> list[dict]:
     """µs of thread CPU per world and call of each of :data:`PARTS` on the ``gait`` preset's state ``at`` [s] into
     the gait (CPU; the least of ``tries`` launches of ``reps`` calls each, the parts interleaved)."""
-    import warp as wp
-
-    from warpworm.sim.solver import state_struct
-
     kernel = _parts_kernel()
     model, sim = _build(W, "analytic", "cpu", gait=gait)
     state = sim.initial_state()
@@ -279,8 +268,6 @@ def newton_cost(W: int, newtons=(2, 3, 4), device: str = "cpu", steps: int = 15)
 
 def launch_floor(device: str = "cpu", reps: int = 200) -> float:
     """Median wall time [µs] of launching a one-thread kernel that writes one float: the fixed cost of a launch."""
-    import warp as wp
-
     @wp.kernel
     def _noop(a: wp.array(dtype=float)):
         a[wp.tid()] = 1.0
@@ -299,113 +286,9 @@ def launch_floor(device: str = "cpu", reps: int = 200) -> float:
 
 
 def _table(rows: list[dict], cols: list[str]) -> str:
-    sys.path.insert(0, str(HERE))
-    from run import table
+    from run import table  # a sibling script
 
     return table([{c: r.get(c, "") for c in cols} for r in rows])
-
-
-ONE_RUN = r"""
-import json, sys, time
-import numpy as np
-from warpworm import quiet_warp
-quiet_warp()
-import warp as wp
-from warpworm.physics import gaits
-from warpworm.sim.model import Model
-from warpworm.sim.simulator import Simulator
-gait, W, kw = sys.argv[1], int(sys.argv[2]), json.loads(sys.argv[3])
-repeats = int(sys.argv[4]) if len(sys.argv) > 4 else 1
-model = Model.from_params(gaits.preset_params(gait, magnet_model="analytic"), W, "cpu")
-sim = Simulator(model, dt=gaits.DEFAULT_DT, substeps=gaits.DEFAULT_SUBSTEPS, **kw)
-st = sim.initial_state()
-sim.settle(st, 0.2)
-n = int(round(1.0 / sim.dt))
-sim.step(st, n)
-if repeats == 1:
-    sim.newton_stats(reset=True)
-    c0 = time.thread_time()
-    sim.step(st, n)
-    wp.synchronize()
-    cpu = time.thread_time() - c0
-else:
-    chunk = 25
-    snap = {k: a.numpy().copy() for k, a in vars(st).items() if isinstance(a, wp.array)}
-    best = np.full((n + chunk - 1) // chunk, np.inf)
-    for r in range(repeats):
-        for k, a in snap.items():
-            getattr(st, k).assign(a)
-        sim.newton_stats(reset=True)
-        for c in range(len(best)):
-            c0 = time.thread_time()
-            sim.step(st, min(chunk, n - c * chunk))
-            wp.synchronize()
-            best[c] = min(best[c], time.thread_time() - c0)
-    cpu = float(best.sum())
-ns = sim.newton_stats()
-x = st.positions.numpy().astype(np.float64)
-print(json.dumps({"rate": W * n * sim.dt / cpu, "steps": float(np.mean(ns["steps"])) / (n * sim.substeps),
-                  "factors": float(np.mean(ns["factors"])) / (n * sim.substeps),
-                  "unstable": int(st.unstable.numpy().astype(bool).sum()), "x_abs_sum": float(np.abs(x).sum())}))
-"""
-"""One timed gait run in a fresh process (argv: gait, W, Simulator kwargs as JSON, repeats): settle 0.2 s, the first
-cycle untimed, the second timed by the thread's CPU time; with repeats > 1 the second cycle is replayed that many
-times from the same state (bit for bit the same work) and each 25-step chunk's least CPU time is kept, which filters
-out most of what other load on a shared machine adds. Prints {rate (worm-s per CPU-s), steps and factors (Newton, per
-substep), unstable, x_abs_sum (Σ|x| at the end: equal on both sides when a change keeps the trajectories)}. Only API
-the code before also has, so that both sides of :func:`alternate` run it."""
-
-
-def source_tree(rev: str | None, into: Path) -> Path:
-    """The committed tree ``rev`` of this repository (None: the working tree's files as they are now, tracked and
-    untracked but not ignored) as an importable folder (``git archive`` or a copy; ``warpworm/kernels`` and
-    ``warpworm/render`` linked to the top-level folders they install from). A copy, so that the run neither depends
-    on where the package is installed from nor sees edits made to the tree while it runs."""
-    import shutil
-    import subprocess
-
-    into.mkdir(parents=True, exist_ok=True)
-    root = HERE.parent
-    if rev is None:
-        files = subprocess.run(["git", "-C", str(root), "ls-files", "-z", "--cached", "--others", "--exclude-standard"],
-                               check=True, capture_output=True).stdout.decode().split("\0")
-        for name in filter(None, files):
-            if (root / name).is_file():
-                (into / name).parent.mkdir(parents=True, exist_ok=True)
-                shutil.copy2(root / name, into / name)
-    else:
-        archive = subprocess.run(["git", "-C", str(root), "archive", rev], check=True, capture_output=True).stdout
-        subprocess.run(["tar", "-x", "-C", str(into)], input=archive, check=True)
-    for name in ("kernels", "render"):
-        (into / "warpworm" / name).symlink_to(Path("..") / name)
-    return into
-
-
-def alternate(before: str, gaits_: list[str], W: int, pairs: int, after_kw: dict, repeats: int = 1) -> list[dict]:
-    """Gait rate of the code at ``before`` (a git revision) and of this tree (with ``after_kw`` Simulator kwargs),
-    alternated run by run (before, after, before, ... per gait and pair), each run a fresh process: this shared
-    machine's speed drifts by 1.5× over hours, so only runs next to each other compare."""
-    import os
-    import subprocess
-    import tempfile
-
-    rows = []
-    with tempfile.TemporaryDirectory() as tmp:
-        trees = {"before": source_tree(before, Path(tmp) / "before"), "after": source_tree(None, Path(tmp) / "after")}
-        for pair in range(1, pairs + 1):
-            for gait in gaits_:
-                for side in ("before", "after"):
-                    env = dict(os.environ, PYTHONPATH=str(trees[side]))
-                    kw = after_kw if side == "after" else {}
-                    out = subprocess.run([sys.executable, "-c", ONE_RUN, gait, str(W), json.dumps(kw), str(repeats)],
-                                         env=env, cwd=tmp, check=True, capture_output=True, text=True).stdout
-                    r = dict(json.loads(out.strip().splitlines()[-1]), pair=pair, gait=gait, side=side)
-                    rows.append(r)
-                    print(f"pair {pair} {gait:12s} {side:6s} {r['rate']:6.1f} worm-s per CPU-s, {r['steps']:.3f} "
-                          f"Newton steps per substep ({r['factors']:.3f} factored), {r['unstable']} unstable, "
-                          f"sum |x| {r['x_abs_sum']:.14g}",
-                          flush=True)
-    return rows
 
 
 def main(argv=None) -> int:
@@ -424,23 +307,7 @@ def main(argv=None) -> int:
                     "solve, contacts, friction, projection, substep-end angles) timed alone on each --gait's state "
                     "1.5 s into the gait (first --worlds; CPU)")
     ap.add_argument("--out", default=str(HERE / "results" / "profile_step.json"), help="JSON path")
-    ap.add_argument("--alternate", metavar="REV", help="instead of the profile: the gait rate (second cycle, CPU "
-                    "time) of git revision REV and of this tree, alternated (one W: the first --worlds)")
-    ap.add_argument("--pairs", type=int, default=3, help="with --alternate: before/after pairs per gait (default 3)")
-    ap.add_argument("--repeats", type=int, default=1, help="with --alternate: replays of the timed cycle per run, the "
-                    "least CPU time of each 25-step chunk kept (default 1: one timed pass)")
     args = ap.parse_args(argv)
-    if args.alternate:
-        after_kw = {}
-        if args.repeats < 1:
-            ap.error(f"--repeats: expected >= 1, got {args.repeats}")
-        rows = alternate(args.alternate, args.gait, args.worlds[0], args.pairs, after_kw, args.repeats)
-        out = Path(args.out)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_text(json.dumps({"alternate": args.alternate, "after_kw": after_kw, "repeats": args.repeats,
-                                   "rows": rows}, indent=1))
-        print(f"wrote {out}")
-        return 0
     for w in args.worlds:
         if w < 1:
             ap.error(f"--worlds: expected counts >= 1, got {w}")
@@ -448,10 +315,8 @@ def main(argv=None) -> int:
         ap.error(f"--skip: expected >= 0 [s], got {args.skip}")
     if not args.duration > 0:
         ap.error(f"--duration: expected > 0 [s], got {args.duration}")
-    from warpworm import quiet_warp
 
     quiet_warp()
-    import warp as wp
 
     wp.init()
     if args.parts:

@@ -4,8 +4,8 @@ The matrix is kept as 3×3 vertex blocks: a world's lower block band is a row of
 ``mat[world, u, d]`` = A[u, u − d] for 0 ≤ d ≤ B (the diagonal blocks stored whole). The worm's vertices are
 numbered section by section along its axis, so a bar or crease couples vertices at most 6 apart (B = 6): a
 factorisation is ~V (B + 1)(B + 2) / 2 ≈ 1100 block products. Blocks, not scalars, because a Warp CPU thread pays a
-few ns per loop iteration whatever the body: 3×3 blocks in registers make the scalar band (n B² / 2 ≈ 2.3e4
-iterations, ~190 µs) about 10× faster. No atomics, no pivoting.
+few ns per loop iteration whatever the body, so 3×3 blocks in registers beat the scalar band's n B² / 2 ≈ 2.3e4
+iterations (docs/dynamics.md, "Notes moved from the code"). No atomics, no pivoting.
 
 After :func:`band_cholesky_factor` the diagonal slot holds the *inverse* of the diagonal factor block, L_uu⁻¹,
 which is what the solves and the off-diagonal blocks need.

@@ -1,5 +1,5 @@
 """Shared ``@wp.func`` helpers and constants of the dynamics kernels (:mod:`warpworm.kernels.substep`,
-:mod:`warpworm.kernels.magnet_pose`): per-world parameters, angle wrapping, hinge fold ranges, freezing a diverging
+:mod:`warpworm.kernels.magnet_pose`): angle wrapping, hinge fold ranges, freezing a diverging
 world, the dihedral angle of a hinge with its gradient, and vectors of :data:`LANES` float32 with the vec3 operations
 done lane by lane (:mod:`warpworm.kernels.hinge_lanes`, :mod:`warpworm.kernels.magnet_far_pair`).
 
@@ -17,6 +17,8 @@ LABEL_FLAT = wp.constant(ids.FLAT)
 LABEL_MOUNTAIN = wp.constant(ids.MOUNTAIN)
 LABEL_VALLEY = wp.constant(ids.VALLEY)
 WORLD_EXPLODED = wp.constant(ids.WORLD_EXPLODED)
+SHAPE_CUBOID = wp.constant(ids.SHAPE_CUBOID)
+SHAPE_CYLINDER = wp.constant(ids.SHAPE_CYLINDER)
 
 PI = wp.constant(3.14159265358979)
 TWO_PI = wp.constant(6.28318530717959)
@@ -31,15 +33,9 @@ TWO_PI = wp.constant(6.28318530717959)
 """)
 def on_gpu() -> bool:
     """True in a kernel's CUDA build, False in its CPU build (a preprocessor test, constant after inlining): lets a
-    kernel take its CPU-only path (the SIMD lanes of :mod:`.hinge_lanes`), whose CUDA build is of no use on a GPU (a
-    thread per world, no vector units) and took NVRTC over 11 minutes, while the CUDA build compiles the scalar code."""
+    kernel take its CPU-only path (the SIMD lanes of :mod:`.hinge_lanes`) on the CPU and its scalar code on a GPU, where
+    a thread per world has no vector units to fill (docs/dynamics.md, "Notes moved from the code")."""
     ...
-
-
-@wp.func
-def pw(p: wp.array(dtype=float), world: int) -> float:
-    """Per-world scalar: one shared value or one per world."""
-    return p[world % p.shape[0]]
 
 
 @wp.func

@@ -142,8 +142,8 @@ def add_hinge_lanes(world: int, h0: int, c: WorldCoefficients, m: BarHingeModel,
 @wp.func
 def whole_lanes(nh: int) -> int:
     """How many of ``nh`` hinges go in whole batches of lanes: all but the last nh mod LANES on the CPU, none in a
-    CUDA build (a thread per world has no vector units to fill, and the lanes' CUDA build took NVRTC over 11
-    minutes; with the count a constant 0 there, the compiler drops their code)."""
+    CUDA build (a thread per world has no vector units to fill; with the count a constant 0 there, the compiler drops
+    the lanes' code: docs/dynamics.md, "Notes moved from the code")."""
     if on_gpu():
         return 0
     return (nh / LANES) * LANES

@@ -24,18 +24,10 @@ from __future__ import annotations
 
 import warp as wp
 
-from .common import LANES, lanes, lanes_dot, lanes_sqrt
-from .magnet_fields import (
-    CYL_PI,
-    F64_0,
-    F64_1,
-    MU0_OVER_4PI,
-    SHAPE_CUBOID,
-    SHAPE_CYLINDER,
-    box_gap,
-    dipole_pair_force_field,
-    panel_count,
-)
+from .common import LANES, SHAPE_CUBOID, SHAPE_CYLINDER, lanes, lanes_dot, lanes_sqrt
+from .magnet_charges import box_gap, panel_count
+from .magnet_closed_form import F64_0, F64_1
+from .magnet_dipoles import CYL_PI, MU0_OVER_4PI, dipole_pair_force_field
 
 NEAR_LIMIT = wp.constant(4.0)
 """Below this many circumscribing radii (of the larger magnet) the closed form is used."""
@@ -217,7 +209,7 @@ def far_cylinder_pair_wrench(
 @wp.func
 def ring_dipoles_on_lanes(px: lanes, py: lanes, pz: lanes, mx: lanes, my: lanes, mz: lanes, src: RingPoints,
                           nphi: int, ms0: wp.vec3, ms1: wp.vec3):
-    """:func:`~.magnet_fields.dipole_pair_force_field` of the source's 2 ``nphi`` ring points (``src``, z = 0; moment
+    """:func:`~.magnet_dipoles.dipole_pair_force_field` of the source's 2 ``nphi`` ring points (``src``, z = 0; moment
     ``ms0`` on the first ring, ``ms1`` on the second) on the target dipoles of the lanes (positions p, moments m by
     coordinate), summed over the source points in their order: (force x, y, z; field x, y, z) by coordinate, each
     lane the scalar function's operations in its order."""
@@ -371,7 +363,7 @@ def cuboid_faces_in_ring_field(
     """Force [N] on a uniformly magnetized cuboid and torque [N·m] about its centre, in its own frame, in the field
     of a cylinder's ring rule: F = ∮ σ B dA over the cuboid's faces (σ = M·n, M = ``c_m`` / volume), Gauss–Legendre
     of ``order`` on panels no larger than their distance to the cylinder's centre (the closed form's
-    :func:`~.magnet_fields.panel_count`).
+    :func:`~.magnet_charges.panel_count`).
 
     Args:
         c_size, c_m: the cuboid's extents [m] and moment [A·m²] (its frame).

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from .common import PI, TWO_PI, pw
+from .common import PI, TWO_PI
 
 # forward only (nothing differentiates these kernels): the adjoints doubled-to-tripled the cold compile (docs/dynamics.md)
 wp.set_module_options({"enable_backward": False})
@@ -115,15 +115,25 @@ def epm_sine_pose(
     """
     world = wp.tid()
     t = float(step_count[world]) * dt_sub
-    s = t / pw(path.period, world) + pw(path.phase, world)
+    period = path.period[world % path.period.shape[0]]
+    phase = path.phase[world % path.phase.shape[0]]
+    rewind = path.rewind[world % path.rewind.shape[0]]
+    start_x = path.start_x[world % path.start_x.shape[0]]
+    start_y = path.start_y[world % path.start_y.shape[0]]
+    direction = path.direction[world % path.direction.shape[0]]
+    wavelength = path.wavelength[world % path.wavelength.shape[0]]
+    depth = path.depth[world % path.depth.shape[0]]
+    amplitude = path.amplitude[world % path.amplitude.shape[0]]
+    theta = path.theta[world % path.theta.shape[0]]
+    s = t / period + phase
     s_adv = s
-    if pw(path.rewind, world) != 0.0:
+    if rewind != 0.0:
         s_adv = rewound_advance(s)
-    px = pw(path.start_x, world) + pw(path.direction, world) * pw(path.wavelength, world) * s_adv
-    pz = -(pw(path.depth, world) + pw(path.amplitude, world) * 0.5 * (1.0 + wp.cos(TWO_PI * s)))
-    magnet_pos[world, 0] = wp.vec3(px, pw(path.start_y, world), pz)
+    px = start_x + direction * wavelength * s_adv
+    pz = -(depth + amplitude * 0.5 * (1.0 + wp.cos(TWO_PI * s)))
+    magnet_pos[world, 0] = wp.vec3(px, start_y, pz)
     # rotation about +y by (pi/2 - theta) takes +z to (cos theta, 0, sin theta)
-    magnet_rot[world, 0] = wp.quat_from_axis_angle(wp.vec3(0.0, 1.0, 0.0), 0.5 * PI - pw(path.theta, world))
+    magnet_rot[world, 0] = wp.quat_from_axis_angle(wp.vec3(0.0, 1.0, 0.0), 0.5 * PI - theta)
 
 
 @wp.kernel

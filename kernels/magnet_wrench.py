@@ -1,7 +1,8 @@
 """Batched magnet kernels: net force and torque on every magnet of every world, pair wrenches, field maps.
 
-The pair physics lives in :mod:`warpworm.kernels.magnet_fields`; this module only places magnets in the world
-(rotating into the source's frame, where the closed forms are defined) and sums over sources.
+The pair physics lives in :mod:`.magnet_dipoles`, :mod:`.magnet_closed_form` and :mod:`.magnet_charges`; this
+module only places magnets in the world (rotating into the source's frame, where the closed forms are defined) and
+sums over sources.
 
 Conventions: float32 arrays, SI units; sizes are cuboid extents (x, y, z) or (d, d, h) for a cylinder (axis +z of
 the magnet); moments [A·m²] are given in the magnet's own frame; rotations are ``wp.quat`` (x, y, z, w) mapping the
@@ -14,23 +15,18 @@ import warp as wp
 
 from warpworm import ids
 
+from .common import SHAPE_CYLINDER
+from .magnet_charges import analytic_pair_wrench
+from .magnet_closed_form import F64_0, magnet_field_local
+from .magnet_dipoles import dipoles_field_local, dipoles_pair_wrench
 from .magnet_far_pair import far_pair_wrench
-from .magnet_fields import (
-    F64_0,
-    SHAPE_CYLINDER,
-    analytic_pair_wrench,
-    dipoles_field_local,
-    dipoles_pair_wrench,
-    magnet_field_local,
-)
-
 
 
 def _cpu_flags_without_slp_cap(flags: str | None) -> str | None:
     """Warp's CPU compiler flags less its cap on the SLP vectorizer's recursion depth (``-slp-recursion-max-depth=4``;
     LLVM's default is 12): only without it do the ring rule's lanes (:func:`.magnet_far_pair.ring_dipoles_on_lanes`)
-    compile to whole SIMD expressions (3 IPM pairs per world 7.1 -> 2.7 µs, against 4.9 µs with the cap; the same
-    operations, so the same bits). ``None`` (LLVM's defaults already) stays None."""
+    compile to whole SIMD expressions (the same operations, so the same bits; the timings: docs/dynamics.md, "Notes
+    moved from the code"). ``None`` (LLVM's defaults already) stays None."""
     if flags is None:
         return None
     return " ".join(f for f in flags.split() if not f.startswith("-mllvm=-slp-recursion-max-depth"))

@@ -17,7 +17,7 @@ import warp as wp
 from warpworm import ids
 
 from .band_cholesky import ALL_ROWS, band_add_block, band_add_gauss_newton3, band_add_gauss_newton4
-from .common import (hinge_angle_at_substep_end, dihedral_angle_gradient_and_normals, fold_range, pw,
+from .common import (hinge_angle_at_substep_end, dihedral_angle_gradient_and_normals, fold_range,
                      wing_contact_of_normal, wrap_angle)
 
 CONTACT_FREE = wp.constant(0)
@@ -144,16 +144,16 @@ def world_coefficients(m: BarHingeModel, world: int, dt: float) -> WorldCoeffici
     c.ak_row = world % m.anchor_stiffness.shape[0]
     c.ss_row = world % m.bar_stop_strain.shape[0]
     c.sk_row = world % m.bar_stop_stiffness.shape[0]
-    c.gravity = wp.vec3(0.0, 0.0, -pw(m.gravity, world))
-    c.damp = 1.0 / (1.0 + pw(m.damping, world) * dt)
-    c.hinge_stiffness = pw(m.hinge_stiffness, world)
-    c.hinge_damping = pw(m.hinge_damping, world)
-    c.fold_limit_stiffness = pw(m.fold_limit_stiffness, world)
-    beta = pw(m.floor_incline, world)
+    c.gravity = wp.vec3(0.0, 0.0, -m.gravity[world % m.gravity.shape[0]])
+    c.damp = 1.0 / (1.0 + m.damping[world % m.damping.shape[0]] * dt)
+    c.hinge_stiffness = m.hinge_stiffness[world % m.hinge_stiffness.shape[0]]
+    c.hinge_damping = m.hinge_damping[world % m.hinge_damping.shape[0]]
+    c.fold_limit_stiffness = m.fold_limit_stiffness[world % m.fold_limit_stiffness.shape[0]]
+    beta = m.floor_incline[world % m.floor_incline.shape[0]]
     c.floor_n = wp.vec3(-wp.sin(beta), 0.0, wp.cos(beta))
-    c.mu_static = pw(m.mu_static, world)
-    c.mu_kinetic = pw(m.mu_kinetic, world)
-    c.friction_backward_ratio = pw(m.friction_backward_ratio, world)
+    c.mu_static = m.mu_static[world % m.mu_static.shape[0]]
+    c.mu_kinetic = m.mu_kinetic[world % m.mu_kinetic.shape[0]]
+    c.friction_backward_ratio = m.friction_backward_ratio[world % m.friction_backward_ratio.shape[0]]
     c.floor_fwd = wp.vec3(wp.cos(beta), 0.0, wp.sin(beta))
     c.dt = dt
     c.inv_dt = 1.0 / dt

@@ -12,7 +12,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from warpworm.data.randomize import seed_uniforms
+from warpworm.rng import seed_uniforms
 
 
 @dataclass

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from warpworm.data.randomize import seed_uniforms
+from warpworm.rng import seed_uniforms
 from warpworm.transforms import axis_angle_to_matrix
 
 

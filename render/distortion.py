@@ -142,7 +142,7 @@ def lens_covers_image(dist: np.ndarray, K: np.ndarray, width: int, height: int) 
 
 
 def _draw(render_cfg, seeds: np.ndarray, stream: int) -> np.ndarray:
-    from warpworm.data.randomize import seed_uniforms
+    from warpworm.rng import seed_uniforms
 
     u = seed_uniforms(seeds, stream, 5)
     r = render_cfg

@@ -56,7 +56,7 @@ def mitsuba():
 def choose_pathtraced(seeds: np.ndarray, fraction: float) -> np.ndarray:
     """Which samples are path-traced: (N,) bool, ``uniform(seed) < fraction``, one draw per sample from its own
     per-sample seed (so the choice does not depend on batches, shards or workers)."""
-    from warpworm.data.randomize import seed_uniforms
+    from warpworm.rng import seed_uniforms
 
     seeds = np.asarray(seeds, dtype=np.int64).reshape(-1)
     if fraction <= 0.0:

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from warpworm.data import randomize as rnd
+from warpworm import rng as rnd
 from warpworm.render.scene import DEFAULT_LAMP_POS, DEFAULT_LAMP_SIZE, Appearance
 
 COOL = np.array([0.90, 0.95, 1.00])

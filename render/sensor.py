@@ -211,7 +211,7 @@ def exposure_gains(render_cfg, seeds) -> tuple[np.ndarray, dict] | None:
     wb_lo, wb_hi = render_cfg.white_balance
     if ev_lo == ev_hi == 0.0 and wb_lo == wb_hi == 1.0:
         return None
-    from warpworm.data.randomize import seed_uniforms
+    from warpworm.rng import seed_uniforms
 
     u = seed_uniforms(np.asarray(seeds).reshape(-1), 0xE7905, 3)
     ev = ev_lo + (ev_hi - ev_lo) * u[:, 0]

@@ -74,7 +74,7 @@ def test_bop_round_trip(data_dir, tmp_path):
 def test_usd_stage_is_compliant_and_points_round_trip(data_dir, tmp_path):
     from pxr import Usd, UsdGeom
 
-    from warpworm.data.usd_export import compliance_errors, read_points
+    from warpworm.data.export_usd import compliance_errors, read_points
 
     out = tmp_path / "worm.usda"
     r = subprocess.run([sys.executable, "-m", "warpworm", "export-usd", str(data_dir), "--out", str(out), "--worlds",
@@ -106,7 +106,7 @@ def test_usd_stage_is_compliant_and_points_round_trip(data_dir, tmp_path):
 def test_usd_from_trajectory_file_and_checker_catches_errors(tmp_path):
     from pxr import Usd, UsdGeom
 
-    from warpworm.data.usd_export import compliance_errors, export_usd, read_points
+    from warpworm.data.export_usd import compliance_errors, export_usd, read_points
 
     rng = np.random.default_rng(0)
     F, W, V = 5, 2, 6

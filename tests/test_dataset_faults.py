@@ -97,14 +97,14 @@ def test_shard_plan_gives_every_worker_work_and_keeps_the_samples(tmp_path, ref)
 
 # --- 4. disk full, read-only -----------------------------------------------------------------------------------------
 def _inject_write_error(monkeypatch, shard: int, err: int):
-    real = ds._FailSafeFile._raw_write
+    real = ds.FailSafeFile._raw_write
 
     def raw_write(self, b):
         if f"shard-{shard:05d}" in self.path.name and self.raw.tell() > 2000:
             raise OSError(err, os.strerror(err))
         return real(self, b)
 
-    monkeypatch.setattr(ds._FailSafeFile, "_raw_write", raw_write)
+    monkeypatch.setattr(ds.FailSafeFile, "_raw_write", raw_write)
 
 
 def _only_final_files(d):
@@ -134,14 +134,14 @@ def test_write_error_mid_shard_one_line_intact_shards_and_resume(tmp_path, monke
 
 def test_read_only_folder_mid_job_permission_error(tmp_path, monkeypatch):
     out = tmp_path / "d"
-    real_init = ds._FailSafeFile.__init__
+    real_init = ds.FailSafeFile.__init__
 
     def init(self, path):
         if "shard-00001" in Path(path).name:
             raise PermissionError(errno.EACCES, "Permission denied", str(path))
         real_init(self, path)
 
-    monkeypatch.setattr(ds._FailSafeFile, "__init__", init)
+    monkeypatch.setattr(ds.FailSafeFile, "__init__", init)
     with pytest.raises(ds.DatasetWriteError, match=r"shard-00001\.h5.*Permission denied.*writable.*--resume"):
         run(tiny(), out)
     assert _only_final_files(out) == ["manifest.json", "shard-00000.h5"]

@@ -8,11 +8,14 @@ whatever they measure (the gait presets are still being tuned).
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from warpworm.analysis import experiments as ex
+from warpworm.physics import gaits
+from warpworm.physics.params import WormParams
 
 
 def test_force_distance_analytic_equals_table():
@@ -51,7 +54,7 @@ def test_flexure_anchor_forces_balance_weight_and_grow_with_deflection():
     from warpworm.sim.model import Model
 
     # the weight from the masses' definitions (sheet density × trimesh's area, the IPMs' ρ π r² h), not the model's
-    p = ex.replace(ex.WormParams(), **ex.NO_MAGNETS)
+    p = replace(WormParams(), **ex.NO_MAGNETS)
     model = Model.from_params(p, 1, "cpu")
     area = trimesh.Trimesh(model.rest_positions_host[0], model.pattern.triangles, process=False).area
     ipm = p.magnet_mass_density * np.pi * (p.ipm_diameter / 2) ** 2 * p.ipm_thickness
@@ -211,7 +214,7 @@ def test_set_overrides_name_the_item_and_reach_the_worlds(tmp_path, capsys):
         assert main(["experiment", "force-plate", "--set", bad, "--out", str(tmp_path / "x")]) == 2
         assert bad in capsys.readouterr().err
     assert not (tmp_path / "x").exists()
-    model, _ = ex._gait_model(["peristaltic"], base=ex.replace(ex.WormParams(), closest_approach_scale=1.1))
-    model0, _ = ex._gait_model(["peristaltic"])
+    model, _ = ex.gait_model(["peristaltic"], base=replace(WormParams(), closest_approach_scale=1.1))
+    model0, _ = ex.gait_model(["peristaltic"])
     depth = model.default_path.depth - model0.default_path.depth
-    np.testing.assert_allclose(depth, 0.1 * ex.gaits.GAIT_PRESETS["peristaltic"]["closest_approach"], rtol=1e-9)
+    np.testing.assert_allclose(depth, 0.1 * gaits.GAIT_PRESETS["peristaltic"]["closest_approach"], rtol=1e-9)

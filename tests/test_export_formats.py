@@ -327,7 +327,7 @@ def test_ultralytics_loads_the_yolo_export_and_trains(data_dir, tmp_path, monkey
 
 
 def test_simulate_trajectory_to_usd(tmp_path):
-    from warpworm.data.usd_export import read_points
+    from warpworm.data.export_usd import read_points
 
     r = _warpworm("simulate", "--cycles", "1", "--settle", "0.02", "--magnet-model", "analytic", "--fps", "10",
                   "--out", tmp_path / "sim")

@@ -72,7 +72,7 @@ def test_panel_contact_holds_the_wing_that_used_to_collapse():
     from 2 % of the hinge length) the same 0.48 s run stays live, and no wing goes below 1 % (measured: 1.76 %)."""
     from warpworm.analysis import experiments
 
-    model, _ = experiments._gait_model(["inchworm"], anchors=section_vertices(6, 0), anchor_stiffness=1e4, base=None,
+    model, _ = experiments.gait_model(["inchworm"], anchors=section_vertices(6, 0), anchor_stiffness=1e4, base=None,
                                        device="cpu")
     hinges = model.pattern.hinges
     assert wing_altitude_ratio(hinges, model.rest_positions_host[0]).min() > 0.17

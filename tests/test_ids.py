@@ -8,7 +8,7 @@ from warpworm.physics import crease, magnets, params
 from warpworm.data import dataset, export_bop
 from warpworm import ids
 from warpworm.sim import model
-from warpworm.kernels import common, magnet_fields, magnet_wrench
+from warpworm.kernels import common, magnet_wrench
 from warpworm.render import raster_kernels, scene
 
 
@@ -33,8 +33,8 @@ def test_dataset_files_spell_the_ids_as_schema_version_1_always_did():
 
 
 def test_magnet_and_crease_ids_are_one_table():
-    assert model.SHAPE_CUBOID == magnets.SHAPE_CUBOID == magnet_fields.SHAPE_CUBOID == ids.SHAPE_CUBOID
-    assert model.SHAPE_CYLINDER == magnets.SHAPE_CYLINDER == magnet_fields.SHAPE_CYLINDER == ids.SHAPE_CYLINDER
+    assert model.SHAPE_CUBOID == magnets.SHAPE_CUBOID == common.SHAPE_CUBOID == ids.SHAPE_CUBOID
+    assert model.SHAPE_CYLINDER == magnets.SHAPE_CYLINDER == common.SHAPE_CYLINDER == ids.SHAPE_CYLINDER
     assert params.MAGNET_MODELS == ids.MAGNET_MODELS
     assert magnets.MODELS == {"dipoles": magnet_wrench.MODEL_DIPOLES, "analytic": magnet_wrench.MODEL_ANALYTIC}
     assert (crease.FLAT, crease.MOUNTAIN, crease.VALLEY) == (common.LABEL_FLAT, common.LABEL_MOUNTAIN,

@@ -32,7 +32,7 @@ def test_sigterm_during_an_h5py_write_callback_is_a_clean_stop(tmp_path, monkeyp
     kill landing in a shard's flush does): the writer raises Interrupted after the write, where before the stop came
     back out of h5py as an error (measured without the hold: SystemError from the file object's flush)."""
     calls = {"n": 0}
-    real = ds._FailSafeFile._raw_write
+    real = ds.FailSafeFile._raw_write
 
     def write_and_get_killed(self, b):
         calls["n"] += 1
@@ -40,7 +40,7 @@ def test_sigterm_during_an_h5py_write_callback_is_a_clean_stop(tmp_path, monkeyp
             os.kill(os.getpid(), signal.SIGTERM)
         return real(self, b)
 
-    monkeypatch.setattr(ds._FailSafeFile, "_raw_write", write_and_get_killed)
+    monkeypatch.setattr(ds.FailSafeFile, "_raw_write", write_and_get_killed)
     with SignalGuard():
         with pytest.raises(Interrupted):
             writer = ds.ShardWriter(tmp_path, 0, 0, 4, {"note": "test"})

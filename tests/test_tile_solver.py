@@ -96,7 +96,7 @@ def anchored():
 
 def _run_substeps(sim, band, tile, tiles, n: int) -> None:
     sim.run_substeps(band, n)
-    tiles.step(tile, sim.control, n)
+    tiles.step(tile, n, sim.control)
 
 
 def _gait_steps(sim, band, tile, tiles, steps: int) -> None:
@@ -105,7 +105,7 @@ def _gait_steps(sim, band, tile, tiles, steps: int) -> None:
         sim.update_magnets(band)
         sim.run_substeps(band, sim.substeps)
         sim.update_magnets(tile)
-        tiles.step(tile, sim.control, sim.substeps)
+        tiles.step(tile, sim.substeps, sim.control)
 
 
 def gait():
@@ -152,7 +152,7 @@ def test_bad_arguments_name_the_key():
     with pytest.raises(ValueError, match="block_dim"):
         TileSolver(model, sim.settings, block_dim=0)
     with pytest.raises(ValueError, match="num_substeps"):
-        TileSolver(model, sim.settings).step(sim.initial_state(), sim.control, 0)
+        TileSolver(model, sim.settings).step(sim.initial_state(), 0, sim.control)
 
 
 def _assert_identical(band, tile) -> None:
@@ -274,7 +274,7 @@ def test_cooperative_threads_per_world_match_the_band_path(factorization, block_
     wp.config.enable_cpu_blocks = True
     try:
         tiles = TileSolver(sim.model, sim.settings, factorization, block_dim=block_dim)
-        tiles.step(tile, sim.control, 30)
+        tiles.step(tile, 30, sim.control)
     finally:
         wp.config.enable_cpu_blocks = old
     sim.run_substeps(band, 30)

@@ -21,7 +21,7 @@ def quiet_warp() -> None:
     ``fprintf``s the warning to fd 2), so file descriptor 2 is redirected to a temporary file for the duration of
     ``wp.init()`` only, and everything else it printed is written back to stderr. On a machine without a driver the
     only device is the CPU; a config asking for ``cuda:N`` is then refused with the available devices
-    (``config._check_device``), and the dataset pipeline prints one line naming the device it runs on, so nothing
+    (``warpworm.data.config.sections._check_device``), and the dataset pipeline prints one line naming the device it runs on, so nothing
     is lost by dropping the warning. Recorded in :data:`cuda_driver_missing`.
     """
     import warp as wp

@@ -11,8 +11,9 @@ from __future__ import annotations
 import numpy as np
 
 from warpworm.physics import crease
-
-from warpworm.physics.params import EPM as EPM_SLOT, IPM_CENTRE as IPM_CENTRE_SLOT, IPM_HEAD as IPM_HEAD_SLOT
+from warpworm.physics.params import EPM as EPM_SLOT
+from warpworm.physics.params import IPM_CENTRE as IPM_CENTRE_SLOT
+from warpworm.physics.params import IPM_HEAD as IPM_HEAD_SLOT
 
 
 def segment_ratios(pattern: crease.CreasePattern, positions: np.ndarray) -> np.ndarray:

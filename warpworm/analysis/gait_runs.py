@@ -8,16 +8,20 @@ import time
 
 import numpy as np
 
+from warpworm.analysis.gait_metrics import gait_metrics
+from warpworm.analysis.world_split import concat, run_shares
+from warpworm.data import sampling
+from warpworm.data.config import load_config
+from warpworm.physics import gaits
 from warpworm.physics.params import slice_worlds
+from warpworm.sim.model import Model
+from warpworm.sim.simulator import Simulator
 
 
 def randomized_params(config: str, gait: str, backward: bool, magnet_model: str, num_worlds: int, seed: int):
     """World w's parameters as trajectory w of a dataset job of ``config`` with master seed ``seed`` draws them
     (:func:`warpworm.data.sampling.randomized_params`: the config's distributions, the counter-based generator), with the
     gait, direction and magnet model fixed to the command's."""
-    from warpworm.data import sampling
-    from warpworm.data.config import load_config
-
     cfg = load_config(config, [f"randomize.worm.gait={gait}", f"randomize.worm.backward={str(bool(backward)).lower()}",
                                f"randomize.worm.magnet_model={magnet_model}"])
     return sampling.randomized_params(cfg, num_worlds, seed)
@@ -37,11 +41,6 @@ def run_gait(params, num_worlds: int, cycles: float, *, device="cpu", dt=None, s
     Returns a dict: displacement_m (W,), unstable (W,), sim_time_s, wall_time_s, metrics (per-world gait measures,
     :func:`warpworm.analysis.gait_metrics.gait_metrics`; None without ``fps``), frames (stacked snapshots of the first
     ``save_worlds`` worlds, or None), model, sim."""
-    from warpworm.physics import gaits
-    from warpworm.analysis.gait_metrics import gait_metrics
-    from warpworm.sim.model import Model
-    from warpworm.sim.simulator import Simulator
-
     dt = gaits.DEFAULT_DT if dt is None else dt
     substeps = gaits.DEFAULT_SUBSTEPS if substeps is None else substeps
     t_wall = time.perf_counter()
@@ -93,8 +92,6 @@ def run_gait_split(params, num_worlds: int, cycles: float, *, workers: int | Non
     contiguous share with its own Model and Simulator (:func:`warpworm.analysis.world_split.run_shares`); worlds never
     interact, so every per-world result equals one batch's bit for bit. The trajectory frames are those of the first
     ``save_worlds`` worlds, gathered from the shares that hold them; ``model`` and ``sim`` are the first share's."""
-    from warpworm.analysis.world_split import concat, run_shares
-
     t0 = time.perf_counter()
     save = kw.pop("save_worlds", 4)
 

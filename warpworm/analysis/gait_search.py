@@ -10,10 +10,14 @@ commanded direction.
 
 from __future__ import annotations
 
+import csv
 import itertools
+import warnings
 from dataclasses import replace
 
 import numpy as np
+
+from warpworm.analysis.gait_runs import run_gait_split
 
 GRID_KEYS = {"w": "wavelength", "a": "amplitude", "h": "closest_approach"}
 """Short names of the searchable path parameters -> WormParams fields."""
@@ -86,7 +90,6 @@ def search_gait(params, grid: dict[str, np.ndarray], cycles: int = 3, *, workers
         raise ValueError(f"cycles: {cycles}; expected at least 1 whole EPM cycle")
     pts = grid_points(grid)
     N = len(next(iter(pts.values())))
-    from warpworm.analysis.gait_runs import run_gait_split
 
     r = run_gait_split(replace(params, **pts), N, cycles, workers=workers, dt=dt, substeps=substeps, settle=settle,
                        fps=fps, save_worlds=0)
@@ -109,15 +112,11 @@ def search_gait(params, grid: dict[str, np.ndarray], cycles: int = 3, *, workers
 
 def write_csv(path, result: dict) -> None:
     """One row per grid point: its fields, distance per cycle, validity and the scalar gait metrics."""
-    import csv
-
     pts, m = result["points"], result["metrics"]
     cols = list(pts) + ["per_cycle_m", "valid"]
     scal = [k for k, v in m.items() if np.asarray(v).ndim == 1]
     ratio = [f"ratio_min_{i}" for i in range(4)]
     with np.errstate(all="ignore"):
-        import warnings
-
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN rows: no contraction in any cycle
             hold = np.nanmax(m["end_hold_ratio"], axis=1)
@@ -133,7 +132,7 @@ def write_csv(path, result: dict) -> None:
 
 def write_heatmap(path, result: dict, x_key: str = "wavelength", y_key: str = "closest_approach") -> None:
     """Distance per cycle over (x_key, y_key) at the best point's other fields (grey: unstable or crumpled)."""
-    import cv2
+    import cv2  # start-up time: OpenCV loads on first use
 
     pts, per, valid = result["points"], result["per_cycle_m"], result["valid"]
     if x_key not in pts or y_key not in pts:

@@ -28,6 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
+from warpworm.analysis import experiments as ex
+
 COLUMNS = ("displacement_m", "force_n")
 TESTS = ("compression", "flexure")
 
@@ -152,8 +154,6 @@ def simulate_curves(test: str, hinge_stiffness, displacement, *, base=None, max_
 
     Returns: ``force (W, N)`` [N] at ``displacement``, and ``result``: the experiment's own result dict.
     """
-    from warpworm.analysis import experiments as ex
-
     if test not in TESTS:
         raise ValueError(f"test: expected one of {TESTS}, got {test!r}")
     d = np.asarray(displacement, np.float64).reshape(-1)

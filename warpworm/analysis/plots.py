@@ -15,11 +15,11 @@ GAIT_COLORS = {"peristaltic": "tab:blue", "omega": "tab:orange", "inchworm": "ta
 
 def _plt():
     try:
-        import matplotlib
+        import matplotlib  # optional dependency: matplotlib (the plots extra)
     except ImportError as exc:  # pragma: no cover - depends on the environment
         raise RuntimeError("plots need matplotlib: install the 'plots' extra (pip install -e '.[plots]')") from exc
     matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # optional dependency: matplotlib (the plots extra)
 
     return plt
 
@@ -28,7 +28,7 @@ def _save(fig, path) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110, bbox_inches="tight")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # optional dependency: matplotlib (the plots extra)
 
     plt.close(fig)
     return path
@@ -121,8 +121,8 @@ def plot_force_plate(r: dict, path) -> Path:
 
 def plot_strain(r: dict, path) -> Path:
     plt = _plt()
-    from matplotlib.collections import LineCollection
-    from matplotlib.colors import LinearSegmentedColormap, Normalize
+    from matplotlib.collections import LineCollection  # optional dependency: matplotlib (the plots extra)
+    from matplotlib.colors import LinearSegmentedColormap, Normalize  # optional: matplotlib
 
     cmap = LinearSegmentedColormap.from_list("blue_red", ["#1f3fff", "#ff1f1f"])
     W = len(r["gaits"])

@@ -4,8 +4,8 @@ Worlds never interact, so a batch of W worlds can run as a few batches of contig
 :class:`~warpworm.sim.model.Model` and :class:`~warpworm.sim.simulator.Simulator`, and every per-world result is the
 one-batch result bit for bit (tests/test_threads_split.py). Threads, not processes: Warp's CPU kernels run on the
 launching thread and release the GIL while they run (a ctypes call), so two threads keep two cores busy, and nothing
-is paid per share to start (a spawned process paid ~1-1.5 s of Python, ``import warp`` and kernel loading, per batch:
-that is what made a short job on 2 cores 1.1x one core on a busy machine; benchmarks/bench_threads.py).
+is paid per share to start (a process per share pays Python, ``import warp`` and kernel loading per batch;
+docs/dynamics.md, "One job on every core", has the measurements and ``benchmarks/bench_threads.py`` the timing).
 
 Two rules make the threads safe with Warp 1.19: the kernel modules are loaded once before the threads start (Warp
 loads a module on its first launch, without a lock: two threads could load it twice), and the shares hold the
@@ -16,8 +16,7 @@ bit, tests/test_step_graph.py) and run at once but for their captures.
 
 NumPy's OpenBLAS runs one thread inside a split, whatever the worker count (:func:`one_blas_thread`): its rounding
 depends on its thread count, so a per-world result computed with BLAS would otherwise depend on the split, and a
-two-thread OpenBLAS spin-waits on small solves (compression's 192 linear predictions: 5-11 CPU-s at 2 BLAS threads
-against 1.1 at one on this 2-core machine). Host work per world (e.g. compression's NumPy prediction) belongs in the
+two-thread OpenBLAS spin-waits on small solves (docs/dynamics.md, "One job on every core"). Host work per world (e.g. compression's NumPy prediction) belongs in the
 share's own function, after its simulation: no third thread competes with the shares for two cores, and a share's
 host work overlaps the other share's replays (docs/dynamics.md, "One job on every core").
 
@@ -36,7 +35,11 @@ from typing import Callable
 
 import numpy as np
 
+from warpworm import quiet_warp
+from warpworm.physics.params import WormParams
 from warpworm.sim import capture_gate
+from warpworm.sim.model import Model
+from warpworm.sim.simulator import Simulator
 
 _local = threading.local()
 _blas = {"lock": threading.Lock(), "users": 0, "saved": None, "lib": False}
@@ -71,7 +74,7 @@ def load_kernels(device="cpu") -> None:
     """Load the kernel modules a simulation uses on ``device`` (from Warp's cache; compiled when cold), by one step and
     one snapshot of a one-world batch in this thread: exactly the modules the shares will launch, none they will not
     (the tile solver's, on a cold cache, would cost a compile for nothing). Once per device and process: a loaded
-    module stays loaded, and the one-world run cost a short job ~10 ms of its serial part each time."""
+    module stays loaded, so the one-world run need not be repeated."""
     with _loaded["lock"]:
         if str(device) in _loaded["devices"]:
             return
@@ -80,11 +83,6 @@ def load_kernels(device="cpu") -> None:
 
 
 def _load_kernels(device) -> None:
-    from warpworm import quiet_warp
-    from warpworm.physics.params import WormParams
-    from warpworm.sim.model import Model
-    from warpworm.sim.simulator import Simulator
-
     quiet_warp()
     sim = Simulator(Model.from_params(WormParams(), 1, device), dt=0.004, substeps=2, use_graph=False)
     state = sim.initial_state()

@@ -37,7 +37,7 @@ def json_schema() -> dict:
 
 
 def _forms(spec) -> tuple[str, dict]:
-    """(a name, the JSON Schema) of the YAML forms a parameter of ``spec`` (a warpworm.data.config.ParamSpec) may take,
+    """(a name, the JSON Schema) of the YAML forms a parameter of ``spec`` (a warpworm.physics.param_specs.ParamSpec) may take,
     as warpworm.data.randomize.parse_distribution reads them and warpworm.data.config's _check_spec accepts them."""
     def obj(**props):
         return {"type": "object", "properties": props, "required": list(props)[:1], "additionalProperties": False}

@@ -158,7 +158,7 @@ def main(args) -> int:
         print(f"error: --{exc}", file=sys.stderr)
         return 2
     from warpworm.commands.common import check_minimum, check_positive, refuse
-    from warpworm.data.config import check_worm_params
+    from warpworm.physics.param_specs import check_worm_params
 
     try:  # the rules generate applies (warpworm.data.config), before any work
         base = check_worm_params(replace(base, **parse_overrides(args.set)))

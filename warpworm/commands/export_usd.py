@@ -36,7 +36,7 @@ def _worlds(text: str) -> list[int]:
 
 def main(args: argparse.Namespace) -> int:
     from warpworm.commands.common import refuse
-    from warpworm.data.usd_export import compliance_errors, export_usd
+    from warpworm.data.export_usd import compliance_errors, export_usd
 
     out = Path(args.out)
     try:

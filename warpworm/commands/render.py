@@ -65,7 +65,7 @@ def simulate_states(cfg, num_worlds: int, seed: int, gait: str, sim_time: float,
 def main(args) -> int:
     from warpworm.data import sampling
     from warpworm.data.config import load_config
-    from warpworm.data.randomize import derive_seeds
+    from warpworm.rng import derive_seeds
     from warpworm.render import Renderer, sample_cameras, scene_from_snapshot
     from warpworm.render.contact_sheet import contact_sheet, save_png
     from warpworm.render.demo import default_pattern, posed_worm_states

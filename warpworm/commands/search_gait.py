@@ -94,7 +94,7 @@ def write_heatmap(path, res: dict, pts: dict, title: str) -> Path:
 def _check(args):
     """Every option, by the rules generate applies (warpworm.data.config), before any work; returns (grid, params)."""
     from warpworm.commands.common import check_minimum
-    from warpworm.data.config import check_worm_params
+    from warpworm.physics.param_specs import check_worm_params
     from warpworm.physics import gaits
     from warpworm.physics.materials import material_params
     from warpworm.physics.params import parse_overrides

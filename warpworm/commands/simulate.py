@@ -231,7 +231,8 @@ def main(args) -> int:
     from warpworm.physics.params import parse_overrides
 
     from warpworm.commands.common import check_minimum, check_positive, device_option, refuse
-    from warpworm.data.config import check_options, check_worm_params
+    from warpworm.data.config import check_options
+    from warpworm.physics.param_specs import check_worm_params
 
     try:  # the rules generate applies to the same values (warpworm.data.config), before any work
         check_options({"--worlds": (args.worlds, "sim.worlds"), "--dt": (args.dt, "sim.dt"),

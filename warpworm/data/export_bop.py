@@ -37,9 +37,11 @@ from pathlib import Path
 
 import numpy as np
 
+from warpworm import ids
 from warpworm.data import dataset as ds
 from warpworm.data import export_json as strict_json
-from warpworm import ids
+from warpworm.physics import crease
+from warpworm.render.labels import WormBody
 
 OBJECTS = {1: ("worm", ids.SEG_WORM), 2: ("ipm_tail", (ids.SEG_IPMS[0],)), 3: ("ipm_centre", (ids.SEG_IPMS[1],)),
            4: ("ipm_head", (ids.SEG_IPMS[2],)), 5: ("epm", (ids.SEG_EPM,))}
@@ -78,10 +80,7 @@ def _turn_z(quarters: int) -> list[float]:
 
 def object_meshes(reader) -> dict:
     """obj_id -> trimesh.Trimesh in the object's own frame [m] (module docstring), from sample 0's parameters."""
-    import trimesh
-
-    from warpworm.physics import crease
-    from warpworm.render.labels import WormBody
+    import trimesh  # start-up time: trimesh loads on first use
 
     p = {k: float(reader.read(f"params/worm.{k}", [0])[0]) for k in
          ("a", "b", "l0", "ipm_diameter", "ipm_thickness", "epm_size_x", "epm_size_y", "epm_size_z")}
@@ -195,7 +194,7 @@ def begin_export(src, out, limit: int | None):
 
 def export_bop(src, out, *, split: str = "train_pbr", limit: int | None = None) -> dict:
     """Write the BOP layout of dataset ``src`` to ``out``; returns {"images": n, "scenes": k}."""
-    import cv2
+    import cv2  # start-up time: OpenCV loads on first use
 
     reader, out, n = begin_export(src, out, limit)
     scenes = 0

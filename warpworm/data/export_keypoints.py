@@ -29,6 +29,9 @@ import json
 
 import numpy as np
 
+from warpworm.physics import crease
+from warpworm.render.camera import Cameras
+
 DATASET_NAMES = ("seg0", "seg1", "seg2", "seg3", "seg4", "tail", "head", "tail_top", "tail_left", "tail_right",
                  "head_top", "head_left", "head_right")
 """The dataset keypoints the exports keep, in this order."""
@@ -81,8 +84,6 @@ def project(points: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray,
             dist: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """World points (N, P, 3) [m] through cameras K, R, t (N, ...) and their lens distortion ``dist`` (N, 5), OpenCV's
     (k1, k2, p1, p2, k3; None: pinhole), as the renderer draws them -> pixels (N, P, 2) and camera depth (N, P) [m]."""
-    from warpworm.render.camera import Cameras
-
     cams = Cameras(K=K, R=R, t=t, world=np.arange(len(K)), width=0, height=0, dist=dist)
     uv, pc = cams.project(np.asarray(points, np.float64))
     return uv, pc[..., 2]
@@ -105,8 +106,6 @@ class KeypointExporter:
     """Reads the exported keypoints of samples of one dataset (``reader``: :func:`warpworm.data.dataset.open`)."""
 
     def __init__(self, reader):
-        from warpworm.physics import crease
-
         names = json.loads(reader.attrs["keypoint_names"])
         self.reader = reader
         kept = [n for n in DATASET_NAMES if n in names]

@@ -32,13 +32,14 @@ import numpy as np
 
 from warpworm.data import export_bop as bop
 from warpworm.data import export_json as strict_json
+from warpworm.data.export_keypoints import KeypointExporter
 
 SHARD_SIZE = 1000
 """Images per tar shard (BOP-webdataset's maximum)."""
 
 
 def _png(img: np.ndarray) -> bytes:
-    import cv2
+    import cv2  # start-up time: OpenCV loads on first use
 
     ok, buf = cv2.imencode(".png", img)
     if not ok:
@@ -60,9 +61,7 @@ def rle_uncompressed(mask: np.ndarray) -> dict:
 
 def export_webdataset(src, out, *, limit: int | None = None, shard_size: int = SHARD_SIZE) -> dict:
     """Write the shards of dataset ``src`` to ``out``; returns {"images": n, "shards": k}."""
-    import webdataset as wds
-
-    from warpworm.data.export_keypoints import KeypointExporter
+    import webdataset as wds  # optional dependency: webdataset (the export extra)
 
     reader, out, n = bop.begin_export(src, out, limit)
     kpx = KeypointExporter(reader)
@@ -102,7 +101,7 @@ def export_webdataset(src, out, *, limit: int | None = None, shard_size: int = S
 
 def decode_png(data: bytes) -> np.ndarray:
     """A PNG from a shard as an array (uint8 RGB for rgb.png, as stored for depth.png)."""
-    import cv2
+    import cv2  # start-up time: OpenCV loads on first use
 
     img = cv2.imdecode(np.frombuffer(io.BytesIO(data).getvalue(), np.uint8), cv2.IMREAD_UNCHANGED)
     return img[..., ::-1] if img.ndim == 3 else img

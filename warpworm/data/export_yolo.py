@@ -53,7 +53,7 @@ def label_line(bbox, uv, vis, W: int, H: int) -> str | None:
 
 def export_yolo(src, out, *, limit: int | None = None, val_fraction: float = 0.1) -> dict:
     """Write ``out``; returns {"train": n, "val": n, "labels": lines written, "yaml": path}."""
-    import cv2
+    import cv2  # start-up time: OpenCV loads on first use
 
     reader = ds.open(src)
     out = Path(out)

@@ -13,19 +13,26 @@ import functools
 import json
 import math
 import os
+import signal
 import sys
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
+import h5py
 import numpy as np
+import yaml
+from tqdm import tqdm
 
+import warpworm
 from warpworm.data import dataset as ds
 from warpworm.data import signal_hold
 from warpworm.data import workers as wk
-from warpworm.data.config import ConfigError, DatasetConfig, check_output_dir
+from warpworm.data.config import ConfigError, DatasetConfig, check_output_dir, load_config
+from warpworm.data.export_json import jsonable
 from warpworm.data.shard import Interrupted, ShardStats, warp_version
-from warpworm.data.stages import DEFAULT_STAGES
+from warpworm.data.stages import DEFAULT_STAGES, load_stages
 
 
 @dataclass
@@ -68,10 +75,6 @@ class Summary:
 
 @functools.lru_cache(maxsize=None)
 def _versions() -> dict:
-    import h5py
-
-    import warpworm
-
     return {"warpworm": warpworm.__version__, "warp": warp_version(), "numpy": np.__version__,
             "h5py": h5py.__version__, "python": sys.version.split()[0]}
 
@@ -126,17 +129,12 @@ class SignalGuard:
         raise Interrupted(signum)
 
     def __enter__(self):
-        import signal
-        import threading
-
         if threading.current_thread() is threading.main_thread():
             for sig in (signal.SIGTERM, signal.SIGINT):
                 self._old[sig] = signal.signal(sig, self._handler)
         return self
 
     def __exit__(self, *exc):
-        import signal
-
         for sig, h in self._old.items():
             signal.signal(sig, h)
         self._old = {}
@@ -190,10 +188,6 @@ def warm_kernels(cfg: DatasetConfig, stages: str, log) -> float:
     """Load (on a cold cache: compile) the stages' Warp kernels before the progress bar starts; returns the wall
     time [s]. If it takes longer than :data:`KERNEL_NOTICE_S`, one line says that kernels are compiling, roughly how
     long it takes and that it happens once, and another how long it took."""
-    import threading
-
-    from warpworm.data.stages import load_stages
-
     warm = getattr(load_stages(stages), "warm", None)
     if warm is None:
         return 0.0
@@ -223,8 +217,6 @@ def warm_kernels(cfg: DatasetConfig, stages: str, log) -> float:
 
 
 def _json_rt(d):
-    from warpworm.data.export_json import jsonable  # as the manifest stores it: NaN (a gait preset's value) as null
-
     return json.loads(json.dumps(jsonable(d), default=str))
 
 
@@ -286,8 +278,6 @@ def plan_job(cfg: DatasetConfig, out_dir, resume: bool, requested_shard_size: in
 
 
 def _shard_config_problem(path, cfg: DatasetConfig) -> str | None:
-    import h5py
-
     try:
         with h5py.File(path, "r") as f:
             text = f.attrs.get("config_yaml", "")
@@ -300,11 +290,6 @@ def _shard_config_problem(path, cfg: DatasetConfig) -> str | None:
 def _config_from_shards(cfg: DatasetConfig, out: Path, requested: int) -> DatasetConfig:
     """Without a manifest: the sharding of the shards on disk (kept if smaller than ``requested``: split for the first
     run's workers), refused with the differing keys if their config is not this run's otherwise."""
-    import h5py
-    import yaml
-
-    from warpworm.data.config import load_config
-
     for name in sorted(os.listdir(out)):
         if not ds.SHARD_RE.match(name):
             continue
@@ -326,12 +311,10 @@ def _config_from_shards(cfg: DatasetConfig, out: Path, requested: int) -> Datase
 
 def device_line(cfg: DatasetConfig) -> str:
     """One line naming the device the job runs on (instead of Warp's CUDA driver warning on CPU-only machines)."""
-    import warpworm
-
     dev = cfg.sim.device
     if dev.startswith("cuda"):
         try:
-            import warp as wp
+            import warp as wp  # start-up time: Warp loads on first use
 
             return f"device: {dev} ({wp.get_device(dev).name})"
         except Exception:  # noqa: BLE001
@@ -386,8 +369,6 @@ def _generate_locked(cfg, out, t0, guard, log, *, workers, resume, stages, engin
 
     save(complete=not todo)
     kernels_s = warm_kernels(cfg, stages, log) if todo and engine == "local" else 0.0
-
-    from tqdm import tqdm
 
     total_new = sum(cfg.shard_range(k)[1] - cfg.shard_range(k)[0] for k in todo)
     bar = tqdm(total=total_new, unit="sample", disable=not progress, dynamic_ncols=True, smoothing=0.1,

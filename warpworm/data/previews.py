@@ -16,6 +16,9 @@ from warpworm.data.config import DatasetConfig
 from warpworm.data.sampling import appearance_draws, worm_params
 from warpworm.data.shard import ShardStats, simulate_with_replacement
 from warpworm.data.stages import DEFAULT_STAGES, load_stages
+from warpworm.render import make_cameras
+from warpworm.render.contact_sheet import _kp_color, contact_sheet, save_png
+from warpworm.render.labels import KEYPOINT_NAMES
 
 
 PREVIEW_TEMPORARIES = (".preview.tmp.png", ".preview.tmp.mp4")
@@ -30,10 +33,7 @@ def remove_preview_temporaries(out) -> None:
 
 def legend(width: int) -> np.ndarray:
     """A key under the contact sheet (RGB uint8, ``width`` px wide): what the third column's colours and marks mean."""
-    import cv2
-
-    from warpworm.render.contact_sheet import _kp_color
-    from warpworm.render.labels import KEYPOINT_NAMES
+    import cv2  # start-up time: OpenCV loads on first use
 
     groups: dict = {}  # the sheet's own colours, grouped: each colour once, with the keypoints drawn in it
     for name in KEYPOINT_NAMES:
@@ -66,10 +66,7 @@ def write_previews(cfg: DatasetConfig, out, stages=DEFAULT_STAGES, max_rows: int
     """``preview.png``: the renderer's contact sheet (:func:`warpworm.render.contact_sheet.contact_sheet`) of the
     first samples; ``preview.mp4``: trajectory 0 resimulated at 20 fps over ``sim.frame_times`` with the same draws,
     seen from sample 0's stored camera (one world, small)."""
-    import cv2
-
-    from warpworm.render import make_cameras
-    from warpworm.render.contact_sheet import contact_sheet, save_png
+    import cv2  # start-up time: OpenCV loads on first use
 
     out = Path(out)
     reader = ds.open(out)

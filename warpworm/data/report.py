@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import json
 import math
+import textwrap
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -256,7 +257,7 @@ def build(dirs, out) -> tuple[dict, Path, Path | None, str | None]:
         report["bins"][k] = shared_bins(arrays + extra).tolist()
     png, note = out.with_suffix(".png"), None
     try:
-        import matplotlib
+        import matplotlib  # optional dependency: matplotlib (the plots extra)
     except ImportError:
         png, note = None, ("note: the PNG needs the plots extra (pip install 'warpworm[plots]'); wrote the JSON "
                            "only")
@@ -275,8 +276,8 @@ def _short(path: Path, n: int = 38) -> str:
 
 
 def _plot(folders, rows, varying, constant, report, png: Path, differs=frozenset()) -> None:
-    import matplotlib.pyplot as plt
-    from matplotlib.ticker import MaxNLocator
+    import matplotlib.pyplot as plt  # optional dependency: matplotlib (the plots extra)
+    from matplotlib.ticker import MaxNLocator  # optional dependency: matplotlib (the plots extra)
 
     nf = len(folders)
     CW = 3.6  # [in] per column
@@ -289,7 +290,6 @@ def _plot(folders, rows, varying, constant, report, png: Path, differs=frozenset
     # stays the size of one folder's (it was a column per folder and a row per quantity: 720 x 9542 px for two)
     ncol = 4
     nrow = math.ceil(len(panels) / ncol)
-    import textwrap
 
     lines = []
     for f in report["folders"]:

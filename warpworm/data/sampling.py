@@ -15,10 +15,19 @@ What each draw is keyed by (so that any shard size, worker count, engine or devi
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
+from warpworm import rng
 from warpworm.data import randomize as rnd
+from warpworm.data.config import ConfigError, load_config
+from warpworm.physics.gaits import GAIT_PRESETS, gait_theta
 from warpworm.physics.params import WormParams
+from warpworm.render import default_appearance, hsv_to_rgb, sample_cameras
+from warpworm.render.distortion import draw_distortion
+from warpworm.render.placement import place, placement_draws
+from warpworm.render.scene import BAND_COLORS
 
 _WORM_VECTOR = {"epm_size": ("epm_size_x", "epm_size_y", "epm_size_z"),
                 "ipm_moment": ("ipm_moment_tail", "ipm_moment_centre", "ipm_moment_head")}
@@ -40,8 +49,6 @@ def draw_worm(cfg, traj: np.ndarray, attempt: np.ndarray) -> rnd.Draws:
 def _fill_gait_presets(d: rnd.Draws) -> None:
     """NaN = "the gait preset's value" (:data:`warpworm.physics.gaits.GAIT_PRESETS`), resolved in place per sample's gait;
     a NaN orientation becomes the preset's EPM moment angle for the sample's gait and direction."""
-    from warpworm.physics.gaits import GAIT_PRESETS, gait_theta
-
     gait = np.asarray(d["worm.gait"]).astype(str)
     for g, preset in GAIT_PRESETS.items():
         sel = gait == g
@@ -88,10 +95,6 @@ def randomized_params(cfg_name_or_cfg, num_worlds: int, seed: int) -> WormParams
     ``gait`` and ``backward`` come out per world ((W,) arrays) when they differ between worlds; ``magnet_model`` is
     one value per solver batch, so a config whose draws give it two values is refused, naming the field.
     """
-    import dataclasses
-
-    from warpworm.data.config import ConfigError, load_config
-
     cfg = load_config(cfg_name_or_cfg) if isinstance(cfg_name_or_cfg, str) else cfg_name_or_cfg
     if int(num_worlds) < 1:
         raise ConfigError([f"num_worlds: got {num_worlds}; expected >= 1"])
@@ -122,20 +125,16 @@ def appearance_draws(cfg, traj: np.ndarray) -> dict[str, np.ndarray]:
     app = {}
     for g in APPEARANCE_GROUPS:
         app.update(draw_group(cfg, g, traj).values)
-    app["texture.seed"] = rnd.derived_seed(rnd.sample_keys(cfg.seed, traj), "texture") % (2**31 - 1)
+    app["texture.seed"] = rng.derived_seed(rng.sample_keys(cfg.seed, traj), "texture") % (2**31 - 1)
     r = cfg.render  # issue 24: the plate's pose and material, the lights, distractors (per trajectory)
     if r.plate_pose or r.lights != "fixed" or r.distractors[1] > 0 or r.plate_materials != ["matte"] or r.paper_bsdf:
-        from warpworm.render.placement import placement_draws
-
-        app.update(placement_draws(cfg.render, rnd.sample_keys(cfg.seed, traj)))
+        app.update(placement_draws(cfg.render, rng.sample_keys(cfg.seed, traj)))
     return app
 
 
 def appearance_from_draws(app: dict, seeds: np.ndarray, band_colors=None):
     """The renderer's :class:`~warpworm.render.Appearance` from the drawn ``light/color/texture`` values (B,) each;
     ``band_colors`` (5, 3): the bands' display colours (``render.band_colors``; None: the paper's)."""
-    from warpworm.render import default_appearance, hsv_to_rgb
-
     B = len(seeds)
     a = default_appearance(B)
     worm = hsv_to_rgb(app["color.worm_hue"], app["color.worm_saturation"], app["color.worm_value"])
@@ -155,8 +154,6 @@ def appearance_from_draws(app: dict, seeds: np.ndarray, band_colors=None):
     a.paper_tex = np.stack([np.where(fibre, 0.25, 0.0), np.where(fibre, 0.10, 0.0)], axis=1)
     bands = np.asarray(app["texture.worm"]).astype(str) == "bands"
     if bands.any():  # the paper's marker bands (§IV-E): one colour per segment, flat paint
-        from warpworm.render.scene import BAND_COLORS
-
         c = BAND_COLORS if band_colors is None else np.asarray(band_colors, np.float64)
         a.albedo[bands, 2:7] = c[None] ** 2
         a.paper_tex[bands] = 0.0
@@ -169,8 +166,6 @@ def appearance_from_draws(app: dict, seeds: np.ndarray, band_colors=None):
     bg = app["color.background_value"][:, None] * np.ones(3)
     a.bg_top, a.bg_bottom = bg, 0.6 * bg
     if any(k.startswith(("plate.", "lights.", "distractors.", "paper.")) for k in app):  # drawn when asked
-        from warpworm.render.placement import place
-
         a = place(a, app)
     return a
 
@@ -179,7 +174,7 @@ def sample_appearance(cfg, index: np.ndarray):
     """The renderer's :class:`~warpworm.render.Appearance` of ``index`` (n,) trajectories (or any ids) drawn from the
     config's ``light / color / texture`` distributions: the look a dataset job gives those trajectories."""
     index = np.asarray(index, dtype=np.int64).reshape(-1)
-    return appearance_from_draws(appearance_draws(cfg, index), rnd.derived_seed(rnd.sample_keys(cfg.seed, index)),
+    return appearance_from_draws(appearance_draws(cfg, index), rng.derived_seed(rng.sample_keys(cfg.seed, index)),
                                  cfg.render.band_colors)
 
 
@@ -223,16 +218,14 @@ def dataset_cameras(cfg, index: np.ndarray, worm_points: np.ndarray, view: np.nd
     Returns (cameras, ``camera.*`` values (n,) each as stored in ``params/``: the kept view's distance,
     elevation, azimuth, roll, fov_y [rad], look-at offset length [m], its in-frame fraction, max_tries).
     """
-    from warpworm.render import sample_cameras
-
     c = cfg.randomize["camera"]
     index = np.asarray(index, dtype=np.int64)
-    keys = rnd.sample_keys(cfg.seed, index)
-    seeds = rnd.derived_seed(keys, "camera")
+    keys = rng.sample_keys(cfg.seed, index)
+    seeds = rng.derived_seed(keys, "camera")
     if view is not None:
         view = np.asarray(view, dtype=np.int64)
         for v in np.unique(view[view > 0]):
-            seeds[view == v] = rnd.derived_seed(keys[view == v], f"camera.view{int(v)}")
+            seeds[view == v] = rng.derived_seed(keys[view == v], f"camera.view{int(v)}")
     pts = np.asarray(worm_points, dtype=np.float64)
     target = pts.mean(axis=1)
     deg = lambda name: tuple(np.rad2deg(_range(c[name])))  # noqa: E731
@@ -243,8 +236,6 @@ def dataset_cameras(cfg, index: np.ndarray, worm_points: np.ndarray, view: np.nd
         aspect_jitter=0.0, principal_jitter=0.0, min_in_frame=_range(c["min_in_frame"])[0],
         max_tries=int(_range(c["max_tries"])[0]))
     if cfg.render.distortion:  # issue 24: lens distortion per camera, from the camera's seed (stored as camera/dist)
-        from warpworm.render.distortion import draw_distortion
-
         cams.dist = draw_distortion(cfg.render, seeds, cams.K, cfg.render.width, cfg.render.height)
     d = cams.draws
     n = len(index)

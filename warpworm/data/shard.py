@@ -25,13 +25,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+import warpworm
+from warpworm import ids, rng
 from warpworm.data import dataset as ds
-from warpworm import ids
 from warpworm.data import randomize as rnd
-from warpworm.data.config import BATCH_SHARED, DatasetConfig
+from warpworm.data.config import BATCH_SHARED, PARAM_SPECS, DatasetConfig
 from warpworm.data.sampling import appearance_draws, dataset_cameras, draw_worm, worm_params
-from warpworm.data.signal_hold import Interrupted  # noqa: F401  (re-exported: the workers and job raise it)
 from warpworm.data.stages import load_stages
+from warpworm.render.placement import MATERIALS
+from warpworm.data.signal_hold import Interrupted  # noqa: F401  (re-exported: the workers and job raise it)
 
 
 @dataclass
@@ -116,8 +118,6 @@ def _simulate_group(stages, cfg, params, num_worlds: int, stats: ShardStats):
 # Attributes
 def root_attributes(cfg: DatasetConfig, meta: dict) -> dict:
     """Root attributes every shard carries (and the manifest repeats)."""
-    import warpworm
-
     return {
         "format": ds.FORMAT,
         "schema_version": ds.SCHEMA_VERSION,
@@ -146,7 +146,7 @@ def root_attributes(cfg: DatasetConfig, meta: dict) -> dict:
 @functools.lru_cache(maxsize=None)
 def warp_version() -> str:
     try:
-        import warp
+        import warp  # start-up time: Warp loads on first use
 
         return str(warp.__version__)
     except Exception:  # noqa: BLE001 - the fake stages in tests do not need Warp
@@ -288,7 +288,7 @@ def _render_rows(stages, cfg: DatasetConfig, batch: _Trajectories, sid: np.ndarr
         cam_draws = _take(batch.cam_draws, csel)
         cams = batch.cams.take(csel)
     cams.world = np.arange(len(sid), dtype=np.int32)
-    seeds = rnd.derived_seed(rnd.sample_keys(cfg.seed, sid))
+    seeds = rng.derived_seed(rng.sample_keys(cfg.seed, sid))
     app = _take(batch.appearance, tsel)
     t0 = time.perf_counter()
     out = stages.render_batch(fr, worm_params(cfg, batch.draws, tsel), cams, app, seeds, cfg)
@@ -316,9 +316,6 @@ def text_widths() -> dict[str, int]:
     """Bytes of the longest value each text parameter may take, from the schema (not from the values drawn): the
     ``values`` of every text parameter of :data:`~warpworm.data.config.PARAM_SPECS` and the renderer's plate
     materials (``render.plate_materials``, :data:`warpworm.render.placement.MATERIALS`)."""
-    from warpworm.data.config import PARAM_SPECS
-    from warpworm.render.placement import MATERIALS
-
     out = {f"{g}.{n}": max(len(str(v).encode()) for v in spec.values)
            for g, specs in PARAM_SPECS.items() for n, spec in specs.items()
            if spec.values is not None and all(isinstance(v, str) for v in spec.values)}

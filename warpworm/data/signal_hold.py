@@ -9,6 +9,8 @@ section raises it when it ends. Process-wide (signals are handled on the main th
 
 from __future__ import annotations
 
+import functools
+import signal as _signal
 from contextlib import contextmanager
 
 _depth = 0
@@ -24,8 +26,6 @@ class Interrupted(BaseException):
     callable')``, a best-effort clean-up swallows it) must not catch or transform a stop."""
 
     def __init__(self, signum: int):
-        import signal as _signal
-
         self.signum = int(signum)
         super().__init__(f"interrupted by {_signal.Signals(self.signum).name}")
 
@@ -59,8 +59,6 @@ def io_section():
 
 def holds_signals(fn):
     """Decorator: run ``fn`` inside an :func:`io_section`."""
-    import functools
-
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
         with io_section():

@@ -19,14 +19,18 @@ node of a two-node cluster mid-shard).
 
 from __future__ import annotations
 
+import multiprocessing as mp
 import os
 import queue as queue_mod
+import signal
+import sys
 import threading
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from typing import Callable
 
 from warpworm.data import signal_hold
+from warpworm.data.dataset import DatasetWriteError, clean_temporaries, shard_name
 from warpworm.data.shard import Interrupted, run_shard
 from warpworm.data.stages import load_stages
 
@@ -46,7 +50,6 @@ def _worker_signal(signum, frame):
 
 def _init_worker(q, parent_pid: int, stages=None, ready=None):
     global _progress_queue
-    import signal
 
     _progress_queue = q
     for sig in (signal.SIGTERM, signal.SIGINT):
@@ -93,8 +96,6 @@ def _warm(cfg, stages) -> None:
     try:
         warm(cfg)
     except Exception as exc:  # noqa: BLE001 - a failed warm-up only costs time; the shards report real errors
-        import sys
-
         print(f"warning: kernel warm-up failed ({type(exc).__name__}: {exc}); modules load on first use",
               file=sys.stderr)
 
@@ -122,8 +123,6 @@ def run_shards(cfg, out, todo: list[int], stages, *, workers: int = 1, engine: s
 
 
 def _run_local_pool(cfg, out, todo, stages, workers, on_progress, on_shard):
-    import multiprocessing as mp
-
     ctx = mp.get_context("spawn")
     q = ctx.Queue()
     # one thread per process: BLAS/OpenMP pools would oversubscribe the cores the other workers use
@@ -160,7 +159,6 @@ def _run_local_pool(cfg, out, todo, stages, workers, on_progress, on_shard):
                 except Exception as exc:  # noqa: BLE001 - re-raised with the recovery advice
                     for f in pending:
                         f.cancel()
-                    from warpworm.data.dataset import DatasetWriteError
 
                     if isinstance(exc, DatasetWriteError):  # disk full in a worker: its own one-line message
                         _stop_workers(pool)
@@ -179,8 +177,6 @@ def _run_local_pool(cfg, out, todo, stages, workers, on_progress, on_shard):
 
 def _stop_workers(pool, timeout: float = 10.0) -> None:
     """SIGTERM every live worker (each discards its shard in flight and exits), SIGKILL any left after ``timeout``."""
-    import signal
-
     procs = list(getattr(pool, "_processes", {}).values())
     for p in procs:
         if p.is_alive():
@@ -204,7 +200,7 @@ shard is written under a temporary name and renamed when complete."""
 
 def _run_ray(cfg, out, todo, stages, address, on_progress, on_shard):
     try:
-        import ray
+        import ray  # optional dependency: ray (the ray extra)
     except ImportError:
         raise WorkerError("--engine ray needs Ray: pip install 'warpworm[ray]'") from None
     ray.init(address=address, ignore_reinit_error=True, log_to_driver=False,
@@ -231,8 +227,6 @@ def _remove_dead_attempts(out, shards) -> list[str]:
     shard in ``shards`` is committed: Ray re-ran those attempts elsewhere, and a task whose node died is gone (its
     worker exits when its raylet does), so nothing is still writing them. (The pid in a name is another host's, so it
     cannot tell here whether its writer lives.)"""
-    from warpworm.data.dataset import clean_temporaries, shard_name
-
     return [name for k in shards for name in clean_temporaries(out, f".{shard_name(k)}.tmp-*")]
 
 

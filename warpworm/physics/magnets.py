@@ -29,6 +29,8 @@ import numpy as np
 import warp as wp
 
 from warpworm.ids import MAGNET_MODELS, SHAPE_CUBOID, SHAPE_CYLINDER
+from warpworm.kernels.magnet_wrench import (field_kernel, pair_wrench_kernel, sum_pair_wrenches_kernel,
+                                            world_pair_wrench_kernel)
 from warpworm.transforms import matrix_to_quat_wxyz, quat_wxyz_to_xyzw
 
 MU0 = 1.25663706212e-6
@@ -231,8 +233,6 @@ def launch_world_wrenches(
     Magnets must not overlap. Cost per world ('dipoles') ~ Σ over unordered pairs of N_a · N_b point-dipole pairs
     (paper's worm at 64/cm³: 256·12·3 + 12·12·3 = 9,648 pair interactions, with or without the EPM's wrench).
     """
-    from warpworm.kernels.magnet_wrench import sum_pair_wrenches_kernel, world_pair_wrench_kernel
-
     device = device or pos.device
     gl_x, gl_w = _gauss_legendre(quad_order, str(device))
     W, M = pos.shape
@@ -316,8 +316,6 @@ def wrench(
         ``(F, T)``: force on the target [N] and torque on the target about its centre [N·m], shape (3,) each, or
         (N, 3) for batched poses, float64 arrays (computed in float32 on the device).
     """
-    from warpworm.kernels.magnet_wrench import pair_wrench_kernel
-
     dev = _device(device)
     if model not in MODELS:
         raise ValueError(f"model={model!r}: expected one of {sorted(MODELS)}")
@@ -372,8 +370,6 @@ def field(magnet: Magnet, pose, points, model: str = "analytic", density: float 
     """Magnetic flux density B [T] of ``magnet`` at ``pose`` (position (3,), rotation (3, 3)) at world ``points``
     [m], shape (..., 3) -> (..., 3). ``model="dipoles"`` sums the dipole grid at ``density`` [1/m³] instead of the
     exact field. Inside a magnet the exact model returns B (including J)."""
-    from warpworm.kernels.magnet_wrench import field_kernel
-
     if model not in MODELS:
         raise ValueError(f"model={model!r}: expected one of {sorted(MODELS)}")
     dev = _device(device)
@@ -465,7 +461,7 @@ __all__ = [
 def dipole_grid(magnet: Magnet, density: float = DEFAULT_DENSITY) -> np.ndarray:
     """The 'dipoles' model's grid of ``magnet`` at ``density`` [1/m³]: points (N, 3) [m] in the magnet frame.
 
-    Mirrors the kernels' on-the-fly generation (``kernels/magnet_fields.py``: ``dipole_grid_*``, same order); every
+    Mirrors the kernels' on-the-fly generation (``kernels/magnet_dipoles.py``: ``dipole_grid_*``, same order); every
     point stands for a cell of equal volume and carries ``magnet.moment / N``. Cuboid: cell centres of an
     n_x × n_y × n_z lattice, n_i = max(1, round(size_i · density^(1/3))). Cylinder: n_z mid-height layers, each an
     equal-area polar partition (rings of width ≈ h, sectors of area ≈ h²) with the dipoles on radii that keep the

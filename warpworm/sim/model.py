@@ -22,9 +22,11 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from warpworm.physics import crease, gaits
-from warpworm.physics.params import MAGNET_MODELS, WormParams, per_world
 from warpworm.ids import SHAPE_CUBOID, SHAPE_CYLINDER
+from warpworm.kernels import magnet_pose
+from warpworm.physics import crease, gaits
+from warpworm.physics.param_specs import check_worm_params
+from warpworm.physics.params import MAGNET_MODELS, WormParams, per_world
 from warpworm.transforms import axis_angle_to_matrix, matrix_to_quat_wxyz, quat_wxyz_to_xyzw
 
 
@@ -98,8 +100,6 @@ class Control:
     (``KeyframePath``); ``anchor_target`` [m] (W, A) vec3; ``revision`` (int, bumped by :meth:`set_path`)."""
 
     def __init__(self, model: "Model", path: "gaits.EpmPath | None" = None):
-        from warpworm.kernels import magnet_pose
-
         self._kpose = magnet_pose
         self.device = model.device
         self.num_worlds, self.num_anchors = model.num_worlds, model.num_anchors
@@ -172,16 +172,6 @@ class ModelBuilder:
         W = int(num_worlds)
         if W < 1:
             raise ValueError("num_worlds must be >= 1")
-        if p.magnet_model not in MAGNET_MODELS:
-            raise ValueError(f"magnet_model must be one of {MAGNET_MODELS}, got {p.magnet_model!r}")
-        ratio = np.asarray(p.friction_backward_ratio, np.float64).reshape(-1)
-        ok = np.isfinite(ratio) & (ratio > 0.0)
-        if not ok.all():
-            bad = ratio[~ok][0]
-            raise ValueError(f"worm.friction_backward_ratio: got {bad}; expected a finite ratio > 0 (tail-ward over "
-                             "head-ward friction; 1 is isotropic)")
-        from warpworm.data.config import check_worm_params  # the rules every entry point shares (ConfigError)
-
         check_worm_params(p)
         self.params, self.num_worlds = p, W
         self.anchors = np.zeros(0, np.int32) if anchors is None else np.asarray(anchors, np.int32).reshape(-1)

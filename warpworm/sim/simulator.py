@@ -24,6 +24,9 @@ import numpy as np
 import warp as wp
 
 from warpworm.ids import WORLD_CRUMPLED
+from warpworm.kernels import magnet_pose
+from warpworm.physics.gaits import DEFAULT_DT, DEFAULT_SUBSTEPS
+from warpworm.physics.magnets import launch_world_wrenches, pair_wrench_scratch
 from warpworm.sim import capture_gate
 from warpworm.sim.model import Control, Model, State
 from warpworm.sim.solver import BandSolver, SolverBase, SubstepSettings, put_bounded
@@ -31,16 +34,15 @@ from warpworm.sim.tile_solver import TileSolver
 from warpworm.transforms import quat_wxyz_to_matrix, quat_xyzw_to_wxyz
 
 
-def launch_world_wrenches(model: Model, state: State, moment: wp.array, *, epm_wrench: bool = True,
-                          force_out: wp.array | None = None, torque_out: wp.array | None = None,
-                          pair_scratch: tuple[wp.array, wp.array] | None = None) -> None:
-    """Net magnetic force and torque on every magnet of every world (the one place the magnet API is called), into
-    ``state.magnet_force`` / ``magnet_torque`` unless other outputs are given. ``epm_wrench=False`` leaves the EPM's
-    own wrench (slot 0) zero and spends nothing on it: the dynamics needs only the IPMs'. ``pair_scratch``: the
-    caller's (:func:`warpworm.physics.magnets.pair_wrench_scratch`), else one per call."""
-    from warpworm.physics.magnets import launch_world_wrenches as _launch
-
-    _launch(
+def model_wrenches(model: Model, state: State, moment: wp.array, *, epm_wrench: bool = True,
+                   force_out: wp.array | None = None, torque_out: wp.array | None = None,
+                   pair_scratch: tuple[wp.array, wp.array] | None = None) -> None:
+    """:func:`warpworm.physics.magnets.launch_world_wrenches` on a model's magnets in a state (the simulator's one
+    call of the magnet API): net force and torque on every magnet of every world, into ``state.magnet_force`` /
+    ``magnet_torque`` unless other outputs are given. ``epm_wrench=False`` leaves the EPM's own wrench (slot 0) zero
+    and spends nothing on it: the dynamics needs only the IPMs'. ``pair_scratch``: the caller's
+    (:func:`warpworm.physics.magnets.pair_wrench_scratch`), else one per call."""
+    launch_world_wrenches(
         model.magnet_model,
         model.magnet_shape,
         model.magnet_size,
@@ -87,8 +89,10 @@ class Simulator:
 
     Args:
         model: the batch.
-        dt: step [s]: the magnetic wrench and the EPM pose are refreshed once per step.
-        substeps: substeps per step (``dt / substeps`` the substep; 2 ms, the gaits' default, is accurate for them).
+        dt: step [s]: the magnetic wrench and the EPM pose are refreshed once per step (default the gait runs',
+            :data:`warpworm.physics.gaits.DEFAULT_DT`).
+        substeps: substeps per step (``dt / substeps`` the substep; default
+            :data:`~warpworm.physics.gaits.DEFAULT_SUBSTEPS`: 2 ms substeps, accurate for the gaits).
         magnet_every_substep: re-evaluate the magnetic wrench every substep (slower; for dt studies).
         strain_limit: a bar strained beyond |ΔL/L0| this flags its world unstable (the soft waist bars at
             ``max(strain_limit, 0.9)``).
@@ -115,23 +119,20 @@ class Simulator:
     def __init__(
         self,
         model: Model,
-        dt: float = 2.0e-3,
-        substeps: int = 8,
+        dt: float = DEFAULT_DT,
+        substeps: int = DEFAULT_SUBSTEPS,
         *,
         magnet_every_substep: bool = False,
-        strain_limit: float = 0.5,
-        fold_tolerance: float = np.radians(5.0),
-        speed_limit: float = 20.0,
+        strain_limit: float = SubstepSettings.strain_limit,
+        fold_tolerance: float = SubstepSettings.fold_tolerance,
+        speed_limit: float = SubstepSettings.speed_limit,
         use_graph: bool | None = None,
-        newton: int = 24,
+        newton: int = SubstepSettings.newton,
         chord: bool | None = None,
-        newton_tol: float = 1.0e-4,
-        slip_speed: float = 1.0e-5,
+        newton_tol: float = SubstepSettings.newton_tol,
+        slip_speed: float = SubstepSettings.slip_speed,
         solver: str = "band",
     ):
-        from warpworm.kernels import magnet_pose
-
-        self._kpose = magnet_pose
         if solver not in SOLVERS:
             raise ValueError(f"solver: got {solver!r}; expected one of {SOLVERS}")
         self.model = model
@@ -156,8 +157,6 @@ class Simulator:
         self.solver = make_solver(solver, model, self.settings)
         """The substep solver (:class:`~warpworm.sim.solver.SolverBase`), owner of its scratch."""
         W, dev = model.num_worlds, model.device
-        from warpworm.physics.magnets import pair_wrench_scratch
-
         # the magnet pairs' wrenches between the wrench's two launches: allocated here, before any graph capture
         M = model.magnet_shape.shape[1]  # EPM and the three IPMs
         self._pair_scratch = pair_wrench_scratch(W, M, dev)
@@ -193,7 +192,7 @@ class Simulator:
 
     # ------------------------------------------------------------------------------------------------------------
     def _magnet_poses(self, state: State, control: Control) -> None:
-        m, k = self.model, self._kpose
+        m, k = self.model, magnet_pose  # k: the pose kernels
         W = m.num_worlds
         if control.path.kind == "sine":
             wp.launch(k.epm_sine_pose, dim=W, inputs=[control.sine, self.dt_sub, state.step_count],
@@ -215,9 +214,9 @@ class Simulator:
     def _wrench(self, state: State, control: Control, moment: wp.array) -> None:
         m = self.model
         self._magnet_poses(state, control)
-        launch_world_wrenches(m, state, moment, epm_wrench=False, pair_scratch=self._pair_scratch)
+        model_wrenches(m, state, moment, epm_wrench=False, pair_scratch=self._pair_scratch)
         state.external_force.zero_()
-        wp.launch(self._kpose.distribute_wrench, dim=(m.num_worlds, 3),
+        wp.launch(magnet_pose.distribute_wrench, dim=(m.num_worlds, 3),
                   inputs=[m.mount_vertices, state.positions, state.magnet_pos, state.magnet_force,
                           state.magnet_torque],
                   outputs=[state.external_force], device=m.device)
@@ -225,18 +224,18 @@ class Simulator:
     def run_substeps(self, state: State, num_substeps: int, control: Control | None = None) -> State:
         """Advance every world by ``num_substeps`` solver substeps under the magnetic force already in
         ``state.external_force`` (no wrench or pose update: for checks of the solver alone)."""
-        self.solver.step(state, control or self.control, int(num_substeps))
+        self.solver.step(state, int(num_substeps), control or self.control)
         return state
 
     def _one_step(self, state: State, control: Control, moment: wp.array) -> None:
         if self.magnet_every_substep:
-            cmd = self.solver.command(state, control, 1)
+            cmd = self.solver.command(state, 1, control)
             for _ in range(self.substeps):
                 self._wrench(state, control, moment)
                 cmd.launch()
         else:
             self._wrench(state, control, moment)
-            self.solver.command(state, control, self.substeps).launch()
+            self.solver.command(state, self.substeps, control).launch()
 
     # ------------------------------------------------------------------------------------------------------------
     def step(self, state: State, num_steps: int = 1, control: Control | None = None, *, epm: bool = True) -> State:
@@ -255,9 +254,8 @@ class Simulator:
             if n > 0 and (g is None or g[0] is not state or g[1] is not control or g[3] != control.revision):
                 # the first step of a new graph runs as plain launches, so that whatever a first launch creates
                 # lazily (a Warp module, the wrench's quadrature arrays, a tile solver's scratch) exists before the
-                # capture: an array made from host data inside a capture gets its copy recorded, not done, and on
-                # the CPU the replay then copied from freed host memory (garbage quadrature, worlds exploding in
-                # every later run of the process; tests/test_step_graph.py)
+                # capture: inside a capture, an array made from host data has its copy recorded, not done
+                # (tests/test_step_graph.py; docs/dynamics.md, "Notes moved from the code")
                 self._one_step(state, control, moment)
                 n -= 1
                 try:
@@ -270,7 +268,7 @@ class Simulator:
                     return self.step(state, n, control, epm=epm)
                 # the graph keeps the recorded substep command it replays alive, whatever the solver drops
                 g = (state, control, capture.graph, control.revision,
-                     self.solver.command(state, control, 1 if self.magnet_every_substep else self.substeps))
+                     self.solver.command(state, 1 if self.magnet_every_substep else self.substeps, control))
                 put_bounded(self._graphs, key, g, MAX_GRAPHS)
             with capture_gate.released():  # a replay touches no capture state: others may launch or capture meanwhile
                 for _ in range(n):
@@ -344,7 +342,7 @@ class Simulator:
         # the whole wrench at these poses, the EPM's included (the dynamics skips it), with the magnets of the last
         # step (the EPM parked after settle)
         f_snap, t_snap = self._snapshot_wrench
-        launch_world_wrenches(m, state, self._last_moment, force_out=f_snap, torque_out=t_snap,
+        model_wrenches(m, state, self._last_moment, force_out=f_snap, torque_out=t_snap,
                               pair_scratch=self._pair_scratch)
         # .numpy() aliases device memory on the CPU: copy, so a snapshot never changes after it is taken
         x = state.positions.numpy().copy()

@@ -1,7 +1,7 @@
 """The substep solvers behind :class:`~warpworm.sim.simulator.Simulator`: one interface, two launch layouts.
 
 As Newton's ``SolverBase``: a solver is built for a :class:`~warpworm.sim.model.Model` and its
-:class:`SubstepSettings`, owns its scratch, and ``step(state, control, num_substeps)`` advances every world in place
+:class:`SubstepSettings`, owns its scratch, and ``step(state, num_substeps, control)`` advances every world in place
 (one launch; ``command`` returns it recorded, for graph capture). :class:`BandSolver` launches
 :func:`warpworm.kernels.implicit_euler.implicit_step` (one thread per world);
 :class:`warpworm.sim.tile_solver.TileSolver` the block-per-world kernel of :mod:`warpworm.kernels.implicit_tile`.
@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from warpworm.kernels import substep
+from warpworm.kernels import implicit_euler, substep
 from warpworm.physics import crease
 
 MAX_COMMANDS = 8
@@ -82,7 +82,7 @@ def state_struct(state) -> substep.BarHingeState:
 
 
 class SolverBase:
-    """A substep solver for every world of ``model``: ``step(state, control, num_substeps)``."""
+    """A substep solver for every world of ``model``: ``step(state, num_substeps, control)``."""
 
     def __init__(self, model, settings: SubstepSettings):
         self.model = model
@@ -119,9 +119,9 @@ class SolverBase:
         """The launch of ``num_substeps`` substeps, recorded (``record_cmd=True``)."""
         raise NotImplementedError
 
-    def command(self, state, control, num_substeps: int):
+    def command(self, state, num_substeps: int, control):
         """The recorded launch of ``num_substeps`` substeps of every world of ``state`` under ``control``, to
-        ``.launch()`` or capture in a graph; recorded once per (state, control, count)."""
+        ``.launch()`` or capture in a graph; recorded once per (state, count, control)."""
         if int(num_substeps) < 1:
             raise ValueError(f"num_substeps: expected >= 1, got {num_substeps}")
         key = (id(state), id(control), int(num_substeps))
@@ -132,10 +132,11 @@ class SolverBase:
         put_bounded(self._cmds, key, (state, control, c), MAX_COMMANDS)
         return c
 
-    def step(self, state, control, num_substeps: int):
+    def step(self, state, num_substeps: int, control):
         """Advance every world of ``state`` by ``num_substeps`` substeps under ``control`` (in place; returns it),
-        the magnetic force in ``state.external_force`` held."""
-        self.command(state, control, num_substeps).launch()
+        the magnetic force in ``state.external_force`` held. The argument order of
+        :meth:`warpworm.sim.simulator.Simulator.step` (state, count, control)."""
+        self.command(state, num_substeps, control).launch()
         return state
 
     def newton_stats(self, reset: bool = False) -> dict:
@@ -157,8 +158,6 @@ class BandSolver(SolverBase):
     (:func:`warpworm.kernels.implicit_euler.implicit_step`)."""
 
     def _record(self, state, control, num_substeps: int):
-        from warpworm.kernels import implicit_euler
-
         return wp.launch(implicit_euler.implicit_step, dim=self.model.num_worlds,
                          inputs=[self.model_arrays, self.options(num_substeps), state.external_force,
                                  control.anchor_target, state_struct(state), self.scratch],
