@@ -25,6 +25,7 @@ from warpworm.render import Renderer, build_scene, sample_cameras
 from warpworm.render.demo import default_pattern, posed_worm_states
 from warpworm.render.placement import distractor_mesh
 from warpworm.render.raycast import RayCaster
+from warpworm.render.sensor import SensorBatch
 
 
 def _scene(num_worlds: int, seed: int = 0):
@@ -197,28 +198,43 @@ PRODUCTION_LOOKS = ["render.plate_pose=true", "render.lights=random", "render.di
 gains are renderer/camera options, added by :func:`production_rows`)."""
 
 
+PRODUCTION_SENSOR = {"wb_r": 1.0, "wb_g": 1.0, "wb_b": 1.0, "hue_deg": 0.0, "saturation": 1.0, "contrast": 1.05,
+                     "brightness": 0.01, "blur_sigma": 0.4, "noise_sigma": 2.0 / 255, "shot_noise": 0.0}
+"""Sensor values near the middle of the dataset's ``sensor.*`` ranges (JPEG set per row)."""
+
+
 def production_rows(size: int = 256, worlds: int = 8, cameras: int = 2, repeats: int = 3, device=None) -> list[dict]:
-    """CPU ms per image of the default look, production's looks, + shadows, and production's whole set (+ shadows,
-    supersample 2, a lens of k1 -0.25, k2 0.08, gains), ``size``² px, posed worms (``python3
-    benchmarks/bench_render.py --production``; best of ``repeats``, CPU time of this process)."""
+    """CPU ms per image of the default look, production's looks, + shadows, + supersample 2 and a lens of k1 -0.25,
+    k2 0.08 (gains on), + the sensor (blur, noise, colour; on the device), + a JPEG round trip of half the images
+    (quality 80, on the host): ``size``² px, posed worms, and each row's cost against the default look in the same
+    run (``python3 benchmarks/bench_render.py --production [--json OUT]``; best of ``repeats``, CPU time of this
+    process, so other load on the machine matters little)."""
     quiet_warp()
     dist = (-0.25, 0.08, 0.002, -0.002, 0.0)
-    cases = [("default look", [], {}), ("production looks", PRODUCTION_LOOKS, {"gain": True}),
-             ("production looks + shadows", PRODUCTION_LOOKS, {"shadows": True, "gain": True}),
-             ("production (+ supersample 2, lens)", PRODUCTION_LOOKS,
-              {"shadows": True, "supersample": 2, "gain": True, "dist": dist})]
+    full = {"shadows": True, "supersample": 2, "gain": True, "dist": dist}
+    cases = [("default look", [], {}, None), ("production looks", PRODUCTION_LOOKS, {"gain": True}, None),
+             ("production looks + shadows", PRODUCTION_LOOKS, {"shadows": True, "gain": True}, None),
+             ("+ supersample 2, lens", PRODUCTION_LOOKS, full, None),
+             ("+ sensor (device)", PRODUCTION_LOOKS, full, 0),
+             ("+ JPEG q80 on half (host): production as shipped", PRODUCTION_LOOKS, full, 80)]
     pattern = default_pattern()
     states = posed_worm_states(np.arange(worlds), pattern)
     N = worlds * cameras
     cams = sample_cameras(np.arange(N), states["positions"], width=size, height=size,
                           world_index=np.arange(N) % worlds)
     rows = []
-    for name, overrides, opts in cases:
+    for name, overrides, opts, jpeg in cases:
         _, scene, view, opts = _option_case(overrides, opts, states, pattern, cams)
+        sensor = None
+        if jpeg is not None:
+            values = dict(PRODUCTION_SENSOR, jpeg_quality=np.where(np.arange(N) % 2 == 0, jpeg, 0))
+            sensor = SensorBatch.from_values(values, np.arange(N))
         renderer = Renderer(size, size, device=device, **opts)
-        renderer.render(scene, view)  # warm-up
-        _, c = _best_time(lambda: renderer.render(scene, view), repeats, cpu=True)
+        renderer.render(scene, view, sensor=sensor)  # warm-up
+        _, c = _best_time(lambda: renderer.render(scene, view, sensor=sensor), repeats, cpu=True)
         rows.append({"case": name, "size": size, "images": N, "cpu_ms_per_image": c / N * 1e3})
+    for r in rows:
+        r["x_default"] = r["cpu_ms_per_image"] / rows[0]["cpu_ms_per_image"]
     return rows
 
 
@@ -259,3 +275,8 @@ if __name__ == "__main__":
     print("  ".join(f"{c:>13}" for c in cols))
     for r in rows:
         print("  ".join(f"{r[c]:>13.4g}" if isinstance(r[c], float) else f"{r[c]:>13}" for c in cols))
+    if "--json" in sys.argv:
+        import json
+
+        with open(sys.argv[sys.argv.index("--json") + 1], "w") as f:
+            json.dump(rows, f, indent=1)

@@ -181,7 +181,8 @@ class Renderer:
                 "cam_trans": wp.empty(n, dtype=wp.vec3, device=d),
                 "cam_intr": wp.empty(n, dtype=wp.vec4, device=d),
                 "fine_intr": wp.empty(n, dtype=wp.vec4, device=d),
-                "cam_dist": wp.zeros((n, 5), dtype=wp.float64, device=d),
+                "cam_dist": wp.zeros(n, dtype=wp.vec4, device=d),
+                "cam_k3": wp.zeros(n, dtype=float, device=d),
                 "cam_gain": wp.empty(n, dtype=wp.vec3, device=d),
             }
         return self._buffers[key]
@@ -364,9 +365,10 @@ class Renderer:
             fine[:n, 2:] += 0.5 * (sub - 1)
             b["fine_intr"].assign(fine)
             if lens:
-                dist = np.zeros((chunk, 5), np.float64)
+                dist = np.zeros((chunk, 5), np.float32)
                 dist[:n] = cameras.dist[start:stop]
-                b["cam_dist"].assign(dist)
+                b["cam_dist"].assign(np.ascontiguousarray(dist[:, :4]))
+                b["cam_k3"].assign(np.ascontiguousarray(dist[:, 4]))
             b["zkey"].fill_(rk.EMPTY_KEY)
             b["mask"].zero_()
             b["fine_key"].fill_(rk.EMPTY_KEY)
@@ -378,10 +380,12 @@ class Renderer:
                       inputs=[s["triangles"], s["tri_label"], s["vertices"], *common, b["fine_intr"], gw * sub,
                               gh * sub, self.near],
                       outputs=[b["fine_key"], b["fine_mask"]])
-            wp.launch(sk.resolve_samples_kernel(sub, lens), dim=(n, self.height, self.width), device=d,
+            span = self.width if d.is_cpu else 1
+            wp.launch(sk.resolve_samples_kernel(sub, lens), dim=(n, self.height, (self.width + span - 1) // span),
+                      device=d,
                       inputs=[s["triangles"], s["tri_label"], s["look"], lights, s["vertices"], s["texcoords"],
-                              *common, b["cam_intr"], b["cam_dist"], b["cam_gain"], b["zkey"], b["mask"],
-                              b["fine_key"], self.width, self.height, gw, gh, left, top, int(normals)],
+                              *common, b["cam_intr"], b["cam_dist"], b["cam_k3"], b["cam_gain"], b["zkey"], b["mask"],
+                              b["fine_key"], self.width, self.height, span, gw, gh, left, top, int(normals)],
                       outputs=[out["rgb"], out["depth"], out["seg"], out["worm_mask"], out_normals])
         if sensor is not None:
             launch_sensor(out["rgb"], sensor.take(slice(start, stop)), self.width, self.height, d)

@@ -6,7 +6,7 @@ It reads two z-buffers that :func:`~warpworm.render.raster_kernels.raster_triang
 grid* ``s`` times finer. An output pixel
 
 - finds the pinhole point it sees: itself, or through the lens the undistorted direction of its distorted centre
-  (:func:`~warpworm.render.raster_kernels.lens_inverse`, float64), with the lens map's Jacobian for the samples;
+  (:func:`lens_inverse32`), with the lens map's Jacobian for the samples;
 - takes its labels (depth, segmentation, normal) from the label grid: without a lens its own texel's key (the plain
   pass's labels bit for bit); through a lens, of the four texels around its ray, the nearest triangle that the ray
   hits (:func:`covering_key`), its depth on the exact ray; the worm mask from the nearest texel;
@@ -32,7 +32,6 @@ from warpworm.render.raster_kernels import (
     depth_plane,
     edge_fn,
     floor_row,
-    lens_inverse,
     mesh_surface,
     nearer_floor,
     project,
@@ -63,6 +62,43 @@ def grid_key(keys: wp.array2d(dtype=wp.int64), img: int, px: float, py: float, g
     ix = wp.clamp(int(wp.floor(px + 0.5)), 0, gw - 1)
     iy = wp.clamp(int(wp.floor(py + 0.5)), 0, gh - 1)
     return keys[img, iy * gw + ix]
+
+
+@wp.func
+def lens_inverse32(xd: float, yd: float, dist: wp.vec4, k3: float):
+    """:func:`~warpworm.render.raster_kernels.lens_inverse` in float32 for the renderer: the undistorted
+    normalized point (u, v) of the distorted (xd, yd) through OpenCV's lens ``dist`` = (k1, k2, p1, p2) and ``k3``,
+    by Newton's method from the radial first guess (xd, yd) / (1 + k1 r² + k2 r⁴ + k3 r⁶), and the forward map's
+    Jacobian (a, b, d) there; ``ok`` False where no ray reaches the point. Four steps reach float32 rounding
+    (1e-7 of the normalized radius, ~2e-5 px) over every lens that covers its image."""
+    k1 = dist[0]
+    k2 = dist[1]
+    p1 = dist[2]
+    p2 = dist[3]
+    r2d = xd * xd + yd * yd
+    g = 1.0 + r2d * (k1 + r2d * (k2 + r2d * k3))
+    u = xd / g
+    v = yd / g
+    a = float(1.0)
+    b = float(0.0)
+    d = float(1.0)
+    ex = float(0.0)
+    ey = float(0.0)
+    for it in range(5):
+        r2 = u * u + v * v
+        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        drad = 2.0 * (k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2))
+        ex = u * radial + 2.0 * p1 * u * v + p2 * (r2 + 2.0 * u * u) - xd
+        ey = v * radial + p1 * (r2 + 2.0 * v * v) + 2.0 * p2 * u * v - yd
+        a = radial + u * u * drad + 2.0 * p1 * v + 6.0 * p2 * u
+        b = u * v * drad + 2.0 * p1 * u + 2.0 * p2 * v
+        d = radial + v * v * drad + 6.0 * p1 * v + 2.0 * p2 * u
+        if it < 4:  # the last round only measures the residual and the Jacobian at the solution
+            det = a * d - b * b
+            u = u - (d * ex - b * ey) / det
+            v = v - (a * ey - b * ex) / det
+    ok = ex * ex + ey * ey <= 1.0e-10 * (1.0 + r2d) and a > 0.0 and a * d - b * b > 0.0
+    return u, v, a, b, d, ok
 
 
 @wp.func
@@ -102,6 +138,61 @@ def covering_key(keys: wp.array2d(dtype=wp.int64), img: int, px: float, py: floa
     return best
 
 
+@wp.struct
+class Hit:
+    """What a colour sample's ray hits: ``z`` camera depth [m], ``label`` segmentation id, ``surface`` (triangle
+    index, or SURFACE_FLOOR / SURFACE_BACKGROUND), ``n`` unnormalized mesh normal, ``mat`` material coordinates,
+    ``d`` the world ray (a point at depth z is eye + z d); ``mesh_*`` the mesh surface behind a clear floor."""
+
+    z: float
+    label: int
+    surface: int
+    n: wp.vec3
+    mat: wp.vec3
+    d: wp.vec3
+    mesh_z: float
+    mesh_label: int
+    mesh_mat: wp.vec3
+
+
+@wp.func
+def sample_hit(keys: wp.array2d(dtype=wp.int64), img: int, fx: float, fy: float, gw: int, gh: int,
+               triangles: wp.array(dtype=wp.vec3i), tri_label: wp.array(dtype=wp.int32),
+               vertices: wp.array2d(dtype=wp.vec3), texcoords: wp.array2d(dtype=wp.vec3), w: int, R: wp.mat33,
+               t: wp.vec3, Rt: wp.mat33, k: wp.vec4, eye: wp.vec3, fn: wp.vec3, fa: wp.vec3, fb: wp.vec3,
+               floor_eye: wp.vec3, half: float) -> Hit:
+    """The :class:`Hit` of the sample at (fx, fy) of a grid with intrinsics ``k``: the mesh surface its nearest grid
+    key holds, or the floor square (normal ``fn``, axes ``fa``, ``fb``, half side ``half``) where nearer;
+    ``floor_eye`` = the eye's floor coordinates and height (a ray-plane test, not the label pass's per-row form)."""
+    d = Rt * wp.vec3((fx - k[2]) / k[0], (fy - k[3]) / k[1], 1.0)
+    key = grid_key(keys, img, fx, fy, gw, gh)
+    mz, mlabel, n, mmat = mesh_surface(key, triangles, tri_label, vertices, texcoords, w, R, t, k, fx, fy, eye, d)
+    h = Hit()
+    h.d = d
+    h.n = n
+    h.mesh_z = mz
+    h.mesh_label = mlabel
+    h.mesh_mat = mmat
+    h.z = mz
+    h.label = mlabel
+    h.mat = mmat
+    h.surface = int(SURFACE_BACKGROUND)
+    if mlabel != SEG_BACKGROUND:
+        h.surface = int(key % _TRI_SCALE)
+    den = wp.dot(fn, d)
+    if den < 0.0 and floor_eye[2] > 0.0:
+        zf = -floor_eye[2] / den
+        if zf < mz:
+            fu = floor_eye[0] + zf * wp.dot(d, fa)
+            fv = floor_eye[1] + zf * wp.dot(d, fb)
+            if wp.abs(fu) <= half and wp.abs(fv) <= half:
+                h.z = zf
+                h.label = int(SEG_FLOOR)
+                h.mat = wp.vec3(fu, fv, 0.0)
+                h.surface = int(SURFACE_FLOOR)
+    return h
+
+
 def make_resolve_samples(sub: int, lens: bool):
     """The resolve kernel for ``sub`` x ``sub`` colour samples per pixel, through a lens (``lens``) or not; both are
     compile-time switches (one kernel per combination)."""
@@ -136,24 +227,26 @@ def make_resolve_samples(sub: int, lens: bool):
         vertices: wp.array2d(dtype=wp.vec3), texcoords: wp.array2d(dtype=wp.vec3),
         image_world: wp.array(dtype=wp.int32),
         cam_rot: wp.array(dtype=wp.mat33), cam_trans: wp.array(dtype=wp.vec3), cam_intr: wp.array(dtype=wp.vec4),
-        cam_dist: wp.array2d(dtype=wp.float64), cam_gain: wp.array(dtype=wp.vec3),
+        cam_dist: wp.array(dtype=wp.vec4), cam_k3: wp.array(dtype=float), cam_gain: wp.array(dtype=wp.vec3),
         label_key: wp.array2d(dtype=wp.int64), label_mask: wp.array2d(dtype=wp.uint8),
         sample_key: wp.array2d(dtype=wp.int64),
-        width: int, height: int, grid_w: int, grid_h: int, margin_x: int, margin_y: int, write_normals: int,
+        width: int, height: int, span: int, grid_w: int, grid_h: int, margin_x: int, margin_y: int,
+        write_normals: int,
         # Data out:
         rgb: wp.array2d(dtype=wp.vec3ub), depth: wp.array2d(dtype=float), seg: wp.array2d(dtype=wp.uint8),
         worm_mask: wp.array2d(dtype=wp.uint8), normals: wp.array2d(dtype=wp.vec3),
     ):
-        """One output pixel (x, y) of image ``img``; launched as (N, height, width).
+        """``span`` output pixels of row y of image ``img``; launched as (N, height, ceil(width / span)) (span 1 on
+        CUDA; on the CPU the whole row, so a thread's set-up, its copy of ``look`` and ``lights`` included, is paid
+        once per row).
 
         ``cam_intr`` (N,): the label grid's pinhole (fx, fy, cx, cy) [px] (``grid_w`` x ``grid_h``; with a lens,
-        the output's K shifted by the widening margins ``margin_x``, ``margin_y`` [px]); ``cam_dist`` (N, 5) OpenCV's (k1, k2, p1, p2, k3) (read
-        only with a lens); ``label_key``/``label_mask`` (N, grid_h * grid_w) and ``sample_key`` (N, sub² grid_h *
+        the output's K shifted by the widening margins ``margin_x``, ``margin_y`` [px]); ``cam_dist`` (N,) OpenCV's (k1, k2, p1, p2) and ``cam_k3``
+        (N,) its k3 (read only with a lens); ``label_key``/``label_mask`` (N, grid_h * grid_w) and ``sample_key`` (N, sub² grid_h *
         grid_w) the raster pass's keys and worm silhouette. Outputs (N, height * width): 8-bit ``rgb``, camera
         ``depth`` [m] (0: background), ``seg`` ids, ``worm_mask``, camera-frame ``normals`` when ``write_normals``.
         """
-        img, y, x = wp.tid()
-        pix = y * width + x
+        img, y, xb = wp.tid()
         w = image_world[img]
         R = cam_rot[img]
         t = cam_trans[img]
@@ -170,130 +263,121 @@ def make_resolve_samples(sub: int, lens: bool):
         if lights.shadows != 0:
             first = lights.map_first[w]
 
-        # the pinhole point the pixel centre sees, and d(pinhole px) / d(output px) for its samples
-        u0 = float(x)
-        v0 = float(y)
-        jac = wp.vec4(1.0, 0.0, 0.0, 1.0)
-        ok = bool(True)
-        if wp.static(lens):
-            kd = wp.vec4d(wp.float64(k[0]), wp.float64(k[1]), wp.float64(k[2]), wp.float64(k[3]))
-            # the output's principal point is the label grid's less the widening margins
-            u, v, a, b, d, ok = lens_inverse((wp.float64(x + margin_x) - kd[2]) / kd[0],
-                                             (wp.float64(y + margin_y) - kd[3]) / kd[1],
-                                             cam_dist[img, 0], cam_dist[img, 1], cam_dist[img, 2],
-                                             cam_dist[img, 3], cam_dist[img, 4], 8)
-            u0 = float(kd[0] * u + kd[2])
-            v0 = float(kd[1] * v + kd[3])
-            inv_det = 1.0 / float(a * d - b * b)
-            fxy = k[0] / k[1]
-            jac = wp.vec4(float(d) * inv_det, -float(b) * inv_det * fxy, -float(b) * inv_det / fxy,
-                          float(a) * inv_det)
-        if not ok:  # no ray reaches this pixel (the host refuses such lenses; a guard, never data)
-            rgb[img, pix] = wp.vec3ub(wp.uint8(0), wp.uint8(0), wp.uint8(0))
-            depth[img, pix] = 0.0
-            seg[img, pix] = wp.uint8(SEG_BACKGROUND)
-            worm_mask[img, pix] = wp.uint8(0)
-            if write_normals != 0:
-                normals[img, pix] = wp.vec3(0.0)
-            return
-
-        # labels: the label grid's nearest key, the surface on the exact ray (the plain pass's ops without a lens)
-        d0, dx = ray_frame(Rt, k, v0)
-        d_world = d0 + u0 * dx
-        fr = floor_row(fn, fa, fo, fh, eye, d0, dx)
-        lkey = grid_key(label_key, img, u0, v0, grid_w, grid_h)
-        if wp.static(lens):  # between texel centres: the texels' triangle that the exact ray hits
-            lkey = covering_key(label_key, img, u0, v0, grid_w, grid_h, triangles, vertices, w, R, t, k)
-        mz, mlabel, n_world, mmat = mesh_surface(lkey, triangles, tri_label, vertices, texcoords, w, R, t, k, u0,
-                                                 v0, eye, d_world)
-        best_z, label, mat = nearer_floor(fr, u0, mz, mlabel, mmat)
-        if write_normals != 0:
-            nrm = wp.vec3(0.0)
-            if label == SEG_FLOOR:
-                nrm = fn
-            elif label != SEG_BACKGROUND:
-                nrm = n_world
-                if wp.dot(n_world, -d_world) < 0.0:
-                    nrm = -n_world
-            normals[img, pix] = R * nrm
-        if label == SEG_BACKGROUND:
-            best_z = 0.0
-        depth[img, pix] = best_z
-        out_label = label
-        if out_label > SEG_EPM:
-            out_label = SEG_FLOOR  # a distractor object (its own albedo row): static scene, the floor's id
-        seg[img, pix] = wp.uint8(out_label)
-        worm_mask[img, pix] = label_mask[img, grid_key_index(u0, v0, grid_w, grid_h)]
-
-        # colour: sub x sub samples, grouped by the surface they land on
+        fb = wp.cross(fn, fa)
+        floor_eye = wp.vec3(wp.dot(eye - fo, fa), wp.dot(eye - fo, fb), wp.dot(fn, eye))
         kf = wp.vec4(k[0] * float(sub), k[1] * float(sub), k[2] * float(sub) + half_sub, k[3] * float(sub) + half_sub)
         fw = grid_w * sub
         fhgt = grid_h * sub
         transmit = look.floor_transmit[wrow(w, look.floor_transmit.shape[0])]
-        gid = ivec()
-        gfirst = ivec()
-        gcount = ivec()
-        gr = fvec()
-        gg = fvec()
-        gb = fvec()
-        ng = int(0)
-        for j in range(sub):
-            for i in range(sub):
-                fx, fy = sample_point(x, y, i, j, u0, v0, jac)
-                key = grid_key(sample_key, img, fx, fy, fw, fhgt)
-                s0, sdx = ray_frame(Rt, kf, fy)
-                sd = s0 + fx * sdx
-                sfr = floor_row(fn, fa, fo, fh, eye, s0, sdx)
-                smz, smlabel, sn, smat = mesh_surface(key, triangles, tri_label, vertices, texcoords, w, R, t, kf, fx,
-                                                      fy, eye, sd)
-                sz, slabel, smat2 = nearer_floor(sfr, fx, smz, smlabel, smat)
-                sid = int(SURFACE_BACKGROUND)
-                if slabel == SEG_FLOOR:
-                    sid = int(SURFACE_FLOOR)
-                elif slabel != SEG_BACKGROUND:
-                    sid = int(key % _TRI_SCALE)
-                alb = surface_albedo(look, w, slabel, smat2)
-                g = int(-1)
-                for q in range(ng):
-                    if gid[q] == sid:
-                        g = q
-                if g < 0:
-                    g = ng
-                    gid[g] = sid
-                    gfirst[g] = j * sub + i
-                    gcount[g] = 0
-                    gr[g] = 0.0
-                    gg[g] = 0.0
-                    gb[g] = 0.0
-                    ng = ng + 1
-                gcount[g] = gcount[g] + 1
-                gr[g] = gr[g] + alb[0]
-                gg[g] = gg[g] + alb[1]
-                gb[g] = gb[g] + alb[2]
         gain = cam_gain[img]
-        acc = wp.vec3(0.0)
-        for g in range(ng):
-            first_sample = gfirst[g]
-            fx, fy = sample_point(x, y, first_sample % sub, first_sample / sub, u0, v0, jac)
-            key = grid_key(sample_key, img, fx, fy, fw, fhgt)
-            s0, sdx = ray_frame(Rt, kf, fy)
-            sd = s0 + fx * sdx
-            sfr = floor_row(fn, fa, fo, fh, eye, s0, sdx)
-            smz, smlabel, sn, smat = mesh_surface(key, triangles, tri_label, vertices, texcoords, w, R, t, kf, fx, fy,
-                                                  eye, sd)
-            sz, slabel, smat2 = nearer_floor(sfr, fx, smz, smlabel, smat)
-            inv_n = 1.0 / float(gcount[g])
-            alb = wp.vec3(gr[g] * inv_n, gg[g] * inv_n, gb[g] * inv_n)
-            color, _nrm = shade_surface(look, lights, w, first, slabel, alb, sz, sn, eye, sd, bg)
-            if slabel != smlabel and smlabel != SEG_BACKGROUND and transmit > 0.0:
-                # a clear plate (render.plate_materials: acrylic): the mesh under it (the EPM) shows through
-                under, _n = shade_hit(look, lights, w, first, smlabel, smz, smat, sn, eye, sd, bg)
-                color = wp.lerp(color, under, transmit)
-            color = wp.cw_mul(color, gain)
-            color = wp.vec3(wp.clamp(color[0], 0.0, 1.0), wp.clamp(color[1], 0.0, 1.0), wp.clamp(color[2], 0.0, 1.0))
-            acc = acc + color * float(gcount[g])
-        acc = acc * inv_ss
-        rgb[img, pix] = wp.vec3ub(to_srgb8(acc[0]), to_srgb8(acc[1]), to_srgb8(acc[2]))
+        for x in range(xb * span, wp.min(xb * span + span, width)):
+            pix = y * width + x
+            # the pinhole point the pixel centre sees, and d(pinhole px) / d(output px) for its samples
+            u0 = float(x)
+            v0 = float(y)
+            jac = wp.vec4(1.0, 0.0, 0.0, 1.0)
+            ok = bool(True)
+            if wp.static(lens):
+                # the output's principal point is the label grid's less the widening margins
+                u, v, a, b, d, ok = lens_inverse32((float(x + margin_x) - k[2]) / k[0], (float(y + margin_y) - k[3]) / k[1],
+                                                   cam_dist[img], cam_k3[img])
+                u0 = k[0] * u + k[2]
+                v0 = k[1] * v + k[3]
+                inv_det = 1.0 / (a * d - b * b)
+                fxy = k[0] / k[1]
+                jac = wp.vec4(d * inv_det, -b * inv_det * fxy, -b * inv_det / fxy, a * inv_det)
+            if not ok:  # no ray reaches this pixel (the host refuses such lenses; a guard, never data)
+                rgb[img, pix] = wp.vec3ub(wp.uint8(0), wp.uint8(0), wp.uint8(0))
+                depth[img, pix] = 0.0
+                seg[img, pix] = wp.uint8(SEG_BACKGROUND)
+                worm_mask[img, pix] = wp.uint8(0)
+                if write_normals != 0:
+                    normals[img, pix] = wp.vec3(0.0)
+                continue
+
+            # labels: the label grid's nearest key, the surface on the exact ray (the plain pass's ops without a lens)
+            d0, dx = ray_frame(Rt, k, v0)
+            d_world = d0 + u0 * dx
+            fr = floor_row(fn, fa, fo, fh, eye, d0, dx)
+            lkey = grid_key(label_key, img, u0, v0, grid_w, grid_h)
+            if wp.static(lens):  # between texel centres: the texels' triangle that the exact ray hits
+                lkey = covering_key(label_key, img, u0, v0, grid_w, grid_h, triangles, vertices, w, R, t, k)
+            mz, mlabel, n_world, mmat = mesh_surface(lkey, triangles, tri_label, vertices, texcoords, w, R, t, k, u0,
+                                                     v0, eye, d_world)
+            best_z, label, mat = nearer_floor(fr, u0, mz, mlabel, mmat)
+            if write_normals != 0:
+                nrm = wp.vec3(0.0)
+                if label == SEG_FLOOR:
+                    nrm = fn
+                elif label != SEG_BACKGROUND:
+                    nrm = n_world
+                    if wp.dot(n_world, -d_world) < 0.0:
+                        nrm = -n_world
+                normals[img, pix] = R * nrm
+            if label == SEG_BACKGROUND:
+                best_z = 0.0
+            depth[img, pix] = best_z
+            out_label = label
+            if out_label > SEG_EPM:
+                out_label = SEG_FLOOR  # a distractor object (its own albedo row): static scene, the floor's id
+            seg[img, pix] = wp.uint8(out_label)
+            worm_mask[img, pix] = label_mask[img, grid_key_index(u0, v0, grid_w, grid_h)]
+
+            # colour: sub x sub samples, grouped by the surface they land on
+            gid = ivec()
+            gfirst = ivec()
+            gcount = ivec()
+            gr = fvec()
+            gg = fvec()
+            gb = fvec()
+            ng = int(0)
+            hit0 = Hit()
+            for j in range(sub):
+                for i in range(sub):
+                    fx, fy = sample_point(x, y, i, j, u0, v0, jac)
+                    hit = sample_hit(sample_key, img, fx, fy, fw, fhgt, triangles, tri_label, vertices, texcoords, w, R,
+                                     t, Rt, kf, eye, fn, fa, fb, floor_eye, fh)
+                    alb = surface_albedo(look, w, hit.label, hit.mat)
+                    g = int(-1)
+                    for q in range(ng):
+                        if gid[q] == hit.surface:
+                            g = q
+                    if g < 0:
+                        g = ng
+                        gid[g] = hit.surface
+                        gfirst[g] = j * sub + i
+                        gcount[g] = 0
+                        gr[g] = 0.0
+                        gg[g] = 0.0
+                        gb[g] = 0.0
+                        ng = ng + 1
+                        if g == 0:
+                            hit0 = hit
+                    gcount[g] = gcount[g] + 1
+                    gr[g] = gr[g] + alb[0]
+                    gg[g] = gg[g] + alb[1]
+                    gb[g] = gb[g] + alb[2]
+            acc = wp.vec3(0.0)
+            for g in range(ng):
+                hit = hit0
+                if g > 0:  # the first sample of each further surface, again (most pixels see one surface)
+                    first_sample = gfirst[g]
+                    fx, fy = sample_point(x, y, first_sample % sub, first_sample / sub, u0, v0, jac)
+                    hit = sample_hit(sample_key, img, fx, fy, fw, fhgt, triangles, tri_label, vertices, texcoords, w, R,
+                                     t, Rt, kf, eye, fn, fa, fb, floor_eye, fh)
+                inv_n = 1.0 / float(gcount[g])
+                alb = wp.vec3(gr[g] * inv_n, gg[g] * inv_n, gb[g] * inv_n)
+                color, _nrm = shade_surface(look, lights, w, first, hit.label, alb, hit.z, hit.n, eye, hit.d, bg)
+                if hit.label != hit.mesh_label and hit.mesh_label != SEG_BACKGROUND and transmit > 0.0:
+                    # a clear plate (render.plate_materials: acrylic): the mesh under it (the EPM) shows through
+                    under, _n = shade_hit(look, lights, w, first, hit.mesh_label, hit.mesh_z, hit.mesh_mat, hit.n, eye,
+                                          hit.d, bg)
+                    color = wp.lerp(color, under, transmit)
+                color = wp.cw_mul(color, gain)
+                color = wp.vec3(wp.clamp(color[0], 0.0, 1.0), wp.clamp(color[1], 0.0, 1.0), wp.clamp(color[2], 0.0, 1.0))
+                acc = acc + color * float(gcount[g])
+            acc = acc * inv_ss
+            rgb[img, pix] = wp.vec3ub(to_srgb8(acc[0]), to_srgb8(acc[1]), to_srgb8(acc[2]))
 
     return resolve_samples
 
