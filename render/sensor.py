@@ -158,9 +158,9 @@ def launch_sensor(rgb, batch: SensorBatch, width: int, height: int, device) -> N
     seed = wp.array(np.asarray(batch.seed, np.int32), dtype=wp.int32, device=d)
     a = wp.empty((n, width * height), dtype=wp.vec3, device=d)
     b = wp.empty((n, width * height), dtype=wp.vec3, device=d)
-    wp.launch(snk.sensor_colour, dim=(n, width * height), inputs=[rgb, wb, hscb], outputs=[a], device=d)
-    wp.launch(snk.sensor_blur_rows, dim=(n, height, width), inputs=[a, weights, radius, width], outputs=[b], device=d)
-    wp.launch(snk.sensor_blur_cols_noise, dim=(n, height, width),
+    wp.launch(snk.sensor_colour, dim=(n, height), inputs=[rgb, wb, hscb, width], outputs=[a], device=d)
+    wp.launch(snk.sensor_blur_rows, dim=(n, height), inputs=[a, weights, radius, width], outputs=[b], device=d)
+    wp.launch(snk.sensor_blur_cols_noise, dim=(n, height),
               inputs=[b, weights, radius, noise, seed, width, height], outputs=[rgb], device=d)
 
 

@@ -81,27 +81,32 @@ def sensor_colour(
     rgb: wp.array2d(dtype=wp.vec3ub),
     white_balance: wp.array(dtype=wp.vec3),
     hue_sat_con_bri: wp.array(dtype=wp.vec4),
+    width: int,
     # Data out:
     out: wp.array2d(dtype=wp.vec3),
 ):
-    """Colour effects of pixel ``pix`` of image ``img`` (launched (N, H*W)): 8-bit display RGB -> [0, 1], per-channel
-    gains (clipped to [0, 1] when not all 1), hue shift [deg] and saturation gain through HSV (skipped when neutral),
-    then ``(c - 0.5) contrast + 0.5 + brightness`` (not clipped: blur and noise come first)."""
-    img, pix = wp.tid()
-    p = rgb[img, pix]
-    c = wp.vec3(float(p[0]), float(p[1]), float(p[2])) * (1.0 / 255.0)
+    """Colour effects of row y of image ``img`` (launched (N, H): a CPU thread's set-up paid once per row): 8-bit
+    display RGB -> [0, 1], per-channel gains (clipped to [0, 1] when not all 1), hue shift [deg] and saturation gain
+    through HSV (skipped when neutral), then ``(c - 0.5) contrast + 0.5 + brightness`` (not clipped: blur and noise
+    come first)."""
+    img, y = wp.tid()
     wb = white_balance[img]
-    if wb[0] != 1.0 or wb[1] != 1.0 or wb[2] != 1.0:
-        c = wp.cw_mul(c, wb)
-        c = wp.vec3(wp.clamp(c[0], 0.0, 1.0), wp.clamp(c[1], 0.0, 1.0), wp.clamp(c[2], 0.0, 1.0))
     hscb = hue_sat_con_bri[img]
-    if hscb[0] != 0.0 or hscb[1] != 1.0:
-        hsv = rgb_to_hsv(c)
-        h = wp.mod(hsv[0] + hscb[0], 360.0)
-        if h < 0.0:
-            h += 360.0
-        c = hsv_to_rgb(wp.vec3(h, wp.clamp(hsv[1] * hscb[1], 0.0, 1.0), hsv[2]))
-    out[img, pix] = (c - wp.vec3(0.5)) * hscb[2] + wp.vec3(0.5 + hscb[3])
+    gains = wb[0] != 1.0 or wb[1] != 1.0 or wb[2] != 1.0
+    hsv_on = hscb[0] != 0.0 or hscb[1] != 1.0
+    for pix in range(y * width, y * width + width):
+        p = rgb[img, pix]
+        c = wp.vec3(float(p[0]), float(p[1]), float(p[2])) * (1.0 / 255.0)
+        if gains:
+            c = wp.cw_mul(c, wb)
+            c = wp.vec3(wp.clamp(c[0], 0.0, 1.0), wp.clamp(c[1], 0.0, 1.0), wp.clamp(c[2], 0.0, 1.0))
+        if hsv_on:
+            hsv = rgb_to_hsv(c)
+            h = wp.mod(hsv[0] + hscb[0], 360.0)
+            if h < 0.0:
+                h += 360.0
+            c = hsv_to_rgb(wp.vec3(h, wp.clamp(hsv[1] * hscb[1], 0.0, 1.0), hsv[2]))
+        out[img, pix] = (c - wp.vec3(0.5)) * hscb[2] + wp.vec3(0.5 + hscb[3])
 
 
 @wp.func
@@ -139,14 +144,15 @@ def sensor_blur_rows(
     # Data out:
     dst: wp.array2d(dtype=wp.vec3),
 ):
-    """The blur along rows (launched (N, H, W)); ``weights`` (N, 2 R + 1) each image's kernel centred at column R,
+    """The blur along row y (launched (N, H)); ``weights`` (N, 2 R + 1) each image's kernel centred at column R,
     ``radius`` (N,) its half side (0: copy)."""
-    img, y, x = wp.tid()
+    img, y = wp.tid()
     r = radius[img]
-    if r == 0:
-        dst[img, y * width + x] = src[img, y * width + x]
-    else:
-        dst[img, y * width + x] = blur_taps(src, img, y * width, x, width, 1, weights, r)
+    for x in range(width):
+        if r == 0:
+            dst[img, y * width + x] = src[img, y * width + x]
+        else:
+            dst[img, y * width + x] = blur_taps(src, img, y * width, x, width, 1, weights, r)
 
 
 @wp.kernel
@@ -163,21 +169,23 @@ def sensor_blur_cols_noise(
 ):
     """The blur along columns, then noise of std ``noise[img][0] + noise[img][1] sqrt(clip(c, 0, 1))`` (read and
     shot, fractions of full scale; a normal draw per channel from ``seed[img]`` and the pixel) and the 8-bit
-    quantization ``floor(clip(c, 0, 1) 255 + 0.5)`` (launched (N, H, W))."""
-    img, y, x = wp.tid()
-    pix = y * width + x
+    quantization ``floor(clip(c, 0, 1) 255 + 0.5)`` (launched (N, H): a row per thread)."""
+    img, y = wp.tid()
     r = radius[img]
-    c = src[img, pix]
-    if r != 0:
-        c = blur_taps(src, img, x, y, height, width, weights, r)
     ns = noise[img]
-    if ns[0] > 0.0 or ns[1] > 0.0:
-        state = wp.rand_init(seed[img], 3 * pix)
-        for ch in range(3):
-            std = ns[0]
-            if ns[1] > 0.0:
-                std = ns[0] + ns[1] * wp.sqrt(wp.clamp(c[ch], 0.0, 1.0))
-            c[ch] = c[ch] + wp.randn(state) * std
-    rgb[img, pix] = wp.vec3ub(wp.uint8(int(wp.clamp(c[0], 0.0, 1.0) * 255.0 + 0.5)),
-                              wp.uint8(int(wp.clamp(c[1], 0.0, 1.0) * 255.0 + 0.5)),
-                              wp.uint8(int(wp.clamp(c[2], 0.0, 1.0) * 255.0 + 0.5)))
+    noisy = ns[0] > 0.0 or ns[1] > 0.0
+    for x in range(width):
+        pix = y * width + x
+        c = src[img, pix]
+        if r != 0:
+            c = blur_taps(src, img, x, y, height, width, weights, r)
+        if noisy:
+            state = wp.rand_init(seed[img], pix)
+            for ch in range(3):
+                std = ns[0]
+                if ns[1] > 0.0:
+                    std = ns[0] + ns[1] * wp.sqrt(wp.clamp(c[ch], 0.0, 1.0))
+                c[ch] = c[ch] + wp.randn(state) * std
+        rgb[img, pix] = wp.vec3ub(wp.uint8(int(wp.clamp(c[0], 0.0, 1.0) * 255.0 + 0.5)),
+                                  wp.uint8(int(wp.clamp(c[1], 0.0, 1.0) * 255.0 + 0.5)),
+                                  wp.uint8(int(wp.clamp(c[2], 0.0, 1.0) * 255.0 + 0.5)))
