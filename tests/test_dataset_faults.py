@@ -155,7 +155,7 @@ def test_real_enospc_from_dev_full_mid_shard(tmp_path, monkeypatch):
     temporary gone, and --resume completes the job. Runs where ``mount`` is not
     allowed (the tmpfs test below needs root)."""
     out = tmp_path / "d"
-    real_init = ds._FailSafeFile.__init__
+    real_init = ds.FailSafeFile.__init__
     full = []
 
     def init(self, path):
@@ -170,7 +170,7 @@ def test_real_enospc_from_dev_full_mid_shard(tmp_path, monkeypatch):
 
             self._raw_write = raw_write
 
-    monkeypatch.setattr(ds._FailSafeFile, "__init__", init)
+    monkeypatch.setattr(ds.FailSafeFile, "__init__", init)
     with pytest.raises(ds.DatasetWriteError) as ei:
         run(tiny(), out)
     assert full, "shard 2 was never opened"
