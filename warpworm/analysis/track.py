@@ -72,7 +72,7 @@ class CameraModel:
             raise ValueError(f"camera R: got det {np.linalg.det(self.R):.6g}; expected a rotation (det 1)")
 
 
-OVERRIDABLE = ("hue_tol", "sat_frac", "val_frac", "min_pixels", "blob_reach")
+OVERRIDABLE = ("hue_tol", "sat_frac", "val_frac", "min_pixels", "blob_reach", "brightness_cut", "floor_sigma")
 
 
 @dataclass
@@ -84,11 +84,19 @@ class Thresholds:
     sat: np.ndarray
     val: np.ndarray
     white: np.ndarray
-    hue_tol: float = 25.0
+    hue_tol: float = 30.0
     sat_frac: float = 0.5
     val_frac: float = 0.5
     min_pixels: int = 12
     blob_reach: float = 1.5
+    brightness_cut: float = 0.0
+    """1: the brightness rule of the first tracker (value >= ``val_frac`` times the band colour's; loses faces turned
+    from the light, docs/calibration.md). 0 (default): brightness-independent, a pixel is a band's if its hue and
+    saturation (unchanged when a face is shaded: shading scales linear RGB, and the display's power law keeps the
+    ratios) say so and it stands ``floor_sigma`` noise levels above the floor's brightness (estimated per image)."""
+    floor_sigma: float = 5.0
+    """Noise levels of the floor a white pixel must stand above it (half as many for a coloured one, which its
+    chroma also gates)."""
 
     @classmethod
     def from_colors(cls, colors=None, **overrides) -> "Thresholds":
@@ -140,6 +148,18 @@ def dataset_band_colors(path) -> np.ndarray:
     return BAND_COLORS.copy() if colors is None else np.asarray(colors, np.float64)
 
 
+def floor_level(v: np.ndarray, s: np.ndarray) -> tuple[float, float]:
+    """The floor's brightness and its noise (OpenCV V units) in one image, from its unsaturated pixels (S below 96):
+    the median and 1.4826 times the median absolute deviation of their V below the 75th percentile (the floor fills
+    most of a frame filmed as docs/calibration.md asks; the white band and magnets are the bright tail)."""
+    vv = v[s < 96].astype(np.float64)
+    if vv.size < 16:
+        vv = v.astype(np.float64).ravel()
+    vv = vv[vv <= np.percentile(vv, 75)]
+    med = float(np.median(vv))
+    return med, max(1.0, 1.4826 * float(np.median(np.abs(vv - med))))
+
+
 def band_masks(rgb: np.ndarray, thr: Thresholds) -> np.ndarray:
     """The five band masks (5, H, W) bool of one RGB uint8 image (H, W, 3) (rules in the module docstring)."""
     import cv2
@@ -154,13 +174,36 @@ def band_masks(rgb: np.ndarray, thr: Thresholds) -> np.ndarray:
     # white/colour split at half the saturation of the colour the pixel's hue is nearest to
     white_sat = thr.sat_frac * np.where(thr.white, 255.0, thr.sat)[nearest]
     out = np.zeros((NUM_BANDS,) + rgb.shape[:2], bool)
+    cand = np.zeros_like(out)
     for b in range(NUM_BANDS):
-        bright = v >= thr.val_frac * thr.val[b]
         if thr.white[b]:
-            m = (s < white_sat) & bright
+            cand[b] = s < white_sat
         else:
-            m = hue_ok & (nearest == b) & (s >= thr.sat_frac * thr.sat[b]) & bright
-        out[b] = _near_largest(m, thr.blob_reach)
+            cand[b] = hue_ok & (nearest == b) & (s >= thr.sat_frac * thr.sat[b])
+        if thr.brightness_cut:
+            cand[b] &= v >= thr.val_frac * thr.val[b]
+    if not thr.brightness_cut:
+        # Brightness only against the background next to a pixel, never against the paint's colour: the floor's
+        # noise (global), the darkest smoothed background within 3 px (a lit floor, or the band's own shadow)
+        fl, sig = floor_level(v, s)
+        vs = cv2.blur(v.astype(np.float32), (3, 3))
+        colour = cand[~thr.white].any(axis=0)
+        bg = cv2.erode(np.where(colour, 255.0, vs).astype(np.float32), np.ones((7, 7), np.uint8))
+        bg = np.minimum(bg, fl)
+        lit = v >= bg + 0.5 * thr.floor_sigma * sig  # the colours are gated by their chroma too
+        for b in range(NUM_BANDS):
+            cand[b] &= lit if not thr.white[b] else v >= fl + thr.floor_sigma * sig
+        band = cand.any(axis=0)
+        # an edge pixel (next to a pixel of no band) counts if it is at least half-way from that background to the
+        # band's own brightness nearby (the brightest of its inner pixels within 2 px: the face's light, not the
+        # paint's), so a pixel that mixes band and floor is split evenly whatever the shading
+        edge_of = cv2.dilate((~band).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+        for b in range(NUM_BANDS):
+            edge = cand[b] & edge_of
+            ref = cv2.dilate(np.where(cand[b] & ~edge, v, 0).astype(np.uint8), np.ones((5, 5), np.uint8))
+            cand[b] &= ~edge | (2.0 * v >= bg + ref.astype(np.float32))
+    for b in range(NUM_BANDS):
+        out[b] = _near_largest(cand[b], thr.blob_reach)
     return out
 
 
