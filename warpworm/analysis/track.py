@@ -201,7 +201,10 @@ def band_masks(rgb: np.ndarray, thr: Thresholds) -> np.ndarray:
         for b in range(NUM_BANDS):
             edge = cand[b] & edge_of
             ref = cv2.dilate(np.where(cand[b] & ~edge, v, 0).astype(np.uint8), np.ones((5, 5), np.uint8))
-            cand[b] &= ~edge | (2.0 * v >= bg + ref.astype(np.float32))
+            half = 2.0 * v >= bg + ref.astype(np.float32)
+            if thr.white[b]:  # and a white edge pixel needs white inside it (not a colour's desaturated rim)
+                half &= ref > 0
+            cand[b] &= ~edge | half
     for b in range(NUM_BANDS):
         out[b] = _near_largest(cand[b], thr.blob_reach)
     return out
