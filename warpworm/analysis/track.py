@@ -150,14 +150,17 @@ def dataset_band_colors(path) -> np.ndarray:
 
 def floor_level(v: np.ndarray, s: np.ndarray) -> tuple[float, float]:
     """The floor's brightness and its noise (OpenCV V units) in one image, from its unsaturated pixels (S below 96):
-    the median and 1.4826 times the median absolute deviation of their V below the 75th percentile (the floor fills
-    most of a frame filmed as docs/calibration.md asks; the white band and magnets are the bright tail)."""
+    the median and 1.4826 times the median absolute deviation of their V, the bright tail beyond 4 of those
+    deviations dropped (three passes): the floor fills most of a frame filmed as docs/calibration.md asks; the white
+    band and the magnets are the bright tail."""
     vv = v[s < 96].astype(np.float64)
     if vv.size < 16:
         vv = v.astype(np.float64).ravel()
-    vv = vv[vv <= np.percentile(vv, 75)]
-    med = float(np.median(vv))
-    return med, max(1.0, 1.4826 * float(np.median(np.abs(vv - med))))
+    for _ in range(3):
+        med = float(np.median(vv))
+        sig = max(1.0, 1.4826 * float(np.median(np.abs(vv - med))))
+        vv = vv[vv <= med + 4 * sig]
+    return med, sig
 
 
 def band_masks(rgb: np.ndarray, thr: Thresholds) -> np.ndarray:
