@@ -68,7 +68,10 @@ def test_fit_track_recovers_the_planted_epm_moment_from_images(planted_video, ca
     # the planted moment lies inside the acceptable range, which stays within the 3 % tolerance: pinned
     lo, hi = s["range_rel"][0]
     assert lo <= PLANT * base.epm_moment / epm - 1 <= hi and max(-lo, hi) < 0.03, s["range_rel"]
-    assert s["pinned"] == [True, False] and s["tolerance"] == [0.03, 0.05]
+    # (its range, ~2.5 % wide, lies inside the verdict's margin band of 3 % / 1.25 .. 3 % x 1.25: borderline or
+    # pinned, never not pinned; FT.VERDICT_MARGIN)
+    assert s["verdict"][0] in ("pinned", "borderline") and s["verdict"][1] == "not pinned"
+    assert s["pinned"] == [s["verdict"][0] == "pinned", False] and s["tolerance"] == [0.03, 0.05]
     # dipole_density: acceptable over the whole search range (to a bound)
     assert s["at_bound"] == [False, True] and s["range_rel"][1][1] - s["range_rel"][1][0] > 0.3
     print(s["worlds"], s["wall_s"], s["range_rel"], s["moved"])
