@@ -163,6 +163,27 @@ def floor_level(v: np.ndarray, s: np.ndarray) -> tuple[float, float]:
     return med, sig
 
 
+def floor_map(v: np.ndarray, s: np.ndarray, cell: int | None = None) -> tuple[np.ndarray, float]:
+    """The floor's brightness per pixel (H, W) float32 (a lamp lights a floor unevenly) and its noise: the
+    :func:`floor_level` of every ``cell``-pixel cell (default a quarter of the image's shorter side) of a coarse grid
+    from the window of twice its size around it, interpolated bilinearly, and never above the whole image's floor
+    level plus 3 noise levels (a window the worm fills); the noise is the whole image's."""
+    import cv2
+
+    H, W = v.shape
+    fl0, sig = floor_level(v, s)
+    cell = int(cell or max(16, min(H, W) // 4))
+    ny, nx = max(1, int(np.ceil(H / cell))), max(1, int(np.ceil(W / cell)))
+    grid = np.zeros((ny, nx), np.float32)
+    for i in range(ny):
+        for j in range(nx):
+            y0, x0 = max(0, i * cell - cell // 2), max(0, j * cell - cell // 2)
+            grid[i, j] = floor_level(v[y0:y0 + 2 * cell, x0:x0 + 2 * cell], s[y0:y0 + 2 * cell, x0:x0 + 2 * cell])[0]
+    # cell centres at (i + 0.5) cell: resize maps them there
+    full = cv2.resize(np.minimum(grid, fl0 + 3 * sig), (nx * cell, ny * cell), interpolation=cv2.INTER_LINEAR)
+    return full[:H, :W], sig
+
+
 def band_masks(rgb: np.ndarray, thr: Thresholds) -> np.ndarray:
     """The five band masks (5, H, W) bool of one RGB uint8 image (H, W, 3) (rules in the module docstring)."""
     import cv2
@@ -189,13 +210,35 @@ def band_masks(rgb: np.ndarray, thr: Thresholds) -> np.ndarray:
         # Brightness only against the background next to a pixel, never against the paint's colour: the floor's
         # noise (global), the darkest smoothed background within 3 px (a lit floor, or the band's own shadow)
         fl, sig = floor_level(v, s)
+        flm, _ = floor_map(v, s)
         vs = cv2.blur(v.astype(np.float32), (3, 3))
         colour = cand[~thr.white].any(axis=0)
         bg = cv2.erode(np.where(colour, 255.0, vs).astype(np.float32), np.ones((7, 7), np.uint8))
         bg = np.minimum(bg, fl)
         lit = v >= bg + 0.5 * thr.floor_sigma * sig  # the colours are gated by their chroma too
+        # a face in deep shadow can be as dark as the floor: there the chroma of the 3x3 mean decides (the floor's
+        # noise averaged down, the paint's hue and saturation kept)
+        hsv_s = cv2.cvtColor(cv2.blur(np.ascontiguousarray(rgb, np.uint8), (3, 3)), cv2.COLOR_RGB2HSV).astype(np.int16)
+        dh_s = np.abs(hsv_s[..., 0][None] - thr.hue[:, None, None])
+        dh_s = np.minimum(dh_s, 180 - dh_s)
+        dh_s[thr.white] = 999
+        near_s = np.argmin(dh_s, axis=0)
+        ok_s = np.min(dh_s, axis=0) <= thr.hue_tol
         for b in range(NUM_BANDS):
-            cand[b] &= lit if not thr.white[b] else v >= fl + thr.floor_sigma * sig
+            if not thr.white[b]:
+                dark = ok_s & (near_s == b) & (hsv_s[..., 1] >= thr.sat_frac * thr.sat[b]) & (nearest == b)
+                cand[b] = (cand[b] & lit) | (dark & ~lit)
+                continue
+            # hysteresis against the local floor: white where floor_sigma noise levels above it, and every
+            # unsaturated pixel connected to such a one whose 3x3 mean stands 3 levels above it (a white face in
+            # shadow, nearly as dark as the lit floor)
+            strong = cand[b] & (v >= np.maximum(fl, flm) + thr.floor_sigma * sig)
+            weak = cand[b] & (vs >= flm + 3.0 * sig)
+            n, lab = cv2.connectedComponents((weak | strong).astype(np.uint8), connectivity=8)
+            keep = np.zeros(n, bool)
+            keep[np.unique(lab[strong])] = True
+            keep[0] = False
+            cand[b] = keep[lab]
         band = cand.any(axis=0)
         # an edge pixel (next to a pixel of no band) counts if it is at least half-way from that background to the
         # band's own brightness nearby (the brightest of its inner pixels within 2 px: the face's light, not the
