@@ -39,7 +39,7 @@ def main() -> None:
     ap.add_argument("--size", default="256x192")
     ap.add_argument("--spp", type=int, default=8)
     ap.add_argument("--truth", default="raster", choices=["raster", "pathtracer"])
-    ap.add_argument("--brightness-cut", action="store_true", help="the first tracker's rule (value >= half the colour's)")
+    ap.add_argument("--brightness-cut", action="store_true", help="the first tracker (value >= half the colour's, hue within 25)")
     ap.add_argument("--no-distortion", action="store_true")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", default=None)
@@ -50,7 +50,7 @@ def main() -> None:
 
     quiet_warp()
     W, H = (int(x) for x in args.size.split("x"))
-    thr = T.Thresholds.from_colors(brightness_cut=1.0 if args.brightness_cut else 0.0)
+    thr = T.Thresholds.from_colors(**({"brightness_cut": 1.0, "hue_tol": 25.0} if args.brightness_cut else {}))
     rows = []
     print(f"{'gait':12s} {'look':>4s} {'mean px':>8s} {'max px':>7s}  per band max (blue pink white green red)")
     for gait in args.gaits.split(","):

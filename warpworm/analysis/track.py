@@ -8,17 +8,24 @@ above the floor along its normal: the height of the band centres seen from above
 (:func:`default_band_height`). A worm part that lifts off the floor is seen displaced (parallax): the same camera
 model must then be used for the simulation it is compared with (``warpworm fit-track`` does so).
 
-Thresholds (OpenCV HSV: H in [0, 180), S and V in [0, 255]) follow from the band colours
-(:meth:`Thresholds.from_colors`, the colours' own hue H_b, saturation S_b and value V_b): a pixel goes to the
-coloured band of nearest hue if that hue is within ``hue_tol`` (25, i.e. 50 degrees), its saturation >= ``sat_frac``
-S_b and its value >= ``val_frac`` V_b; to the white (low-saturation) band if its saturation is below ``sat_frac``
-times that of the colour of nearest hue and its value >= ``val_frac`` V_white (both fractions 0.5). Splitting at the
-midpoints (nearest hue, half the saturation, half the value) divides a pixel that mixes a band with its neighbour,
-the floor or a magnet (blur, JPEG's halved chroma) evenly, so no centroid is pulled. Of each mask only the largest
-8-connected blob and the blobs near it (centroid within ``blob_reach`` times its size) are kept: a band is one patch
-of paint, a grey magnet or noise elsewhere is not. A band with fewer than ``min_pixels`` pixels is *unseen* in that
-frame: its centre is NaN, and so are the ratios and the displacement that need it. A dark, unsaturated floor keeps
-the white band clean.
+Classification (OpenCV HSV: H in [0, 180), S and V in [0, 255]; :func:`band_masks`) follows from the band colours
+(:meth:`Thresholds.from_colors`, the colours' own hue H_b and saturation S_b) and never from the paint's brightness:
+a face turned from the light keeps its hue and saturation (shading scales linear RGB; the display's power law keeps
+the channel ratios), only its value drops. A pixel goes to the coloured band of nearest hue if that hue is within
+``hue_tol`` (30) and its saturation >= ``sat_frac`` (0.5) S_b, and it stands 0.5 ``floor_sigma`` (5) noise levels
+above the background next to it (the floor's level and noise estimated per image from its unsaturated pixels; the
+darkest smoothed background within 3 px: a lit floor or the band's own shadow); where it is as dark as that, the
+hue and saturation of its 3x3 mean decide (a face in deep shadow). A pixel goes to the white (low-saturation) band
+if its saturation is below ``sat_frac`` times that of the colour of nearest hue and it stands ``floor_sigma`` noise
+levels above the floor, or 3 levels (3x3 mean, against a coarse local floor map) and connected to such a pixel (a
+white face in shadow). A pixel next to the background counts only if it is at least half-way from the background's
+brightness to the band's own nearby (the face's light), and splitting at the nearest hue and at half the saturation
+divides a pixel that mixes a band with its neighbour, the floor or a magnet evenly, so no centroid is pulled.
+``brightness_cut=1`` restores the first tracker's rule (value >= ``val_frac`` V_b; it loses shaded faces:
+docs/calibration.md). Of each mask only the largest 8-connected blob and the blobs near it (centroid within
+``blob_reach`` times its size) are kept: a band is one patch of paint, a grey magnet or noise elsewhere is not. A
+band with fewer than ``min_pixels`` pixels is *unseen* in that frame: its centre is NaN, and so are the ratios and
+the displacement that need it. A dark, unsaturated floor keeps the white band clean.
 """
 
 from __future__ import annotations
