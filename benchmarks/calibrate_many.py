@@ -67,6 +67,9 @@ def main() -> None:
     ap.add_argument("--refine", type=int, default=4)
     ap.add_argument("--profile", type=int, default=3)
     ap.add_argument("--render-scale", type=float, default=1.0)
+    ap.add_argument("--noise-seed", type=int, default=0,
+                    help="added to every image's noise seeds (sensor noise and the path tracer's sampler): the same "
+                         "worms, lights and cameras re-rendered, to measure whether the verdicts flip on noise")
     ap.add_argument("--json", default=None, help="append one JSON line per worm here")
     args = ap.parse_args()
     from warpworm import quiet_warp
@@ -82,7 +85,7 @@ def main() -> None:
         rng = np.random.default_rng([41, j])
         truth = draw_worm(rng)
         try:
-            filmed = [film_clip(c, truth, rng, size=size, spp=args.spp, seed=1000 * j + 10 * k)
+            filmed = [film_clip(c, truth, rng, size=size, spp=args.spp, seed=1000 * j + 10 * k + 100003 * args.noise_seed)
                       for k, c in enumerate(clips)]
         except (RuntimeError, ValueError) as exc:
             print(f"worm {j}: {exc}; skipped", flush=True)
@@ -98,7 +101,7 @@ def main() -> None:
                "range_rel": res["range_rel"].tolist(), "verdict": [str(v) for v in res["verdict"]],
                "planted_inside": inside, "rms_ratio": res["rms_ratio"], "rms_disp_m": res["rms_disp_m"],
                "track_px_mean": float(np.nanmean(px)), "track_px_max": float(np.nanmax(px)),
-               "worlds": res["worlds"], "film_s": t_film, "wall_s": time.perf_counter() - t0, "clips": clips}
+               "worlds": res["worlds"], "film_s": t_film, "noise_seed": args.noise_seed, "wall_s": time.perf_counter() - t0, "clips": clips}
         print(f"worm {j}: planted k={truth[0]:.4g} mu={truth[1]:.3f} m={truth[2]:.3f}  error "
               + "  ".join(f"{100 * e:+.2f}%" for e in err) + "  ranges "
               + "  ".join(f"[{100 * lo:+.1f},{100 * hi:+.1f}]" for lo, hi in res["range_rel"]) + "  "
