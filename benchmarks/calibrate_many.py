@@ -44,8 +44,8 @@ def film_clip(clip: dict, truth: np.ndarray, rng: np.random.Generator, *, size=(
     if fr["unstable"][0]:
         raise RuntimeError("the planted worm's simulation went unstable")
     look = FO.random_look(rng)
-    sign = -1.0 if clip["backward"] else 1.0
-    cam = FO.random_camera(rng, W, H, centre=(0.04 + sign * 0.006 * clip["cycles"], 0.0, 0.0))
+    x = np.asarray(fr["positions"])[:, 0, :, 0]  # the worm's path, framed as a camera operator would
+    cam = FO.random_camera(rng, W, H, centre=(0.5 * (x.min() + x.max()), 0.0, 0.0), span=float(x.max() - x.min()))
     F = len(times)
     rgb, truth_px = FO.pathtraced_band_video(fr, fr["model"], cam, W, H, look, spp=spp,
                                              sensor_values=T.harshest_sensor(F), seed=seed)
@@ -63,7 +63,7 @@ def main() -> None:
     ap.add_argument("--first", type=int, default=0, help="index of the first worm (draws are per index)")
     ap.add_argument("--size", default="256x192")
     ap.add_argument("--spp", type=int, default=8)
-    ap.add_argument("--budget", type=int, default=48)
+    ap.add_argument("--budget", type=int, default=48, help="CMA-ES worlds after the plan's design worms")
     ap.add_argument("--refine", type=int, default=4)
     ap.add_argument("--profile", type=int, default=3)
     ap.add_argument("--render-scale", type=float, default=1.0)
@@ -76,7 +76,9 @@ def main() -> None:
     from warpworm.analysis import fit_track as FT
 
     quiet_warp()
-    clips = json.loads(open(args.plan).read())["clips"]
+    plan = json.loads(open(args.plan).read())
+    clips = plan["clips"]
+    starts = np.asarray(plan["design_worms"]) if "design_worms" in plan and plan.get("names") == NAMES else None
     size = tuple(int(x) for x in args.size.split("x"))
     print(f"{len(clips)} clip(s): " + "; ".join(f"{c['gait']} w={c['wavelength']:.4g} a={c['amplitude']:.4g} "
                                                  f"h={c['closest_approach']:.4g} x{c['cycles']:g}" for c in clips))
@@ -94,7 +96,7 @@ def main() -> None:
         tracks, metas, bases = [f[0] for f in filmed], [f[1] for f in filmed], [f[2] for f in filmed]
         px = np.concatenate([f[3].ravel() for f in filmed])
         res = FT.fit(tracks, bases, NAMES, meta=metas, budget=args.budget, refine=args.refine, profile=args.profile,
-                     render_scale=args.render_scale, seed=j)
+                     render_scale=args.render_scale, seed=j, starts=starts)
         err = res["value"] / truth - 1
         inside = [bool(lo <= -e / (1 + e) <= hi) for (lo, hi), e in zip(res["range_rel"], err)]
         row = {"worm": j, "planted": truth.tolist(), "fitted": res["value"].tolist(), "error": err.tolist(),

@@ -265,14 +265,24 @@ def delta_chi2(cost, best_cost: float, n_res: int, p: int):
     return (np.asarray(cost) - best_cost) * n_res / max(1.0, best_cost * n_res / max(1, n_res - p))
 
 
-def _search(ev, p, lim, budget, pop, seed, log, show):
+def _search(ev, p, lim, budget, pop, seed, log, show, starts=None):
     """CMA-ES over the log-parameters within ±lim, one batch of ``pop`` worlds a generation, until ``budget``
-    worlds. Returns the best point (p,) and the history [(worlds, best cost)]."""
+    worlds. ``starts`` (k, p): points evaluated first as one batch (e.g. the plan's design worms); the search then
+    starts at the best of them with half the spread. Returns the best point (p,) and the history [(worlds, best
+    cost)]."""
     import cma
 
-    es = cma.CMAEvolutionStrategy(np.zeros(p), lim / 3, {"bounds": [-lim, lim], "popsize": pop, "seed": seed + 1,
-                                                         "verbose": -9})
-    best, history, worlds = (np.inf, np.zeros(p)), [], 0
+    x0, sigma, best = np.zeros(p), lim / 3, (np.inf, np.zeros(p))
+    if starts is not None and len(starts):
+        S = np.clip(np.asarray(starts, np.float64).reshape(-1, p), -lim, lim)
+        c0 = ev(S)[0]
+        k = int(np.argmin(c0))
+        x0, sigma, best = S[k].copy(), lim / 6, (float(c0[k]), S[k].copy())
+        if log:
+            log(f"  {ev.worlds:4d} worlds (starts): best cost {best[0]:.4g}  {show(best[1])}")
+    es = cma.CMAEvolutionStrategy(x0, sigma, {"bounds": [-lim, lim], "popsize": pop, "seed": seed + 1,
+                                              "verbose": -9})
+    history, worlds = [], 0
     while worlds + pop <= max(budget, pop):
         X = np.array(es.ask())
         cost = ev(X)[0]
@@ -436,7 +446,7 @@ def acceptable_ranges(X, cost, xb, best_cost, n_res, lim, threshold=ACCEPT_DCHI2
 
 
 def fit_batches(ev, names, *, lim: float, budget: int, pop: int, seed: int = 0, step: float = 0.05, refine: int = 4,
-                profile: int = 6, log=None, show=str, start=None) -> dict:
+                profile: int = 6, log=None, show=str, start=None, starts=None) -> dict:
     """The search and the global uncertainty over an evaluator ``ev`` (:class:`_Batches`: log-parameter points
     (W, p) -> cost (W,), residuals (W, n), obs; one batch a call; ``ev.all()`` every evaluated point): CMA-ES
     (:func:`_search`), ``refine`` Levenberg-Marquardt steps (:func:`_refine`), the global profile (:func:`_profile`),
@@ -446,7 +456,7 @@ def fit_batches(ev, names, *, lim: float, budget: int, pop: int, seed: int = 0, 
     (p,), pinned (p,), n_res."""
     p = len(names)
     if start is None:
-        xb, history = _search(ev, p, lim, budget, pop, seed, log, show)
+        xb, history = _search(ev, p, lim, budget, pop, seed, log, show, starts)
     else:
         xb, history = np.asarray(start, np.float64), []
     st = _refine(ev, xb, refine, step, lim, history, log, show)
@@ -482,13 +492,15 @@ def verdicts(lo, hi, at_bound, tol, margin: float = VERDICT_MARGIN) -> np.ndarra
 
 
 def fit(track, base, names, *, budget: int = 96, popsize: int | None = None, spread: float = 3.0, seed: int = 0,
-        meta: dict | None = None, step: float = 0.05, refine: int = 4, profile: int = 6, log=None, **kw) -> dict:
+        meta: dict | None = None, step: float = 0.05, refine: int = 4, profile: int = 6, log=None, starts=None,
+        **kw) -> dict:
     """Fit ``names`` to ``track`` (or to several clips of one worm jointly: ``track``, ``base`` and ``meta`` lists,
     one per clip, their residuals joined; :func:`_as_clips`): every candidate one world of a batch (:func:`observe`)
     searched over log(names /
     base) within ±log(spread), CMA-ES with ``popsize`` worlds a generation until ``budget`` worlds, ``refine``
     Levenberg-Marquardt steps (2p + 1 worlds each), then the global profile with ``profile`` re-fit steps (0: none,
-    the ranges then come from the search's candidates only) (:func:`fit_batches`). A parameter is pinned when its
+    the ranges then come from the search's candidates only) (:func:`fit_batches`). ``starts`` (k, p): parameter
+    values evaluated first (e.g. the plan's design worms); the search starts at the best of them. A parameter is pinned when its
     acceptable range (:func:`acceptable_ranges` over every evaluated world) stays inside ±its :func:`tolerance`.
 
     Returns a dict: names, base, value (p,), x, cost, rms_ratio, rms_disp_m, chi2_red (at the tracker's accuracy),
@@ -507,7 +519,8 @@ def fit(track, base, names, *, budget: int = 96, popsize: int | None = None, spr
     ev = _Batches(base, names, theta0, track, ref, meta, lim, kw)
     show = lambda x: "  ".join(f"{n}={v:.4g}" for n, v in zip(names, theta0 * np.exp(x)))  # noqa: E731
     out = fit_batches(ev, names, lim=lim, budget=budget, pop=pop, seed=seed, step=step, refine=refine,
-                      profile=profile, log=log, show=show)
+                      profile=profile, log=log, show=show,
+                      starts=None if starts is None else np.log(np.asarray(starts, np.float64) / theta0))
     st, n_res = out["st"], out["n_res"]
     r0, J = st["r"], st["J"]
     chi2 = float(np.sum(r0 ** 2) / max(1, n_res - p))

@@ -36,18 +36,21 @@ def random_look(rng: np.random.Generator, *, shading: str = "hard") -> dict:
 
 
 def random_camera(rng: np.random.Generator, width: int, height: int, *, centre=(0.045, 0.0, 0.0),
-                  tilt_deg=(6.0, 14.0), distortion: bool = True) -> CameraModel:
+                  tilt_deg=(6.0, 14.0), distortion: bool = True, span: float = 0.0) -> CameraModel:
     """A camera 0.17-0.22 m from ``centre`` looking at it, tilted ``tilt_deg`` off vertical toward a random azimuth,
     rolled so image +x is roughly world +x, 24-30 degrees vertical field of view, square pixels, a principal point
-    within ±3 % of the centre, radial distortion k1 in ±0.08 (``distortion``)."""
+    within ±3 % of the centre, radial distortion k1 in ±0.08 (``distortion``); farther when needed for the image's
+    shorter side to hold ``span`` [m] (the worm's path) with 15 % to spare."""
     from warpworm.render import focal_from_fov, look_at
 
     c = np.asarray(centre, np.float64) + np.array([rng.uniform(-0.004, 0.004), rng.uniform(-0.004, 0.004), 0.0])
     tl, az = np.radians(rng.uniform(*tilt_deg)), rng.uniform(0, 2 * np.pi)
     d = rng.uniform(0.17, 0.22)
+    fov = np.radians(rng.uniform(24, 30))
+    d = max(d, 1.15 * span / (2 * np.tan(fov / 2)))
     eye = c + d * np.array([np.sin(tl) * np.cos(az), np.sin(tl) * np.sin(az), np.cos(tl)])
     R, t = look_at(eye, c, up=(0.0, 1.0, 0.0))
-    f = float(focal_from_fov(np.radians(rng.uniform(24, 30)), height))
+    f = float(focal_from_fov(fov, height))
     K = np.array([[f, 0, (width - 1) / 2 + rng.uniform(-0.03, 0.03) * width],
                   [0, f, (height - 1) / 2 + rng.uniform(-0.03, 0.03) * height], [0, 0, 1.0]])
     dist = np.array([rng.uniform(-0.08, 0.08), 0.0, 0.0, 0.0, 0.0]) if distortion else np.zeros(5)
