@@ -28,6 +28,9 @@ def add_arguments(parser) -> None:
                         help="stop adding clips once every design worm's predicted half-width is within this "
                              "fraction of the tolerance (default 0.5: room for the tracker's bias and the global "
                              "profile's wider ranges)")
+    parser.add_argument("--max-nonlinearity", type=float, default=0.5,
+                        help="refuse a clip whose forward and backward differences disagree by more than this "
+                             "fraction of their sum at any design worm (a track that jumps; default 0.5)")
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--out", default="plan.json")
 
@@ -81,15 +84,16 @@ def main(args) -> int:
     print(f"planning {names} over {len(clips)} candidate clips for worms in "
           + ", ".join(f"{n} {ranges[n][0]:g}..{ranges[n][1]:g}" for n in names))
     res = P.plan(names, {n: ranges[n] for n in names}, clips=clips, max_clips=args.max_clips, margin=args.margin,
-                 device=args.device, log=print)
+                 device=args.device, log=print, max_nonlinearity=args.max_nonlinearity)
     print("\n".join(P.report_lines(res)))
     out = {"names": names, "ranges": {n: list(ranges[n]) for n in names},
            "clips": [res["clips"][i] for i in res["chosen"]],
            "predicted_half_width_rel": np.expm1(res["plan_half"]).max(axis=0).tolist(),
            "tolerance": res["tolerance"].tolist(), "worst_after_each_clip": res["worst"].tolist(),
            "design_worms": res["worms"].tolist(),
-           "candidates": [{**c, "stable": bool(ok), "half_width_rel": np.expm1(h).max(axis=0).tolist()}
-                          for c, ok, h in zip(res["clips"], res["ok"].all(axis=1), res["half"])]}
+           "candidates": [{**c, "usable": bool(ok), "nonlinearity": float(np.max(nl)),
+                           "half_width_rel": np.expm1(h).max(axis=0).tolist()}
+                          for c, ok, nl, h in zip(res["clips"], res["ok"].all(axis=1), res["nonlin"], res["half"])]}
     Path(args.out).write_text(json.dumps(out, indent=1))
     print(f"wrote {args.out}: film its {len(out['clips'])} clip(s), track each, then "
           f"warpworm fit-track T1.csv ... --plan {args.out} --fit {','.join(names)}")
