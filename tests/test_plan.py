@@ -117,3 +117,15 @@ def test_fit_track_and_plan_clips_refuse_bad_input(tmp_path, capsys):
     assert "LO:HI" in capsys.readouterr().err
     assert main(["plan-clips", "--fit", "hinge_stiffness,bar_stiffness"]) == 2
     assert "bar_stiffness" in capsys.readouterr().err
+
+
+def test_roughness_tells_a_jump_from_a_smooth_response():
+    """A smooth track (z = a x + 0.5 c x^2 at x = 0, ±0.05) is nearly linear; one with a stick-slip jump between 0
+    and +0.05 is refused by the planner's default cut (0.5)."""
+    t = np.linspace(0, 1, 40)
+    a, c = np.sin(7 * t), np.cos(3 * t)
+    z = lambda x: a * x + 0.5 * c * x * x  # noqa: E731
+    smooth = P.roughness(z(0.0), z(0.05)[None], z(-0.05)[None])[0]
+    assert smooth < 0.1
+    jump = z(0.05) + 0.3 * (t > 0.5)  # a slide that happens only at the perturbed value
+    assert P.roughness(z(0.0), jump[None], z(-0.05)[None])[0] > 0.5

@@ -146,15 +146,21 @@ def clip_jacobians(clips, names, worms, base=None, *, step=0.05, chunk=512, devi
                 # smooth: the forward and backward differences agree; a track that jumps (a stick-slip event
                 # that comes or goes between the perturbations) has a huge, meaningless central difference and
                 # a rugged cost with side valleys as low as the true one
-                fwd = z[k, :, 1:1 + p] - z[k, :, :1]
-                bwd = z[k, :, :1] - z[k, :, 1 + p:]
-                rough = np.linalg.norm(fwd - bwd, axis=-1) / np.maximum(np.linalg.norm(fwd + bwd, axis=-1), 1e-12)
-                nonlin[i] = rough.max(axis=1)
+                nonlin[i] = roughness(z[k, :, 0], z[k, :, 1:1 + p], z[k, :, 1 + p:]).max(axis=1)
                 ok[i] = ~bad[k].any(axis=1) & (nonlin[i] <= max_nonlinearity)
             if log:
                 log(f"  {len(part)} clips x {D} worms x {2 * p + 1} = {per * len(part)} worlds, {cyc:g} cycle(s): "
                     f"{time.perf_counter() - t0:.1f} s")
     return {"J": J, "ok": ok, "nonlin": nonlin}
+
+
+def roughness(z0: np.ndarray, zp: np.ndarray, zm: np.ndarray) -> np.ndarray:
+    """How far a track is from smooth in each parameter: |f - b| / |f + b| of the forward difference f = z(+step) -
+    z0 and the backward b = z0 - z(-step), from tracks z0 (..., n), zp and zm (..., p, n); (..., p). 0 for a linear
+    response, ~step x curvature / slope for a smooth one, ~1 or more where the track jumps between the points."""
+    f = zp - z0[..., None, :]
+    b = z0[..., None, :] - zm
+    return np.linalg.norm(f - b, axis=-1) / np.maximum(np.linalg.norm(f + b, axis=-1), 1e-12)
 
 
 def half_widths(F: np.ndarray) -> np.ndarray:
