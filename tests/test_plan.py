@@ -129,3 +129,38 @@ def test_roughness_tells_a_jump_from_a_smooth_response():
     assert smooth < 0.1
     jump = z(0.05) + 0.3 * (t > 0.5)  # a slide that happens only at the perturbed value
     assert P.roughness(z(0.0), jump[None], z(-0.05)[None])[0] > 0.5
+
+
+def test_fit_track_cli_fits_two_clips_jointly(tmp_path, capsys):
+    """Two clips of one worm (omega and inchworm, the moment at 1.05 x the preset), rendered, tracked and fitted by
+    the CLI from a plan.json: the joint fit runs, reports both clips and finds the moment within 3 %."""
+    from warpworm import quiet_warp
+    from warpworm.analysis import track as T
+    from warpworm.analysis.gait_runs import run_gait
+    from warpworm.cli import main
+    from warpworm.physics import gaits
+
+    quiet_warp()
+    clips = [{"gait": "omega", "backward": False, "wavelength": 0.016, "amplitude": 0.03, "closest_approach": 0.025,
+              "cycles": 0.5},
+             {"gait": "inchworm", "backward": False, "wavelength": 0.02, "amplitude": 0.06,
+              "closest_approach": 0.0055, "cycles": 0.5}]
+    (tmp_path / "plan.json").write_text(json.dumps({"clips": clips}))
+    tracks = []
+    for k, c in enumerate(clips):
+        base = gaits.preset_params(c["gait"], magnet_model="analytic")
+        r = run_gait(FT.candidate_params(base, ["epm_moment"], np.array([[1.05 * base.epm_moment]])), 1, 0.5,
+                     fps=12.5, save_worlds=1)
+        cam = T.overhead_camera(centre=(0.045, 0.0, 0.0), width=320, height=240, fov_deg=26.0)
+        rgb = T.render_band_video(r["frames"], r["model"], cam, 320, 240)
+        h = T.default_band_height(base)
+        tr = T.track(rgb, cam, height=h, fps=12.5)
+        T.write_csv(tmp_path / f"t{k}.csv", tr)
+        T.write_meta(tmp_path / f"t{k}.json", cam, 320, 240, h, 12.5, tr["ref"])
+        tracks.append(str(tmp_path / f"t{k}.csv"))
+    assert main(["fit-track", *tracks, "--plan", str(tmp_path / "plan.json"), "--fit", "epm_moment,mu_static",
+                 "--magnet-model", "analytic", "--budget", "8", "--popsize", "4", "--spread", "1.2", "--refine", "2",
+                 "--profile", "0", "--out", str(tmp_path / "fit"), "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["clips"] == 2
+    assert abs(s["value"][0] / (1.05 * 3.6) - 1) < 0.03, s["value"]
