@@ -6,7 +6,11 @@ tilted camera with lens distortion (:mod:`warpworm.analysis.footage`), the harsh
 (:mod:`warpworm.analysis.track`) and all clips of a worm fitted jointly (:func:`warpworm.analysis.fit_track.fit`,
 through each clip's camera). Prints per worm and the table: recovery error and verdicts per parameter.
 
-    nice -n 10 python benchmarks/calibrate_many.py --plan plan.json --worms 20 --json many.json
+    warpworm plan-clips --max-clips 2 --out plan.json
+    nice -n 10 python benchmarks/calibrate_many.py --plan plan.json --worms 20 --size 384x288 --json many.jsonl
+    python benchmarks/calibrate_many.py --table many.jsonl
+    nice -n 10 python benchmarks/calibrate_many.py --plan plan.json --worms 3 --noise-seed 1 ... --json noise.jsonl
+    python benchmarks/calibrate_many.py --stability many.jsonl noise.jsonl    # do verdicts flip on re-rendering?
 
 Numbers: docs/calibration.md ("Many worms").
 """
@@ -138,10 +142,36 @@ def table(path: str) -> None:
           "px worst")
 
 
+def stability(path_a: str, path_b: str) -> None:
+    """Verdicts of the same worms rendered with two noise seeds (--noise-seed): per parameter, how many verdicts
+    changed, how many flipped between pinned and not pinned, and the range half-widths' relative change."""
+    a = {json.loads(line)["worm"]: json.loads(line) for line in open(path_a)}
+    b = {json.loads(line)["worm"]: json.loads(line) for line in open(path_b)}
+    both = sorted(set(a) & set(b))
+    print(f"{len(both)} worms rendered twice")
+    for i, n in enumerate(NAMES):
+        changed = flipped = 0
+        rel = []
+        for w in both:
+            va, vb = a[w]["verdict"][i], b[w]["verdict"][i]
+            changed += va != vb
+            flipped += {va, vb} == {"pinned", "not pinned"}
+            ha = max(-a[w]["range_rel"][i][0], a[w]["range_rel"][i][1])
+            hb = max(-b[w]["range_rel"][i][0], b[w]["range_rel"][i][1])
+            rel.append(hb / ha - 1)
+        print(f"| {n} | {changed} of {len(both)} changed | {flipped} pinned <-> not pinned | half-width change "
+              f"median {100 * np.median(np.abs(rel)):.0f} %, max {100 * np.max(np.abs(rel)):.0f} % |")
+    for w in both:
+        print(f"  worm {w}: " + "  ".join(f"{x}->{y}" for x, y in zip(a[w]["verdict"], b[w]["verdict"])) + "  errors "
+              + " ".join(f"{100 * x:+.1f}/{100 * y:+.1f}%" for x, y in zip(a[w]["error"], b[w]["error"])))
+
+
 if __name__ == "__main__":
     import sys
 
     if len(sys.argv) == 3 and sys.argv[1] == "--table":
         table(sys.argv[2])
+    elif len(sys.argv) == 4 and sys.argv[1] == "--stability":
+        stability(sys.argv[2], sys.argv[3])
     else:
         main()
