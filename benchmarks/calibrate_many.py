@@ -127,17 +127,19 @@ def table(path: str) -> None:
     inside = np.array([r["planted_inside"] for r in rows])
     tol = np.array([0.05, 0.05, 0.03])
     print(f"N = {len(rows)} worms")
-    print("| parameter | |error| median | 90 % | max | within tolerance | pinned | borderline | not pinned | "
-          "planted inside range |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    print("| parameter | |error| median | 90 % | max | within tolerance | pinned | pinned and within tolerance | "
+          "borderline | not pinned | planted inside range |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for i, n in enumerate(NAMES):
         print(f"| {n} | {100 * np.median(err[:, i]):.2f} % | {100 * np.percentile(err[:, i], 90):.2f} % | "
               f"{100 * err[:, i].max():.2f} % | {np.mean(err[:, i] <= tol[i]):.0%} | {np.mean(ver[:, i] == 'pinned'):.0%} "
+              f"| {np.mean((ver[:, i] == 'pinned') & (err[:, i] <= tol[i])):.0%} "
               f"| {np.mean(ver[:, i] == 'borderline'):.0%} | {np.mean(ver[:, i] == 'not pinned'):.0%} | "
               f"{np.mean(inside[:, i]):.0%} |")
     allp = (ver == "pinned").all(axis=1)
     allw = (err <= tol).all(axis=1)
-    print(f"all three pinned: {allp.mean():.0%}; all three within tolerance: {allw.mean():.0%}; tracker "
+    print(f"all three pinned: {allp.mean():.0%}; all three within tolerance: {allw.mean():.0%}; all three pinned "
+          f"and within tolerance: {(allp & allw).mean():.0%}; tracker "
           f"{np.mean([r['track_px_mean'] for r in rows]):.2f} px mean, {np.max([r['track_px_max'] for r in rows]):.2f} "
           "px worst")
 
