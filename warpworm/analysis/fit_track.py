@@ -37,10 +37,11 @@ PROFILE_FACTOR = 2.5
 VERDICT_MARGIN = 0.25
 """A verdict's margin (issue #41: verdicts that do not flip on noise): a parameter is *pinned* when its acceptable
 range's half-width is below tolerance / (1 + margin), *not pinned* above tolerance x (1 + margin) or at a search
-bound, and *borderline* between. A re-rendering of the same footage moves a range by far less than these 25 %, so a
-verdict can change only between a definite state and borderline, never from pinned to not pinned, unless the range
-changes by a factor 1.25^2 = 1.56; the profile evaluates both edges of the band (held at the tolerance / 1.25 and
-x 1.25) so its crossing there is measured, not extrapolated."""
+bound, and *borderline* between. Where a re-rendering moves a range by less than these 25 % (the fit staying in its
+basin) a verdict can change only between a definite state and borderline; pinned <-> not pinned needs the range to
+change by a factor 1.25^2 = 1.56. The profile evaluates both edges of the band (held at the tolerance / 1.25 and
+x 1.25) so its crossing there is measured, not extrapolated. Measured on path-traced footage the noise can move the
+fit to another basin of a rugged cost and change a range by up to 124 % (docs/calibration.md, "Many worms")."""
 
 
 def fittable_fields() -> tuple[str, ...]:
