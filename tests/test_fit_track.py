@@ -65,10 +65,15 @@ def test_fit_track_recovers_the_planted_epm_moment_from_images(planted_video, ca
     s = json.loads(capsys.readouterr().out)
     epm = s["value"][0]
     assert abs(epm / (PLANT * base.epm_moment) - 1) < 0.03, (epm, PLANT * base.epm_moment)
-    # the planted moment lies inside the acceptable range, which stays within the 3 % tolerance: pinned
+    # the planted moment lies inside the acceptable range, which stays within the verdict band's outer edge (3 % x
+    # 1.25; measured -2.7 .. +3.1 % with the brightness-independent tracker, -0.75 .. +1.35 % with the first one)
     lo, hi = s["range_rel"][0]
-    assert lo <= PLANT * base.epm_moment / epm - 1 <= hi and max(-lo, hi) < 0.03, s["range_rel"]
-    assert s["pinned"] == [True, False] and s["tolerance"] == [0.03, 0.05]
+    assert lo <= PLANT * base.epm_moment / epm - 1 <= hi and max(-lo, hi) < 0.03 * (1 + FT.VERDICT_MARGIN), \
+        s["range_rel"]
+    # (its range, ~2.5 % wide, lies inside the verdict's margin band of 3 % / 1.25 .. 3 % x 1.25: borderline or
+    # pinned, never not pinned; FT.VERDICT_MARGIN)
+    assert s["verdict"][0] in ("pinned", "borderline") and s["verdict"][1] == "not pinned"
+    assert s["pinned"] == [s["verdict"][0] == "pinned", False] and s["tolerance"] == [0.03, 0.05]
     # dipole_density: acceptable over the whole search range (to a bound)
     assert s["at_bound"] == [False, True] and s["range_rel"][1][1] - s["range_rel"][1][0] > 0.3
     print(s["worlds"], s["wall_s"], s["range_rel"], s["moved"])
@@ -188,8 +193,28 @@ def test_global_profile_moves_a_fit_out_of_a_side_valley():
     assert out["moved"]
     x = out["st"]["x"]
     assert abs(x[0] - 0.3) < 0.02 and abs(x[1]) < 0.005
-    assert out["pinned"].tolist() == [True, True]
+    # x0's range is 0.91 of its tolerance: inside it, but within the verdict's margin (FT.VERDICT_MARGIN)
+    assert out["verdict"].tolist() == ["borderline", "pinned"]
+    assert 0.8 < max(-out["lo"][0], out["hi"][0]) / np.log1p(0.05) < 1.0
     assert x[0] + out["lo"][0] > -0.3
+
+
+def test_verdicts_have_a_margin_band():
+    """pinned below tol / 1.25, not pinned above tol x 1.25 or at a bound, borderline between; a range that moves by
+    a few per cent (re-rendering noise) can move a verdict only into or out of the band."""
+    tol = np.array([0.05, 0.05, 0.05, 0.05, 0.03])
+    t = np.log1p(tol)
+    lo = -np.array([0.5, 0.9, 1.1, 1.4, 0.1]) * t
+    hi = np.array([0.7, 0.3, 0.2, 0.1, 0.1]) * t
+    got = FT.verdicts(lo, hi, np.array([False, False, False, False, True]), tol)
+    assert got.tolist() == ["pinned", "borderline", "borderline", "not pinned", "not pinned"]
+    # a 3 % change of every range never turns pinned into not pinned or back
+    rng = np.random.default_rng(0)
+    w = np.exp(rng.uniform(np.log(0.3), np.log(3.0), 2000)) * t[0]
+    a = FT.verdicts(-w, w, np.zeros(2000, bool), np.full(2000, 0.05))
+    b = FT.verdicts(-1.03 * w, 1.03 * w, np.zeros(2000, bool), np.full(2000, 0.05))
+    assert not np.any((a == "pinned") & (b == "not pinned")) and not np.any((a == "not pinned") & (b == "pinned"))
+    assert np.any(a != b)  # (some moved into or out of the band)
 
 
 def test_fit_track_absorbs_the_dipole_model_error_into_the_analytic_moment(tmp_path, capsys):

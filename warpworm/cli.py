@@ -32,6 +32,7 @@ COMMANDS = {
     "report": "report",
     "track": "track",
     "fit-track": "fit_track",
+    "plan-clips": "plan_clips",
 }
 
 

@@ -34,6 +34,14 @@ ACCEPT_DCHI2 = 3.84
 """Chi-square rise of an acceptable candidate: the 95 % quantile of chi-square with one degree of freedom."""
 PROFILE_FACTOR = 2.5
 """Geometric step of the global profile's grid, from the tolerance out to the search bound."""
+VERDICT_MARGIN = 0.25
+"""A verdict's margin (issue #41: verdicts that do not flip on noise): a parameter is *pinned* when its acceptable
+range's half-width is below tolerance / (1 + margin), *not pinned* above tolerance x (1 + margin) or at a search
+bound, and *borderline* between. Where a re-rendering moves a range by less than these 25 % (the fit staying in its
+basin) a verdict can change only between a definite state and borderline; pinned <-> not pinned needs the range to
+change by a factor 1.25^2 = 1.56. The profile evaluates both edges of the band (held at the tolerance / 1.25 and
+x 1.25) so its crossing there is measured, not extrapolated. Measured on path-traced footage the noise can move the
+fit to another basin of a rugged cost and change a range by up to 124 % (docs/calibration.md, "Many worms")."""
 
 
 def fittable_fields() -> tuple[str, ...]:
@@ -191,12 +199,31 @@ def _jacobian(res, p, step):
     return (res[1:1 + p] - res[1 + p:]).T / (2 * step)
 
 
+def _as_clips(track, base, meta, ref=None) -> list[dict]:
+    """One clip or several filmed of one worm -> [{"track", "base", "meta", "ref"}, ...]: ``track``, ``base`` and
+    ``meta`` each one value (one clip) or a list (one per clip; a single base or meta serves every clip)."""
+    tracks = track if isinstance(track, (list, tuple)) else [track]
+    n = len(tracks)
+    bases = base if isinstance(base, (list, tuple)) else [base] * n
+    metas = meta if isinstance(meta, (list, tuple)) else [meta] * n
+    if len(bases) != n or len(metas) != n:
+        raise ValueError(f"clips: got {n} tracks, {len(bases)} bases, {len(metas)} cameras; expected one each")
+    return [{"track": t, "base": b, "meta": m, "ref": int(t.get("ref", 0) if ref is None or n > 1 else ref)}
+            for t, b, m in zip(tracks, bases, metas)]
+
+
 def _evaluate(base, names, theta0, X, track, ref, meta, seen=None, **kw):
     """One batch: the cost (W,), residuals (W, n) and simulated tracks of the log-parameter points X (W, p);
-    appends (X, cost) to ``seen``."""
+    appends (X, cost) to ``seen``. Several clips of one worm (``track``, ``base``, ``meta`` lists, as
+    :func:`_as_clips`): every clip's batch is run at the same points, their residuals joined (the first clip's
+    simulated track under the plain keys, the others' as ``KEY@i``)."""
     vals = theta0[None] * np.exp(np.asarray(X, np.float64))
-    obs = observe(candidate_params(base, names, vals), len(vals), track["time"], ref, meta, **kw)
-    res = residuals(obs, track)
+    res, obs = [], {}
+    for i, c in enumerate(_as_clips(track, base, meta, ref)):
+        o = observe(candidate_params(c["base"], names, vals), len(vals), c["track"]["time"], c["ref"], c["meta"], **kw)
+        res.append(residuals(o, c["track"]))
+        obs.update({(k if i == 0 else f"{k}@{i}"): v for k, v in o.items()})
+    res = np.concatenate(res, axis=1)
     cost = np.mean(res ** 2, axis=1)
     if seen is not None:
         seen.append((np.asarray(X, np.float64), cost))
@@ -239,14 +266,24 @@ def delta_chi2(cost, best_cost: float, n_res: int, p: int):
     return (np.asarray(cost) - best_cost) * n_res / max(1.0, best_cost * n_res / max(1, n_res - p))
 
 
-def _search(ev, p, lim, budget, pop, seed, log, show):
+def _search(ev, p, lim, budget, pop, seed, log, show, starts=None):
     """CMA-ES over the log-parameters within ±lim, one batch of ``pop`` worlds a generation, until ``budget``
-    worlds. Returns the best point (p,) and the history [(worlds, best cost)]."""
+    worlds. ``starts`` (k, p): points evaluated first as one batch (e.g. the plan's design worms); the search then
+    starts at the best of them with half the spread. Returns the best point (p,) and the history [(worlds, best
+    cost)]."""
     import cma
 
-    es = cma.CMAEvolutionStrategy(np.zeros(p), lim / 3, {"bounds": [-lim, lim], "popsize": pop, "seed": seed + 1,
-                                                         "verbose": -9})
-    best, history, worlds = (np.inf, np.zeros(p)), [], 0
+    x0, sigma, best = np.zeros(p), lim / 3, (np.inf, np.zeros(p))
+    if starts is not None and len(starts):
+        S = np.clip(np.asarray(starts, np.float64).reshape(-1, p), -lim, lim)
+        c0 = ev(S)[0]
+        k = int(np.argmin(c0))
+        x0, sigma, best = S[k].copy(), lim / 6, (float(c0[k]), S[k].copy())
+        if log:
+            log(f"  {ev.worlds:4d} worlds (starts): best cost {best[0]:.4g}  {show(best[1])}")
+    es = cma.CMAEvolutionStrategy(x0, sigma, {"bounds": [-lim, lim], "popsize": pop, "seed": seed + 1,
+                                              "verbose": -9})
+    history, worlds = [], 0
     while worlds + pop <= max(budget, pop):
         X = np.array(es.ask())
         cost = ev(X)[0]
@@ -317,6 +354,7 @@ def _profile_targets(xb, lim, names, factor=PROFILE_FACTOR):
     for i, n in enumerate(names):
         t = np.log1p(tolerance(n))
         offs = t * factor ** np.arange(int(np.ceil(np.log(2 * lim / t) / np.log(factor))) + 1)
+        offs = np.concatenate([offs, t * np.array([1 / (1 + VERDICT_MARGIN), 1 + VERDICT_MARGIN])])  # the verdict band
         v = np.unique(np.round(np.clip(xb[i] + np.concatenate([offs, -offs]), -lim, lim), 12))
         v = v[np.abs(v - xb[i]) > 1e-9]
         held += [i] * len(v)
@@ -409,7 +447,7 @@ def acceptable_ranges(X, cost, xb, best_cost, n_res, lim, threshold=ACCEPT_DCHI2
 
 
 def fit_batches(ev, names, *, lim: float, budget: int, pop: int, seed: int = 0, step: float = 0.05, refine: int = 4,
-                profile: int = 6, log=None, show=str, start=None) -> dict:
+                profile: int = 6, log=None, show=str, start=None, starts=None) -> dict:
     """The search and the global uncertainty over an evaluator ``ev`` (:class:`_Batches`: log-parameter points
     (W, p) -> cost (W,), residuals (W, n), obs; one batch a call; ``ev.all()`` every evaluated point): CMA-ES
     (:func:`_search`), ``refine`` Levenberg-Marquardt steps (:func:`_refine`), the global profile (:func:`_profile`),
@@ -419,7 +457,7 @@ def fit_batches(ev, names, *, lim: float, budget: int, pop: int, seed: int = 0, 
     (p,), pinned (p,), n_res."""
     p = len(names)
     if start is None:
-        xb, history = _search(ev, p, lim, budget, pop, seed, log, show)
+        xb, history = _search(ev, p, lim, budget, pop, seed, log, show, starts)
     else:
         xb, history = np.asarray(start, np.float64), []
     st = _refine(ev, xb, refine, step, lim, history, log, show)
@@ -441,17 +479,29 @@ def fit_batches(ev, names, *, lim: float, budget: int, pop: int, seed: int = 0, 
     prof = None if prof is None else {"held": prof[0], "target": prof[1], "cost": prof[2]}
     lo, hi, at_bound = acceptable_ranges(X, c, st["x"], st["cost"], n_res, lim, profile=prof)
     tol = np.array([tolerance(n) for n in names])
-    pinned = (np.maximum(-lo, hi) < np.log1p(tol) - 1e-9) & ~at_bound
+    verdict = verdicts(lo, hi, at_bound, tol)
     return {"st": st, "history": history, "moved": moved, "n_res": n_res, "lo": lo, "hi": hi, "at_bound": at_bound,
-            "pinned": pinned, "tolerance": tol, "profile": prof}
+            "pinned": verdict == "pinned", "verdict": verdict, "tolerance": tol, "profile": prof}
 
 
-def fit(track: dict, base, names, *, budget: int = 96, popsize: int | None = None, spread: float = 3.0, seed: int = 0,
-        meta: dict | None = None, step: float = 0.05, refine: int = 4, profile: int = 6, log=None, **kw) -> dict:
-    """Fit ``names`` to ``track``: every candidate one world of a batch (:func:`observe`) searched over log(names /
+def verdicts(lo, hi, at_bound, tol, margin: float = VERDICT_MARGIN) -> np.ndarray:
+    """Per parameter "pinned", "borderline" or "not pinned" from the acceptable range's log offsets lo (p,) <= 0,
+    hi (p,) >= 0, at_bound (p,) and the relative tolerances tol (p,) (:data:`VERDICT_MARGIN`)."""
+    w = np.maximum(-np.asarray(lo), np.asarray(hi)) / np.log1p(np.asarray(tol, np.float64))
+    out = np.where(w < 1 / (1 + margin) - 1e-9, "pinned", np.where(w > 1 + margin, "not pinned", "borderline"))
+    return np.where(np.asarray(at_bound, bool), "not pinned", out).astype(object)
+
+
+def fit(track, base, names, *, budget: int = 96, popsize: int | None = None, spread: float = 3.0, seed: int = 0,
+        meta: dict | None = None, step: float = 0.05, refine: int = 4, profile: int = 6, log=None, starts=None,
+        **kw) -> dict:
+    """Fit ``names`` to ``track`` (or to several clips of one worm jointly: ``track``, ``base`` and ``meta`` lists,
+    one per clip, their residuals joined; :func:`_as_clips`): every candidate one world of a batch (:func:`observe`)
+    searched over log(names /
     base) within ±log(spread), CMA-ES with ``popsize`` worlds a generation until ``budget`` worlds, ``refine``
     Levenberg-Marquardt steps (2p + 1 worlds each), then the global profile with ``profile`` re-fit steps (0: none,
-    the ranges then come from the search's candidates only) (:func:`fit_batches`). A parameter is pinned when its
+    the ranges then come from the search's candidates only) (:func:`fit_batches`). ``starts`` (k, p): parameter
+    values evaluated first (e.g. the plan's design worms); the search starts at the best of them. A parameter is pinned when its
     acceptable range (:func:`acceptable_ranges` over every evaluated world) stays inside ±its :func:`tolerance`.
 
     Returns a dict: names, base, value (p,), x, cost, rms_ratio, rms_disp_m, chi2_red (at the tracker's accuracy),
@@ -462,13 +512,16 @@ def fit(track: dict, base, names, *, budget: int = 96, popsize: int | None = Non
     n_res, threshold, evaluated (every evaluated point (N, p) and its cost)."""
     t0 = time.perf_counter()
     p = len(names)
-    theta0 = np.array([float(np.ravel(getattr(base, n))[0]) for n in names])
-    ref, lim = int(track.get("ref", 0)), float(np.log(spread))
+    clips = _as_clips(track, base, meta)
+    base0, track0 = clips[0]["base"], clips[0]["track"]
+    theta0 = np.array([float(np.ravel(getattr(base0, n))[0]) for n in names])
+    ref, lim = int(track0.get("ref", 0)), float(np.log(spread))
     pop = int(popsize or max(4 + int(3 * np.log(p)), 8))
     ev = _Batches(base, names, theta0, track, ref, meta, lim, kw)
     show = lambda x: "  ".join(f"{n}={v:.4g}" for n, v in zip(names, theta0 * np.exp(x)))  # noqa: E731
     out = fit_batches(ev, names, lim=lim, budget=budget, pop=pop, seed=seed, step=step, refine=refine,
-                      profile=profile, log=log, show=show)
+                      profile=profile, log=log, show=show,
+                      starts=None if starts is None else np.log(np.asarray(starts, np.float64) / theta0))
     st, n_res = out["st"], out["n_res"]
     r0, J = st["r"], st["J"]
     chi2 = float(np.sum(r0 ** 2) / max(1, n_res - p))
@@ -477,13 +530,17 @@ def fit(track: dict, base, names, *, budget: int = 96, popsize: int | None = Non
     with np.errstate(divide="ignore", invalid="ignore"):
         sigma = np.where(np.diag(jtj) > 0, np.sqrt(np.clip(np.diag(np.linalg.pinv(jtj)) * chi2, 0, None)), np.inf)
         weakest_sigma = float(np.sqrt(chi2 / evals[0])) if evals[0] > 0 else np.inf
-    nr = int(np.isfinite(track["ratios"]).sum())
+    ok_r = [np.isfinite(c["track"]["ratios"]).sum() for c in clips]
+    ok_d = [np.isfinite(c["track"]["displacement"]).sum() for c in clips]
+    r_idx = np.concatenate([np.arange(o, o + a) for o, a in zip(np.cumsum([0] + [a + d for a, d in zip(ok_r, ok_d)]),
+                                                                  ok_r)]).astype(int)
+    d_idx = np.setdiff1d(np.arange(len(r0)), r_idx)
     return {
         "names": list(names), "base": theta0, "value": theta0 * np.exp(st["x"]), "x": st["x"], "cost": st["cost"],
-        "rms_ratio": float(np.sqrt(np.mean(r0[:nr] ** 2)) * SIGMA_RATIO),
-        "rms_disp_m": float(np.sqrt(np.mean(r0[nr:] ** 2)) * SIGMA_DISP), "chi2_red": chi2,
+        "rms_ratio": float(np.sqrt(np.mean(r0[r_idx] ** 2)) * SIGMA_RATIO),
+        "rms_disp_m": float(np.sqrt(np.mean(r0[d_idx] ** 2)) * SIGMA_DISP), "chi2_red": chi2, "clips": len(clips),
         "range_rel": np.expm1(np.stack([out["lo"], out["hi"]], axis=1)), "at_bound": out["at_bound"],
-        "tolerance": out["tolerance"], "pinned": out["pinned"], "sigma_rel": sigma, "weakest": evecs[:, 0],
+        "tolerance": out["tolerance"], "pinned": out["pinned"], "verdict": out["verdict"], "sigma_rel": sigma, "weakest": evecs[:, 0],
         "weakest_sigma": weakest_sigma, "obs": st["obs"], "history": out["history"], "worlds": ev.worlds,
         "wall_s": time.perf_counter() - t0, "moved": out["moved"], "profile": out["profile"], "n_res": n_res,
         "threshold": ACCEPT_DCHI2, "evaluated": ev.all(),
@@ -494,11 +551,13 @@ def report_lines(result: dict) -> list[str]:
     """The fit as text: value, acceptable range, tolerance, pinned or not, the weakest local combination."""
     out = [f"{'parameter':24s} {'preset':>11s} {'fitted':>11s} {'acceptable range':>20s} {'tol':>5s}  "
            "pinned by this track?"]
-    for n, b, v, (lo, hi), ab, tol, ok in zip(result["names"], result["base"], result["value"], result["range_rel"],
-                                              result["at_bound"], result["tolerance"], result["pinned"]):
+    verdict = result.get("verdict", np.where(result["pinned"], "pinned", "not pinned"))
+    for n, b, v, (lo, hi), ab, tol, vd in zip(result["names"], result["base"], result["value"], result["range_rel"],
+                                              result["at_bound"], result["tolerance"], verdict):
         rng = f"{100 * lo:+.1f}% .. {100 * hi:+.1f}%" + (" (bound)" if ab else "")
-        out.append(f"{n:24s} {b:11.5g} {v:11.5g} {rng:>20s} {100 * tol:4.0f}%  "
-                   f"{'yes' if ok else 'NO: not identifiable from this track'}")
+        say = {"pinned": "yes", "not pinned": "NO: not identifiable from this track",
+               "borderline": f"borderline: within ±{100 * VERDICT_MARGIN:.0f} % of the tolerance (add a clip)"}[vd]
+        out.append(f"{n:24s} {b:11.5g} {v:11.5g} {rng:>20s} {100 * tol:4.0f}%  {say}")
     X, c = result["evaluated"]
     n_ok = int((delta_chi2(c, result["cost"], result["n_res"], len(result["names"])) <= result["threshold"]).sum())
     out.append(f"acceptable: chi-square rise <= {result['threshold']:.2f} (95 %, one parameter) at the track's noise "
@@ -508,6 +567,8 @@ def report_lines(result: dict) -> list[str]:
     out.append(f"residual: ratios {result['rms_ratio']:.4f} rms, displacement {1e3 * result['rms_disp_m']:.3f} mm "
                f"rms (reduced chi2 {result['chi2_red']:.3g} at the tracker's accuracy)")
     loose = [n for n, ok in zip(result["names"], result["pinned"]) if not ok]
+    out.append(f"verdicts: pinned below the tolerance / {1 + VERDICT_MARGIN:g}, not pinned above the tolerance x "
+               f"{1 + VERDICT_MARGIN:g} or at a bound, borderline between (stable under re-rendering noise)")
     if loose:
         out.append(f"not identifiable from this track: {', '.join(loose)} (docs/calibration.md: which gait and how "
                    "many cycles pin which parameter; or measure it (steps 1-2) and pass it with --set)")

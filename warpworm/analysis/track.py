@@ -8,17 +8,24 @@ above the floor along its normal: the height of the band centres seen from above
 (:func:`default_band_height`). A worm part that lifts off the floor is seen displaced (parallax): the same camera
 model must then be used for the simulation it is compared with (``warpworm fit-track`` does so).
 
-Thresholds (OpenCV HSV: H in [0, 180), S and V in [0, 255]) follow from the band colours
-(:meth:`Thresholds.from_colors`, the colours' own hue H_b, saturation S_b and value V_b): a pixel goes to the
-coloured band of nearest hue if that hue is within ``hue_tol`` (25, i.e. 50 degrees), its saturation >= ``sat_frac``
-S_b and its value >= ``val_frac`` V_b; to the white (low-saturation) band if its saturation is below ``sat_frac``
-times that of the colour of nearest hue and its value >= ``val_frac`` V_white (both fractions 0.5). Splitting at the
-midpoints (nearest hue, half the saturation, half the value) divides a pixel that mixes a band with its neighbour,
-the floor or a magnet (blur, JPEG's halved chroma) evenly, so no centroid is pulled. Of each mask only the largest
-8-connected blob and the blobs near it (centroid within ``blob_reach`` times its size) are kept: a band is one patch
-of paint, a grey magnet or noise elsewhere is not. A band with fewer than ``min_pixels`` pixels is *unseen* in that
-frame: its centre is NaN, and so are the ratios and the displacement that need it. A dark, unsaturated floor keeps
-the white band clean.
+Classification (OpenCV HSV: H in [0, 180), S and V in [0, 255]; :func:`band_masks`) follows from the band colours
+(:meth:`Thresholds.from_colors`, the colours' own hue H_b and saturation S_b) and never from the paint's brightness:
+a face turned from the light keeps its hue and saturation (shading scales linear RGB; the display's power law keeps
+the channel ratios), only its value drops. A pixel goes to the coloured band of nearest hue if that hue is within
+``hue_tol`` (30) and its saturation >= ``sat_frac`` (0.5) S_b, and it stands 0.5 ``floor_sigma`` (5) noise levels
+above the background next to it (the floor's level and noise estimated per image from its unsaturated pixels; the
+darkest smoothed background within 3 px: a lit floor or the band's own shadow); where it is as dark as that, the
+hue and saturation of its 3x3 mean decide (a face in deep shadow). A pixel goes to the white (low-saturation) band
+if its saturation is below ``sat_frac`` times that of the colour of nearest hue and it stands ``floor_sigma`` noise
+levels above the floor, or 3 levels (3x3 mean, against a coarse local floor map) and connected to such a pixel (a
+white face in shadow). A pixel next to the background counts only if it is at least half-way from the background's
+brightness to the band's own nearby (the face's light), and splitting at the nearest hue and at half the saturation
+divides a pixel that mixes a band with its neighbour, the floor or a magnet evenly, so no centroid is pulled.
+``brightness_cut=1`` restores the first tracker's rule (value >= ``val_frac`` V_b; it loses shaded faces:
+docs/calibration.md). Of each mask only the largest 8-connected blob and the blobs near it (centroid within
+``blob_reach`` times its size) are kept: a band is one patch of paint, a grey magnet or noise elsewhere is not. A
+band with fewer than ``min_pixels`` pixels is *unseen* in that frame: its centre is NaN, and so are the ratios and
+the displacement that need it. A dark, unsaturated floor keeps the white band clean.
 """
 
 from __future__ import annotations
@@ -72,7 +79,7 @@ class CameraModel:
             raise ValueError(f"camera R: got det {np.linalg.det(self.R):.6g}; expected a rotation (det 1)")
 
 
-OVERRIDABLE = ("hue_tol", "sat_frac", "val_frac", "min_pixels", "blob_reach")
+OVERRIDABLE = ("hue_tol", "sat_frac", "val_frac", "min_pixels", "blob_reach", "brightness_cut", "floor_sigma")
 
 
 @dataclass
@@ -84,11 +91,19 @@ class Thresholds:
     sat: np.ndarray
     val: np.ndarray
     white: np.ndarray
-    hue_tol: float = 25.0
+    hue_tol: float = 30.0
     sat_frac: float = 0.5
     val_frac: float = 0.5
     min_pixels: int = 12
     blob_reach: float = 1.5
+    brightness_cut: float = 0.0
+    """1: the brightness rule of the first tracker (value >= ``val_frac`` times the band colour's; loses faces turned
+    from the light, docs/calibration.md). 0 (default): brightness-independent, a pixel is a band's if its hue and
+    saturation (unchanged when a face is shaded: shading scales linear RGB, and the display's power law keeps the
+    ratios) say so and it stands ``floor_sigma`` noise levels above the floor's brightness (estimated per image)."""
+    floor_sigma: float = 5.0
+    """Noise levels of the floor a white pixel must stand above it (half as many for a coloured one, which its
+    chroma also gates)."""
 
     @classmethod
     def from_colors(cls, colors=None, **overrides) -> "Thresholds":
@@ -140,6 +155,42 @@ def dataset_band_colors(path) -> np.ndarray:
     return BAND_COLORS.copy() if colors is None else np.asarray(colors, np.float64)
 
 
+def floor_level(v: np.ndarray, s: np.ndarray) -> tuple[float, float]:
+    """The floor's brightness and its noise (OpenCV V units) in one image, from its unsaturated pixels (S below 96):
+    the median and 1.4826 times the median absolute deviation of their V, the bright tail beyond 4 of those
+    deviations dropped (three passes): the floor fills most of a frame filmed as docs/calibration.md asks; the white
+    band and the magnets are the bright tail."""
+    vv = v[s < 96].astype(np.float64)
+    if vv.size < 16:
+        vv = v.astype(np.float64).ravel()
+    for _ in range(3):
+        med = float(np.median(vv))
+        sig = max(1.0, 1.4826 * float(np.median(np.abs(vv - med))))
+        vv = vv[vv <= med + 4 * sig]
+    return med, sig
+
+
+def floor_map(v: np.ndarray, s: np.ndarray, cell: int | None = None) -> tuple[np.ndarray, float]:
+    """The floor's brightness per pixel (H, W) float32 (a lamp lights a floor unevenly) and its noise: the
+    :func:`floor_level` of every ``cell``-pixel cell (default a quarter of the image's shorter side) of a coarse grid
+    from the window of twice its size around it, interpolated bilinearly, and never above the whole image's floor
+    level plus 3 noise levels (a window the worm fills); the noise is the whole image's."""
+    import cv2
+
+    H, W = v.shape
+    fl0, sig = floor_level(v, s)
+    cell = int(cell or max(16, min(H, W) // 4))
+    ny, nx = max(1, int(np.ceil(H / cell))), max(1, int(np.ceil(W / cell)))
+    grid = np.zeros((ny, nx), np.float32)
+    for i in range(ny):
+        for j in range(nx):
+            y0, x0 = max(0, i * cell - cell // 2), max(0, j * cell - cell // 2)
+            grid[i, j] = floor_level(v[y0:y0 + 2 * cell, x0:x0 + 2 * cell], s[y0:y0 + 2 * cell, x0:x0 + 2 * cell])[0]
+    # cell centres at (i + 0.5) cell: resize maps them there
+    full = cv2.resize(np.minimum(grid, fl0 + 3 * sig), (nx * cell, ny * cell), interpolation=cv2.INTER_LINEAR)
+    return full[:H, :W], sig
+
+
 def band_masks(rgb: np.ndarray, thr: Thresholds) -> np.ndarray:
     """The five band masks (5, H, W) bool of one RGB uint8 image (H, W, 3) (rules in the module docstring)."""
     import cv2
@@ -154,13 +205,61 @@ def band_masks(rgb: np.ndarray, thr: Thresholds) -> np.ndarray:
     # white/colour split at half the saturation of the colour the pixel's hue is nearest to
     white_sat = thr.sat_frac * np.where(thr.white, 255.0, thr.sat)[nearest]
     out = np.zeros((NUM_BANDS,) + rgb.shape[:2], bool)
+    cand = np.zeros_like(out)
     for b in range(NUM_BANDS):
-        bright = v >= thr.val_frac * thr.val[b]
         if thr.white[b]:
-            m = (s < white_sat) & bright
+            cand[b] = s < white_sat
         else:
-            m = hue_ok & (nearest == b) & (s >= thr.sat_frac * thr.sat[b]) & bright
-        out[b] = _near_largest(m, thr.blob_reach)
+            cand[b] = hue_ok & (nearest == b) & (s >= thr.sat_frac * thr.sat[b])
+        if thr.brightness_cut:
+            cand[b] &= v >= thr.val_frac * thr.val[b]
+    if not thr.brightness_cut:
+        # Brightness only against the background next to a pixel, never against the paint's colour: the floor's
+        # noise (global), the darkest smoothed background within 3 px (a lit floor, or the band's own shadow)
+        fl, sig = floor_level(v, s)
+        flm, _ = floor_map(v, s)
+        vs = cv2.blur(v.astype(np.float32), (3, 3))
+        colour = cand[~thr.white].any(axis=0)
+        bg = cv2.erode(np.where(colour, 255.0, vs).astype(np.float32), np.ones((7, 7), np.uint8))
+        bg = np.minimum(bg, fl)
+        lit = v >= bg + 0.5 * thr.floor_sigma * sig  # the colours are gated by their chroma too
+        # a face in deep shadow can be as dark as the floor: there the chroma of the 3x3 mean decides (the floor's
+        # noise averaged down, the paint's hue and saturation kept)
+        hsv_s = cv2.cvtColor(cv2.blur(np.ascontiguousarray(rgb, np.uint8), (3, 3)), cv2.COLOR_RGB2HSV).astype(np.int16)
+        dh_s = np.abs(hsv_s[..., 0][None] - thr.hue[:, None, None])
+        dh_s = np.minimum(dh_s, 180 - dh_s)
+        dh_s[thr.white] = 999
+        near_s = np.argmin(dh_s, axis=0)
+        ok_s = np.min(dh_s, axis=0) <= thr.hue_tol
+        for b in range(NUM_BANDS):
+            if not thr.white[b]:
+                dark = ok_s & (near_s == b) & (hsv_s[..., 1] >= thr.sat_frac * thr.sat[b]) & (nearest == b)
+                cand[b] = (cand[b] & lit) | (dark & ~lit)
+                continue
+            # hysteresis against the local floor: white where floor_sigma noise levels above it, and every
+            # unsaturated pixel connected to such a one whose 3x3 mean stands 3 levels above it (a white face in
+            # shadow, nearly as dark as the lit floor)
+            strong = cand[b] & (v >= np.maximum(fl, flm) + thr.floor_sigma * sig)
+            weak = cand[b] & (vs >= flm + 3.0 * sig)
+            n, lab = cv2.connectedComponents((weak | strong).astype(np.uint8), connectivity=8)
+            keep = np.zeros(n, bool)
+            keep[np.unique(lab[strong])] = True
+            keep[0] = False
+            cand[b] = keep[lab]
+        band = cand.any(axis=0)
+        # an edge pixel (next to a pixel of no band) counts if it is at least half-way from that background to the
+        # band's own brightness nearby (the brightest of its inner pixels within 2 px: the face's light, not the
+        # paint's), so a pixel that mixes band and floor is split evenly whatever the shading
+        edge_of = cv2.dilate((~band).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+        for b in range(NUM_BANDS):
+            edge = cand[b] & edge_of
+            ref = cv2.dilate(np.where(cand[b] & ~edge, v, 0).astype(np.uint8), np.ones((5, 5), np.uint8))
+            half = 2.0 * v >= bg + ref.astype(np.float32)
+            if thr.white[b]:  # and a white edge pixel needs white inside it (not a colour's desaturated rim)
+                half &= ref > 0
+            cand[b] &= ~edge | half
+    for b in range(NUM_BANDS):
+        out[b] = _near_largest(cand[b], thr.blob_reach)
     return out
 
 

@@ -14,12 +14,17 @@ HELP = "fit worm parameters (k_alpha, friction, EPM moment, ...) to a band track
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("track", metavar="TRACK.csv", help="a track written by 'warpworm track'")
-    parser.add_argument("--gait", choices=["peristaltic", "omega", "inchworm"], required=True)
-    parser.add_argument("--backward", action="store_true", help="the worm was driven toward -x")
-    parser.add_argument("--path", default=None, metavar="w=…,a=…,h=…",
+    parser.add_argument("track", metavar="TRACK.csv", nargs="+",
+                        help="a track written by 'warpworm track'; several clips of one worm are fitted jointly")
+    parser.add_argument("--gait", default=None, metavar="GAIT[,GAIT…]",
+                        help="peristaltic, omega or inchworm: one for every track, or one per track (comma-separated)")
+    parser.add_argument("--backward", action="store_true", help="the worm was driven toward -x (every track)")
+    parser.add_argument("--path", default=None, metavar="w=…,a=…,h=…[;…]",
                         help="the EPM path of the video [m]: wavelength, amplitude, closest approach (default: the "
-                             "gait preset's)")
+                             "gait preset's); one for every track or one per track, separated by ';'")
+    parser.add_argument("--plan", default=None, metavar="PLAN.json",
+                        help="the clips of 'warpworm plan-clips' (gait, path, direction of each, in the order the "
+                             "tracks are given), instead of --gait/--path/--backward")
     parser.add_argument("--fit", default="hinge_stiffness,valley_bar_stiffness,mu_static,epm_moment",
                         help="WormParams fields to fit, comma-separated (default: %(default)s)")
     parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
@@ -45,14 +50,14 @@ def add_arguments(parser) -> None:
     parser.add_argument("--json", action="store_true", help="print a JSON summary only")
 
 
-def _base_params(args, path_fields):
+def _base_params(args, gait, backward, path_fields):
     """The gait preset with the video's path, magnet model and known values (checked by the config's rules)."""
     from dataclasses import replace
 
     from warpworm.physics import gaits
     from warpworm.physics.params import WormParams
 
-    base = gaits.preset_params(args.gait, args.backward, **path_fields)
+    base = gaits.preset_params(gait, backward, **path_fields)
     base = replace(base, magnet_model=args.magnet_model)
     known = {}
     names = {f for f in WormParams.__dataclass_fields__}
@@ -71,6 +76,37 @@ def _base_params(args, path_fields):
     return base, known
 
 
+def _clips(args, n: int) -> list[tuple[str, bool, dict]]:
+    """(gait, backward, path fields) of each of the ``n`` tracks, from --plan or --gait/--path/--backward."""
+    import json
+    from pathlib import Path
+
+    from warpworm.analysis import fit_track as FT
+
+    if args.plan:
+        try:
+            plan = json.loads(Path(args.plan).read_text())
+            clips = plan["clips"]
+        except (OSError, ValueError, KeyError, TypeError):
+            raise ValueError(f"--plan {args.plan}: expected the plan.json that 'warpworm plan-clips' wrote") from None
+        if len(clips) != n:
+            raise ValueError(f"--plan {args.plan}: {len(clips)} clips for {n} tracks; expected one track per clip, "
+                             "in the plan's order")
+        return [(c["gait"], bool(c["backward"]), {"wavelength": float(c["wavelength"]),
+                                                   "amplitude": float(c["amplitude"]),
+                                                   "closest_approach": float(c["closest_approach"])}) for c in clips]
+    gaits_ = [g.strip() for g in (args.gait or "").split(",") if g.strip()]
+    if not gaits_:
+        raise ValueError("--gait: missing; expected peristaltic, omega or inchworm (or --plan PLAN.json)")
+    bad = [g for g in gaits_ if g not in ("peristaltic", "omega", "inchworm")]
+    paths = (args.path or "").split(";")
+    if bad or len(gaits_) not in (1, n) or len(paths) not in (1, n):
+        raise ValueError(f"--gait/--path: got {len(gaits_)} gait(s) {bad or ''} and {len(paths)} path(s) for {n} "
+                         "track(s); expected peristaltic/omega/inchworm, one for all tracks or one per track")
+    return [(gaits_[i % len(gaits_)], bool(args.backward), FT.parse_path(paths[i % len(paths)] or None))
+            for i in range(n)]
+
+
 def main(args) -> int:
     from pathlib import Path
 
@@ -83,8 +119,6 @@ def main(args) -> int:
     from warpworm.data.config import ConfigError
 
     try:
-        if not Path(args.track).is_file():
-            raise ValueError(f"TRACK: got {args.track!r}; expected a track.csv written by 'warpworm track'")
         if args.budget < 1 or (args.popsize is not None and args.popsize < 2) or args.refine < 0 or args.profile < 0:
             raise ValueError(f"--budget/--popsize/--refine/--profile: got {args.budget}/{args.popsize}/{args.refine}/"
                              f"{args.profile}; expected >= 1 / >= 2 / >= 0 / >= 0")
@@ -95,41 +129,53 @@ def main(args) -> int:
         except ImportError:
             raise ValueError("fit-track: the cma package is missing; expected it installed (pip install "
                              "'warpworm[calibrate]')") from None
-        path_fields = FT.parse_path(args.path)
         names = FT.parse_fit(args.fit)
-        track = T.read_csv(args.track)
-        if int(track["seen"].all(axis=1).sum()) < 3:
-            raise ValueError(f"TRACK {args.track}: fewer than 3 frames with all bands; expected a longer track")
-        meta = None
-        cam_arg = args.camera or (str(T.meta_path(args.track)) if T.meta_path(args.track).is_file() else "none")
-        if cam_arg != "none":
-            meta = T.read_meta(cam_arg) if "height_m" in Path(cam_arg).read_text() else None
-            if meta is None:
-                raise ValueError(f"--camera {cam_arg}: expected the TRACK.json that 'warpworm track' wrote (camera, "
-                                 "image size, plane height)")
-            track["ref"] = meta["ref"]
-        else:
-            track["ref"] = int(np.nonzero(track["seen"].all(axis=1))[0][0])
-        base, known = _base_params(args, path_fields)
+        clips = _clips(args, len(args.track))
+        tracks, metas, bases = [], [], []
+        for path, (gait, backward, path_fields) in zip(args.track, clips):
+            if not Path(path).is_file():
+                raise ValueError(f"TRACK: got {path!r}; expected a track.csv written by 'warpworm track'")
+            track = T.read_csv(path)
+            if int(track["seen"].all(axis=1).sum()) < 3:
+                raise ValueError(f"TRACK {path}: fewer than 3 frames with all bands; expected a longer track")
+            meta = None
+            cam_arg = args.camera or (str(T.meta_path(path)) if T.meta_path(path).is_file() else "none")
+            if cam_arg != "none":
+                meta = T.read_meta(cam_arg) if "height_m" in Path(cam_arg).read_text() else None
+                if meta is None:
+                    raise ValueError(f"--camera {cam_arg}: expected the TRACK.json that 'warpworm track' wrote "
+                                     "(camera, image size, plane height)")
+                track["ref"] = meta["ref"]
+            else:
+                track["ref"] = int(np.nonzero(track["seen"].all(axis=1))[0][0])
+            base, known = _base_params(args, gait, backward, path_fields)
+            tracks.append(track)
+            metas.append(meta)
+            bases.append(base)
+        gait, backward, path_fields = clips[0]
+        track, meta, base = tracks[0], metas[0], bases[0]
     except (ValueError, ConfigError) as exc:
         return refuse(exc)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     log = None if args.json else print
     if log:
-        log(f"fitting {names} to {len(track['time'])} frames of {args.gait}{' backward' if args.backward else ''} "
+        log(f"fitting {names} to {' + '.join(str(len(t['time'])) for t in tracks)} frames of "
+            f"{' + '.join(g + (' backward' if b else '') for g, b, _ in clips)} "
             f"({'through the track camera' if meta else 'band centres from above'}), budget {args.budget} worlds")
-    res = FT.fit(track, base, names, budget=args.budget, popsize=args.popsize, spread=args.spread, seed=args.seed,
-                 meta=meta, log=log, refine=args.refine, profile=args.profile, render_scale=args.render_scale, device=args.device)
-    frag = FT.write_fragment(out / "fit.yaml", args.gait, args.backward, {**path_fields, **known}, res, base)
+    res = FT.fit(tracks if len(tracks) > 1 else track, bases if len(bases) > 1 else base, names, budget=args.budget, popsize=args.popsize, spread=args.spread, seed=args.seed,
+                 meta=metas if len(metas) > 1 else meta, log=log, refine=args.refine, profile=args.profile, render_scale=args.render_scale, device=args.device)
+    frag = FT.write_fragment(out / "fit.yaml", gait, backward, {**path_fields, **known}, res, base)
     plot_note = ""
     try:
-        FT.plot_fit(out / "fit.png", track, res, title=f"{args.gait}: measured (red) vs fitted (blue)")
+        FT.plot_fit(out / "fit.png", track, res, title=f"{gait}: measured (red) vs fitted (blue)"
+                    + (f" (clip 1 of {len(tracks)})" if len(tracks) > 1 else ""))
     except ImportError:
         plot_note = " (no fit.png: install the plots extra, pip install 'warpworm[plots]')"
     summary = {"names": names, "value": res["value"].tolist(), "preset": res["base"].tolist(),
                "range_rel": res["range_rel"].tolist(), "at_bound": res["at_bound"].tolist(),
                "tolerance": res["tolerance"].tolist(), "pinned": res["pinned"].tolist(),
+               "verdict": [str(v) for v in res["verdict"]], "clips": len(tracks),
                "sigma_rel": [float(s) for s in res["sigma_rel"]],
                "cost": float(res["cost"]), "rms_ratio": float(res["rms_ratio"]),
                "rms_displacement_m": float(res["rms_disp_m"]), "weakest": res["weakest"].tolist(),

@@ -27,7 +27,8 @@ def add_arguments(parser) -> None:
                         help="the five band colours tail -> head as displayed, each R,G,B in [0, 1] (default: the "
                              "paper's blue, pink, white, green, red)")
     parser.add_argument("--threshold", action="append", default=[], metavar="NAME=VALUE",
-                        help="override a segmentation threshold: hue_tol, sat_frac, val_frac, min_pixels, blob_reach "
+                        help="override a segmentation threshold: hue_tol, sat_frac, floor_sigma, min_pixels, blob_reach; "
+                             "brightness_cut=1 (with val_frac) restores the first tracker's brightness rule "
                              "(docs/calibration.md)")
     parser.add_argument("--band-colors-from", default=None, metavar="DATASET",
                         help="take the band colours from a dataset folder's config (render.band_colors; the paper's "

@@ -1,0 +1,179 @@
+"""Calibration from images over many worms (issue #41): worms drawn across production's ranges of k_alpha, mu_s and
+the EPM moment (dataset_configs/production.yaml: k_alpha loguniform 0.003-0.01 N m/rad, mu_s uniform 0.2-0.4, EPM
+moment uniform 3-4 A m^2; every other parameter at the preset, analytic magnets), each filmed in the clips of a plan
+(``warpworm plan-clips``'s plan.json), every clip path-traced by Mitsuba 3 under its own randomized hard light and
+tilted camera with lens distortion (:mod:`warpworm.analysis.footage`), the harshest sensor noise added, tracked
+(:mod:`warpworm.analysis.track`) and all clips of a worm fitted jointly (:func:`warpworm.analysis.fit_track.fit`,
+through each clip's camera). Prints per worm and the table: recovery error and verdicts per parameter.
+
+    warpworm plan-clips --max-clips 2 --out plan.json
+    nice -n 10 python benchmarks/calibrate_many.py --plan plan.json --worms 20 --size 384x288 --json many.jsonl
+    python benchmarks/calibrate_many.py --table many.jsonl
+    nice -n 10 python benchmarks/calibrate_many.py --plan plan.json --worms 3 --noise-seed 1 ... --json noise.jsonl
+    python benchmarks/calibrate_many.py --stability many.jsonl noise.jsonl    # do verdicts flip on re-rendering?
+
+Numbers: docs/calibration.md ("Many worms").
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+import numpy as np
+
+NAMES = ["hinge_stiffness", "mu_static", "epm_moment"]
+
+
+def draw_worm(rng: np.random.Generator) -> np.ndarray:
+    """One worm across production's ranges: k_alpha loguniform 0.003-0.01, mu_s uniform 0.2-0.4, EPM 3-4 A m^2."""
+    return np.array([np.exp(rng.uniform(np.log(0.003), np.log(0.01))), rng.uniform(0.2, 0.4), rng.uniform(3.0, 4.0)])
+
+
+def film_clip(clip: dict, truth: np.ndarray, rng: np.random.Generator, *, size=(256, 192), spp=8, seed=0):
+    """(track, meta, base) of one clip of the worm ``truth`` (NAMES' values): simulated, path-traced, tracked."""
+    from warpworm.analysis import fit_track as FT
+    from warpworm.analysis import footage as FO
+    from warpworm.analysis import plan as P
+    from warpworm.analysis import track as T
+    from warpworm.physics import gaits
+
+    W, H = size
+    base = gaits.preset_params(clip["gait"], bool(clip["backward"]), magnet_model="analytic",
+                               wavelength=float(clip["wavelength"]), amplitude=float(clip["amplitude"]),
+                               closest_approach=float(clip["closest_approach"]))
+    times = np.arange(int(round(clip["cycles"] * P.FPS)) + 1) / P.FPS
+    fr = FT.simulate_frames(FT.candidate_params(base, NAMES, truth[None]), 1, times)
+    if fr["unstable"][0]:
+        raise RuntimeError("the planted worm's simulation went unstable")
+    look = FO.random_look(rng)
+    x = np.asarray(fr["positions"])[:, 0, :, 0]  # the worm's path, framed as a camera operator would
+    cam = FO.random_camera(rng, W, H, centre=(0.5 * (x.min() + x.max()), 0.0, 0.0), span=float(x.max() - x.min()))
+    F = len(times)
+    rgb, truth_px = FO.pathtraced_band_video(fr, fr["model"], cam, W, H, look, spp=spp,
+                                             sensor_values=T.harshest_sensor(F), seed=seed)
+    h = T.default_band_height(base)
+    tr = T.track(rgb, cam, height=h, fps=P.FPS)
+    err_px = np.linalg.norm(tr["pixel"] - truth_px, axis=-1)
+    meta = {"camera": cam, "width": W, "height": H, "height_m": h}
+    return tr, meta, base, err_px
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--plan", required=True, help="plan.json of warpworm plan-clips (its clips are filmed)")
+    ap.add_argument("--worms", type=int, default=20)
+    ap.add_argument("--first", type=int, default=0, help="index of the first worm (draws are per index)")
+    ap.add_argument("--size", default="256x192")
+    ap.add_argument("--spp", type=int, default=8)
+    ap.add_argument("--budget", type=int, default=48, help="CMA-ES worlds after the plan's design worms")
+    ap.add_argument("--refine", type=int, default=4)
+    ap.add_argument("--profile", type=int, default=3)
+    ap.add_argument("--render-scale", type=float, default=1.0)
+    ap.add_argument("--noise-seed", type=int, default=0,
+                    help="added to every image's noise seeds (sensor noise and the path tracer's sampler): the same "
+                         "worms, lights and cameras re-rendered, to measure whether the verdicts flip on noise")
+    ap.add_argument("--json", default=None, help="append one JSON line per worm here")
+    args = ap.parse_args()
+    from warpworm import quiet_warp
+    from warpworm.analysis import fit_track as FT
+
+    quiet_warp()
+    plan = json.loads(open(args.plan).read())
+    clips = plan["clips"]
+    starts = np.asarray(plan["design_worms"]) if "design_worms" in plan and plan.get("names") == NAMES else None
+    size = tuple(int(x) for x in args.size.split("x"))
+    print(f"{len(clips)} clip(s): " + "; ".join(f"{c['gait']} w={c['wavelength']:.4g} a={c['amplitude']:.4g} "
+                                                 f"h={c['closest_approach']:.4g} x{c['cycles']:g}" for c in clips))
+    for j in range(args.first, args.first + args.worms):
+        t0 = time.perf_counter()
+        rng = np.random.default_rng([41, j])
+        truth = draw_worm(rng)
+        try:
+            filmed = [film_clip(c, truth, rng, size=size, spp=args.spp, seed=1000 * j + 10 * k + 100003 * args.noise_seed)
+                      for k, c in enumerate(clips)]
+        except (RuntimeError, ValueError) as exc:
+            print(f"worm {j}: {exc}; skipped", flush=True)
+            continue
+        t_film = time.perf_counter() - t0
+        tracks, metas, bases = [f[0] for f in filmed], [f[1] for f in filmed], [f[2] for f in filmed]
+        px = np.concatenate([f[3].ravel() for f in filmed])
+        res = FT.fit(tracks, bases, NAMES, meta=metas, budget=args.budget, refine=args.refine, profile=args.profile,
+                     render_scale=args.render_scale, seed=j, starts=starts)
+        err = res["value"] / truth - 1
+        inside = [bool(lo <= -e / (1 + e) <= hi) for (lo, hi), e in zip(res["range_rel"], err)]
+        row = {"worm": j, "planted": truth.tolist(), "fitted": res["value"].tolist(), "error": err.tolist(),
+               "range_rel": res["range_rel"].tolist(), "verdict": [str(v) for v in res["verdict"]],
+               "planted_inside": inside, "rms_ratio": res["rms_ratio"], "rms_disp_m": res["rms_disp_m"],
+               "track_px_mean": float(np.nanmean(px)), "track_px_max": float(np.nanmax(px)),
+               "worlds": res["worlds"], "film_s": t_film, "noise_seed": args.noise_seed, "wall_s": time.perf_counter() - t0, "clips": clips}
+        print(f"worm {j}: planted k={truth[0]:.4g} mu={truth[1]:.3f} m={truth[2]:.3f}  error "
+              + "  ".join(f"{100 * e:+.2f}%" for e in err) + "  ranges "
+              + "  ".join(f"[{100 * lo:+.1f},{100 * hi:+.1f}]" for lo, hi in res["range_rel"]) + "  "
+              + "/".join(row["verdict"]) + f"  tracker {row['track_px_mean']:.2f}/{row['track_px_max']:.2f} px  "
+              f"{res['worlds']} worlds {row['wall_s']:.0f} s", flush=True)
+        if args.json:
+            with open(args.json, "a") as f:
+                f.write(json.dumps(row) + "\n")
+
+
+def table(path: str) -> None:
+    """The docs' table from a --json file: per parameter, |error| median / 90th percentile / max, the rate within
+    the tolerance, the pinned rate and the planted value inside the acceptable range."""
+    rows = [json.loads(line) for line in open(path)]
+    err = np.abs(np.array([r["error"] for r in rows]))
+    ver = np.array([r["verdict"] for r in rows])
+    inside = np.array([r["planted_inside"] for r in rows])
+    tol = np.array([0.05, 0.05, 0.03])
+    print(f"N = {len(rows)} worms")
+    print("| parameter | |error| median | 90 % | max | within tolerance | pinned | pinned and within tolerance | "
+          "borderline | not pinned | planted inside range |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    for i, n in enumerate(NAMES):
+        print(f"| {n} | {100 * np.median(err[:, i]):.2f} % | {100 * np.percentile(err[:, i], 90):.2f} % | "
+              f"{100 * err[:, i].max():.2f} % | {np.mean(err[:, i] <= tol[i]):.0%} | {np.mean(ver[:, i] == 'pinned'):.0%} "
+              f"| {np.mean((ver[:, i] == 'pinned') & (err[:, i] <= tol[i])):.0%} "
+              f"| {np.mean(ver[:, i] == 'borderline'):.0%} | {np.mean(ver[:, i] == 'not pinned'):.0%} | "
+              f"{np.mean(inside[:, i]):.0%} |")
+    allp = (ver == "pinned").all(axis=1)
+    allw = (err <= tol).all(axis=1)
+    print(f"all three pinned: {allp.mean():.0%}; all three within tolerance: {allw.mean():.0%}; all three pinned "
+          f"and within tolerance: {(allp & allw).mean():.0%}; tracker "
+          f"{np.mean([r['track_px_mean'] for r in rows]):.2f} px mean, {np.max([r['track_px_max'] for r in rows]):.2f} "
+          "px worst")
+
+
+def stability(path_a: str, path_b: str) -> None:
+    """Verdicts of the same worms rendered with two noise seeds (--noise-seed): per parameter, how many verdicts
+    changed, how many flipped between pinned and not pinned, and the range half-widths' relative change."""
+    a = {json.loads(line)["worm"]: json.loads(line) for line in open(path_a)}
+    b = {json.loads(line)["worm"]: json.loads(line) for line in open(path_b)}
+    both = sorted(set(a) & set(b))
+    print(f"{len(both)} worms rendered twice")
+    for i, n in enumerate(NAMES):
+        changed = flipped = 0
+        rel = []
+        for w in both:
+            va, vb = a[w]["verdict"][i], b[w]["verdict"][i]
+            changed += va != vb
+            flipped += {va, vb} == {"pinned", "not pinned"}
+            ha = max(-a[w]["range_rel"][i][0], a[w]["range_rel"][i][1])
+            hb = max(-b[w]["range_rel"][i][0], b[w]["range_rel"][i][1])
+            rel.append(hb / ha - 1)
+        print(f"| {n} | {changed} of {len(both)} changed | {flipped} pinned <-> not pinned | half-width change "
+              f"median {100 * np.median(np.abs(rel)):.0f} %, max {100 * np.max(np.abs(rel)):.0f} % |")
+    for w in both:
+        print(f"  worm {w}: " + "  ".join(f"{x}->{y}" for x, y in zip(a[w]["verdict"], b[w]["verdict"])) + "  errors "
+              + " ".join(f"{100 * x:+.1f}/{100 * y:+.1f}%" for x, y in zip(a[w]["error"], b[w]["error"])))
+
+
+if __name__ == "__main__":
+    import sys
+
+    if len(sys.argv) == 3 and sys.argv[1] == "--table":
+        table(sys.argv[2])
+    elif len(sys.argv) == 4 and sys.argv[1] == "--stability":
+        stability(sys.argv[2], sys.argv[3])
+    else:
+        main()
