@@ -241,7 +241,7 @@ def _trace(scene: SceneBatch, cameras: Cameras, spp: int, seeds: np.ndarray) -> 
 
 
 def _distorted(scene: SceneBatch, cameras: Cameras, spp: int, seeds: np.ndarray) -> np.ndarray:
-    """Images through ``cameras.dist`` the way the rasterizer makes them (``Renderer._render_distorted``): a pinhole
+    """Images through ``cameras.dist`` as the rasterizer made them before it followed each pixel through the lens: a pinhole
     image with the same K widened by margins that hold the ray of every distorted pixel centre, warped bilinearly
     (``cv2.remap``) by :func:`warpworm.render.distortion.undistort_maps`. Linear (N, H, W, 3) float32."""
     import cv2

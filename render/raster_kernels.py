@@ -986,37 +986,7 @@ resolve_shade = make_resolve_shade(False)
 resolve_shade_plain = make_resolve_shade(True)
 """The same for batches without any per-pixel shading option: the default look's path, bit for bit."""
 resolve_labels = make_resolve_shade(True, shade=False)
-"""Depth, segmentation and normals only: the pixel-centre pass of a supersampled render, whose RGB comes from the
-fine pass (the same labels as :data:`resolve_shade`, without shading or shadow maps)."""
-
-
-@wp.kernel
-def downsample_rgb(
-    fine: wp.array2d(dtype=wp.vec3ub),
-    sub: int,
-    width: int,
-    # Data out:
-    rgb: wp.array2d(dtype=wp.vec3ub),
-):
-    """Supersampling's resolve: pixel (x, y) of image ``img`` is the mean, in linear RGB (display gamma 2), of the
-    ``sub`` x ``sub`` block of ``fine`` pixels (sub x, sub y) .. (sub x + sub - 1, sub y + sub - 1).
-
-    Args:
-        fine: (N, sub H * sub W) 8-bit pixels of the images rendered ``sub`` times larger.
-        sub: samples per pixel side. width: W [px] of the output.
-        rgb: (N, H * W) output pixels.
-    """
-    img, y, x = wp.tid()
-    fw = width * sub
-    acc = wp.vec3(0.0)
-    for j in range(sub):
-        row = (y * sub + j) * fw + x * sub
-        for i in range(sub):
-            p = fine[img, row + i]
-            c = wp.vec3(float(p[0]), float(p[1]), float(p[2])) * (1.0 / 255.0)
-            acc = acc + wp.cw_mul(c, c)
-    acc = acc * (1.0 / float(sub * sub))
-    rgb[img, y * width + x] = wp.vec3ub(to_srgb8(acc[0]), to_srgb8(acc[1]), to_srgb8(acc[2]))
+"""Depth, segmentation and normals only (the same labels as :data:`resolve_shade`, without shading or shadow maps)."""
 
 
 @wp.func

@@ -189,18 +189,6 @@ def band_appearance(appearance: Appearance, colors=None) -> Appearance:
     return out
 
 
-def _default_config():
-    global _DEFAULT_CONFIG
-    if _DEFAULT_CONFIG is None:
-        from warpworm.data.config import load_config
-
-        _DEFAULT_CONFIG = load_config("default")
-    return _DEFAULT_CONFIG
-
-
-_DEFAULT_CONFIG = None
-
-
 # ---------------------------------------------------------------------------------------------------------------------
 # meshes
 # ---------------------------------------------------------------------------------------------------------------------
