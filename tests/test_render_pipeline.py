@@ -39,8 +39,10 @@ def _batch(n_images: int, size: int = 32, lens: bool = True):
 def test_device_result_equals_host_result():
     scene, cams, sensor = _batch(3)
     r = Renderer(32, 32, device="cpu", shadows=True, supersample=2)
-    host = r.render(scene, cams, normals=True, sensor=sensor)
+    host = {k: v.copy() for k, v in r.render(scene, cams, normals=True, sensor=sensor).items()}
     dev = r.render(scene, cams, normals=True, sensor=sensor, out="device")
+    other = dataclasses.replace(cams, R=cams.R[::-1].copy(), t=cams.t[::-1].copy())
+    r.render(scene, other, normals=True, sensor=sensor)  # a later batch must not touch the device result
     assert all(isinstance(v, wp.array) for v in dev.values())
     assert set(dev) == set(host)
     assert np.array_equal(dev["rgb"].numpy(), host["rgb"])  # vec3ub (N, H, W) -> (N, H, W, 3)
