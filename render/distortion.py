@@ -54,15 +54,15 @@ def undistort(xd: np.ndarray, yd: np.ndarray, dist: np.ndarray, iterations: int 
 def undistort_maps(K: np.ndarray, dist: np.ndarray, width: int, height: int, device=None) -> np.ndarray:
     """For every pixel centre (u, v) of N distorted images, the pinhole pixel (same K) whose ray it sees:
     (N, H, W, 2) float64 [px]. ``K`` (N, 3, 3), ``dist`` (N, 5). Newton's method as :func:`undistort`, run by the
-    Warp kernel :func:`warpworm.render.raster_kernels.undistort_pixels` (NumPy took 70 ms per 256² image)."""
+    Warp kernel :func:`warpworm.render.lens_kernels.undistort_pixels` (NumPy took 70 ms per 256² image)."""
     import warp as wp
 
-    from warpworm.render import raster_kernels as rk
+    from warpworm.render import lens_kernels as lk
 
     N = len(K)
     intr = np.stack([K[:, 0, 0], K[:, 1, 1], K[:, 0, 2], K[:, 1, 2]], axis=1).astype(np.float64)
     out = wp.empty((N, height, width), dtype=wp.vec2d, device=device)
-    wp.launch(rk.undistort_pixels, dim=(N, height, width), device=device,
+    wp.launch(lk.undistort_pixels, dim=(N, height, width), device=device,
               inputs=[wp.array(intr, dtype=wp.vec4d, device=device),
                       wp.array(np.ascontiguousarray(dist, dtype=np.float64), dtype=wp.float64, device=device), 8],
               outputs=[out])

@@ -181,7 +181,7 @@ def distractor_mesh(draws: dict, num_worlds: int, floor_incline=0.0, segments: i
 
 
 PAPER_RANGES = {"wrap": (0.15, 0.45), "sheen": (0.1, 0.4), "roughness": (0.3, 0.7), "ground": (0.25, 0.6)}
-"""Ranges of the sheet's paper BSDF (``render.paper_bsdf``; :func:`warpworm.render.raster_kernels.paper_surface`),
+"""Ranges of the sheet's paper BSDF (``render.paper_bsdf``; :func:`warpworm.render.shading.paper_surface`),
 drawn per trajectory and stored as ``params/paper.<name>``: wrap of the diffuse term, sheen strength and roughness,
 the ambient from below as a fraction of the sky's."""
 MATERIALS = ("matte", "glossy", "acrylic")

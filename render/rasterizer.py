@@ -36,6 +36,9 @@ import warp as wp
 from warpworm.render import raster_kernels as rk
 from warpworm.render import sample_kernels as sk
 from warpworm.render import sensor_kernels as snk
+from warpworm.render import shadow_kernels as shk
+from warpworm.render.raster_math import EMPTY_KEY, NOISE_SIZE, SEG_FLOOR
+from warpworm.render.shading import Look
 from warpworm.render.camera import Cameras
 from warpworm.render.distortion import lens_margins
 from warpworm.render.scene import SceneBatch
@@ -80,7 +83,7 @@ def plain_look(a) -> bool:
     return bool(power.shape[1] == 1 and np.all(np.any(power != 0, axis=-1))
                 and not np.any((pb[..., 0] > 0) | (pb[..., 1] > 0) | (pb[..., 3] > 0))
                 and not np.any(f32(a.floor_transmit) > 0)
-                and not np.any(f32(a.specular)[:, rk.SEG_FLOOR, 0] > 0))
+                and not np.any(f32(a.specular)[:, SEG_FLOOR, 0] > 0))
 
 
 class Renderer:
@@ -122,16 +125,16 @@ class Renderer:
         self.supersample = int(supersample)
         self._buffers: dict = {}
         # load the kernels once here: concurrent first launches from several threads would race to load them
-        for module in (rk, snk):
+        for module in (rk, shk, snk):
             wp.load_module(module, device=self.device)
-        self._noise = wp.array(bake_noise(rk.NOISE_SIZE), dtype=float, device=self.device)
+        self._noise = wp.array(bake_noise(NOISE_SIZE), dtype=float, device=self.device)
 
     # -- uploads -------------------------------------------------------------------------------------------------------
 
     def _upload_scene(self, scene: SceneBatch) -> dict:
         d = self.device
         a = scene.appearance
-        look = rk.Look()
+        look = Look()
         look.albedo = _vec_array(a.albedo, wp.vec3, d)
         look.specular = _vec_array(a.specular, wp.vec2, d)
         look.floor_normal = _vec_array(scene.floor_normal, wp.vec3, d)
@@ -187,15 +190,15 @@ class Renderer:
             }
         return self._buffers[key]
 
-    def _lights(self, arrays: dict, maps: dict | None) -> rk.Lights:
+    def _lights(self, arrays: dict, maps: dict | None) -> shk.Lights:
         """The kernel's :class:`Lights` from uploaded light arrays and, when shadows are on, a chunk's maps."""
         d = self.device
-        lights = rk.Lights()
+        lights = shk.Lights()
         for name, arr in arrays.items():
             setattr(lights, name, arr)
         lights.shadows = 0 if maps is None else 1
         lights.map_side = self.shadow_map
-        lights.map_tiles = -(-self.shadow_map // rk.SHADOW_TILE)
+        lights.map_tiles = -(-self.shadow_map // shk.SHADOW_TILE)
         if maps is None:  # never read: placeholders
             maps = {"first": wp.zeros(1, dtype=wp.int32, device=d), "key": wp.zeros((1, 1), dtype=wp.int64, device=d),
                     "rot": wp.zeros(1, dtype=wp.mat33, device=d), "trans": wp.zeros(1, dtype=wp.vec3, device=d),
@@ -206,7 +209,7 @@ class Renderer:
         lights.map_tile_min = maps["tile_min"]
         return lights
 
-    def _shadow_maps(self, s: dict, worlds: np.ndarray) -> rk.Lights:
+    def _shadow_maps(self, s: dict, worlds: np.ndarray) -> shk.Lights:
         """The scene's :class:`Lights` with the shadow maps of ``worlds`` (unique scene world ids) rasterized: one
         map for the sun and one per point light of each world (:func:`shadow_cameras`)."""
         d, S = self.device, self.shadow_map
@@ -216,7 +219,7 @@ class Renderer:
         first = np.full(scene.num_worlds, -1, np.int32)
         first[worlds] = np.arange(len(worlds), dtype=np.int32) * (M // len(worlds))
         maps = {"first": wp.array(first, dtype=wp.int32, device=d),
-                "key": wp.full((M, S * S), rk.EMPTY_KEY, dtype=wp.int64, device=d),
+                "key": wp.full((M, S * S), EMPTY_KEY, dtype=wp.int64, device=d),
                 "rot": _vec_array(cams["R"], wp.mat33, d), "trans": _vec_array(cams["t"], wp.vec3, d),
                 "intr": _vec_array(cams["intr"], wp.vec4, d),
                 "size": wp.array(cams["size"].astype(np.float32), dtype=float, device=d)}
@@ -226,9 +229,9 @@ class Renderer:
                           wp.array(cams["world"].astype(np.int32), dtype=wp.int32, device=d), maps["rot"],
                           maps["trans"], maps["intr"], S, S, self.near],
                   outputs=[maps["key"], mask])
-        tiles = -(-S // rk.SHADOW_TILE)
+        tiles = -(-S // shk.SHADOW_TILE)
         maps["tile_min"] = wp.empty((M, tiles * tiles), dtype=wp.int64, device=d)
-        wp.launch(rk.shadow_tile_min, dim=(M, tiles * tiles), device=d, inputs=[maps["key"], S, tiles],
+        wp.launch(shk.shadow_tile_min, dim=(M, tiles * tiles), device=d, inputs=[maps["key"], S, tiles],
                   outputs=[maps["tile_min"]])
         return self._lights(s["light_arrays"], maps)
 
@@ -346,7 +349,7 @@ class Renderer:
         common = [b["image_world"], b["cam_rot"], b["cam_trans"]]
         tris = s["triangles"].shape[0]
         if sub == 0:  # plain pinhole images: raster at pixel centres straight into the outputs, resolve and shade
-            b["zkey"].fill_(rk.EMPTY_KEY)
+            b["zkey"].fill_(EMPTY_KEY)
             out["worm_mask"].zero_()
             wp.launch(rk.raster_triangles, dim=(n, tris), device=d,
                       inputs=[s["triangles"], s["tri_label"], s["vertices"], *common, b["cam_intr"], gw, gh,
@@ -369,9 +372,9 @@ class Renderer:
                 dist[:n] = cameras.dist[start:stop]
                 b["cam_dist"].assign(np.ascontiguousarray(dist[:, :4]))
                 b["cam_k3"].assign(np.ascontiguousarray(dist[:, 4]))
-            b["zkey"].fill_(rk.EMPTY_KEY)
+            b["zkey"].fill_(EMPTY_KEY)
             b["mask"].zero_()
-            b["fine_key"].fill_(rk.EMPTY_KEY)
+            b["fine_key"].fill_(EMPTY_KEY)
             wp.launch(rk.raster_triangles, dim=(n, tris), device=d,
                       inputs=[s["triangles"], s["tri_label"], s["vertices"], *common, b["cam_intr"], gw, gh,
                               self.near],

@@ -21,26 +21,28 @@ from __future__ import annotations
 
 import warp as wp
 
-from warpworm.render.raster_kernels import (
+from warpworm.render.raster_math import (
     _EMPTY,
     _TRI_SCALE,
     SEG_BACKGROUND,
     SEG_EPM,
     SEG_FLOOR,
-    Lights,
-    Look,
     depth_plane,
     edge_fn,
-    floor_row,
-    mesh_surface,
-    nearer_floor,
     project,
-    shade_hit,
-    shade_surface,
-    surface_albedo,
     to_srgb8,
     wrow,
 )
+from warpworm.render.shading import (
+    Look,
+    floor_row,
+    mesh_surface,
+    nearer_floor,
+    shade_hit,
+    shade_surface,
+    surface_albedo,
+)
+from warpworm.render.shadow_kernels import Lights
 
 wp.set_module_options({"enable_backward": False})
 
@@ -66,7 +68,7 @@ def grid_key(keys: wp.array2d(dtype=wp.int64), img: int, px: float, py: float, g
 
 @wp.func
 def lens_inverse32(xd: float, yd: float, dist: wp.vec4, k3: float):
-    """:func:`~warpworm.render.raster_kernels.lens_inverse` in float32 for the renderer: the undistorted
+    """:func:`~warpworm.render.lens_kernels.lens_inverse` in float32 for the renderer: the undistorted
     normalized point (u, v) of the distorted (xd, yd) through OpenCV's lens ``dist`` = (k1, k2, p1, p2) and ``k3``,
     by Newton's method from the radial first guess (xd, yd) / (1 + k1 r² + k2 r⁴ + k3 r⁶), and the forward map's
     Jacobian (a, b, d) there; ``ok`` False where no ray reaches the point. Four steps reach float32 rounding

@@ -75,7 +75,7 @@ class Appearance:
     """Point light radius [m] (spherical lights: the softness of their shadows), shape (W, L)."""
     paper_bsdf: np.ndarray
     """The sheet's paper BSDF (wrap, sheen strength, sheen roughness, ground ambient fraction), shape (W, 4); zeros:
-    Lambert with a constant ambient (before ``render.paper_bsdf``; :func:`raster_kernels.paper_surface`)."""
+    Lambert with a constant ambient (before ``render.paper_bsdf``; :func:`shading.paper_surface`)."""
     floor_transmit: np.ndarray
     """Fraction of the light of meshes under the floor (the EPM) that shows through it: 0 opaque, a clear acrylic
     plate 0.3-0.6 (its glossiness is the floor's ``specular`` row), shape (W,)."""

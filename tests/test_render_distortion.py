@@ -52,7 +52,7 @@ def test_inverse_undoes_the_lens():
 
 
 def test_warp_maps_equal_the_numpy_inverse():
-    # undistort_maps runs Newton's method in a Warp kernel (raster_kernels.undistort_pixels): its twin in NumPy is
+    # undistort_maps runs Newton's method in a Warp kernel (lens_kernels.undistort_pixels): its twin in NumPy is
     # undistort, so every pixel centre must map to the same pinhole pixel (float64 both, the same iteration)
     _, _, cams = _scenes()
     H, W = cams.height, cams.width

@@ -1,0 +1,67 @@
+"""OpenCV's lens model inverted on the device: Newton's method on the distortion map (float64) and the per-pixel
+maps of :func:`warpworm.render.distortion.undistort_maps`."""
+
+from __future__ import annotations
+
+import warp as wp
+
+wp.set_module_options({"enable_backward": False})
+
+
+@wp.func
+def lens_inverse(xd: wp.float64, yd: wp.float64, k1: wp.float64, k2: wp.float64, p1: wp.float64, p2: wp.float64,
+                 k3: wp.float64, iterations: int):
+    """The undistorted normalized point (u, v) that OpenCV's lens map (k1, k2, p1, p2, k3) sends to the distorted
+    normalized point (xd, yd), by ``iterations`` Newton steps from (xd, yd) in float64; with the forward map's
+    symmetric Jacobian (a, b, d) = (dxd/du, dxd/dv = dyd/du, dyd/dv) there, and ``ok``: False where Newton's method
+    ends off the lens (residual over 1e-9, or a folded Jacobian: no ray reaches that point)."""
+    one = wp.float64(1.0)
+    two = wp.float64(2.0)
+    u = xd
+    v = yd
+    for _it in range(iterations):
+        r2 = u * u + v * v
+        radial = one + r2 * (k1 + r2 * (k2 + r2 * k3))
+        drad = two * (k1 + r2 * (two * k2 + wp.float64(3.0) * k3 * r2))
+        fx = u * radial + two * p1 * u * v + p2 * (r2 + two * u * u) - xd
+        fy = v * radial + p1 * (r2 + two * v * v) + two * p2 * u * v - yd
+        a = radial + u * u * drad + two * p1 * v + wp.float64(6.0) * p2 * u
+        b = u * v * drad + two * p1 * u + two * p2 * v
+        d = radial + v * v * drad + wp.float64(6.0) * p1 * v + two * p2 * u
+        det = a * d - b * b
+        u = u - (d * fx - b * fy) / det
+        v = v - (a * fy - b * fx) / det
+    # where the polynomial folds back before this point's radius, no ray reaches it: Newton wanders or lands on the
+    # far (folded) branch; say so instead of returning a wrong ray
+    r2 = u * u + v * v
+    radial = one + r2 * (k1 + r2 * (k2 + r2 * k3))
+    drad = two * (k1 + r2 * (two * k2 + wp.float64(3.0) * k3 * r2))
+    ex = u * radial + two * p1 * u * v + p2 * (r2 + two * u * u) - xd
+    ey = v * radial + p1 * (r2 + two * v * v) + two * p2 * u * v - yd
+    a = radial + u * u * drad + two * p1 * v + wp.float64(6.0) * p2 * u
+    b = u * v * drad + two * p1 * u + two * p2 * v
+    d = radial + v * v * drad + wp.float64(6.0) * p1 * v + two * p2 * u
+    ok = ex * ex + ey * ey <= wp.float64(1.0e-18) and a > wp.float64(0.0) and a * d - b * b > wp.float64(0.0)
+    return u, v, a, b, d, ok
+
+
+@wp.kernel
+def undistort_pixels(
+    intr: wp.array(dtype=wp.vec4d),
+    dist: wp.array2d(dtype=wp.float64),
+    iterations: int,
+    # Data out:
+    pinhole: wp.array3d(dtype=wp.vec2d),
+):
+    """For pixel centre (x, y) of distorted image ``img``: the pinhole pixel (same intrinsics ``intr`` = (fx, fy, cx,
+    cy)) whose ray it sees, by :func:`lens_inverse` with ``dist`` (k1, k2, p1, p2, k3) (float64; the NumPy twin is
+    :func:`warpworm.render.distortion.undistort`). ``pinhole``: (N, H, W); NaN where no ray reaches that pixel."""
+    img, y, x = wp.tid()
+    k = intr[img]
+    u, v, _a, _b, _d, ok = lens_inverse((wp.float64(x) - k[2]) / k[0], (wp.float64(y) - k[3]) / k[1], dist[img, 0],
+                                       dist[img, 1], dist[img, 2], dist[img, 3], dist[img, 4], iterations)
+    if not ok:
+        nan = wp.float64(wp.nan)
+        pinhole[img, y, x] = wp.vec2d(nan, nan)
+        return
+    pinhole[img, y, x] = wp.vec2d(k[0] * u + k[2], k[1] * v + k[3])

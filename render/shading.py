@@ -1,0 +1,472 @@
+"""Surfaces and their light: the per-world :class:`Look`, the mesh and floor hits of a pixel's ray, albedo (paper,
+magnets, the floor's checker and grain), Lambert + Blinn-Phong and the paper BSDF under the sun and point lights,
+shadowed by :mod:`~warpworm.render.shadow_kernels`. Functions only: the resolve kernels
+(:mod:`~warpworm.render.raster_kernels`, :mod:`~warpworm.render.sample_kernels`) call them."""
+
+from __future__ import annotations
+
+import warp as wp
+
+from warpworm.render.raster_math import (
+    _EMPTY,
+    _TRI_SCALE,
+    SEG_BACKGROUND,
+    SEG_EPM,
+    SEG_FLOOR,
+    SEG_WORM_LAST,
+    depth_plane,
+    noise_tex,
+    spec_power,
+    wrow,
+)
+from warpworm.render.shadow_kernels import Lights, is_dark, point_light, shadow_factor
+
+wp.set_module_options({"enable_backward": False})
+
+
+@wp.func
+def light_surface_plain(albedo: wp.vec3, spec: wp.vec2, p: wp.vec3, n: wp.vec3, to_eye: wp.vec3, ambient: wp.vec3,
+                        sun_dir: wp.vec3, sun_color: wp.vec3, lamp_pos: wp.vec3, lamp_power: wp.vec3) -> wp.vec3:
+    """:func:`light_surface` for the plain path (:func:`make_resolve_shade`): one lit point lamp, no shadows, the
+    world's lights passed in as values (the same float operations, so the same bits)."""
+    ndl = wp.max(wp.dot(n, sun_dir), 0.0)
+    to_lamp = lamp_pos - p
+    r2 = wp.max(wp.dot(to_lamp, to_lamp), 1.0e-6)
+    inv_r = 1.0 / wp.sqrt(r2)
+    ldir = to_lamp * inv_r
+    lpow = lamp_power * (inv_r * inv_r)
+    ndp = wp.max(wp.dot(n, ldir), 0.0)
+    color = wp.cw_mul(albedo, ambient + sun_color * ndl + lpow * ndp)
+    if spec[0] > 0.0:
+        v = wp.normalize(to_eye)
+        hs = wp.max(wp.dot(n, wp.normalize(sun_dir + v)), 0.0)
+        hl = wp.max(wp.dot(n, wp.normalize(ldir + v)), 0.0)
+        if ndl > 0.0:
+            color = color + sun_color * (spec[0] * spec_power(hs, spec[1]))
+        if ndp > 0.0:
+            color = color + lpow * (spec[0] * spec_power(hl, spec[1]))
+    return color
+
+
+@wp.func(inline=True)
+def light_surface(albedo: wp.vec3, spec: wp.vec2, p: wp.vec3, n: wp.vec3, to_eye: wp.vec3, L: Lights, w: int,
+                  first: int) -> wp.vec3:
+    """Ambient + Lambert + Blinn-Phong for the directional sun and every point light of world ``w``, linear RGB.
+
+    ``to_eye`` points from the surface toward the camera (any length); a point light's irradiance falls with the
+    inverse square of the distance. Specular terms are evaluated only where ``spec[0] > 0`` (magnets), with
+    Schlick's approximation of the power, so matte surfaces pay for Lambert only. ``first``: the world's first
+    shadow map (< 0: unshadowed).
+    """
+    sd = L.sun_dir[wrow(w, L.sun_dir.shape[0])]
+    sc = L.sun_color[wrow(w, L.sun_color.shape[0])]
+    wl = wrow(w, L.pos.shape[0])
+    ndl = wp.max(wp.dot(n, sd), 0.0)
+    irr = L.ambient[wrow(w, L.ambient.shape[0])] + sc * shadow_factor(L, first, 0, ndl, p, n)
+    for i in range(L.pos.shape[1]):
+        if is_dark(L, wl, i):
+            continue
+        ldir, lpow, ndp = point_light(L, wl, i, p, n)
+        irr = irr + lpow * shadow_factor(L, first, 1 + i, ndp, p, n)
+    color = wp.cw_mul(albedo, irr)
+    if spec[0] > 0.0:
+        v = wp.normalize(to_eye)
+        hs = wp.max(wp.dot(n, wp.normalize(sd + v)), 0.0)
+        if ndl > 0.0:
+            color = color + sc * (spec[0] * spec_power(hs, spec[1]) * shadow_factor(L, first, 0, 1.0, p, n))
+        for i in range(L.pos.shape[1]):
+            if is_dark(L, wl, i):
+                continue
+            ldir, lpow, ndp = point_light(L, wl, i, p, n)
+            hl = wp.max(wp.dot(n, wp.normalize(ldir + v)), 0.0)
+            if ndp > 0.0:
+                color = color + lpow * (spec[0] * spec_power(hl, spec[1]) * shadow_factor(L, first, 1 + i, 1.0, p, n))
+    return color
+
+
+@wp.func
+def paper_light(albedo: wp.vec3, n: wp.vec3, v: wp.vec3, ndv: float, l: wp.vec3, irr: wp.vec3, vis: float,
+                pb: wp.vec4) -> wp.vec3:
+    """One light (unit direction ``l``, irradiance ``irr`` on a facing surface, visibility ``vis``) on paper:
+    wrapped diffuse ``max(n.l + w, 0) / (1 + w)`` (light through the thin sheet softens the terminator, w = pb[0])
+    plus a soft white sheen, Charlie's distribution ``(2 + 1/r) sin(theta_h)^(1/r) / (2 pi)`` with Ashikhmin's
+    visibility ``1 / (4 (n.l + n.v - n.l n.v))`` times n.l, strength pb[1], roughness r = pb[2]."""
+    ndl = wp.dot(n, l)
+    color = wp.cw_mul(albedo, irr) * (wp.max(ndl + pb[0], 0.0) / (1.0 + pb[0]) * vis)
+    if ndl > 0.0 and pb[1] > 0.0:
+        nh = wp.dot(n, wp.normalize(l + v))
+        sin2 = wp.max(1.0 - nh * nh, 0.0)
+        d = (2.0 + 1.0 / pb[2]) * wp.pow(sin2, 0.5 / pb[2]) / (2.0 * wp.pi)
+        color = color + irr * (pb[1] * d / (4.0 * (ndl + ndv - ndl * ndv)) * ndl * vis)
+    return color
+
+
+@wp.func(inline=True)
+def paper_surface(albedo: wp.vec3, p: wp.vec3, n: wp.vec3, to_eye: wp.vec3, L: Lights, w: int, first: int,
+                  pb: wp.vec4) -> wp.vec3:
+    """The sheet's paper BSDF (``render.paper_bsdf``) under the sun and every point light: :func:`paper_light` each,
+    and a hemispherical ambient, the sky's ``ambient`` from above fading to ``pb[3]`` of it from below (the
+    floor's bounce) instead of a constant."""
+    v = wp.normalize(to_eye)
+    ndv = wp.max(wp.dot(n, v), 1.0e-4)
+    sky = 0.5 * (1.0 + n[2])
+    color = wp.cw_mul(albedo, L.ambient[wrow(w, L.ambient.shape[0])]) * (pb[3] + (1.0 - pb[3]) * sky)
+    sd = L.sun_dir[wrow(w, L.sun_dir.shape[0])]
+    vis = float(1.0)
+    if wp.dot(n, sd) + pb[0] > 0.0:
+        vis = shadow_factor(L, first, 0, 1.0, p, n)
+    color = color + paper_light(albedo, n, v, ndv, sd, L.sun_color[wrow(w, L.sun_color.shape[0])], vis, pb)
+    wl = wrow(w, L.pos.shape[0])
+    for i in range(L.pos.shape[1]):
+        if is_dark(L, wl, i):
+            continue
+        ldir, lpow, ndp = point_light(L, wl, i, p, n)
+        vis = 1.0
+        if wp.dot(n, ldir) + pb[0] > 0.0:
+            vis = shadow_factor(L, first, 1 + i, 1.0, p, n)
+        color = color + paper_light(albedo, n, v, ndv, ldir, lpow, vis, pb)
+    return color
+
+
+@wp.func
+def mesh_surface(
+    key: wp.int64,
+    triangles: wp.array(dtype=wp.vec3i),
+    tri_label: wp.array(dtype=wp.int32),
+    vertices: wp.array2d(dtype=wp.vec3),
+    texcoords: wp.array2d(dtype=wp.vec3),
+    w: int,
+    R: wp.mat33,
+    t: wp.vec3,
+    k: wp.vec4,
+    px: float,
+    py: float,
+    eye: wp.vec3,
+    d_world: wp.vec3,
+):
+    """The triangle the raster pass kept at pixel (px, py) (its ``zkey``): (camera z, segmentation id, unnormalized
+    world normal, material coordinates of the hit), or (1e30, background, 0, 0) where no triangle covers it."""
+    best_z = float(1.0e30)
+    label = int(SEG_BACKGROUND)
+    n_world = wp.vec3(0.0)
+    mat = wp.vec3(0.0)
+    if key != _EMPTY:
+        tri = int(key % _TRI_SCALE)
+        f = triangles[tri]
+        a = vertices[w, f[0]]
+        b = vertices[w, f[1]]
+        c = vertices[w, f[2]]
+        plane = depth_plane(R * a + t, R * b + t, R * c + t, k)
+        best_z = plane[0] / (plane[1] * px + plane[2] * py + plane[3])  # the raster pass's formula, bit for bit
+        label = tri_label[tri]
+        # perspective-correct barycentrics: areas of the 3-D hit point against the world triangle
+        hit = eye + best_z * d_world
+        nw = wp.cross(b - a, c - a)
+        inv = 1.0 / wp.dot(nw, nw)
+        la = wp.dot(nw, wp.cross(c - b, hit - b)) * inv
+        lb = wp.dot(nw, wp.cross(a - c, hit - c)) * inv
+        mat = la * texcoords[w, f[0]] + lb * texcoords[w, f[1]] + (1.0 - la - lb) * texcoords[w, f[2]]
+        n_world = nw * wp.sqrt(inv)
+    return best_z, label, n_world, mat
+
+
+@wp.struct
+class FloorRow:
+    """One image row's ray against the floor plane: along a row the world ray is affine in x, d(x) = d0 + x dx, and
+    so are its dot products with the floor normal and axes (``den``, ``du``, ``dv``: value at x = 0, step per pixel).
+    ``height``: the eye's height above the plane; ``eu``, ``ev``: the eye's floor coordinates (from the floor's
+    origin); ``half``: half side."""
+
+    den0: float
+    dden: float
+    du0: float
+    ddu: float
+    dv0: float
+    ddv: float
+    eu: float
+    ev: float
+    height: float
+    half: float
+
+
+@wp.func
+def floor_row(fn: wp.vec3, fa: wp.vec3, fo: wp.vec3, half: float, eye: wp.vec3, d0: wp.vec3, dx: wp.vec3) -> FloorRow:
+    """The :class:`FloorRow` of the row whose ray is ``d0 + x dx`` from ``eye``, for the floor square with normal
+    ``fn``, in-plane axis ``fa`` and centre ``fo`` (a point of the plane through the world origin)."""
+    fb = wp.cross(fn, fa)
+    fr = FloorRow()
+    fr.den0 = wp.dot(fn, d0)
+    fr.dden = wp.dot(fn, dx)
+    fr.eu = wp.dot(eye - fo, fa)
+    fr.ev = wp.dot(eye - fo, fb)
+    fr.du0 = wp.dot(d0, fa)
+    fr.ddu = wp.dot(dx, fa)
+    fr.dv0 = wp.dot(d0, fb)
+    fr.ddv = wp.dot(dx, fb)
+    fr.height = wp.dot(fn, eye)
+    fr.half = half
+    return fr
+
+
+@wp.func
+def nearer_floor(fr: FloorRow, px: float, best_z: float, label: int, mat: wp.vec3):
+    """The analytic floor (the square |u|, |v| <= half of its plane, seen from above only) where it is nearer
+    than the mesh's surface at pixel x = px: (z, label, material coordinates (u, v, 0))."""
+    z_out = best_z
+    label_out = label
+    mat_out = mat
+    denom = fr.den0 + px * fr.dden
+    if denom < 0.0 and fr.height > 0.0:
+        zf = -fr.height / denom
+        if zf < best_z:
+            fu = fr.eu + zf * (fr.du0 + px * fr.ddu)
+            fv = fr.ev + zf * (fr.dv0 + px * fr.ddv)
+            if wp.abs(fu) <= fr.half and wp.abs(fv) <= fr.half:
+                z_out = zf
+                label_out = int(SEG_FLOOR)
+                mat_out = wp.vec3(fu, fv, 0.0)
+    return z_out, label_out, mat_out
+
+
+@wp.struct
+class Look:
+    """Per-world surfaces (arrays read as ``a[wrow(w, a.shape[0])]``): ``albedo`` (linear RGB) and ``specular``
+    (strength, Blinn exponent) per segmentation id, (Wa, 11); the floor square: unit ``floor_normal``, in-plane
+    ``floor_axis`` (+u), centre ``floor_origin`` [m], ``floor_half`` [m]; ``floor_tex`` (tile [m], checker contrast,
+    grain amplitude, grain frequency [1/m]); ``floor_color2``; ``paper_tex`` (fibre, mottle amplitudes);
+    ``tex_seed`` (offsets the shared ``noise`` texture per world); background gradient ``bg_top``, ``bg_bottom``;
+    ``floor_transmit``: the fraction of the light from meshes under the floor that shows through it (a clear plate);
+    ``paper_bsdf``: (wrap, sheen, sheen roughness, ground ambient) of the sheet (:func:`paper_surface`; 0: Lambert)."""
+
+    albedo: wp.array2d(dtype=wp.vec3)
+    specular: wp.array2d(dtype=wp.vec2)
+    floor_normal: wp.array(dtype=wp.vec3)
+    floor_axis: wp.array(dtype=wp.vec3)
+    floor_origin: wp.array(dtype=wp.vec3)
+    floor_half: wp.array(dtype=float)
+    floor_tex: wp.array(dtype=wp.vec4)
+    floor_color2: wp.array(dtype=wp.vec3)
+    paper_tex: wp.array(dtype=wp.vec2)
+    tex_seed: wp.array(dtype=wp.int32)
+    bg_top: wp.array(dtype=wp.vec3)
+    bg_bottom: wp.array(dtype=wp.vec3)
+    noise: wp.array2d(dtype=float)
+    floor_transmit: wp.array(dtype=float)
+    paper_bsdf: wp.array(dtype=wp.vec4)
+
+
+@wp.func(inline=True)
+def noise_offset(look: Look, w: int) -> wp.vec2:
+    """World ``w``'s offset [texels] into the shared noise texture, from its texture seed."""
+    seed0 = look.tex_seed[wrow(w, look.tex_seed.shape[0])]
+    return wp.vec2(float(seed0 & 4095) * 0.03125, float((seed0 >> 12) & 4095) * 0.03125)
+
+
+@wp.func
+def floor_albedo(base: wp.vec3, mat: wp.vec3, inv_tile: float, ft: wp.vec4, fc2: wp.vec3,
+                 noise: wp.array2d(dtype=float), off_u: float, off_v: float) -> wp.vec3:
+    """The floor's checker (tiles ``1 / inv_tile`` [m], colours ``base`` and its mix with ``fc2``) and grain at floor
+    coordinates ``mat`` [m] (``ft``: the world's ``Look.floor_tex``; ``off_u``, ``off_v``: its noise offset)."""
+    cu = int(wp.floor(mat[0] * inv_tile))
+    cv = int(wp.floor(mat[1] * inv_tile))
+    albedo = base
+    if ((cu + cv) & 1) != 0:
+        albedo = wp.lerp(base, fc2, ft[1])
+    g = noise_tex(noise, mat[0] * ft[3] + off_u, mat[1] * ft[3] + off_v)
+    return albedo * (1.0 + ft[2] * (g - 0.5))
+
+
+@wp.func(inline=True)
+def floor_albedo_at(look: Look, w: int, mat: wp.vec3) -> wp.vec3:
+    """World ``w``'s floor albedo (checker + grain, :func:`floor_albedo`) at floor coordinates ``mat`` [m]."""
+    ft = look.floor_tex[wrow(w, look.floor_tex.shape[0])]
+    off = noise_offset(look, w)
+    return floor_albedo(look.albedo[wrow(w, look.albedo.shape[0]), SEG_FLOOR], mat, 1.0 / ft[0], ft,
+                        look.floor_color2[wrow(w, look.floor_color2.shape[0])], look.noise, off[0], off[1])
+
+
+@wp.func(inline=True)
+def floor_lit(look: Look, L: Lights, w: int, first: int, albedo: wp.vec3, p: wp.vec3, to_eye: wp.vec3) -> wp.vec3:
+    """The floor of albedo ``albedo`` at ``p``: ambient + sun + every point light, and, for a glossy plate (floor
+    specular strength > 0), their highlights seen along ``to_eye``. Linear in ``albedo`` plus the highlights."""
+    fn = look.floor_normal[wrow(w, look.floor_normal.shape[0])]
+    sc = L.sun_color[wrow(w, L.sun_color.shape[0])]
+    ndl = wp.max(wp.dot(fn, L.sun_dir[wrow(w, L.sun_dir.shape[0])]), 0.0)
+    irr = L.ambient[wrow(w, L.ambient.shape[0])] + sc * shadow_factor(L, first, 0, ndl, p, fn)
+    wl = wrow(w, L.pos.shape[0])
+    for i in range(L.pos.shape[1]):
+        if is_dark(L, wl, i):
+            continue
+        to_lamp = L.pos[wl, i] - p
+        inv_r2 = 1.0 / wp.max(wp.dot(to_lamp, to_lamp), 1.0e-6)
+        ndp = wp.max(wp.dot(fn, to_lamp), 0.0) * wp.sqrt(inv_r2)
+        irr = irr + L.power[wl, i] * (shadow_factor(L, first, 1 + i, ndp, p, fn) * inv_r2)
+    color = wp.cw_mul(albedo, irr)
+    spec = look.specular[wrow(w, look.specular.shape[0]), SEG_FLOOR]
+    if spec[0] > 0.0:  # a glossy plate (render.plate_materials): Blinn-Phong highlights of every light
+        color = color + floor_highlights(L, w, first, spec, p, fn, to_eye)
+    return color
+
+
+@wp.func(inline=True)
+def floor_highlights(L: Lights, w: int, first: int, spec: wp.vec2, p: wp.vec3, fn: wp.vec3, to_eye: wp.vec3
+                     ) -> wp.vec3:
+    """Blinn-Phong highlights (strength, exponent ``spec``) of the sun and every point light on the floor at ``p``
+    seen along ``to_eye``, shadowed like the diffuse term."""
+    v = wp.normalize(to_eye)
+    sd = L.sun_dir[wrow(w, L.sun_dir.shape[0])]
+    out = wp.vec3(0.0)
+    if wp.dot(fn, sd) > 0.0:
+        hs = wp.max(wp.dot(fn, wp.normalize(sd + v)), 0.0)
+        out = L.sun_color[wrow(w, L.sun_color.shape[0])] * (spec[0] * spec_power(hs, spec[1]) *
+                                                       shadow_factor(L, first, 0, 1.0, p, fn))
+    wl = wrow(w, L.pos.shape[0])
+    for i in range(L.pos.shape[1]):
+        if is_dark(L, wl, i):
+            continue
+        ldir, lpow, ndp = point_light(L, wl, i, p, fn)
+        if ndp > 0.0:
+            hl = wp.max(wp.dot(fn, wp.normalize(ldir + v)), 0.0)
+            out = out + lpow * (spec[0] * spec_power(hl, spec[1]) * shadow_factor(L, first, 1 + i, 1.0, p, fn))
+    return out
+
+
+@wp.func(inline=True)
+def object_albedo(look: Look, w: int, label: int, mat: wp.vec3) -> wp.vec3:
+    """A worm or magnet surface's albedo at material coordinates ``mat``: paper texture on the sheet, the EPM's
+    painted half."""
+    off = noise_offset(look, w)
+    return textured_albedo(look.albedo[wrow(w, look.albedo.shape[0]), label], label, mat,
+                           look.paper_tex[wrow(w, look.paper_tex.shape[0])], look.noise, off[0], off[1])
+
+
+@wp.func
+def textured_albedo(base: wp.vec3, label: int, mat: wp.vec3, pt: wp.vec2, noise: wp.array2d(dtype=float),
+                    off_u: float, off_v: float) -> wp.vec3:
+    """:func:`object_albedo` from the world's values: ``base`` albedo of ``label``, paper texture amplitudes ``pt``,
+    noise offset (``off_u``, ``off_v``) [texels]."""
+    albedo = base
+    if label <= SEG_WORM_LAST:
+        # paper: short fibres (noise stretched along the sheet's x) over a soft mottle; material coordinates
+        # are the rest positions [m], so the texture sticks to the sheet as it folds
+        sw = mat[1] + mat[2]
+        fib = noise_tex(noise, mat[0] * 2500.0 + off_v, sw * 600.0 + off_u)
+        mot = noise_tex(noise, mat[0] * 180.0 - off_u, (mat[1] - mat[2]) * 180.0 + off_v)
+        albedo = base * (1.0 + pt[0] * (fib - 0.5) + pt[1] * (mot - 0.5))
+    elif label == SEG_EPM:
+        if mat[2] > 0.0:
+            albedo = base * 0.55  # a painted north half breaks the bar's 180 degree symmetry
+    return albedo
+
+
+@wp.func(inline=True)
+def surface_albedo(look: Look, w: int, label: int, mat: wp.vec3) -> wp.vec3:
+    """Albedo (linear RGB) of surface ``label`` at material coordinates ``mat``: the floor's checker and grain, the
+    paper and magnets' textures; 0 for the background."""
+    albedo = wp.vec3(0.0)
+    if label == SEG_FLOOR:
+        albedo = floor_albedo_at(look, w, mat)
+    elif label != SEG_BACKGROUND:
+        albedo = object_albedo(look, w, label, mat)
+    return albedo
+
+
+@wp.func(inline=True)
+def shade_surface(look: Look, L: Lights, w: int, first: int, label: int, albedo: wp.vec3, z: float,
+                  n_world: wp.vec3, eye: wp.vec3, d_world: wp.vec3, bg: wp.vec3):
+    """Colour (linear RGB) and unit world normal (0 for background) of surface ``label`` of albedo ``albedo`` hit at
+    camera depth ``z`` along ``d_world`` (mesh normal ``n_world``, unnormalized). Linear in ``albedo`` (plus
+    highlights and sheen), so a pixel's samples on one surface may share it with their mean albedo."""
+    color = bg
+    nrm = wp.vec3(0.0)
+    if label == SEG_FLOOR:
+        nrm = look.floor_normal[wrow(w, look.floor_normal.shape[0])]
+        color = floor_lit(look, L, w, first, albedo, eye + z * d_world, -d_world)
+    elif label != SEG_BACKGROUND:
+        nrm = n_world
+        if wp.dot(n_world, -d_world) < 0.0:
+            nrm = -n_world  # double-sided sheet: light the side the camera sees
+        pb = look.paper_bsdf[wrow(w, look.paper_bsdf.shape[0])]
+        if label <= SEG_WORM_LAST and (pb[0] > 0.0 or pb[1] > 0.0 or pb[3] > 0.0):
+            color = paper_surface(albedo, eye + z * d_world, nrm, -d_world, L, w, first, pb)
+        else:
+            color = light_surface(albedo, look.specular[wrow(w, look.specular.shape[0]), label], eye + z * d_world,
+                                  nrm, -d_world, L, w, first)
+    return color, nrm
+
+
+@wp.func(inline=True)
+def shade_hit(look: Look, L: Lights, w: int, first: int, label: int, z: float, mat: wp.vec3, n_world: wp.vec3,
+              eye: wp.vec3, d_world: wp.vec3, bg: wp.vec3):
+    """:func:`shade_surface` with the surface's own albedo at material coordinates ``mat``."""
+    color, nrm = shade_surface(look, L, w, first, label, surface_albedo(look, w, label, mat), z, n_world, eye,
+                               d_world, bg)
+    return color, nrm
+
+
+@wp.struct
+class PlainWorld:
+    """One world's values the plain path (:func:`make_resolve_shade`) loads once per thread: its lights (ambient,
+    sun, the one lamp), floor (checker ``ft``, ``inv_tile`` = 1 / tile [m], second colour ``fc2``, ``floor_irr``:
+    the ambient + sun irradiance of its constant normal ``fn``), paper texture ``pt`` and noise offset [texels]."""
+
+    amb: wp.vec3
+    sd: wp.vec3
+    sc: wp.vec3
+    lp: wp.vec3
+    lpw: wp.vec3
+    fn: wp.vec3
+    ft: wp.vec4
+    inv_tile: float
+    fc2: wp.vec3
+    floor_irr: wp.vec3
+    pt: wp.vec2
+    off_u: float
+    off_v: float
+
+
+@wp.func
+def plain_world(look: Look, L: Lights, w: int) -> PlainWorld:
+    """World ``w``'s :class:`PlainWorld` (one lamp: light 0)."""
+    pw = PlainWorld()
+    pw.amb = L.ambient[wrow(w, L.ambient.shape[0])]
+    pw.sd = L.sun_dir[wrow(w, L.sun_dir.shape[0])]
+    pw.sc = L.sun_color[wrow(w, L.sun_color.shape[0])]
+    pw.lp = L.pos[wrow(w, L.pos.shape[0]), 0]
+    pw.lpw = L.power[wrow(w, L.power.shape[0]), 0]
+    pw.fn = look.floor_normal[wrow(w, look.floor_normal.shape[0])]
+    pw.ft = look.floor_tex[wrow(w, look.floor_tex.shape[0])]
+    pw.inv_tile = 1.0 / pw.ft[0]
+    pw.fc2 = look.floor_color2[wrow(w, look.floor_color2.shape[0])]
+    pw.floor_irr = pw.amb + pw.sc * wp.max(wp.dot(pw.fn, pw.sd), 0.0)
+    pw.pt = look.paper_tex[wrow(w, look.paper_tex.shape[0])]
+    off = noise_offset(look, w)
+    pw.off_u = off[0]
+    pw.off_v = off[1]
+    return pw
+
+
+@wp.func(inline=True)
+def shade_hit_plain(look: Look, pw: PlainWorld, wa: int, ws: int, label: int, z: float, mat: wp.vec3,
+                    n_world: wp.vec3, eye: wp.vec3, d_world: wp.vec3, bg: wp.vec3):
+    """:func:`shade_hit` for the plain path: world ``pw`` (its albedo row ``wa``, specular row ``ws``) under one lamp,
+    no shadows, Lambert paper, a matte opaque floor."""
+    color = bg
+    nrm = wp.vec3(0.0)
+    if label == SEG_FLOOR:
+        nrm = pw.fn
+        p = eye + z * d_world
+        to_lamp = pw.lp - p
+        inv_r2 = 1.0 / wp.max(wp.dot(to_lamp, to_lamp), 1.0e-6)
+        ndp = wp.max(wp.dot(pw.fn, to_lamp), 0.0) * wp.sqrt(inv_r2)
+        albedo = floor_albedo(look.albedo[wa, SEG_FLOOR], mat, pw.inv_tile, pw.ft, pw.fc2, look.noise, pw.off_u,
+                              pw.off_v)
+        color = wp.cw_mul(albedo, pw.floor_irr + pw.lpw * (ndp * inv_r2))
+    elif label != SEG_BACKGROUND:
+        nrm = n_world
+        if wp.dot(n_world, -d_world) < 0.0:
+            nrm = -n_world  # double-sided sheet: light the side the camera sees
+        base = textured_albedo(look.albedo[wa, label], label, mat, pw.pt, look.noise, pw.off_u, pw.off_v)
+        color = light_surface_plain(base, look.specular[ws, label], eye + z * d_world, nrm, -d_world, pw.amb, pw.sd,
+                                    pw.sc, pw.lp, pw.lpw)
+    return color, nrm
