@@ -259,8 +259,8 @@ def make_resolve_samples(sub: int, lens: bool):
         fa = look.floor_axis[wrow(w, look.floor_axis.shape[0])]
         fo = look.floor_origin[wrow(w, look.floor_origin.shape[0])]
         fh = look.floor_half[wrow(w, look.floor_half.shape[0])]
-        bg = wp.lerp(look.bg_top[wrow(w, look.bg_top.shape[0])], look.bg_bottom[wrow(w, look.bg_bottom.shape[0])],
-                     float(y) / float(height))
+        bg_top = look.bg_top[wrow(w, look.bg_top.shape[0])]
+        bg_bottom = look.bg_bottom[wrow(w, look.bg_bottom.shape[0])]
         first = int(-1)
         if lights.shadows != 0:
             first = lights.map_first[w]
@@ -296,6 +296,9 @@ def make_resolve_samples(sub: int, lens: bool):
                 if write_normals != 0:
                     normals[img, pix] = wp.vec3(0.0)
                 continue
+
+            # the background's vertical gradient follows the ray: its row in the (widened) pinhole grid
+            bg = wp.lerp(bg_top, bg_bottom, v0 / float(grid_h))
 
             # labels: the label grid's nearest key, the surface on the exact ray (the plain pass's ops without a lens)
             d0, dx = ray_frame(Rt, k, v0)

@@ -71,8 +71,7 @@ def kernel_modules() -> list[str]:
 def factory_modules(skip=()) -> list[str]:
     """Names of the kernel modules that building a :class:`~warpworm.sim.simulator.Simulator` for every solver in
     ``simulator.SOLVERS`` creates beyond ``skip`` (kernels made by a factory for the worm's shape, each its own
-    ``module="unique"`` module, e.g. the block-per-world tile substeps), on a one-world CPU model, and the
-    renderer's resolve kernels of 2 x 2 samples with and without a lens."""
+    ``module="unique"`` module, e.g. the block-per-world tile substeps), on a one-world CPU model."""
     from warp._src.context import user_modules
 
     from warpworm.physics import gaits
@@ -83,10 +82,6 @@ def factory_modules(skip=()) -> list[str]:
     model = Model.from_params(gaits.preset_params("peristaltic"), 1, "cpu")
     for solver in SOLVERS:
         Simulator(model, solver=solver)
-    from warpworm.render.sample_kernels import resolve_samples_kernel
-
-    for sub, lens in ((2, False), (2, True)):  # the renderer's resolve for supersampled and lens images
-        resolve_samples_kernel(sub, lens)
     return [n for n in list(user_modules) if n not in before and n not in skip and user_modules[n].kernels]
 
 
