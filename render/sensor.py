@@ -193,7 +193,14 @@ def apply_sensor(rgb: np.ndarray, seeds, config: SensorConfig | None = None, *, 
     if len(seeds) != len(rgb):
         raise ValueError(f"need one seed per image: {len(seeds)} seeds for {len(rgb)} images")
     batch = SensorBatch.draw(seeds, config) if values is None else SensorBatch.from_values(values, seeds)
+    return apply_sensor_batch(rgb, batch, device)
+
+
+def apply_sensor_batch(rgb: np.ndarray, batch: SensorBatch, device=None) -> np.ndarray:
+    """:func:`apply_sensor` with the values already in a :class:`SensorBatch` (one per image of ``rgb``)."""
     N, H, W = rgb.shape[:3]
+    if len(batch) != N:
+        raise ValueError(f"need one sensor value set per image: {len(batch)} for {N} images")
     if N == 0:
         return rgb.copy()
     d = wp.get_device("cpu" if device is None else device)

@@ -196,7 +196,7 @@ class WarpStages:
             appearance=appearance_from_draws(appearance, seeds, cfg.render.band_colors),
             extra_mesh=distractor_mesh(appearance, B, params.floor_incline))  # render.distractors (None: off)
         from warpworm.render.labels import schema_labels
-        from warpworm.render.sensor import SensorBatch, apply_sensor, exposure_gains
+        from warpworm.render.sensor import SensorBatch, apply_sensor_batch, exposure_gains
 
         cams = dataclasses.replace(cameras, world=np.arange(B, dtype=np.int32))
         gains = exposure_gains(cfg.render, seeds)  # render.exposure / white_balance: None when off
@@ -220,7 +220,7 @@ class WarpStages:
             rgb = rgb.copy()
             rgb[sel] = render_pathtraced(scene, cams.take(sel), spp=cfg.render.pathtraced_spp, seeds=seeds[sel])
         if replaced:
-            rgb = apply_sensor(rgb, seeds, values=sensor_values(appearance), device=cfg.sim.device)
+            rgb = apply_sensor_batch(rgb, sensor, device=cfg.sim.device)  # the values drawn above, once
         labels = schema_labels(frame, pattern, cams, img, rest_positions=frame.get("rest_positions"),
                                ipm_diameter=params.ipm_diameter, ipm_thickness=params.ipm_thickness)
         out = {"rgb": rgb, "depth": img["depth"], "segmentation": img["seg"], **labels}
