@@ -290,8 +290,8 @@ class Renderer:
             for slot in range(T):  # allocate every stream's buffers before any thread starts
                 self._get_buffers(chunk, (gw, gh), sub, slot)
             view = (left, top, gw, gh, sub, lens)
-            if sub:  # this (sub, lens) resolve kernel's own module, loaded before any stream launches it
-                wp.load_module(sk.resolve_samples_kernel(sub, lens).module, device=d)
+            if sub:  # the sample resolve's module, loaded before any stream launches it
+                wp.load_module(sk.resolve_samples.module, device=d)
 
             def stream(slot: int) -> None:
                 for start, stop in pieces[slot::T]:
@@ -384,11 +384,12 @@ class Renderer:
                               gh * sub, self.near],
                       outputs=[b["fine_key"], b["fine_mask"]])
             span = self.width if d.is_cpu else 1
-            wp.launch(sk.resolve_samples_kernel(sub, lens), dim=(n, self.height, (self.width + span - 1) // span),
+            wp.launch(sk.resolve_samples, dim=(n, self.height, (self.width + span - 1) // span),
                       device=d,
                       inputs=[s["triangles"], s["tri_label"], s["look"], lights, s["vertices"], s["texcoords"],
                               *common, b["cam_intr"], b["cam_dist"], b["cam_k3"], b["cam_gain"], b["zkey"], b["mask"],
-                              b["fine_key"], self.width, self.height, span, gw, gh, left, top, int(normals)],
+                              b["fine_key"], self.width, self.height, span, gw, gh, left, top, sub, int(lens),
+                              int(normals)],
                       outputs=[out["rgb"], out["depth"], out["seg"], out["worm_mask"], out_normals])
         if sensor is not None:
             launch_sensor(out["rgb"], sensor.take(slice(start, stop)), self.width, self.height, d)

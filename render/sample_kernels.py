@@ -59,11 +59,17 @@ def ray_frame(Rt: wp.mat33, k: wp.vec4, py: float):
 
 
 @wp.func
-def grid_key(keys: wp.array2d(dtype=wp.int64), img: int, px: float, py: float, gw: int, gh: int) -> wp.int64:
-    """The z-buffer key of the grid texel nearest to point (px, py) [texels] of a ``gw`` x ``gh`` grid (clamped)."""
+def grid_key_index(px: float, py: float, gw: int, gh: int) -> int:
+    """Index of the grid texel nearest to (px, py) (clamped), as :func:`grid_key` reads it."""
     ix = wp.clamp(int(wp.floor(px + 0.5)), 0, gw - 1)
     iy = wp.clamp(int(wp.floor(py + 0.5)), 0, gh - 1)
-    return keys[img, iy * gw + ix]
+    return iy * gw + ix
+
+
+@wp.func
+def grid_key(keys: wp.array2d(dtype=wp.int64), img: int, px: float, py: float, gw: int, gh: int) -> wp.int64:
+    """The z-buffer key of the grid texel nearest to point (px, py) [texels] of a ``gw`` x ``gh`` grid (clamped)."""
+    return keys[img, grid_key_index(px, py, gw, gh)]
 
 
 @wp.func
@@ -195,212 +201,210 @@ def sample_hit(keys: wp.array2d(dtype=wp.int64), img: int, fx: float, fy: float,
     return h
 
 
-def make_resolve_samples(sub: int, lens: bool):
-    """The resolve kernel for ``sub`` x ``sub`` colour samples per pixel, through a lens (``lens``) or not; both are
-    compile-time switches (one kernel per combination)."""
-    ss = sub * sub
-    ivec = wp.types.vector(length=ss, dtype=wp.int32)
-    fvec = wp.types.vector(length=ss, dtype=float)
-    inv_ss = 1.0 / float(ss)
+MAX_GROUPS = wp.constant(8)
+"""Surfaces a pixel's samples are grouped by (one lighting evaluation each); a sample on a further surface is shaded
+on its own."""
+
+
+@wp.func
+def sample_point(x: int, y: int, i: int, j: int, sub: int, lens: int, u0: float, v0: float, jac: wp.vec4):
+    """Sample (i, j) of the ``sub`` x ``sub`` samples of output pixel (x, y) in the sample grid's coordinates [texels]:
+    a regular grid over the pixel's square, through the lens map's Jacobian ``jac`` about pinhole point (u0, v0)."""
+    fx = float(0.0)
+    fy = float(0.0)
+    if lens != 0:
+        half_sub = 0.5 * float(sub - 1)
+        ox = (float(i) + 0.5) / float(sub) - 0.5
+        oy = (float(j) + 0.5) / float(sub) - 0.5
+        fx = float(sub) * (u0 + jac[0] * ox + jac[1] * oy) + half_sub
+        fy = float(sub) * (v0 + jac[2] * ox + jac[3] * oy) + half_sub
+    else:
+        fx = float(sub * x + i)
+        fy = float(sub * y + j)
+    return fx, fy
+
+
+@wp.func
+def shade_sample(look: Look, lights: Lights, w: int, first: int, hit: Hit, albedo: wp.vec3, eye: wp.vec3,
+                 bg: wp.vec3, transmit: float, gain: wp.vec3) -> wp.vec3:
+    """Display-linear colour in [0, 1] of a sample ``hit`` of albedo ``albedo`` (a group's mean): lit and shadowed,
+    the mesh under a clear floor mixed in by ``transmit``, times the camera's ``gain``."""
+    color, _nrm = shade_surface(look, lights, w, first, hit.label, albedo, hit.z, hit.n, eye, hit.d, bg)
+    if hit.label != hit.mesh_label and hit.mesh_label != SEG_BACKGROUND and transmit > 0.0:
+        # a clear plate (render.plate_materials: acrylic): the mesh under it (the EPM) shows through
+        under, _n = shade_hit(look, lights, w, first, hit.mesh_label, hit.mesh_z, hit.mesh_mat, hit.n, eye, hit.d,
+                              bg)
+        color = wp.lerp(color, under, transmit)
+    color = wp.cw_mul(color, gain)
+    return wp.vec3(wp.clamp(color[0], 0.0, 1.0), wp.clamp(color[1], 0.0, 1.0), wp.clamp(color[2], 0.0, 1.0))
+
+
+GroupIds = wp.types.vector(length=8, dtype=wp.int32)
+GroupSums = wp.types.vector(length=8, dtype=float)
+"""Per-group sample counts and ids, and albedo sums per channel (length MAX_GROUPS)."""
+
+
+@wp.kernel
+def resolve_samples(
+    # Model:
+    triangles: wp.array(dtype=wp.vec3i), tri_label: wp.array(dtype=wp.int32),
+    look: Look, lights: Lights,
+    # Data in:
+    vertices: wp.array2d(dtype=wp.vec3), texcoords: wp.array2d(dtype=wp.vec3),
+    image_world: wp.array(dtype=wp.int32),
+    cam_rot: wp.array(dtype=wp.mat33), cam_trans: wp.array(dtype=wp.vec3), cam_intr: wp.array(dtype=wp.vec4),
+    cam_dist: wp.array(dtype=wp.vec4), cam_k3: wp.array(dtype=float), cam_gain: wp.array(dtype=wp.vec3),
+    label_key: wp.array2d(dtype=wp.int64), label_mask: wp.array2d(dtype=wp.uint8),
+    sample_key: wp.array2d(dtype=wp.int64),
+    width: int, height: int, span: int, grid_w: int, grid_h: int, margin_x: int, margin_y: int,
+    sub: int, lens: int, write_normals: int,
+    # Data out:
+    rgb: wp.array2d(dtype=wp.vec3ub), depth: wp.array2d(dtype=float), seg: wp.array2d(dtype=wp.uint8),
+    worm_mask: wp.array2d(dtype=wp.uint8), normals: wp.array2d(dtype=wp.vec3),
+):
+    """``span`` output pixels of row y of image ``img``; launched as (N, height, ceil(width / span)) (span 1 on
+    CUDA; on the CPU the whole row, so a thread's set-up, its copy of ``look`` and ``lights`` included, is paid once
+    per row).
+
+    ``cam_intr`` (N,): the label grid's pinhole (fx, fy, cx, cy) [px] (``grid_w`` x ``grid_h``; with a lens, the
+    output's K shifted by the widening margins ``margin_x``, ``margin_y`` [px]); ``cam_dist`` (N,) OpenCV's
+    (k1, k2, p1, p2) and ``cam_k3`` (N,) its k3 (read only when ``lens``); ``label_key``/``label_mask``
+    (N, grid_h * grid_w) and ``sample_key`` (N, sub² grid_h * grid_w) the raster pass's keys and worm silhouette;
+    ``sub`` colour samples per pixel side (>= 1). Outputs (N, height * width): 8-bit ``rgb``, camera ``depth`` [m]
+    (0: background), ``seg`` ids, ``worm_mask``, camera-frame ``normals`` when ``write_normals``.
+    """
+    img, y, xb = wp.tid()
+    w = image_world[img]
+    R = cam_rot[img]
+    t = cam_trans[img]
+    k = cam_intr[img]
+    Rt = wp.transpose(R)
+    eye = -(Rt * t)
+    fn = look.floor_normal[wrow(w, look.floor_normal.shape[0])]
+    fa = look.floor_axis[wrow(w, look.floor_axis.shape[0])]
+    fo = look.floor_origin[wrow(w, look.floor_origin.shape[0])]
+    fh = look.floor_half[wrow(w, look.floor_half.shape[0])]
+    bg_top = look.bg_top[wrow(w, look.bg_top.shape[0])]
+    bg_bottom = look.bg_bottom[wrow(w, look.bg_bottom.shape[0])]
+    first = int(-1)
+    if lights.shadows != 0:
+        first = lights.map_first[w]
+
+    fb = wp.cross(fn, fa)
+    floor_eye = wp.vec3(wp.dot(eye - fo, fa), wp.dot(eye - fo, fb), wp.dot(fn, eye))
     half_sub = 0.5 * float(sub - 1)
-
-    @wp.func
-    def sample_point(x: int, y: int, i: int, j: int, u0: float, v0: float, jac: wp.vec4):
-        """Sample (i, j) of output pixel (x, y) in the sample grid's coordinates [texels]."""
-        fx = float(0.0)
-        fy = float(0.0)
-        if wp.static(lens):
-            ox = (float(i) + 0.5) / float(sub) - 0.5
-            oy = (float(j) + 0.5) / float(sub) - 0.5
-            fx = float(sub) * (u0 + jac[0] * ox + jac[1] * oy) + half_sub
-            fy = float(sub) * (v0 + jac[2] * ox + jac[3] * oy) + half_sub
-        else:
-            fx = float(sub * x + i)
-            fy = float(sub * y + j)
-        return fx, fy
-
-    # a module of its own: each (sub, lens) is compiled on first use only
-    @wp.kernel(name=f"resolve_samples_s{sub}_{'lens' if lens else 'pinhole'}", module="unique")
-    def resolve_samples(
-        # Model:
-        triangles: wp.array(dtype=wp.vec3i), tri_label: wp.array(dtype=wp.int32),
-        look: Look, lights: Lights,
-        # Data in:
-        vertices: wp.array2d(dtype=wp.vec3), texcoords: wp.array2d(dtype=wp.vec3),
-        image_world: wp.array(dtype=wp.int32),
-        cam_rot: wp.array(dtype=wp.mat33), cam_trans: wp.array(dtype=wp.vec3), cam_intr: wp.array(dtype=wp.vec4),
-        cam_dist: wp.array(dtype=wp.vec4), cam_k3: wp.array(dtype=float), cam_gain: wp.array(dtype=wp.vec3),
-        label_key: wp.array2d(dtype=wp.int64), label_mask: wp.array2d(dtype=wp.uint8),
-        sample_key: wp.array2d(dtype=wp.int64),
-        width: int, height: int, span: int, grid_w: int, grid_h: int, margin_x: int, margin_y: int,
-        write_normals: int,
-        # Data out:
-        rgb: wp.array2d(dtype=wp.vec3ub), depth: wp.array2d(dtype=float), seg: wp.array2d(dtype=wp.uint8),
-        worm_mask: wp.array2d(dtype=wp.uint8), normals: wp.array2d(dtype=wp.vec3),
-    ):
-        """``span`` output pixels of row y of image ``img``; launched as (N, height, ceil(width / span)) (span 1 on
-        CUDA; on the CPU the whole row, so a thread's set-up, its copy of ``look`` and ``lights`` included, is paid
-        once per row).
-
-        ``cam_intr`` (N,): the label grid's pinhole (fx, fy, cx, cy) [px] (``grid_w`` x ``grid_h``; with a lens,
-        the output's K shifted by the widening margins ``margin_x``, ``margin_y`` [px]); ``cam_dist`` (N,) OpenCV's (k1, k2, p1, p2) and ``cam_k3``
-        (N,) its k3 (read only with a lens); ``label_key``/``label_mask`` (N, grid_h * grid_w) and ``sample_key`` (N, sub² grid_h *
-        grid_w) the raster pass's keys and worm silhouette. Outputs (N, height * width): 8-bit ``rgb``, camera
-        ``depth`` [m] (0: background), ``seg`` ids, ``worm_mask``, camera-frame ``normals`` when ``write_normals``.
-        """
-        img, y, xb = wp.tid()
-        w = image_world[img]
-        R = cam_rot[img]
-        t = cam_trans[img]
-        k = cam_intr[img]
-        Rt = wp.transpose(R)
-        eye = -(Rt * t)
-        fn = look.floor_normal[wrow(w, look.floor_normal.shape[0])]
-        fa = look.floor_axis[wrow(w, look.floor_axis.shape[0])]
-        fo = look.floor_origin[wrow(w, look.floor_origin.shape[0])]
-        fh = look.floor_half[wrow(w, look.floor_half.shape[0])]
-        bg_top = look.bg_top[wrow(w, look.bg_top.shape[0])]
-        bg_bottom = look.bg_bottom[wrow(w, look.bg_bottom.shape[0])]
-        first = int(-1)
-        if lights.shadows != 0:
-            first = lights.map_first[w]
-
-        fb = wp.cross(fn, fa)
-        floor_eye = wp.vec3(wp.dot(eye - fo, fa), wp.dot(eye - fo, fb), wp.dot(fn, eye))
-        kf = wp.vec4(k[0] * float(sub), k[1] * float(sub), k[2] * float(sub) + half_sub, k[3] * float(sub) + half_sub)
-        fw = grid_w * sub
-        fhgt = grid_h * sub
-        transmit = look.floor_transmit[wrow(w, look.floor_transmit.shape[0])]
-        gain = cam_gain[img]
-        for x in range(xb * span, wp.min(xb * span + span, width)):
-            pix = y * width + x
-            # the pinhole point the pixel centre sees, and d(pinhole px) / d(output px) for its samples
-            u0 = float(x)
-            v0 = float(y)
-            jac = wp.vec4(1.0, 0.0, 0.0, 1.0)
-            ok = bool(True)
-            if wp.static(lens):
-                # the output's principal point is the label grid's less the widening margins
-                u, v, a, b, d, ok = lens_inverse32((float(x + margin_x) - k[2]) / k[0], (float(y + margin_y) - k[3]) / k[1],
-                                                   cam_dist[img], cam_k3[img])
-                u0 = k[0] * u + k[2]
-                v0 = k[1] * v + k[3]
-                inv_det = 1.0 / (a * d - b * b)
-                fxy = k[0] / k[1]
-                jac = wp.vec4(d * inv_det, -b * inv_det * fxy, -b * inv_det / fxy, a * inv_det)
-            if not ok:  # no ray reaches this pixel (the host refuses such lenses; a guard, never data)
-                rgb[img, pix] = wp.vec3ub(wp.uint8(0), wp.uint8(0), wp.uint8(0))
-                depth[img, pix] = 0.0
-                seg[img, pix] = wp.uint8(SEG_BACKGROUND)
-                worm_mask[img, pix] = wp.uint8(0)
-                if write_normals != 0:
-                    normals[img, pix] = wp.vec3(0.0)
-                continue
-
-            # the background's vertical gradient follows the ray: its row in the (widened) pinhole grid
-            bg = wp.lerp(bg_top, bg_bottom, v0 / float(grid_h))
-
-            # labels: the label grid's nearest key, the surface on the exact ray (the plain pass's ops without a lens)
-            d0, dx = ray_frame(Rt, k, v0)
-            d_world = d0 + u0 * dx
-            fr = floor_row(fn, fa, fo, fh, eye, d0, dx)
-            lkey = grid_key(label_key, img, u0, v0, grid_w, grid_h)
-            if wp.static(lens):  # between texel centres: the texels' triangle that the exact ray hits
-                lkey = covering_key(label_key, img, u0, v0, grid_w, grid_h, triangles, vertices, w, R, t, k)
-            mz, mlabel, n_world, mmat = mesh_surface(lkey, triangles, tri_label, vertices, texcoords, w, R, t, k, u0,
-                                                     v0, eye, d_world)
-            best_z, label, mat = nearer_floor(fr, u0, mz, mlabel, mmat)
+    kf = wp.vec4(k[0] * float(sub), k[1] * float(sub), k[2] * float(sub) + half_sub, k[3] * float(sub) + half_sub)
+    fw = grid_w * sub
+    fhgt = grid_h * sub
+    inv_ss = 1.0 / float(sub * sub)
+    transmit = look.floor_transmit[wrow(w, look.floor_transmit.shape[0])]
+    gain = cam_gain[img]
+    for x in range(xb * span, wp.min(xb * span + span, width)):
+        pix = y * width + x
+        # the pinhole point the pixel centre sees, and d(pinhole px) / d(output px) for its samples
+        u0 = float(x)
+        v0 = float(y)
+        jac = wp.vec4(1.0, 0.0, 0.0, 1.0)
+        ok = bool(True)
+        if lens != 0:
+            # the output's principal point is the label grid's less the widening margins
+            u, v, a, b, d, ok = lens_inverse32((float(x + margin_x) - k[2]) / k[0], (float(y + margin_y) - k[3]) / k[1],
+                                               cam_dist[img], cam_k3[img])
+            u0 = k[0] * u + k[2]
+            v0 = k[1] * v + k[3]
+            inv_det = 1.0 / (a * d - b * b)
+            fxy = k[0] / k[1]
+            jac = wp.vec4(d * inv_det, -b * inv_det * fxy, -b * inv_det / fxy, a * inv_det)
+        if not ok:  # no ray reaches this pixel (the host refuses such lenses; a guard, never data)
+            rgb[img, pix] = wp.vec3ub(wp.uint8(0), wp.uint8(0), wp.uint8(0))
+            depth[img, pix] = 0.0
+            seg[img, pix] = wp.uint8(SEG_BACKGROUND)
+            worm_mask[img, pix] = wp.uint8(0)
             if write_normals != 0:
-                nrm = wp.vec3(0.0)
-                if label == SEG_FLOOR:
-                    nrm = fn
-                elif label != SEG_BACKGROUND:
-                    nrm = n_world
-                    if wp.dot(n_world, -d_world) < 0.0:
-                        nrm = -n_world
-                normals[img, pix] = R * nrm
-            if label == SEG_BACKGROUND:
-                best_z = 0.0
-            depth[img, pix] = best_z
-            out_label = label
-            if out_label > SEG_EPM:
-                out_label = SEG_FLOOR  # a distractor object (its own albedo row): static scene, the floor's id
-            seg[img, pix] = wp.uint8(out_label)
-            worm_mask[img, pix] = label_mask[img, grid_key_index(u0, v0, grid_w, grid_h)]
+                normals[img, pix] = wp.vec3(0.0)
+            continue
 
-            # colour: sub x sub samples, grouped by the surface they land on
-            gid = ivec()
-            gfirst = ivec()
-            gcount = ivec()
-            gr = fvec()
-            gg = fvec()
-            gb = fvec()
-            ng = int(0)
-            hit0 = Hit()
-            for j in range(sub):
-                for i in range(sub):
-                    fx, fy = sample_point(x, y, i, j, u0, v0, jac)
-                    hit = sample_hit(sample_key, img, fx, fy, fw, fhgt, triangles, tri_label, vertices, texcoords, w, R,
-                                     t, Rt, kf, eye, fn, fa, fb, floor_eye, fh)
-                    alb = surface_albedo(look, w, hit.label, hit.mat)
-                    g = int(-1)
-                    for q in range(ng):
-                        if gid[q] == hit.surface:
-                            g = q
-                    if g < 0:
-                        g = ng
-                        gid[g] = hit.surface
-                        gfirst[g] = j * sub + i
-                        gcount[g] = 0
-                        gr[g] = 0.0
-                        gg[g] = 0.0
-                        gb[g] = 0.0
-                        ng = ng + 1
-                        if g == 0:
-                            hit0 = hit
+        # the background's vertical gradient follows the ray: its row in the (widened) pinhole grid
+        bg = wp.lerp(bg_top, bg_bottom, v0 / float(grid_h))
+
+        # labels: the label grid's nearest key, the surface on the exact ray (the plain pass's ops without a lens)
+        d0, dx = ray_frame(Rt, k, v0)
+        d_world = d0 + u0 * dx
+        fr = floor_row(fn, fa, fo, fh, eye, d0, dx)
+        lkey = wp.int64(0)
+        if lens != 0:  # between texel centres: the texels' triangle that the exact ray hits
+            lkey = covering_key(label_key, img, u0, v0, grid_w, grid_h, triangles, vertices, w, R, t, k)
+        else:
+            lkey = label_key[img, grid_key_index(u0, v0, grid_w, grid_h)]
+        mz, mlabel, n_world, mmat = mesh_surface(lkey, triangles, tri_label, vertices, texcoords, w, R, t, k, u0,
+                                                 v0, eye, d_world)
+        best_z, label, mat = nearer_floor(fr, u0, mz, mlabel, mmat)
+        if write_normals != 0:
+            nrm = wp.vec3(0.0)
+            if label == SEG_FLOOR:
+                nrm = fn
+            elif label != SEG_BACKGROUND:
+                nrm = n_world
+                if wp.dot(n_world, -d_world) < 0.0:
+                    nrm = -n_world
+            normals[img, pix] = R * nrm
+        if label == SEG_BACKGROUND:
+            best_z = 0.0
+        depth[img, pix] = best_z
+        out_label = label
+        if out_label > SEG_EPM:
+            out_label = SEG_FLOOR  # a distractor object (its own albedo row): static scene, the floor's id
+        seg[img, pix] = wp.uint8(out_label)
+        worm_mask[img, pix] = label_mask[img, grid_key_index(u0, v0, grid_w, grid_h)]
+
+        # colour: sub x sub samples, grouped by the surface they land on (the first MAX_GROUPS surfaces)
+        gid = GroupIds()
+        gfirst = GroupIds()
+        gcount = GroupIds()
+        gr = GroupSums()
+        gg = GroupSums()
+        gb = GroupSums()
+        ng = int(0)
+        hit0 = Hit()
+        acc = wp.vec3(0.0)
+        for j in range(sub):
+            for i in range(sub):
+                fx, fy = sample_point(x, y, i, j, sub, lens, u0, v0, jac)
+                hit = sample_hit(sample_key, img, fx, fy, fw, fhgt, triangles, tri_label, vertices, texcoords, w, R,
+                                 t, Rt, kf, eye, fn, fa, fb, floor_eye, fh)
+                alb = surface_albedo(look, w, hit.label, hit.mat)
+                g = int(-1)
+                for q in range(ng):
+                    if gid[q] == hit.surface:
+                        g = q
+                if g < 0 and ng < MAX_GROUPS:
+                    g = ng
+                    gid[g] = hit.surface
+                    gfirst[g] = j * sub + i
+                    gcount[g] = 0
+                    gr[g] = 0.0
+                    gg[g] = 0.0
+                    gb[g] = 0.0
+                    ng = ng + 1
+                    if g == 0:
+                        hit0 = hit
+                if g >= 0:
                     gcount[g] = gcount[g] + 1
                     gr[g] = gr[g] + alb[0]
                     gg[g] = gg[g] + alb[1]
                     gb[g] = gb[g] + alb[2]
-            acc = wp.vec3(0.0)
-            for g in range(ng):
-                hit = hit0
-                if g > 0:  # the first sample of each further surface, again (most pixels see one surface)
-                    first_sample = gfirst[g]
-                    fx, fy = sample_point(x, y, first_sample % sub, first_sample / sub, u0, v0, jac)
-                    hit = sample_hit(sample_key, img, fx, fy, fw, fhgt, triangles, tri_label, vertices, texcoords, w, R,
-                                     t, Rt, kf, eye, fn, fa, fb, floor_eye, fh)
-                inv_n = 1.0 / float(gcount[g])
-                alb = wp.vec3(gr[g] * inv_n, gg[g] * inv_n, gb[g] * inv_n)
-                color, _nrm = shade_surface(look, lights, w, first, hit.label, alb, hit.z, hit.n, eye, hit.d, bg)
-                if hit.label != hit.mesh_label and hit.mesh_label != SEG_BACKGROUND and transmit > 0.0:
-                    # a clear plate (render.plate_materials: acrylic): the mesh under it (the EPM) shows through
-                    under, _n = shade_hit(look, lights, w, first, hit.mesh_label, hit.mesh_z, hit.mesh_mat, hit.n, eye,
-                                          hit.d, bg)
-                    color = wp.lerp(color, under, transmit)
-                color = wp.cw_mul(color, gain)
-                color = wp.vec3(wp.clamp(color[0], 0.0, 1.0), wp.clamp(color[1], 0.0, 1.0), wp.clamp(color[2], 0.0, 1.0))
-                acc = acc + color * float(gcount[g])
-            acc = acc * inv_ss
-            rgb[img, pix] = wp.vec3ub(to_srgb8(acc[0]), to_srgb8(acc[1]), to_srgb8(acc[2]))
-
-    return resolve_samples
-
-
-@wp.func
-def grid_key_index(px: float, py: float, gw: int, gh: int) -> int:
-    """Index of the grid texel nearest to (px, py) (clamped), as :func:`grid_key` reads it."""
-    ix = wp.clamp(int(wp.floor(px + 0.5)), 0, gw - 1)
-    iy = wp.clamp(int(wp.floor(py + 0.5)), 0, gh - 1)
-    return iy * gw + ix
-
-
-_KERNELS: dict = {}
-
-
-def resolve_samples_kernel(sub: int, lens: bool):
-    """The (cached) :func:`make_resolve_samples` kernel for ``sub`` samples per side and a lens or not."""
-    key = (int(sub), bool(lens))
-    if key not in _KERNELS:
-        _KERNELS[key] = make_resolve_samples(*key)
-    return _KERNELS[key]
+                else:  # every group taken: this sample is lit on its own
+                    acc = acc + shade_sample(look, lights, w, first, hit, alb, eye, bg, transmit, gain)
+        for g in range(ng):
+            hit = hit0
+            if g > 0:  # the first sample of each further surface, again (most pixels see one surface)
+                first_sample = gfirst[g]
+                fx, fy = sample_point(x, y, first_sample % sub, first_sample / sub, sub, lens, u0, v0, jac)
+                hit = sample_hit(sample_key, img, fx, fy, fw, fhgt, triangles, tri_label, vertices, texcoords, w, R,
+                                 t, Rt, kf, eye, fn, fa, fb, floor_eye, fh)
+            inv_n = 1.0 / float(gcount[g])
+            alb = wp.vec3(gr[g] * inv_n, gg[g] * inv_n, gb[g] * inv_n)
+            color = shade_sample(look, lights, w, first, hit, alb, eye, bg, transmit, gain)
+            acc = acc + color * float(gcount[g])
+        acc = acc * inv_ss
+        rgb[img, pix] = wp.vec3ub(to_srgb8(acc[0]), to_srgb8(acc[1]), to_srgb8(acc[2]))

@@ -124,11 +124,9 @@ class WarpStages:
                 max_workers = len(os.sched_getaffinity(0))
             except AttributeError:  # pragma: no cover - not Linux
                 max_workers = os.cpu_count() or 1
-        from warpworm.render.sample_kernels import resolve_samples_kernel
-
         modules = [wp.get_module(n) for n in self.kernel_modules()]
-        if cfg.render.supersample > 1 or cfg.render.distortion:  # the config's own resolve kernel (a module of its own)
-            modules.append(resolve_samples_kernel(cfg.render.supersample, cfg.render.distortion).module)
+        if cfg.render.supersample > 1 or cfg.render.distortion:  # the sample resolve (supersampling or a lens)
+            modules.append(wp.get_module("warpworm.render.sample_kernels"))
         wp.force_load(device=cfg.sim.device, modules=modules, max_workers=max_workers)
 
     def _pattern(self, n_units: int):
