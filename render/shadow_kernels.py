@@ -18,13 +18,14 @@ class Lights:
 
     ``pos``, ``power``, ``size``: point lights, shape (Wl, L): position [m], irradiance at 1 m (falls as 1/r²; zero
     pads a world with fewer lights), radius [m]. ``sun_dir`` (unit, toward the light), ``sun_color`` (irradiance),
-    ``ambient``: per world. Shadow map ``m`` is a depth image (packed keys of :func:`raster_triangles`, side
-    ``map_side``) seen by a pinhole ``map_rot``/``map_trans``/``map_intr`` at the light; world ``w``'s maps are
-    ``map_first[w]`` (the sun) and ``map_first[w] + 1 + i`` (point light i); ``map_first[w] < 0``: none (lit).
-    ``map_light_size``: the light's radius [m] as placed for the map (it sets the penumbra). ``map_tile_min``
-    (M, map_tiles²): the smallest key of each ``SHADOW_TILE`` x ``SHADOW_TILE`` block of texels
-    (:func:`shadow_tile_min`), so a point whose blocker search region holds no nearer texel is known lit from a few
-    reads (:func:`region_unblocked`).
+    ``ambient``: per world. Shadow map ``m`` is a depth image ``map_depth`` (M, side²) [m] of the nearest caster per
+    texel (1e30: none; side ``map_side``) seen by a pinhole ``map_rot``/``map_trans``/``map_intr`` at the light;
+    world ``w``'s maps are ``map_first[w]`` (the sun) and ``map_first[w] + 1 + i`` (point light i);
+    ``map_first[w] < 0``: none (lit). ``map_light_size``: the light's radius [m] as placed for the map (it sets the
+    penumbra). ``map_tile_min`` (M, map_tiles²): the nearest depth [m] of each ``SHADOW_TILE``² block of texels,
+    ``map_reach`` the nearest within ``SHADOW_REACH`` blocks of each (:func:`shadow_tile_min`,
+    :func:`shadow_reach_min`): a point whose blocker search can reach no nearer texel is known lit from one read, or
+    a few (:func:`region_unblocked`).
     """
 
     ambient: wp.array(dtype=wp.vec3)
@@ -35,66 +36,95 @@ class Lights:
     size: wp.array2d(dtype=float)
     shadows: int
     map_first: wp.array(dtype=wp.int32)
-    map_key: wp.array2d(dtype=wp.int64)
+    map_depth: wp.array2d(dtype=float)
     map_rot: wp.array(dtype=wp.mat33)
     map_trans: wp.array(dtype=wp.vec3)
     map_intr: wp.array(dtype=wp.vec4)
     map_light_size: wp.array(dtype=float)
     map_side: int
-    map_tile_min: wp.array2d(dtype=wp.int64)
+    map_tile_min: wp.array2d(dtype=float)
+    map_reach: wp.array2d(dtype=float)
     map_tiles: int
+
+
+NO_CASTER = wp.constant(1.0e30)
+"""Depth [m] of a shadow-map texel that no caster covers."""
 
 
 @wp.func
 def map_depth(L: Lights, m: int, x: int, y: int) -> float:
     """Camera z [m] of the nearest occluder in texel (x, y) of shadow map ``m``; 1e30 where nothing (or outside)."""
     s = L.map_side
-    z = float(1.0e30)
+    z = float(NO_CASTER)
     if x >= 0 and y >= 0 and x < s and y < s:
-        key = L.map_key[m, y * s + x]
-        if key != _EMPTY:
-            z = float(key / _TRI_SCALE) / _DEPTH_SCALE
+        z = L.map_depth[m, y * s + x]
     return z
 
 
 SHADOW_TILE = 8
-"""Side [texels] of the blocks whose minimum key :func:`shadow_tile_min` keeps."""
+"""Side [texels] of the blocks whose nearest depth :func:`shadow_reach_min` keeps."""
 _SHADOW_TILE = wp.constant(SHADOW_TILE)
+SHADOW_REACH = wp.constant(2)
+"""Tiles on each side of a point's own tile that :func:`pcf_taps` can read: its taps lie within 8 texels (the widest
+search) plus one of rounding and one of margin of the point's texel, at most two 8-texel tiles away."""
 
 
 @wp.kernel
 def shadow_tile_min(map_key: wp.array2d(dtype=wp.int64), side: int, tiles: int,
-                    tile_min: wp.array2d(dtype=wp.int64)):
-    """Smallest key of each ``SHADOW_TILE``² block of every shadow map: ``map_key`` (M, side²) ->
-    ``tile_min`` (M, tiles²); launched as (M, tiles²)."""
+                    depth: wp.array2d(dtype=float), tile_min: wp.array2d(dtype=float)):
+    """Shadow-map depths [m] from the raster pass's packed keys ``map_key`` (M, side²) -> ``depth`` (1e30 where
+    empty), and the nearest of each ``SHADOW_TILE``² block -> ``tile_min`` (M, tiles²); launched as (M, tiles²)."""
     m, b = wp.tid()
     x0 = (b % tiles) * _SHADOW_TILE
     y0 = (b / tiles) * _SHADOW_TILE
-    best = _EMPTY
+    best = float(NO_CASTER)
     for y in range(y0, wp.min(y0 + _SHADOW_TILE, side)):
         for x in range(x0, wp.min(x0 + _SHADOW_TILE, side)):
-            best = wp.min(best, map_key[m, y * side + x])
+            key = map_key[m, y * side + x]
+            z = float(NO_CASTER)
+            if key != _EMPTY:
+                z = float(key / _TRI_SCALE) / _DEPTH_SCALE
+            depth[m, y * side + x] = z
+            best = wp.min(best, z)
     tile_min[m, b] = best
+
+
+@wp.kernel
+def shadow_reach_min(tile_min: wp.array2d(dtype=float), tiles: int, reach: wp.array2d(dtype=float)):
+    """Nearest depth [m] over the blocks within ``SHADOW_REACH`` of each block (clamped to the map); launched as
+    (M, tiles²)."""
+    m, b = wp.tid()
+    bx = b % tiles
+    by = b / tiles
+    best = float(NO_CASTER)
+    for y in range(wp.max(by - SHADOW_REACH, 0), wp.min(by + SHADOW_REACH + 1, tiles)):
+        for x in range(wp.max(bx - SHADOW_REACH, 0), wp.min(bx + SHADOW_REACH + 1, tiles)):
+            best = wp.min(best, tile_min[m, y * tiles + x])
+    reach[m, b] = best
 
 
 @wp.func
 def region_unblocked(L: Lights, m: int, u: float, v: float, z: float, radius: float) -> bool:
-    """True when no texel :func:`pcf_taps` reads about (u, v) at ``radius`` can hold an occluder nearer than ``z``,
-    judged from the tile minima (a texel wider than the taps on each side, so rounding cannot escape): then the
-    blocker search would find none, and the point is lit. Exact: the same answer as the 16 taps."""
+    """True when no texel :func:`pcf_taps` reads about (u, v) at ``radius`` (<= 8) can hold an occluder nearer than
+    ``z``: then the blocker search would find none, and the point is lit. Judged first from the nearest depth within
+    reach of the point's block (one read: most of a map is far from every caster), then from the blocks that the
+    taps' texels, widened by one on each side against rounding, overlap. Exact: True only where the 16 taps find no
+    blocker."""
     s = L.map_side
+    tx = wp.clamp(int(wp.floor(u + 0.5)), 0, s - 1) / _SHADOW_TILE
+    ty = wp.clamp(int(wp.floor(v + 0.5)), 0, s - 1) / _SHADOW_TILE
+    if L.map_reach[m, ty * L.map_tiles + tx] >= z:
+        return True
     x0 = wp.max(int(wp.floor(u - radius + 0.5)) - 1, 0)
     x1 = wp.min(int(wp.floor(u + radius + 0.5)) + 1, s - 1)
     y0 = wp.max(int(wp.floor(v - radius + 0.5)) - 1, 0)
     y1 = wp.min(int(wp.floor(v + radius + 0.5)) + 1, s - 1)
     clear = bool(True)
     if x0 <= x1 and y0 <= y1:
-        for ty in range(y0 / _SHADOW_TILE, y1 / _SHADOW_TILE + 1):
-            for tx in range(x0 / _SHADOW_TILE, x1 / _SHADOW_TILE + 1):
-                key = L.map_tile_min[m, ty * L.map_tiles + tx]
-                if key != _EMPTY:
-                    if float(key / _TRI_SCALE) / _DEPTH_SCALE < z:
-                        clear = False
+        for by in range(y0 / _SHADOW_TILE, y1 / _SHADOW_TILE + 1):
+            for bx in range(x0 / _SHADOW_TILE, x1 / _SHADOW_TILE + 1):
+                if L.map_tile_min[m, by * L.map_tiles + bx] < z:
+                    clear = False
     return clear
 
 
@@ -167,9 +197,10 @@ def is_dark(L: Lights, wl: int, i: int) -> bool:
 
 
 @wp.func(inline=True)
-def shadow_factor(L: Lights, first: int, light: int, ndl: float, p: wp.vec3, n: wp.vec3) -> float:
-    """``ndl`` times the visibility of light ``light`` (0 = sun, 1 + i = point light i) when shadows are on."""
-    out = ndl
-    if L.shadows != 0 and first >= 0 and ndl > 0.0:
-        out = ndl * light_visibility(L, first + light, p, n)
+def visibility(L: Lights, first: int, light: int, p: wp.vec3, n: wp.vec3) -> float:
+    """Fraction [0, 1] of light ``light`` (0 = sun, 1 + i = point light i) reaching ``p`` when shadows are on (1
+    otherwise): the world's map ``first + light``."""
+    out = float(1.0)
+    if L.shadows != 0 and first >= 0:
+        out = light_visibility(L, first + light, p, n)
     return out
