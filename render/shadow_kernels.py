@@ -131,14 +131,24 @@ def region_unblocked(L: Lights, m: int, u: float, v: float, z: float, radius: fl
 @wp.func
 def pcf_taps(L: Lights, m: int, u: float, v: float, z: float, radius: float) -> wp.vec2:
     """4 x 4 taps of shadow map ``m`` on a grid spanning ``radius`` texels about (u, v): (number of taps nearer than
-    ``z``, their summed depth) -- the blocker search and the percentage-closer filter of PCSS share it."""
+    ``z``, their summed depth) -- the blocker search and the percentage-closer filter of PCSS share it. The grid's
+    four columns and rows are found once; a grid inside the map reads its texels without per-tap bounds checks."""
+    xs = wp.vec4i()
+    ys = wp.vec4i()
+    for i in range(4):
+        xs[i] = int(wp.floor(u + radius * (float(i) - 1.5) / 1.5 + 0.5))
+        ys[i] = int(wp.floor(v + radius * (float(i) - 1.5) / 1.5 + 0.5))
+    s = L.map_side
+    inside = xs[0] >= 0 and ys[0] >= 0 and xs[3] < s and ys[3] < s
     hits = float(0.0)
     zsum = float(0.0)
     for j in range(4):
         for i in range(4):
-            x = int(wp.floor(u + radius * (float(i) - 1.5) / 1.5 + 0.5))
-            y = int(wp.floor(v + radius * (float(j) - 1.5) / 1.5 + 0.5))
-            d = map_depth(L, m, x, y)
+            d = float(NO_CASTER)
+            if inside:
+                d = L.map_depth[m, ys[j] * s + xs[i]]
+            else:
+                d = map_depth(L, m, xs[i], ys[j])
             if d < z:
                 hits += 1.0
                 zsum += d
