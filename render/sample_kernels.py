@@ -224,7 +224,7 @@ def sample_point(x: int, y: int, i: int, j: int, sub: int, lens: int, u0: float,
     return fx, fy
 
 
-@wp.func
+@wp.func(inline=True)
 def shade_sample(look: Look, lights: Lights, w: int, first: int, hit: Hit, albedo: wp.vec3, eye: wp.vec3,
                  bg: wp.vec3, transmit: float, gain: wp.vec3) -> wp.vec3:
     """Display-linear colour in [0, 1] of a sample ``hit`` of albedo ``albedo`` (a group's mean): lit and shadowed,

@@ -52,12 +52,12 @@ NO_CASTER = wp.constant(1.0e30)
 
 
 @wp.func
-def map_depth(L: Lights, m: int, x: int, y: int) -> float:
-    """Camera z [m] of the nearest occluder in texel (x, y) of shadow map ``m``; 1e30 where nothing (or outside)."""
-    s = L.map_side
+def map_depth(depth: wp.array2d(dtype=float), s: int, m: int, x: int, y: int) -> float:
+    """Camera z [m] of the nearest occluder in texel (x, y) of shadow map ``m`` (``depth`` (M, s²)); 1e30 where
+    nothing (or outside)."""
     z = float(NO_CASTER)
     if x >= 0 and y >= 0 and x < s and y < s:
-        z = L.map_depth[m, y * s + x]
+        z = depth[m, y * s + x]
     return z
 
 
@@ -104,16 +104,17 @@ def shadow_reach_min(tile_min: wp.array2d(dtype=float), tiles: int, reach: wp.ar
 
 
 @wp.func
-def region_unblocked(L: Lights, m: int, u: float, v: float, z: float, radius: float) -> bool:
+def region_unblocked(reach: wp.array2d(dtype=float), tile_min: wp.array2d(dtype=float), tiles: int, s: int, m: int,
+                     u: float, v: float, z: float, radius: float) -> bool:
     """True when no texel :func:`pcf_taps` reads about (u, v) at ``radius`` (<= 8) can hold an occluder nearer than
     ``z``: then the blocker search would find none, and the point is lit. Judged first from the nearest depth within
     reach of the point's block (one read: most of a map is far from every caster), then from the blocks that the
     taps' texels, widened by one on each side against rounding, overlap. Exact: True only where the 16 taps find no
-    blocker."""
-    s = L.map_side
+    blocker. ``reach``, ``tile_min`` (M, tiles²): :class:`Lights`' ``map_reach`` and ``map_tile_min``; ``s`` the
+    maps' side [texels]. (Arrays, not the whole Lights: Warp passes a struct by value, a copy per call.)"""
     tx = wp.clamp(int(wp.floor(u + 0.5)), 0, s - 1) / _SHADOW_TILE
     ty = wp.clamp(int(wp.floor(v + 0.5)), 0, s - 1) / _SHADOW_TILE
-    if L.map_reach[m, ty * L.map_tiles + tx] >= z:
+    if reach[m, ty * tiles + tx] >= z:
         return True
     x0 = wp.max(int(wp.floor(u - radius + 0.5)) - 1, 0)
     x1 = wp.min(int(wp.floor(u + radius + 0.5)) + 1, s - 1)
@@ -123,14 +124,14 @@ def region_unblocked(L: Lights, m: int, u: float, v: float, z: float, radius: fl
     if x0 <= x1 and y0 <= y1:
         for by in range(y0 / _SHADOW_TILE, y1 / _SHADOW_TILE + 1):
             for bx in range(x0 / _SHADOW_TILE, x1 / _SHADOW_TILE + 1):
-                if L.map_tile_min[m, by * L.map_tiles + bx] < z:
+                if tile_min[m, by * tiles + bx] < z:
                     clear = False
     return clear
 
 
 @wp.func
-def pcf_taps(L: Lights, m: int, u: float, v: float, z: float, radius: float) -> wp.vec2:
-    """4 x 4 taps of shadow map ``m`` on a grid spanning ``radius`` texels about (u, v): (number of taps nearer than
+def pcf_taps(depth: wp.array2d(dtype=float), s: int, m: int, u: float, v: float, z: float, radius: float) -> wp.vec2:
+    """4 x 4 taps of shadow map ``m`` (``depth`` (M, s²)) on a grid spanning ``radius`` texels about (u, v): (number of taps nearer than
     ``z``, their summed depth) -- the blocker search and the percentage-closer filter of PCSS share it. The grid's
     four columns and rows are found once; a grid inside the map reads its texels without per-tap bounds checks."""
     xs = wp.vec4i()
@@ -138,7 +139,6 @@ def pcf_taps(L: Lights, m: int, u: float, v: float, z: float, radius: float) -> 
     for i in range(4):
         xs[i] = int(wp.floor(u + radius * (float(i) - 1.5) / 1.5 + 0.5))
         ys[i] = int(wp.floor(v + radius * (float(i) - 1.5) / 1.5 + 0.5))
-    s = L.map_side
     inside = xs[0] >= 0 and ys[0] >= 0 and xs[3] < s and ys[3] < s
     hits = float(0.0)
     zsum = float(0.0)
@@ -146,16 +146,16 @@ def pcf_taps(L: Lights, m: int, u: float, v: float, z: float, radius: float) -> 
         for i in range(4):
             d = float(NO_CASTER)
             if inside:
-                d = L.map_depth[m, ys[j] * s + xs[i]]
+                d = depth[m, ys[j] * s + xs[i]]
             else:
-                d = map_depth(L, m, xs[i], ys[j])
+                d = map_depth(depth, s, m, xs[i], ys[j])
             if d < z:
                 hits += 1.0
                 zsum += d
     return wp.vec2(hits, zsum)
 
 
-@wp.func
+@wp.func(inline=True)
 def light_visibility(L: Lights, m: int, p: wp.vec3, n: wp.vec3) -> float:
     """Fraction [0, 1] of light ``m`` reaching surface point ``p`` (normal ``n`` toward the viewer/light side), by
     percentage-closer soft shadows: a blocker search over the texels the light's disk can be hidden by, then a
@@ -164,28 +164,27 @@ def light_visibility(L: Lights, m: int, p: wp.vec3, n: wp.vec3) -> float:
     R = L.map_rot[m]
     t = L.map_trans[m]
     pc = R * p + t
-    if pc[2] <= 0.0:
-        return 1.0
-    texel = pc[2] / k[0]  # a texel's size [m] at the receiver
-    pc = R * (p + n * (1.5 * texel)) + t  # normal offset against self-shadowing of the receiver's own surface
-    u = k[0] * pc[0] / pc[2] + k[2]
-    v = k[1] * pc[1] / pc[2] + k[3]
-    z = pc[2] - texel
-    size = L.map_light_size[m]
-    search = wp.clamp(size * k[0] / z, 1.0, 8.0)
-    side = float(L.map_side)
-    if u < -search - 1.0 or v < -search - 1.0 or u > side + search or v > side + search:
-        return 1.0  # outside the map, which covers every caster: nothing between the point and the light
-    if region_unblocked(L, m, u, v, z, search):
-        return 1.0
-    blk = pcf_taps(L, m, u, v, z, search)
-    if blk[0] == 0.0:
-        return 1.0
-    zb = blk[1] / blk[0]
-    # the 4 x 4 grid's taps at +-r, +-r/3 have the second moment (5/9 r^2) of a disk light's edge profile (its
-    # penumbra half-width p: p^2 / 4) for r = 0.67 p
-    penumbra = wp.clamp(0.67 * size * (z - zb) / zb * k[0] / z, 1.0, 8.0)
-    return 1.0 - pcf_taps(L, m, u, v, z, penumbra)[0] / 16.0
+    out = float(1.0)
+    if pc[2] > 0.0:  # else behind the light's map camera: lit
+        texel = pc[2] / k[0]  # a texel's size [m] at the receiver
+        pc = R * (p + n * (1.5 * texel)) + t  # normal offset against self-shadowing of the receiver's own surface
+        u = k[0] * pc[0] / pc[2] + k[2]
+        v = k[1] * pc[1] / pc[2] + k[3]
+        z = pc[2] - texel
+        size = L.map_light_size[m]
+        search = wp.clamp(size * k[0] / z, 1.0, 8.0)
+        side = float(L.map_side)
+        # outside the map, which covers every caster, nothing is between the point and the light
+        inside = u >= -search - 1.0 and v >= -search - 1.0 and u <= side + search and v <= side + search
+        if inside and not region_unblocked(L.map_reach, L.map_tile_min, L.map_tiles, L.map_side, m, u, v, z, search):
+            blk = pcf_taps(L.map_depth, L.map_side, m, u, v, z, search)
+            if blk[0] != 0.0:
+                zb = blk[1] / blk[0]
+                # the 4 x 4 grid's taps at +-r, +-r/3 have the second moment (5/9 r^2) of a disk light's edge
+                # profile (its penumbra half-width p: p^2 / 4) for r = 0.67 p
+                penumbra = wp.clamp(0.67 * size * (z - zb) / zb * k[0] / z, 1.0, 8.0)
+                out = 1.0 - pcf_taps(L.map_depth, L.map_side, m, u, v, z, penumbra)[0] / 16.0
+    return out
 
 
 @wp.func(inline=True)
