@@ -104,18 +104,11 @@ def shadow_reach_min(tile_min: wp.array2d(dtype=float), tiles: int, reach: wp.ar
 
 
 @wp.func
-def region_unblocked(reach: wp.array2d(dtype=float), tile_min: wp.array2d(dtype=float), tiles: int, s: int, m: int,
-                     u: float, v: float, z: float, radius: float) -> bool:
-    """True when no texel :func:`pcf_taps` reads about (u, v) at ``radius`` (<= 8) can hold an occluder nearer than
-    ``z``: then the blocker search would find none, and the point is lit. Judged first from the nearest depth within
-    reach of the point's block (one read: most of a map is far from every caster), then from the blocks that the
-    taps' texels, widened by one on each side against rounding, overlap. Exact: True only where the 16 taps find no
-    blocker. ``reach``, ``tile_min`` (M, tiles²): :class:`Lights`' ``map_reach`` and ``map_tile_min``; ``s`` the
-    maps' side [texels]. (Arrays, not the whole Lights: Warp passes a struct by value, a copy per call.)"""
-    tx = wp.clamp(int(wp.floor(u + 0.5)), 0, s - 1) / _SHADOW_TILE
-    ty = wp.clamp(int(wp.floor(v + 0.5)), 0, s - 1) / _SHADOW_TILE
-    if reach[m, ty * tiles + tx] >= z:
-        return True
+def blocks_clear(tile_min: wp.array2d(dtype=float), tiles: int, s: int, m: int, u: float, v: float, z: float,
+                 radius: float) -> bool:
+    """True when no block that the texels :func:`pcf_taps` reads about (u, v) at ``radius``, widened by one on each
+    side against rounding, overlap holds a depth nearer than ``z`` (``tile_min`` (M, tiles²): :class:`Lights`'
+    ``map_tile_min``; ``s`` the maps' side [texels]): then none of the 16 taps is nearer. Exact where True."""
     x0 = wp.max(int(wp.floor(u - radius + 0.5)) - 1, 0)
     x1 = wp.min(int(wp.floor(u + radius + 0.5)) + 1, s - 1)
     y0 = wp.max(int(wp.floor(v - radius + 0.5)) - 1, 0)
@@ -126,6 +119,22 @@ def region_unblocked(reach: wp.array2d(dtype=float), tile_min: wp.array2d(dtype=
             for bx in range(x0 / _SHADOW_TILE, x1 / _SHADOW_TILE + 1):
                 if tile_min[m, by * tiles + bx] < z:
                     clear = False
+    return clear
+
+
+@wp.func
+def region_unblocked(reach: wp.array2d(dtype=float), tile_min: wp.array2d(dtype=float), tiles: int, s: int, m: int,
+                     u: float, v: float, z: float, radius: float) -> bool:
+    """True when no texel :func:`pcf_taps` reads about (u, v) at ``radius`` (<= 8) can hold an occluder nearer than
+    ``z``: then the blocker search would find none, and the point is lit. Judged first from the nearest depth within
+    reach of the point's block (``reach``: :class:`Lights`' ``map_reach``; one read: most of a map is far from every
+    caster), then from the blocks the taps overlap (:func:`blocks_clear`). Exact: True only where the 16 taps find
+    no blocker. (Arrays, not the whole Lights: Warp passes a struct by value, a copy per call.)"""
+    tx = wp.clamp(int(wp.floor(u + 0.5)), 0, s - 1) / _SHADOW_TILE
+    ty = wp.clamp(int(wp.floor(v + 0.5)), 0, s - 1) / _SHADOW_TILE
+    clear = bool(True)
+    if reach[m, ty * tiles + tx] < z:
+        clear = blocks_clear(tile_min, tiles, s, m, u, v, z, radius)
     return clear
 
 
@@ -183,7 +192,9 @@ def light_visibility(L: Lights, m: int, p: wp.vec3, n: wp.vec3) -> float:
                 # the 4 x 4 grid's taps at +-r, +-r/3 have the second moment (5/9 r^2) of a disk light's edge
                 # profile (its penumbra half-width p: p^2 / 4) for r = 0.67 p
                 penumbra = wp.clamp(0.67 * size * (z - zb) / zb * k[0] / z, 1.0, 8.0)
-                out = 1.0 - pcf_taps(L.map_depth, L.map_side, m, u, v, z, penumbra)[0] / 16.0
+                # the filter's own footprint may hold no blocker (the search's is wider): lit, from the blocks
+                if not blocks_clear(L.map_tile_min, L.map_tiles, L.map_side, m, u, v, z, penumbra):
+                    out = 1.0 - pcf_taps(L.map_depth, L.map_side, m, u, v, z, penumbra)[0] / 16.0
     return out
 
 
