@@ -38,7 +38,6 @@ from warpworm.render.shading import (
     floor_row,
     mesh_surface,
     nearer_floor,
-    shade_hit,
     shade_surface,
     surface_albedo,
 )
@@ -202,8 +201,8 @@ def sample_hit(keys: wp.array2d(dtype=wp.int64), img: int, fx: float, fy: float,
 
 
 MAX_GROUPS = wp.constant(8)
-"""Surfaces a pixel's samples are grouped by (one lighting evaluation each); a sample on a further surface is shaded
-on its own."""
+"""Surfaces a pixel's samples are grouped by (one lighting evaluation each); a sample on a further surface (only
+possible with more than 8 samples per pixel) is counted with the last group."""
 
 
 @wp.func
@@ -229,12 +228,25 @@ def shade_sample(look: Look, lights: Lights, w: int, first: int, hit: Hit, albed
                  bg: wp.vec3, transmit: float, gain: wp.vec3) -> wp.vec3:
     """Display-linear colour in [0, 1] of a sample ``hit`` of albedo ``albedo`` (a group's mean): lit and shadowed,
     the mesh under a clear floor mixed in by ``transmit``, times the camera's ``gain``."""
-    color, _nrm = shade_surface(look, lights, w, first, hit.label, albedo, hit.z, hit.n, eye, hit.d, bg)
+    # a clear plate (render.plate_materials: acrylic) lets the mesh under it (the EPM) show through: a second
+    # layer, shaded at the same call site (one inlined copy of the lighting code, not two)
+    layers = 1
     if hit.label != hit.mesh_label and hit.mesh_label != SEG_BACKGROUND and transmit > 0.0:
-        # a clear plate (render.plate_materials: acrylic): the mesh under it (the EPM) shows through
-        under, _n = shade_hit(look, lights, w, first, hit.mesh_label, hit.mesh_z, hit.mesh_mat, hit.n, eye, hit.d,
-                              bg)
-        color = wp.lerp(color, under, transmit)
+        layers = 2
+    color = wp.vec3(0.0)
+    for layer in range(layers):
+        label = hit.label
+        z = hit.z
+        alb = albedo
+        if layer == 1:
+            label = hit.mesh_label
+            z = hit.mesh_z
+            alb = surface_albedo(look, w, label, hit.mesh_mat)
+        c, _nrm = shade_surface(look, lights, w, first, label, alb, z, hit.n, eye, hit.d, bg)
+        if layer == 0:
+            color = c
+        else:
+            color = wp.lerp(color, c, transmit)
     color = wp.cw_mul(color, gain)
     return wp.vec3(wp.clamp(color[0], 0.0, 1.0), wp.clamp(color[1], 0.0, 1.0), wp.clamp(color[2], 0.0, 1.0))
 
@@ -397,24 +409,26 @@ def resolve_samples(
                         gg[g] = 0.0
                         gb[g] = 0.0
                         ng = ng + 1
-                    if g >= 0:
-                        gcount[g] = gcount[g] + 1
-                        gr[g] = gr[g] + alb[0]
-                        gg[g] = gg[g] + alb[1]
-                        gb[g] = gb[g] + alb[2]
-                    else:  # every group taken: this sample is lit on its own
-                        acc = acc + shade_sample(look, lights, w, first, hit, alb, eye, bg, transmit, gain)
-        inv_n0 = 1.0 / float(count0)
-        color0 = shade_sample(look, lights, w, first, hit0, alb0 * inv_n0, eye, bg, transmit, gain)
-        acc = acc + color0 * float(count0)
-        for g in range(ng):  # the first sample of each further surface, again
-            first_sample = gfirst[g]
-            fx, fy = sample_point(x, y, first_sample % sub, first_sample / sub, sub, lens, u0, v0, jac)
-            hit = sample_hit(sample_key, img, fx, fy, fw, fhgt, triangles, tri_label, vertices, texcoords, w, R,
-                             t, Rt, kf, eye, fn, fa, fb, floor_eye, fh)
-            inv_n = 1.0 / float(gcount[g])
-            alb = wp.vec3(gr[g] * inv_n, gg[g] * inv_n, gb[g] * inv_n)
+                    if g < 0:  # every group taken (more than MAX_GROUPS surfaces): counted with the last
+                        g = ng - 1
+                    gcount[g] = gcount[g] + 1
+                    gr[g] = gr[g] + alb[0]
+                    gg[g] = gg[g] + alb[1]
+                    gb[g] = gb[g] + alb[2]
+        # each surface lit once with its samples' mean albedo, at one call site (the lighting code inlined once)
+        for g in range(ng + 1):
+            hit = hit0
+            count = count0
+            alb = alb0 * (1.0 / float(count0))
+            if g > 0:  # the first sample of each further surface, again
+                first_sample = gfirst[g - 1]
+                fx, fy = sample_point(x, y, first_sample % sub, first_sample / sub, sub, lens, u0, v0, jac)
+                hit = sample_hit(sample_key, img, fx, fy, fw, fhgt, triangles, tri_label, vertices, texcoords, w, R,
+                                 t, Rt, kf, eye, fn, fa, fb, floor_eye, fh)
+                count = gcount[g - 1]
+                inv_n = 1.0 / float(count)
+                alb = wp.vec3(gr[g - 1] * inv_n, gg[g - 1] * inv_n, gb[g - 1] * inv_n)
             color = shade_sample(look, lights, w, first, hit, alb, eye, bg, transmit, gain)
-            acc = acc + color * float(gcount[g])
+            acc = acc + color * float(count)
         acc = acc * inv_ss
         rgb[img, pix] = wp.vec3ub(to_srgb8(acc[0]), to_srgb8(acc[1]), to_srgb8(acc[2]))
