@@ -75,7 +75,8 @@ class FakeStages:
         unstable = k > float(os.environ.get("WARPWORM_FAKE_UNSTABLE_ABOVE", "0.9"))
         return SimResult(frames=frames, unstable=unstable)
 
-    def render_batch(self, frame, params, cameras, appearance, seeds, cfg):
+    def render_batch(self, frame, draws, cfg):
+        cameras, appearance, seeds = draws.cameras, draws.appearance, draws.seeds
         B = len(seeds)
         H, W = cameras.height, cameras.width
         pos = frame["positions"]

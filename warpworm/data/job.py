@@ -8,6 +8,7 @@ them afterwards (:func:`warpworm.data.previews.write_previews`).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import json
@@ -29,9 +30,10 @@ import warpworm
 from warpworm.data import dataset as ds
 from warpworm.data import signal_hold
 from warpworm.data import workers as wk
-from warpworm.data.config import ConfigError, DatasetConfig, check_output_dir, load_config
+from warpworm.data.config import ConfigError, DatasetConfig, load_config
 from warpworm.data.export_json import jsonable
-from warpworm.data.shard import Interrupted, ShardStats, warp_version
+from warpworm.data.shard import ShardStats
+from warpworm.data.signal_hold import Interrupted
 from warpworm.data.stages import DEFAULT_STAGES, load_stages
 
 
@@ -75,7 +77,7 @@ class Summary:
 
 @functools.lru_cache(maxsize=None)
 def _versions() -> dict:
-    return {"warpworm": warpworm.__version__, "warp": warp_version(), "numpy": np.__version__,
+    return {"warpworm": warpworm.__version__, "warp": ds.warp_version(), "numpy": np.__version__,
             "h5py": h5py.__version__, "python": sys.version.split()[0]}
 
 
@@ -338,7 +340,7 @@ def generate(cfg: DatasetConfig, out_dir, *, workers: int = 1, resume: bool = Fa
     if holder is not None:
         raise ds.DatasetLockedError(f"{out_dir} is in use by another job: {ds.FolderLock.describe(holder)}; wait for it "
                                     "to finish or stop it (kill -TERM <pid>), then rerun with --resume")
-    check_output_dir(out_dir, resume)
+    ds.check_output_dir(out_dir, resume)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     lock = ds.FolderLock(out).acquire()
@@ -374,16 +376,14 @@ def _generate_locked(cfg, out, t0, guard, log, *, workers, resume, stages, engin
     bar = tqdm(total=total_new, unit="sample", disable=not progress, dynamic_ncols=True, smoothing=0.1,
                desc=f"generate {cfg.name}", file=sys.stderr)
     written: dict[int, ShardStats] = {}
-
-    def on_shard(st: ShardStats):
-        with guard.critical():
-            written[st.index] = st
-            done[st.index] = dataclasses.asdict(st)
-            save(complete=False)
-
     try:
-        wk.run_shards(cfg, out, todo, stages, workers=workers, engine=engine, address=address,
-                      on_progress=bar.update, on_shard=on_shard)
+        with contextlib.closing(wk.run_shards(cfg, out, todo, stages, workers=workers, engine=engine,
+                                              address=address, on_progress=bar.update)) as shards:
+            for st in shards:
+                with guard.critical():
+                    written[st.index] = st
+                    done[st.index] = dataclasses.asdict(st)
+                    save(complete=False)
     except Interrupted:
         _discard_unrecorded(out, todo, done)
         raise

@@ -16,8 +16,8 @@ from typing import Any, Protocol
 import numpy as np
 
 from warpworm.data.config import DatasetConfig
+from warpworm.data.sampling import RenderDraws
 from warpworm.physics.params import WormParams
-from warpworm.data.sampling import appearance_from_draws, sensor_values
 
 DEFAULT_STAGES = "warpworm.data.stages:WarpStages"
 
@@ -45,17 +45,16 @@ class Stages(Protocol):
     def simulate_batch(self, params: WormParams, num_worlds: int, cfg: DatasetConfig) -> SimResult:
         """Settle for ``sim.settle_time`` then drive the EPM paths; snapshots at ``sim.frame_times``."""
 
-    def render_batch(self, frame: dict[str, np.ndarray], params: WormParams, cameras,
-                     appearance: dict[str, np.ndarray], seeds: np.ndarray, cfg: DatasetConfig) -> dict[str, np.ndarray]:
+    def render_batch(self, frame: dict[str, np.ndarray], draws: RenderDraws, cfg: DatasetConfig) -> dict[str, np.ndarray]:
         """Render B images of one snapshot per world and compute their labels.
 
-        ``cameras`` is a :class:`warpworm.render.Cameras` of B images (``K (B,3,3)``, ``R (B,3,3)``, ``t (B,3)``,
-        ``width``, ``height``; image b shows world b of ``frame``).
+        ``draws`` (:class:`warpworm.data.sampling.RenderDraws`) holds everything drawn for the B images: the worlds'
+        ``params``, ``cameras`` (a :class:`warpworm.render.Cameras`: image b shows world b of ``frame``), the drawn
+        ``appearance`` values (B,) each and the renderer's ``look`` built from them, the ``sensor`` values, and
+        ``seeds`` (B,) int64 that all pixel noise must derive from.
 
         Returns name -> (B, ...) arrays for the image and label datasets of :data:`warpworm.data.dataset.SCHEMA`
         (rgb, depth, segmentation, poses/*, keypoints/*, creases/angle, bars/strain, worm/vertices, labels/*).
-        ``appearance`` holds the drawn ``light.*``, ``color.*``, ``texture.*``, ``sensor.*`` values, (B,) each;
-        ``seeds`` (B,) int64 seeds all pixel noise must derive from.
         """
 
 
@@ -74,8 +73,8 @@ class WarpStages:
     Simulation: ``Model.from_params`` -> ``Simulator(dt, substeps)`` -> ``settle(settle_time)`` -> ``step`` to each
     frame time -> ``snapshot``. A world flagged unstable at any frame is reported unstable.
     Rendering: ``render.build_scene`` (worm sheet, IPM disks, EPM bar, floor) with an appearance built from the drawn
-    ``light/color/texture`` values, ``Renderer.render`` with the drawn ``sensor.*`` values applied in its pass
-    (:class:`warpworm.render.sensor.SensorBatch`, :func:`warpworm.data.sampling.sensor_values`) and labels in the dataset's form
+    ``light/color/texture`` values (the ``look`` of the draws), ``Renderer.render`` with the drawn ``sensor.*``
+    values applied in its pass (:class:`warpworm.render.sensor.SensorBatch`) and labels in the dataset's form
     (:func:`warpworm.render.labels.schema_labels`).
     """
 
@@ -181,17 +180,18 @@ class WarpStages:
                                                 supersample=cfg.render.supersample)
         return r
 
-    def render_batch(self, frame, params, cameras, appearance, seeds, cfg):
+    def render_batch(self, frame, draws, cfg):
         from warpworm import render
         from warpworm.render.placement import distractor_mesh
 
+        params, cameras, appearance, seeds = draws.params, draws.cameras, draws.appearance, draws.seeds
         B = len(seeds)
         pattern = self._pattern(cfg.sim.n_units)
         scene = render.build_scene(
             frame["positions"], pattern.triangles, pattern.triangle_segment, magnet_pos=frame["magnet_pos"],
             magnet_rot=frame["magnet_rot"], worm_texcoords=pattern.vertices, ipm_diameter=params.ipm_diameter,
             ipm_thickness=params.ipm_thickness, epm_size=params.epm_size, floor_incline=params.floor_incline,
-            appearance=appearance_from_draws(appearance, seeds, cfg.render.band_colors),
+            appearance=draws.look,
             extra_mesh=distractor_mesh(appearance, B, params.floor_incline))  # render.distractors (None: off)
         from warpworm.render.labels import schema_labels
         from warpworm.render.sensor import SensorBatch, apply_sensor_batch, exposure_gains
@@ -203,7 +203,7 @@ class WarpStages:
         engine = pathtraced_samples(cfg, seeds)  # None: the option is off (nothing more is written)
         # the sensor runs inside the renderer's pass, unless the RGB is replaced first (motion blur, path tracing)
         replaced = cfg.render.motion_blur > 0 or (engine is not None and engine.any())
-        sensor = SensorBatch.from_values(sensor_values(appearance), seeds)
+        sensor = SensorBatch.from_values(draws.sensor, seeds)
         img = self._renderer(cfg).render(scene, cams, sensor=None if replaced else sensor)
         rgb = img["rgb"]
         if cfg.render.motion_blur > 0:  # RGB over the shutter from the simulated velocities; labels at the frame

@@ -11,7 +11,7 @@ expected. Nothing is written by loading or validating a config. Building the dat
 
 Modules: ``specs`` (PARAM_SPECS, BATCH_SHARED), ``sections`` (SimConfig, RenderConfig, OutputConfig),
 ``randomize_schema`` (the randomize groups), ``dataset_config`` (DatasetConfig), ``validate`` (config_from_dict,
-check_option(s), messages), ``loading`` (read_yaml, apply_overrides, load_config), ``output_dir`` (check_output_dir).
+check_option(s), messages), ``loading`` (read_yaml, apply_overrides, load_config).
 Every public name is importable from here.
 """
 
@@ -19,7 +19,6 @@ from __future__ import annotations
 
 from warpworm.data.config.dataset_config import DatasetConfig, schema_adapter
 from warpworm.data.config.loading import apply_overrides, config_packaged_names, load_config, read_yaml
-from warpworm.data.config.output_dir import check_output_dir
 from warpworm.data.config.sections import RENDER_OFF_GROUPS, OutputConfig, RenderConfig, SimConfig
 from warpworm.data.config.specs import BATCH_SHARED, PARAM_SPECS
 from warpworm.data.config.validate import check_option, check_options, config_from_dict

@@ -3,6 +3,7 @@ and the docs table generated from it (docs/dataset.md holds exactly :func:`schem
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 from warpworm import ids
@@ -11,6 +12,17 @@ SCHEMA_VERSION = 1
 FORMAT = "warpworm-dataset"
 """The ``format`` of every shard's root attributes and of the manifest."""
 QUATERNION_ORDER = "wxyz"
+
+
+@functools.lru_cache(maxsize=None)
+def warp_version() -> str:
+    """The Warp version that writes the files (root attribute ``warp_version``, the manifest's ``versions``)."""
+    try:
+        import warp  # start-up time: Warp loads on first use
+
+        return str(warp.__version__)
+    except Exception:  # noqa: BLE001 - the fake stages in tests do not need Warp
+        return "unavailable"
 
 SEGMENTATION_IDS = ids.SEGMENTATION_IDS
 """Segmentation ids (:mod:`warpworm.ids`, docs/architecture.md): worm segments 0..4 run tail -> head."""
