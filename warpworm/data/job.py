@@ -418,4 +418,4 @@ def _summary(cfg, out, written: dict[int, ShardStats], *, wall_s, done_before, w
                    cameras_below_min=sum(s.cameras_below_min for s in w))
 
 
-__all__ = ["Interrupted", "Summary", "device_line", "generate", "plan_job", "shard_plan"]
+__all__ = ["Summary", "device_line", "generate", "plan_job", "shard_plan"]

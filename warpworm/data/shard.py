@@ -32,7 +32,6 @@ from warpworm.data.config import PARAM_SPECS, DatasetConfig
 from warpworm.data.sampling import RenderDraws, draw_views, draw_worlds
 from warpworm.data.stages import load_stages
 from warpworm.render.placement import MATERIALS
-from warpworm.data.signal_hold import Interrupted  # noqa: F401  (re-exported: the workers and job raise it)
 
 
 @dataclass
@@ -286,5 +285,5 @@ def _gather_frames(stacked: dict, tsel: np.ndarray, fidx: np.ndarray) -> dict:
     return {k: v[tsel, fidx] for k, v in stacked.items()}
 
 
-__all__ = ["Interrupted", "ShardStats", "root_attributes", "run_shard",
+__all__ = ["ShardStats", "root_attributes", "run_shard",
            "simulate_with_replacement", "text_column", "text_widths"]

@@ -31,7 +31,8 @@ from typing import Callable, Iterator
 
 from warpworm.data import signal_hold
 from warpworm.data.dataset import DatasetWriteError, clean_temporaries, shard_name
-from warpworm.data.shard import Interrupted, ShardStats, run_shard
+from warpworm.data.shard import ShardStats, run_shard
+from warpworm.data.signal_hold import Interrupted
 from warpworm.data.stages import load_stages
 
 _progress_queue = None

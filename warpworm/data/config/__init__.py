@@ -23,7 +23,3 @@ from warpworm.data.config.sections import RENDER_OFF_GROUPS, OutputConfig, Rende
 from warpworm.data.config.specs import BATCH_SHARED, PARAM_SPECS
 from warpworm.data.config.validate import check_option, check_options, config_from_dict
 from warpworm.errors import ConfigError
-from warpworm.physics.param_specs import ParamSpec
-# shim (issue 42): the parameter contract's checks, importable from their old place; new code imports
-# warpworm.physics.param_specs
-from warpworm.physics.param_specs import check_worm_params, worm_param_problems
