@@ -334,7 +334,7 @@ def test_tile_kernel_compiles_for_sm90(factorization, use_ptx):
     from warpworm.kernels.implicit_tile import MAX_REGISTERS, make_tile_substep_kernel
 
     model = Model.from_params(WormParams(), 1, "cpu")
-    kernel = make_tile_substep_kernel(model.num_vertices, model.vertex_bandwidth, factorization == "dense")
+    kernel = make_tile_substep_kernel(model.num_vertices, model.half_bandwidth, factorization == "dense")
     module = kernel.module  # a module of this kernel alone: its options are ours to set
     module.options["block_dim"] = DEFAULT_CUDA_BLOCK_DIM[factorization]
     paths = wp.compile_aot_module(module, arch=90, use_ptx=use_ptx)  # into the kernel cache: rebuilt only on change

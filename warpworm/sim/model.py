@@ -40,7 +40,7 @@ def _scalar_param(value, num_worlds: int, name: str) -> np.ndarray:
     raise ValueError(f"WormParams.{name}: expected a scalar or shape ({num_worlds},), got {arr.shape}")
 
 
-def vertex_bandwidth(edges: np.ndarray, hinges: np.ndarray) -> int:
+def half_bandwidth(edges: np.ndarray, hinges: np.ndarray) -> int:
     """Half-bandwidth, in 3×3 vertex blocks, of the implicit solver's Newton matrix (kernels/band_cholesky.py): every
     bar and crease couples the vertices it touches, so it is the largest vertex-index span of an element."""
     return max(int(np.ptp(np.asarray(edges), axis=1).max(initial=0)),
@@ -261,7 +261,7 @@ class ModelBuilder:
         """Shared topology: bars, hinges, mounts, anchors."""
         pat, A_idx = self.info["pattern"], self.anchors
         A = len(A_idx)
-        self.info["vertex_bandwidth"] = vertex_bandwidth(pat.edges, pat.hinges)
+        self.info["half_bandwidth"] = half_bandwidth(pat.edges, pat.hinges)
         self._put("edges", pat.edges, wp.int32)
         self._put("hinges", pat.hinges, wp.int32)
         self._put("hinge_label", pat.hinge_label.astype(np.int32), wp.int32)
@@ -364,8 +364,8 @@ class Model:
     """A, anchored vertices (0 without a force plate)."""
     pattern: crease.CreasePattern
     """World 0's crease pattern (host; topology shared by every world)."""
-    vertex_bandwidth: int
-    """Half-bandwidth of the Newton matrix in vertex blocks (:func:`vertex_bandwidth`)."""
+    half_bandwidth: int
+    """Half-bandwidth of the Newton matrix in vertex blocks (:func:`half_bandwidth`)."""
     # --- geometry and mass
     rest_length: wp.array
     """Bar rest lengths [m], shape (R, E), float."""
@@ -507,7 +507,7 @@ class Model:
         total = sum(getattr(s, f).capacity for f in State.__dataclass_fields__)
         W, V = self.num_worlds, self.num_vertices
         total += W * self.num_anchors * 12  # anchor targets (Control)
-        total += W * V * (12 + 12 + 12) + W * V * (self.vertex_bandwidth + 1) * 36  # solver scratch
+        total += W * V * (12 + 12 + 12) + W * V * (self.half_bandwidth + 1) * 36  # solver scratch
         per = [self.rest_length, self.hinge_rest_angle, self.hinge_length, self.inv_mass, self.magnet_size,
                self.magnet_moment]
         total += sum(a.capacity * self.num_worlds // a.shape[0] for a in per)

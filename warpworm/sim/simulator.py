@@ -29,7 +29,7 @@ from warpworm.physics.gaits import DEFAULT_DT, DEFAULT_SUBSTEPS
 from warpworm.physics.magnets import launch_world_wrenches, pair_wrench_scratch
 from warpworm.sim import capture_gate
 from warpworm.sim.model import Control, Model, State
-from warpworm.sim.solver import BandSolver, SolverBase, SubstepSettings, put_bounded
+from warpworm.sim.solver import BandedSolver, SolverBase, SubstepSettings, put_bounded
 from warpworm.sim.tile_solver import TileSolver
 from warpworm.transforms import quat_wxyz_to_matrix, quat_xyzw_to_wxyz
 
@@ -76,11 +76,11 @@ SOLVERS = ("band", "tile-band", "tile-dense")
 
 
 def make_solver(name: str, model: Model, settings: SubstepSettings) -> SolverBase:
-    """The solver :data:`SOLVERS` calls ``name``: :class:`BandSolver` or a :class:`TileSolver` of that factorization."""
+    """The solver :data:`SOLVERS` calls ``name``: :class:`BandedSolver` or a :class:`TileSolver` of that factorization."""
     if name not in SOLVERS:
         raise ValueError(f"solver: got {name!r}; expected one of {SOLVERS}")
     if name == "band":
-        return BandSolver(model, settings)
+        return BandedSolver(model, settings)
     return TileSolver(model, settings, factorization=name[len("tile-"):])
 
 
@@ -110,7 +110,7 @@ class Simulator:
         chord: chord Newton steps (reuse the last factor; :mod:`warpworm.kernels.implicit_euler`); default on for
             the band solver, which alone has them.
         slip_speed: static friction's regularisation speed ε [m/s]: a worm held by friction creeps at most ~ε.
-        solver: one of :data:`SOLVERS`: ``"band"`` one thread per world (:class:`~warpworm.sim.solver.BandSolver`);
+        solver: one of :data:`SOLVERS`: ``"band"`` one thread per world (:class:`~warpworm.sim.solver.BandedSolver`);
             ``"tile-band"`` / ``"tile-dense"`` a block of threads per world, the band factored column-parallel
             (bit-identical to "band") or a dense tile Cholesky in shared memory
             (:class:`~warpworm.sim.tile_solver.TileSolver`; the GPU layouts).

@@ -2,7 +2,7 @@
 
 As Newton's ``SolverBase``: a solver is built for a :class:`~warpworm.sim.model.Model` and its
 :class:`SubstepSettings`, owns its scratch, and ``step(state, num_substeps, control)`` advances every world in place
-(one launch; ``command`` returns it recorded, for graph capture). :class:`BandSolver` launches
+(one launch; ``command`` returns it recorded, for graph capture). :class:`BandedSolver` launches
 :func:`warpworm.kernels.implicit_euler.implicit_step` (one thread per world);
 :class:`warpworm.sim.tile_solver.TileSolver` the block-per-world kernel of :mod:`warpworm.kernels.implicit_tile`.
 Both run the physics of :mod:`warpworm.kernels.substep`. Nothing loops over worlds on the host.
@@ -99,7 +99,7 @@ class SolverBase:
         the Newton counters (W,) int32."""
         s = self.scratch
         s.x_prev, s.delta, s.grad = (wp.zeros((W, V), dtype=wp.vec3, device=dev) for _ in range(3))
-        s.hess = wp.zeros((W, V, model.vertex_bandwidth + 1), dtype=wp.mat33, device=dev)
+        s.hess = wp.zeros((W, V, model.half_bandwidth + 1), dtype=wp.mat33, device=dev)
         s.released = wp.zeros((W, V), dtype=wp.int32, device=dev)
         s.newton_steps, s.newton_capped, s.newton_factors = (wp.zeros(W, dtype=wp.int32, device=dev)
                                                              for _ in range(3))
@@ -153,7 +153,7 @@ class SolverBase:
         return out
 
 
-class BandSolver(SolverBase):
+class BandedSolver(SolverBase):
     """One thread per world, block-band Cholesky, chord steps if ``settings.chord``
     (:func:`warpworm.kernels.implicit_euler.implicit_step`)."""
 

@@ -74,7 +74,7 @@ class TileSolver(SolverBase):
             start, index = vertex_incidence(elements.numpy(), V)
             setattr(inc, f"{kind}_start", wp.array(start, dtype=wp.int32, device=model.device))
             setattr(inc, kind, wp.array(index, dtype=wp.int32, device=model.device))
-        self.kernel = make_tile_substep_kernel(V, int(model.vertex_bandwidth), factorization == "dense",
+        self.kernel = make_tile_substep_kernel(V, int(model.half_bandwidth), factorization == "dense",
                                                max_registers)
 
     @property
