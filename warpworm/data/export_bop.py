@@ -18,7 +18,7 @@ Scenes hold 1000 images: sample i is image ``i % 1000`` of scene ``i // 1000``. 
 2 tail IPM, 3 centre IPM, 4 head IPM, 5 EPM. BOP units are mm for translations and depth.
 
 Models: the worm is its rest-shape mesh in its body frame (``poses/body``: x tail -> head, z dorsal, origin the mean
-of the segment centres; docs/render.md) for the first sample's a, b, l0 (a dataset that randomizes them has one mesh
+of the segment centres) for the first sample's a, b, l0 (a dataset that randomizes them has one mesh
 per sample: the model is then that of sample 0, as ``models_info.json``'s note says); a deformed worm differs from it
 by its folds. The IPMs are disks (axis +z, the moment), the EPM a cuboid of its extents (long axis +z). Symmetries
 (BOP's ``symmetries_discrete``: 4x4 row-major, translation in mm; ``symmetries_continuous``: axis and offset): the worm

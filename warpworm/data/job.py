@@ -56,7 +56,7 @@ class Summary:
     new_samples: int = 0
     cameras_below_min: int = 0
     kernels_s: float = 0.0
-    """Wall time [s] loading the Warp kernels before the first shard (compiling them on a cold cache: ~20-30 s)."""
+    """Wall time [s] loading the Warp kernels before the first shard (compiling them on a cold cache)."""
 
     @property
     def samples_per_s(self) -> float:

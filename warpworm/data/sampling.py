@@ -131,7 +131,7 @@ def appearance_draws(cfg, traj: np.ndarray) -> dict[str, np.ndarray]:
     for g in APPEARANCE_GROUPS:
         app.update(draw_group(cfg, g, traj).values)
     app["texture.seed"] = rng.derived_seed(rng.sample_keys(cfg.seed, traj), "texture") % (2**31 - 1)
-    r = cfg.render  # issue 24: the plate's pose and material, the lights, distractors (per trajectory)
+    r = cfg.render  # the plate's pose and material, the lights, distractors (per trajectory)
     if r.plate_pose or r.lights != "fixed" or r.distractors[1] > 0 or r.plate_materials != ["matte"] or r.paper_bsdf:
         app.update(placement_draws(cfg.render, rng.sample_keys(cfg.seed, traj)))
     return app
@@ -192,7 +192,7 @@ def sensor_values(app: dict) -> dict:
     """
     q = np.asarray(app["sensor.jpeg_quality"]).astype(np.int64)
     B = len(q)
-    f32 = np.float32  # float32 values keep the per-image arithmetic in float32 (measured ~25 % faster than float64)
+    f32 = np.float32  # float32 values keep the per-image arithmetic in float32 (faster than float64)
     return {"wb_r": np.ones(B), "wb_g": np.ones(B), "wb_b": np.ones(B), "hue_deg": np.zeros(B),
             "saturation": np.ones(B), "contrast": np.asarray(app["sensor.contrast"], f32),
             "brightness": (np.asarray(app["sensor.brightness"], np.float64) / 255.0).astype(f32),
@@ -240,7 +240,7 @@ def dataset_cameras(cfg, index: np.ndarray, worm_points: np.ndarray, view: np.nd
         roll_deg=deg("roll"), fov_deg=deg("fov_y"), fov_axis="y", lookat_jitter=_range(c["lookat_jitter"])[0],
         aspect_jitter=0.0, principal_jitter=0.0, min_in_frame=_range(c["min_in_frame"])[0],
         max_tries=int(_range(c["max_tries"])[0]))
-    if cfg.render.distortion:  # issue 24: lens distortion per camera, from the camera's seed (stored as camera/dist)
+    if cfg.render.distortion:  # lens distortion per camera, from the camera's seed (stored as camera/dist)
         cams.dist = draw_distortion(cfg.render, seeds, cams.K, cfg.render.width, cfg.render.height)
     d = cams.draws
     n = len(index)

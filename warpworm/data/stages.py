@@ -112,8 +112,7 @@ class WarpStages:
         Warp's kernel cache in parallel (``max_workers`` threads; default one per available core).
 
         Run once in the parent before workers start: with a cold cache (a kernel source changed, a fresh install)
-        each worker would otherwise compile the same modules itself (measured ~33 s of CPU per process here, ~23 s
-        wall when the three modules compile in parallel). With a hot cache it costs the module hashing (~0.3 s).
+        each worker would otherwise compile the same modules itself; with a hot cache it only hashes the modules.
         """
         import warp as wp
 
@@ -155,7 +154,7 @@ class WarpStages:
         rest = model.rest_positions_host.astype(np.float32)  # per-world rest geometry (a, b, l0 may differ)
         sim.settle(state, cfg.sim.settle_time)
         keep = ("positions", "magnet_pos", "magnet_rot", "crease_angle", "bar_strain", "unstable")
-        if cfg.render.motion_blur > 0:  # issue 24: the shutter's motion needs the vertices' velocities
+        if cfg.render.motion_blur > 0:  # the shutter's motion needs the vertices' velocities
             keep += ("velocities",)
         if getattr(cfg.sim, "frame_unit", "s") == "cycle":
             frames = run_at_phases(sim, state, params, num_worlds, cfg.sim.frame_times, keep)

@@ -240,7 +240,7 @@ class ModelBuilder:
         ipm_h = per_world(p.ipm_thickness, W)
         ipm_mass = per_world(p.magnet_mass_density, W) * np.pi * (0.5 * ipm_d) ** 2 * ipm_h  # (W,)
         # The IPM mass goes on its mount vertices with least-norm weights that keep the total mass and the centre of
-        # mass (so gravity's moment on the mount is exact); docs/dynamics.md discusses the inertia this implies.
+        # mass (so gravity's moment on the mount is exact).
         mv = pat.mount_vertices
         mpos_rest, _ = crease.mount_poses(pat, xm)  # (mrows, 3, 3)
         # least-norm weights w (K,) with sum(w) = 1 and sum(w x_k) = mount centre: a batched 4 x K pseudo-inverse over
@@ -276,7 +276,7 @@ class ModelBuilder:
     def add_material(self) -> None:
         """Per-bar rigidity and stops, crease stiffness, damping, friction, floor, gravity."""
         p, W, pat = self.params, self.num_worlds, self.info["pattern"]
-        # Per-bar rigidity: the valley rings get their own (soft) EA so the isostatic tube can fold (docs/crease.md).
+        # Per-bar rigidity: the valley rings get their own (soft) EA so the isostatic tube can fold.
         ea_rigid = _scalar_param(p.bar_stiffness, W, "bar_stiffness")
         ea_valley = _scalar_param(p.valley_bar_stiffness, W, "valley_bar_stiffness")
         is_valley = pat.edge_label == crease.VALLEY

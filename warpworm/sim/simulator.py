@@ -106,7 +106,7 @@ class Simulator:
             first). 24: a stick–slip transition can take 15–25 at 2 ms substeps.
         newton_tol: a Newton step (the second or later) changing no vertex's velocity by more than this [m/s] ends
             the substep (default 1e-4; 0 takes every step). A fixed step count is not converged through a
-            snap-through (docs/dynamics.md, "Newton convergence").
+            snap-through.
         chord: chord Newton steps (reuse the last factor; :mod:`warpworm.kernels.implicit_euler`); default on for
             the band solver, which alone has them.
         slip_speed: static friction's regularisation speed ε [m/s]: a worm held by friction creeps at most ~ε.
@@ -255,7 +255,6 @@ class Simulator:
                 # the first step of a new graph runs as plain launches, so that whatever a first launch creates
                 # lazily (a Warp module, the wrench's quadrature arrays, a tile solver's scratch) exists before the
                 # capture: inside a capture, an array made from host data has its copy recorded, not done
-                # (tests/test_step_graph.py; docs/dynamics.md, "Notes moved from the code")
                 self._one_step(state, control, moment)
                 n -= 1
                 try:
@@ -327,7 +326,7 @@ class Simulator:
 
     # ------------------------------------------------------------------------------------------------------------
     def snapshot(self, state: State, control: Control | None = None) -> dict:
-        """Host copies (NumPy) of the state, keyed as in docs/architecture.md.
+        """Host copies (NumPy) of the state.
 
         Returns ``positions (W, V, 3)``, ``velocities (W, V, 3)`` [m, m/s]; ``magnet_pos (W, 4, 3)`` [m],
         ``magnet_rot (W, 4, 3, 3)`` (magnet -> world; slots EPM, tail, centre, head); ``magnet_force``,

@@ -1,7 +1,7 @@
 """Dataset job configuration: YAML -> validated dataclasses (a pydantic v2 schema), with dotted command-line overrides.
 
 The schema is the dataclasses of ``sections`` and ``dataset_config`` (their field docstrings are the documentation) and :data:`PARAM_SPECS` (every
-randomizable parameter); ``warpworm config-schema`` exports it as a JSON Schema for editors (docs/config.md).
+randomizable parameter); ``warpworm config-schema`` exports it as a JSON Schema for editors.
 All SI: m, s, rad, kg.
 
 Every mistake (unknown key, wrong type, negative size, low > high, unknown gait, unwritable output folder) raises

@@ -12,7 +12,7 @@ renamed to its final name, and the folder fsynced. A final-named shard is theref
 at most temporary files, which ``--resume`` deletes before redoing the missing shards. Because shard k's content depends
 only on (config, k), a resumed job gives the same bytes of data as an uninterrupted one.
 
-Storage (chosen by ``benchmarks/bench_dataset.py``; see docs/dataset.md): images (rgb, depth, segmentation, worm mask)
+Storage: images (rgb, depth, segmentation, worm mask)
 are chunked one sample per chunk and compressed with the config's filter (default gzip level 1, with byte shuffle for
 depth); small per-sample labels are buffered per shard and stored contiguous and uncompressed (a few hundred bytes a
 sample; chunking them costs more than it saves). Rows are always written as contiguous ranges.

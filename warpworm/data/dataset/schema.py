@@ -1,5 +1,5 @@
 """The dataset schema: every HDF5 dataset of a shard (name, shape, dtype, unit, meaning), the root attributes' units,
-and the docs table generated from it (docs/dataset.md holds exactly :func:`schema_markdown`'s text)."""
+and the docs table generated from it."""
 
 from __future__ import annotations
 
@@ -25,7 +25,7 @@ def warp_version() -> str:
         return "unavailable"
 
 SEGMENTATION_IDS = ids.SEGMENTATION_IDS
-"""Segmentation ids (:mod:`warpworm.ids`, docs/architecture.md): worm segments 0..4 run tail -> head."""
+"""Segmentation ids (:mod:`warpworm.ids`): worm segments 0..4 run tail -> head."""
 
 UNITS = {"length": "m", "depth": "m (camera z; 0 = background)", "angle": "rad", "time": "s", "pixel": "px",
          "mass": "kg", "moment": "A*m^2", "frames": "OpenCV camera (+z forward, +y down), x_cam = R x_world + t; "
@@ -114,7 +114,7 @@ SCHEMA_TABLE_END = "<!-- end of schema table -->"
 
 
 def schema_markdown() -> str:
-    """The docs' table of every HDF5 dataset (docs/dataset.md holds exactly this text; a test checks it)."""
+    """The docs' table of every HDF5 dataset."""
     def shape(f):
         return "(" + ", ".join(str(d) for d in f.shape) + ("," if len(f.shape) == 1 else "") + ")"
 
