@@ -32,7 +32,7 @@ from warpworm.data import workers as wk
 from warpworm.data.config import load_config
 from warpworm.data.job import generate
 from warpworm.data.sampling import appearance_draws, dataset_cameras, draw_worlds, render_draws
-from warpworm.data.stages import WarpStages
+from warpworm.data.warp_stages import WarpStages
 
 NOTES = ("storage: bytes/sample and samples/s per image codec; end_to_end: overhead = 1 - (sim + render) / total; "
          "workers: speedup of 2 processes over 1; memory: RSS growth over the job (see module docstring)")

@@ -64,7 +64,7 @@ def trace_generate(config: str, num: int, out: Path) -> dict:
     from warpworm.commands import generate as gen
 
     for name in ("warpworm.data.config", "warpworm.data.dataset", "warpworm.data.job", "warpworm.data.stages",
-                 "warpworm.data.workers", "warpworm.data.previews"):
+                 "warpworm.data.warp_stages", "warpworm.data.workers", "warpworm.data.previews"):
         importlib.import_module(name)  # module bodies run before the walk: it follows calls, not imports
     children: dict[tuple, list] = {}
     seen_edges: set = set()

@@ -38,7 +38,7 @@ def _topology(n: int):
 
 
 class FakeStages:
-    """Deterministic closed-form stand-in for :class:`warpworm.data.stages.WarpStages` (tests only)."""
+    """Deterministic closed-form stand-in for :class:`warpworm.data.warp_stages.WarpStages` (tests only)."""
 
     def metadata(self, cfg):
         V, tri, edges, hinges, seg = _topology(cfg.sim.n_units)

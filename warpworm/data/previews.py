@@ -9,6 +9,7 @@ import dataclasses
 import os
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from warpworm.data import dataset as ds
@@ -33,8 +34,6 @@ def remove_preview_temporaries(out) -> None:
 
 def legend(width: int) -> np.ndarray:
     """A key under the contact sheet (RGB uint8, ``width`` px wide): what the third column's colours and marks mean."""
-    import cv2  # start-up time: OpenCV loads on first use
-
     groups: dict = {}  # the sheet's own colours, grouped: each colour once, with the keypoints drawn in it
     for name in KEYPOINT_NAMES:
         groups.setdefault(tuple(_kp_color(name)), []).append(name)
@@ -66,8 +65,6 @@ def write_previews(cfg: DatasetConfig, out, stages=DEFAULT_STAGES, max_rows: int
     """``preview.png``: the renderer's contact sheet (:func:`warpworm.render.contact_sheet.contact_sheet`) of the
     first samples; ``preview.mp4``: trajectory 0 resimulated at 20 fps over ``sim.frame_times`` with the same draws,
     seen from sample 0's stored camera (one world, small)."""
-    import cv2  # start-up time: OpenCV loads on first use
-
     out = Path(out)
     reader = ds.open(out)
     try:
