@@ -16,10 +16,9 @@ import warp as wp
 from .band_cholesky import ALL_ROWS, band_cholesky_factor, band_cholesky_solve
 from .common import freeze_world
 from .hinge_lanes import add_hinges, update_hinge_angles_lanes
-from .substep import (  # noqa: F401  (CONTACT_SLIDING, CONTACT_STUCK, friction_force: read from here by tests)
-    CONTACT_SLIDING, CONTACT_STUCK, CONTACTS_LANDED, WORLD_CRUMPLED, BarHingeModel, BarHingeState, NewtonScratch,
-    SubstepOptions, WorldCoefficients, add_anchors, add_bar, apply_step, finish_vertices, friction_force,
-    friction_row, inertia_row, predict, project_row, project_rhs, update_contacts, world_coefficients)
+from .substep import (CONTACTS_LANDED, WORLD_CRUMPLED, BarHingeModel, BarHingeState, NewtonScratch, SubstepOptions,
+                      WorldCoefficients, add_anchors, add_bar, apply_step, finish_vertices, friction_row, inertia_row,
+                      predict, project_row, project_rhs, update_contacts, world_coefficients)
 
 wp.set_module_options({"enable_backward": False})
 
