@@ -3,7 +3,7 @@
 The job (:mod:`warpworm.data.job`) never imports the simulator or the renderer: it calls a *stages* object (see
 :class:`Stages`) given as ``"module:attribute"`` so that worker processes can import it. The default,
 :class:`warpworm.data.warp_stages.WarpStages`, is warpworm's simulator and renderer (loaded by :func:`load_stages`
-when a shard runs, so a job that refuses its config never imports Warp); tests plug in a closed-form double.
+when the shards run: the job's own modules never import the simulator); tests plug in a closed-form double.
 """
 
 from __future__ import annotations
