@@ -1,6 +1,6 @@
 """The pipeline's two heavy stages (simulation, rendering) behind one small interface.
 
-The job (:mod:`warpworm.data.job`) never imports the simulator or the renderer: it calls a *stages* object (see
+The job (:mod:`warpworm.data.job`) runs neither the simulator nor the renderer itself: it calls a *stages* object (see
 :class:`Stages`) given as ``"module:attribute"`` so that worker processes can import it. The default,
 :class:`warpworm.data.warp_stages.WarpStages`, is warpworm's simulator and renderer (loaded by :func:`load_stages`
 when the shards run: the job's own modules never import the simulator); tests plug in a closed-form double.
