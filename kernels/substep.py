@@ -2,7 +2,7 @@
 
 A substep of length dt finds the x minimising ½ |x − x̃|²_M / dt² + E(x) (x̃ the inertial prediction; E the bars,
 hinges with their fold barrier and panel contact, anchors) by Newton steps with the floor's contacts and friction
-updated between them (the floor's contact and friction: :mod:`.floor_contact`). Everything here is per vertex or per element, so the band
+(:mod:`.floor_contact`) updated between them. Everything here is per vertex or per element, so the band
 layout (:mod:`.implicit_euler`, one thread per world, element loops) and the tile layout (:mod:`.implicit_tile`, a
 block of threads per world, one row per thread) assemble the same numbers in the same order. The element adders
 take a ``row``: :data:`~.band_cholesky.ALL_ROWS` adds the whole element, a vertex index only what lands in that

@@ -44,7 +44,8 @@ class Stages(Protocol):
     def simulate_batch(self, params: WormParams, num_worlds: int, cfg: DatasetConfig) -> SimResult:
         """Settle for ``sim.settle_time`` then drive the EPM paths; snapshots at ``sim.frame_times``."""
 
-    def render_batch(self, frame: dict[str, np.ndarray], draws: RenderDraws, cfg: DatasetConfig) -> dict[str, np.ndarray]:
+    def render_batch(self, frame: dict[str, np.ndarray], draws: RenderDraws,
+                     cfg: DatasetConfig) -> dict[str, np.ndarray]:
         """Render B images of one snapshot per world and compute their labels.
 
         ``draws`` (:class:`warpworm.data.sampling.RenderDraws`) holds everything drawn for the B images: the worlds'

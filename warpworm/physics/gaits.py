@@ -40,8 +40,8 @@ inchworm       north pole up (θ = +π/2): anterior half an   between centre and
                                                                                                   centre and tail
 =============  ===========================================  ====================================  =====================
 
-:func:`preset_params` returns :class:`~warpworm.physics.params.WormParams` with a gait's tuned path (w, a, h, period); the
-tuning is ``warpworm search-gait``, a batched grid search as the paper's Table I.
+:func:`preset_params` returns :class:`~warpworm.physics.params.WormParams` with a gait's tuned path (w, a, h,
+period); the tuning is ``warpworm search-gait``, a batched grid search as the paper's Table I.
 """
 
 from __future__ import annotations

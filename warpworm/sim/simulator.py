@@ -76,7 +76,8 @@ SOLVERS = ("band", "tile-band", "tile-dense")
 
 
 def make_solver(name: str, model: Model, settings: SubstepSettings) -> SolverBase:
-    """The solver :data:`SOLVERS` calls ``name``: :class:`BandedSolver` or a :class:`TileSolver` of that factorization."""
+    """The solver :data:`SOLVERS` calls ``name``: :class:`BandedSolver` or a :class:`TileSolver` of that
+    factorization."""
     if name not in SOLVERS:
         raise ValueError(f"solver: got {name!r}; expected one of {SOLVERS}")
     if name == "band":

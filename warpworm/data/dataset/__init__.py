@@ -18,8 +18,8 @@ depth); small per-sample labels are buffered per shard and stored contiguous and
 sample; chunking them costs more than it saves). Rows are always written as contiguous ranges.
 
 Modules: ``schema`` (FIELDS, SCHEMA, docs table), ``files`` (errors, fail-safe file, atomic JSON, SHA-256), ``folder``
-(shard names, manifest, shard checks, temporaries), ``writer`` (ShardWriter), ``lock`` (FolderLock), ``output_dir`` (check_output_dir: the folder's rule before any work), ``reader``
-(DatasetReader, open, WormDataset). Every public name is importable from here.
+(shard names, manifest, shard checks, temporaries), ``writer`` (ShardWriter), ``lock`` (FolderLock), ``output_dir``
+(check_output_dir: the folder's rule before any work), ``reader`` (DatasetReader, open, WormDataset). Every public name is importable from here.
 """
 
 from __future__ import annotations
