@@ -65,7 +65,10 @@ def trace_generate(config: str, num: int, out: Path) -> dict:
 
     for name in ("warpworm.data.config", "warpworm.data.dataset", "warpworm.data.job", "warpworm.data.stages",
                  "warpworm.data.warp_stages", "warpworm.data.workers", "warpworm.data.previews"):
-        importlib.import_module(name)  # module bodies run before the walk: it follows calls, not imports
+        try:
+            importlib.import_module(name)  # module bodies run before the walk: it follows calls, not imports
+        except ModuleNotFoundError:  # an older tree without it
+            pass
     children: dict[tuple, list] = {}
     seen_edges: set = set()
 
