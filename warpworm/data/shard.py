@@ -30,7 +30,6 @@ from warpworm import ids
 from warpworm.data import dataset as ds
 from warpworm.data.config import PARAM_SPECS, DatasetConfig
 from warpworm.data.sampling import RenderDraws, draw_views, draw_worlds
-from warpworm.data.stages import load_stages
 from warpworm.render.placement import MATERIALS
 
 
@@ -164,9 +163,9 @@ class _WriteBehind:
 
 
 def run_shard(cfg: DatasetConfig, out_dir, k: int, stages, progress=None) -> ShardStats:
-    """Produce and commit shard ``k``; the written content depends only on (cfg, k)."""
+    """Produce and commit shard ``k`` with ``stages`` (a loaded stages object, :class:`warpworm.data.stages.Stages`);
+    the written content depends only on (cfg, k)."""
     t_start = time.perf_counter()
-    stages = load_stages(stages)
     start, stop = cfg.shard_range(k)
     F = cfg.samples_per_trajectory  # K views x frames
     stats = ShardStats(index=k, count=stop - start)

@@ -37,6 +37,8 @@ from warpworm.data.stages import load_stages
 
 _progress_queue = None
 _in_shard = False
+_stages = None
+"""This worker process's stages object, loaded once from the job's spec (:func:`_init_worker`)."""
 
 
 def _worker_signal(signum, frame):
@@ -49,8 +51,8 @@ def _worker_signal(signum, frame):
     os._exit(128 + signum)
 
 
-def _init_worker(q, parent_pid: int, stages=None):
-    global _progress_queue
+def _init_worker(q, parent_pid: int, stages):
+    global _progress_queue, _stages
 
     _progress_queue = q
     for sig in (signal.SIGTERM, signal.SIGINT):
@@ -63,10 +65,10 @@ def _init_worker(q, parent_pid: int, stages=None):
             time.sleep(0.5)
 
     threading.Thread(target=watchdog, daemon=True, name="warpworm-parent-watchdog").start()
-    if stages is not None:  # heavy imports (Warp, the simulator, the renderer) before the first shard
-        preload = getattr(load_stages(stages), "preload", None)
-        if preload is not None:
-            preload()
+    _stages = load_stages(stages)
+    preload = getattr(_stages, "preload", None)
+    if preload is not None:  # heavy imports (Warp, the simulator, the renderer) before the first shard
+        preload()
 
 
 def _report(n: int):
@@ -74,11 +76,11 @@ def _report(n: int):
         _progress_queue.put(n)
 
 
-def _run_shard_task(cfg, out, k, stages):
+def _run_shard_task(cfg, out, k):
     global _in_shard
     _in_shard = True
     try:
-        return run_shard(cfg, out, k, stages, progress=_report)
+        return run_shard(cfg, out, k, _stages, progress=_report)
     except Interrupted as exc:  # the temporary is gone (run_shard aborted the writer): stop this process now
         os._exit(128 + exc.signum)
     finally:
@@ -89,12 +91,16 @@ class WorkerError(RuntimeError):
     """A worker failed; completed shards are intact and ``--resume`` continues the job."""
 
 
-def run_shards(cfg, out, todo: list[int], stages, *, workers: int = 1, engine: str = "local",
+def run_shards(cfg, out, todo: list[int], stages, *, loaded=None, workers: int = 1, engine: str = "local",
                address: str | None = None,
                on_progress: Callable[[int], None] = lambda n: None) -> Iterator[ShardStats]:
     """Run shards ``todo``, yielding each one's :class:`~warpworm.data.shard.ShardStats` as it is committed (in the
     order they finish); calls ``on_progress(samples)`` as batches finish. Closing the generator early (the caller
-    stopped: a signal, an error) stops the workers; use it in ``contextlib.closing``."""
+    stopped: a signal, an error) stops the workers; use it in ``contextlib.closing``.
+
+    ``stages``: the ``"module:attr"`` spec worker processes and Ray tasks load (or a stages object, in this process
+    only); ``loaded``: the stages object already loaded here, for shards run in this process (None: load ``stages``).
+    """
     if not todo:
         return
     if engine == "ray":
@@ -103,8 +109,9 @@ def run_shards(cfg, out, todo: list[int], stages, *, workers: int = 1, engine: s
     if engine != "local":
         raise ValueError(f"--engine: got {engine!r}; expected 'local' or 'ray'")
     if workers <= 1:
+        here = load_stages(stages) if loaded is None else loaded
         for k in todo:
-            yield run_shard(cfg, out, k, stages, progress=on_progress)
+            yield run_shard(cfg, out, k, here, progress=on_progress)
         return
     yield from _run_local_pool(cfg, out, todo, stages, workers, on_progress)
 
@@ -131,7 +138,7 @@ def _run_local_pool(cfg, out, todo, stages, workers, on_progress):
     pool = ProcessPoolExecutor(max_workers=min(workers, len(todo)), mp_context=ctx, initializer=_init_worker,
                                initargs=(q, os.getpid(), stages))
     try:
-        pending = {pool.submit(_run_shard_task, cfg, str(out), k, stages): k for k in todo}  # starts the workers
+        pending = {pool.submit(_run_shard_task, cfg, str(out), k): k for k in todo}  # starts the workers
         while pending:
             finished, _ = wait(pending, return_when=FIRST_COMPLETED)
             for fut in finished:
@@ -214,7 +221,7 @@ def _remove_dead_attempts(out, shards) -> list[str]:
 
 def _ray_shard(cfg, out, k, stages):
     # Ray workers may not see the driver's sys.path (tests' fake stages): it travels with the task
-    return run_shard(cfg, out, k, stages)
+    return run_shard(cfg, out, k, load_stages(stages))
 
 
 def default_workers() -> int:

@@ -26,11 +26,13 @@ from __future__ import annotations
 
 from warpworm.data.dataset.files import (DatasetError, DatasetWriteError, FailSafeFile, atomic_write_json,
                                          file_sha256, write_error)
-from warpworm.data.dataset.folder import MANIFEST, SHARD_RE, clean_temporaries, read_manifest, shard_name, shard_problem
+from warpworm.data.dataset.folder import (MANIFEST, SHARD_RE, clean_temporaries, manifest, read_manifest, shard_name,
+                                          shard_problem)
 from warpworm.data.dataset.output_dir import check_output_dir
 from warpworm.data.dataset.lock import LOCK_NAME, DatasetLockedError, FolderLock, lock_holder
 from warpworm.data.dataset.reader import DatasetReader, WormDataset, open  # noqa: A004 - mirrors h5py.File / zarr.open
 from warpworm.data.dataset.schema import (FIELDS, FORMAT, IMAGE_KEYS, PARAMS_FIELD, QUATERNION_ORDER, SCHEMA,
                                           SCHEMA_TABLE_BEGIN, SCHEMA_TABLE_END, SCHEMA_VERSION, SEGMENTATION_IDS,
-                                          SHAPE_SYMBOLS, UNITS, Field, resolve_shape, schema_markdown, warp_version)
+                                          SHAPE_SYMBOLS, UNITS, Field, resolve_shape, schema_markdown, versions,
+                                          warp_version)
 from warpworm.data.dataset.writer import ShardWriter

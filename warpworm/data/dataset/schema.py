@@ -4,14 +4,26 @@ and the docs table generated from it."""
 from __future__ import annotations
 
 import functools
+import sys
 from dataclasses import dataclass
 
+import h5py
+import numpy as np
+
+import warpworm
 from warpworm import ids
 
 SCHEMA_VERSION = 1
 FORMAT = "warpworm-dataset"
 """The ``format`` of every shard's root attributes and of the manifest."""
 QUATERNION_ORDER = "wxyz"
+
+
+@functools.lru_cache(maxsize=None)
+def versions() -> dict[str, str]:
+    """The versions of the code that writes a dataset (the manifest's ``versions``)."""
+    return {"warpworm": warpworm.__version__, "warp": warp_version(), "numpy": np.__version__,
+            "h5py": h5py.__version__, "python": sys.version.split()[0]}
 
 
 @functools.lru_cache(maxsize=None)
