@@ -2,11 +2,11 @@
 
 A substep of length dt finds the x minimising ½ |x − x̃|²_M / dt² + E(x) (x̃ the inertial prediction; E the bars,
 hinges with their fold barrier and panel contact, anchors) by Newton steps with the floor's contacts and friction
-(:mod:`.floor_contact`) updated between them. Everything here is per vertex or per element, so the band
+(:mod:`.floor_contact`) updated between them. Everything here is per vertex or per element, so the banded
 layout (:mod:`.implicit_euler`, one thread per world, element loops) and the tile layout (:mod:`.implicit_tile`, a
 block of threads per world, one row per thread) assemble the same numbers in the same order. The element adders
-take a ``row``: :data:`~.band_cholesky.ALL_ROWS` adds the whole element, a vertex index only what lands in that
-vertex's row of the gradient and of the lower block band. Per-vertex phases take (``first``, ``stride``): the band
+take a ``row``: :data:`~.banded_cholesky.ALL_ROWS` adds the whole element, a vertex index only what lands in that
+vertex's row of the gradient and of the lower block-banded part. Per-vertex phases take (``first``, ``stride``): the banded
 layout passes (0, 1), the tile layout (lane, block_dim). float32, SI units.
 """
 
@@ -16,7 +16,7 @@ import warp as wp
 
 from warpworm import ids
 
-from .band_cholesky import ALL_ROWS, band_add_block, band_add_gauss_newton3, band_add_gauss_newton4
+from .banded_cholesky import ALL_ROWS, banded_add_block, banded_add_gauss_newton3, banded_add_gauss_newton4
 from .common import (hinge_angle_at_substep_end, dihedral_angle_gradient_and_normals, fold_range,
                      wing_contact_of_normal, wrap_angle)
 from .floor_contact import (CONTACT_FIXED, CONTACT_FREE, CONTACT_SLIDING, CONTACT_STUCK, RELEASED_LET_GO,
@@ -64,7 +64,7 @@ class SubstepOptions:
     num_substeps: int  # substeps per launch
     newton: int  # Newton steps per substep at most (>= 2)
     newton_tol: float  # [m] a Newton step (the second or later) moving no vertex farther than this ends the substep
-    refactor: int  # 1: assemble and factor the Hessian at every Newton step; 0: chord steps (band layout only)
+    refactor: int  # 1: assemble and factor the Hessian at every Newton step; 0: chord steps (banded layout only)
     slip_speed: float  # static-friction regularisation ε [m/s]
     strain_limit: wp.array(dtype=float)  # (E,) |strain| beyond which a world explodes
     speed_limit: float  # [m/s] beyond which (or non-finite) a world explodes
@@ -92,10 +92,10 @@ class NewtonScratch:
 
     x_prev: wp.array2d(dtype=wp.vec3)  # (W, V) positions at the start of the substep [m]
     delta: wp.array2d(dtype=wp.vec3)  # (W, V) x − x̃ [m]
-    hess: wp.array3d(dtype=wp.mat33)  # (W, V, B + 1) lower block band of the Newton matrix
+    hess: wp.array3d(dtype=wp.mat33)  # (W, V, B + 1) lower block-banded part of the Newton matrix
     grad: wp.array2d(dtype=wp.vec3)  # (W, V) right-hand side, then the Newton step
     released: wp.array2d(dtype=wp.int32)  # (W, V) bit 0: let go of the floor this substep; above: stick/slip switches
-    newton_steps: wp.array(dtype=wp.int32)  # (W,) Newton steps taken, summed over substeps (band layout)
+    newton_steps: wp.array(dtype=wp.int32)  # (W,) Newton steps taken, summed over substeps (banded layout)
     newton_capped: wp.array(dtype=wp.int32)  # (W,) substeps that took every step without meeting the tolerance
     newton_factors: wp.array(dtype=wp.int32)  # (W,) Newton steps that assembled and factored the Hessian
 
@@ -339,7 +339,7 @@ def apply_step(world: int, i: int, dx: wp.vec3, s: BarHingeState, w: NewtonScrat
 
 @wp.func
 def inertia_row(world: int, i: int, c: WorldCoefficients, m: BarHingeModel, with_hessian: bool, w: NewtonScratch):
-    """Start vertex ``i``'s row of ``grad`` (and of the band) with the inertia term M (x − x̃) / dt²; m/dt² on the
+    """Start vertex ``i``'s row of ``grad`` (and of the banded matrix) with the inertia term M (x − x̃) / dt²; m/dt² on the
     diagonal in every direction, the fixed ones too (keeps the matrix definite; the projection decouples them)."""
     m_dt2 = mass_over_dt2(m.inv_mass[c.im_row, i], c.inv_dt2)
     w.grad[world, i] = w.delta[world, i] * m_dt2  # delta is 0 for a vertex of infinite mass
@@ -392,11 +392,11 @@ def add_bar(world: int, e: int, row: int, c: WorldCoefficients, m: BarHingeModel
         nn = wp.outer(n, n)
         kb = k_axial * nn + k_trans * (wp.identity(n=3, dtype=float) - nn)
         if in_row(row, a):
-            band_add_block(world, w.hess, a, a, kb)
+            banded_add_block(world, w.hess, a, a, kb)
         if in_row(row, b):
-            band_add_block(world, w.hess, b, b, kb)
+            banded_add_block(world, w.hess, b, b, kb)
         if in_row(row, wp.max(a, b)):
-            band_add_block(world, w.hess, a, b, -kb)
+            banded_add_block(world, w.hess, a, b, -kb)
     return 0
 
 
@@ -428,7 +428,7 @@ def add_wing(world: int, row: int, n: wp.vec3, len2: float, p0: wp.vec3, p1: wp.
         add_to_row(world, row, b, gb * f, w)
         add_to_row(world, row, cc, gc * f, w)
         if with_hessian:
-            band_add_gauss_newton3(world, w.hess, row, kappa, a, b, cc, ga, gb, gc)
+            banded_add_gauss_newton3(world, w.hess, row, kappa, a, b, cc, ga, gb, gc)
 
 
 @wp.func
@@ -441,7 +441,7 @@ def add_hinge_rows(world: int, row: int, torque: float, stiff: float, i0: int, i
     add_to_row(world, row, i2, g2 * torque, w)
     add_to_row(world, row, i3, g3 * torque, w)
     if with_hessian:
-        band_add_gauss_newton4(world, w.hess, row, stiff, i0, i1, i2, i3, g0, g1, g2, g3)
+        banded_add_gauss_newton4(world, w.hess, row, stiff, i0, i1, i2, i3, g0, g1, g2, g3)
 
 
 @wp.func
@@ -478,7 +478,7 @@ def add_anchors(world: int, row: int, c: WorldCoefficients, m: BarHingeModel,
             if ka > 0.0:
                 w.grad[world, pv] = w.grad[world, pv] + (s.x[world, pv] - anchor_target[world, an]) * ka
                 if with_hessian:
-                    band_add_block(world, w.hess, pv, pv, wp.identity(n=3, dtype=float) * ka)
+                    banded_add_block(world, w.hess, pv, pv, wp.identity(n=3, dtype=float) * ka)
 
 
 @wp.func
@@ -504,17 +504,17 @@ def project_row(world: int, u: int, c: WorldCoefficients, m: BarHingeModel, s: B
     """Row ``u`` of the Newton matrix restricted to the vertices' allowed directions: block (u, v) -> P_u B P_v; the
     removed directions of the diagonal block get m/dt² back (keeps the matrix definite; their update is zero)."""
     su = s.contact[world, u]
-    for band in range(w.hess.shape[2]):
-        vv = u - band
+    for off in range(w.hess.shape[2]):
+        vv = u - off
         if vv >= 0:
             sv = s.contact[world, vv]
             if su != CONTACT_FREE or sv != CONTACT_FREE:
                 pu = dof_projector(su, c.floor_n)
-                blk = pu * w.hess[world, u, band] * dof_projector(sv, c.floor_n)
-                if band == 0:
+                blk = pu * w.hess[world, u, off] * dof_projector(sv, c.floor_n)
+                if off == 0:
                     blk = blk + (wp.identity(n=3, dtype=float) - pu) * mass_over_dt2(m.inv_mass[c.im_row, u],
                                                                                     c.inv_dt2)
-                w.hess[world, u, band] = blk
+                w.hess[world, u, off] = blk
 
 
 @wp.func

@@ -41,7 +41,7 @@ def _scalar_param(value, num_worlds: int, name: str) -> np.ndarray:
 
 
 def half_bandwidth(edges: np.ndarray, hinges: np.ndarray) -> int:
-    """Half-bandwidth, in 3×3 vertex blocks, of the implicit solver's Newton matrix (kernels/band_cholesky.py): every
+    """Half-bandwidth, in 3×3 vertex blocks, of the implicit solver's Newton matrix (kernels/banded_cholesky.py): every
     bar and crease couples the vertices it touches, so it is the largest vertex-index span of an element."""
     return max(int(np.ptp(np.asarray(edges), axis=1).max(initial=0)),
                int(np.ptp(np.asarray(hinges), axis=1).max(initial=0)))

@@ -109,10 +109,10 @@ class Simulator:
             the substep (default 1e-4; 0 takes every step). A fixed step count is not converged through a
             snap-through.
         chord: chord Newton steps (reuse the last factor; :mod:`warpworm.kernels.implicit_euler`); default on for
-            the band solver, which alone has them.
+            the banded solver, which alone has them.
         slip_speed: static friction's regularisation speed ε [m/s]: a worm held by friction creeps at most ~ε.
         solver: one of :data:`SOLVERS`: ``"band"`` one thread per world (:class:`~warpworm.sim.solver.BandedSolver`);
-            ``"tile-band"`` / ``"tile-dense"`` a block of threads per world, the band factored column-parallel
+            ``"tile-band"`` / ``"tile-dense"`` a block of threads per world, the banded matrix factored column-parallel
             (bit-identical to "band") or a dense tile Cholesky in shared memory
             (:class:`~warpworm.sim.tile_solver.TileSolver`; the GPU layouts).
     """

@@ -42,7 +42,7 @@ class SubstepSettings:
     newton_tol: float = 1.0e-4
     """[m/s] a Newton step (the second or later) changing no vertex's velocity by more than this ends the substep."""
     chord: bool = False
-    """Chord Newton steps (band layout only)."""
+    """Chord Newton steps (banded layout only)."""
     slip_speed: float = 1.0e-5
     """Static friction's regularisation speed ε [m/s]."""
     strain_limit: float = 0.5
@@ -154,7 +154,7 @@ class SolverBase:
 
 
 class BandedSolver(SolverBase):
-    """One thread per world, block-band Cholesky, chord steps if ``settings.chord``
+    """One thread per world, block-banded Cholesky, chord steps if ``settings.chord``
     (:func:`warpworm.kernels.implicit_euler.implicit_step`)."""
 
     def _record(self, state, control, num_substeps: int):

@@ -1,7 +1,7 @@
 """The block-per-world solver (:mod:`warpworm.kernels.implicit_tile`), the GPU layout of the substep.
 
-:class:`TileSolver` is a :class:`~warpworm.sim.solver.SolverBase`: ``step(state, n, control)`` runs the band
-layout's substeps with one block of ``block_dim`` threads per world instead of one thread. It assembles the band
+:class:`TileSolver` is a :class:`~warpworm.sim.solver.SolverBase`: ``step(state, n, control)`` runs the banded
+layout's substeps with one block of ``block_dim`` threads per world instead of one thread. It assembles the banded
 layout's Newton systems bit for bit; ``factorization="band"`` also factors them with the same arithmetic (identical
 results on the CPU), "dense" (``wp.tile_cholesky``) rounds differently.
 """
