@@ -13,6 +13,7 @@ process (CPU time of all its threads): what one dedicated core would deliver, mu
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
 
 import numpy as np
@@ -203,12 +204,13 @@ PRODUCTION_SENSOR = {"wb_r": 1.0, "wb_g": 1.0, "wb_b": 1.0, "hue_deg": 0.0, "sat
 """Sensor values near the middle of the dataset's ``sensor.*`` ranges (JPEG set per row)."""
 
 
-def production_rows(size: int = 256, worlds: int = 8, cameras: int = 2, repeats: int = 3, device=None) -> list[dict]:
+def production_rows(size: int = 256, worlds: int = 8, cameras: int = 2, repeats: int = 7, device=None) -> list[dict]:
     """CPU ms per image of the default look, production's looks, + shadows, + supersample 2 and a lens of k1 -0.25,
     k2 0.08 (gains on), + the sensor (blur, noise, colour; on the device), + a JPEG round trip of half the images
     (quality 80, on the host): ``size``² px, posed worms, and each row's cost against the default look in the same
-    run (``python3 benchmarks/bench_render.py --production [--json OUT]``; best of ``repeats``, CPU time of this
-    process, so other load on the machine matters little)."""
+    run (``python3 benchmarks/bench_render.py --production [--json OUT]``). The cases take turns, ``repeats``
+    rounds, and each keeps its best CPU time of this process, so a drift in the machine's speed or other load on it
+    touches every row alike."""
     quiet_warp()
     dist = (-0.25, 0.08, 0.002, -0.002, 0.0)
     full = {"shadows": True, "supersample": 2, "gain": True, "dist": dist}
@@ -222,7 +224,7 @@ def production_rows(size: int = 256, worlds: int = 8, cameras: int = 2, repeats:
     N = worlds * cameras
     cams = sample_cameras(np.arange(N), states["positions"], width=size, height=size,
                           world_index=np.arange(N) % worlds)
-    rows = []
+    calls = []
     for name, overrides, opts, jpeg in cases:
         _, scene, view, opts = _option_case(overrides, opts, states, pattern, cams)
         sensor = None
@@ -230,9 +232,15 @@ def production_rows(size: int = 256, worlds: int = 8, cameras: int = 2, repeats:
             values = dict(PRODUCTION_SENSOR, jpeg_quality=np.where(np.arange(N) % 2 == 0, jpeg, 0))
             sensor = SensorBatch.from_values(values, np.arange(N))
         renderer = Renderer(size, size, device=device, **opts)
-        renderer.render(scene, view, sensor=sensor)  # warm-up
-        _, c = _best_time(lambda: renderer.render(scene, view, sensor=sensor), repeats, cpu=True)
-        rows.append({"case": name, "size": size, "images": N, "cpu_ms_per_image": c / N * 1e3})
+        call = functools.partial(renderer.render, scene, view, sensor=sensor)
+        call()  # warm-up: kernel load, buffers
+        calls.append(call)
+    best = [float("inf")] * len(cases)
+    for _ in range(repeats):
+        for i, call in enumerate(calls):
+            best[i] = min(best[i], _best_time(call, 1, cpu=True)[1])
+    rows = [{"case": name, "size": size, "images": N, "cpu_ms_per_image": c / N * 1e3}
+            for (name, *_), c in zip(cases, best)]
     for r in rows:
         r["x_default"] = r["cpu_ms_per_image"] / rows[0]["cpu_ms_per_image"]
     return rows

@@ -200,13 +200,14 @@ class Renderer:
         lights.map_side = self.shadow_map
         lights.map_tiles = -(-self.shadow_map // shk.SHADOW_TILE)
         if maps is None:  # never read: placeholders
-            maps = {"first": wp.zeros(1, dtype=wp.int32, device=d), "key": wp.zeros((1, 1), dtype=wp.int64, device=d),
+            maps = {"first": wp.zeros(1, dtype=wp.int32, device=d), "depth": wp.zeros((1, 1), dtype=float, device=d),
                     "rot": wp.zeros(1, dtype=wp.mat33, device=d), "trans": wp.zeros(1, dtype=wp.vec3, device=d),
                     "intr": wp.zeros(1, dtype=wp.vec4, device=d), "size": wp.zeros(1, dtype=float, device=d),
-                    "tile_min": wp.zeros((1, 1), dtype=wp.int64, device=d)}
-        lights.map_first, lights.map_key, lights.map_rot = maps["first"], maps["key"], maps["rot"]
+                    "tile_min": wp.zeros((1, 1), dtype=float, device=d),
+                    "reach": wp.zeros((1, 1), dtype=float, device=d)}
+        lights.map_first, lights.map_depth, lights.map_rot = maps["first"], maps["depth"], maps["rot"]
         lights.map_trans, lights.map_intr, lights.map_light_size = maps["trans"], maps["intr"], maps["size"]
-        lights.map_tile_min = maps["tile_min"]
+        lights.map_tile_min, lights.map_reach = maps["tile_min"], maps["reach"]
         return lights
 
     def _shadow_maps(self, s: dict, worlds: np.ndarray) -> shk.Lights:
@@ -218,8 +219,9 @@ class Renderer:
         M = len(cams["world"])
         first = np.full(scene.num_worlds, -1, np.int32)
         first[worlds] = np.arange(len(worlds), dtype=np.int32) * (M // len(worlds))
+        key = wp.full((M, S * S), EMPTY_KEY, dtype=wp.int64, device=d)
         maps = {"first": wp.array(first, dtype=wp.int32, device=d),
-                "key": wp.full((M, S * S), EMPTY_KEY, dtype=wp.int64, device=d),
+                "depth": wp.empty((M, S * S), dtype=float, device=d),
                 "rot": _vec_array(cams["R"], wp.mat33, d), "trans": _vec_array(cams["t"], wp.vec3, d),
                 "intr": _vec_array(cams["intr"], wp.vec4, d),
                 "size": wp.array(cams["size"].astype(np.float32), dtype=float, device=d)}
@@ -228,11 +230,14 @@ class Renderer:
                   inputs=[s["triangles"], s["tri_label"], s["vertices"],
                           wp.array(cams["world"].astype(np.int32), dtype=wp.int32, device=d), maps["rot"],
                           maps["trans"], maps["intr"], S, S, self.near],
-                  outputs=[maps["key"], mask])
+                  outputs=[key, mask])
         tiles = -(-S // shk.SHADOW_TILE)
-        maps["tile_min"] = wp.empty((M, tiles * tiles), dtype=wp.int64, device=d)
-        wp.launch(shk.shadow_tile_min, dim=(M, tiles * tiles), device=d, inputs=[maps["key"], S, tiles],
-                  outputs=[maps["tile_min"]])
+        maps["tile_min"] = wp.empty((M, tiles * tiles), dtype=float, device=d)
+        maps["reach"] = wp.empty((M, tiles * tiles), dtype=float, device=d)
+        wp.launch(shk.shadow_tile_min, dim=(M, tiles * tiles), device=d, inputs=[key, S, tiles],
+                  outputs=[maps["depth"], maps["tile_min"]])
+        wp.launch(shk.shadow_reach_min, dim=(M, tiles * tiles), device=d, inputs=[maps["tile_min"], tiles],
+                  outputs=[maps["reach"]])
         return self._lights(s["light_arrays"], maps)
 
     # -- rendering -----------------------------------------------------------------------------------------------------

@@ -224,7 +224,7 @@ def sample_point(x: int, y: int, i: int, j: int, sub: int, lens: int, u0: float,
     return fx, fy
 
 
-@wp.func
+@wp.func(inline=True)
 def shade_sample(look: Look, lights: Lights, w: int, first: int, hit: Hit, albedo: wp.vec3, eye: wp.vec3,
                  bg: wp.vec3, transmit: float, gain: wp.vec3) -> wp.vec3:
     """Display-linear colour in [0, 1] of a sample ``hit`` of albedo ``albedo`` (a group's mean): lit and shadowed,
@@ -357,7 +357,11 @@ def resolve_samples(
         seg[img, pix] = wp.uint8(out_label)
         worm_mask[img, pix] = label_mask[img, grid_key_index(u0, v0, grid_w, grid_h)]
 
-        # colour: sub x sub samples, grouped by the surface they land on (the first MAX_GROUPS surfaces)
+        # colour: sub x sub samples, grouped by the surface they land on: the first sample's surface in registers
+        # (most pixels see one surface), the next MAX_GROUPS - 1 surfaces in small vectors
+        hit0 = Hit()
+        count0 = int(0)
+        alb0 = wp.vec3(0.0)
         gid = GroupIds()
         gfirst = GroupIds()
         gcount = GroupIds()
@@ -365,7 +369,6 @@ def resolve_samples(
         gg = GroupSums()
         gb = GroupSums()
         ng = int(0)
-        hit0 = Hit()
         acc = wp.vec3(0.0)
         for j in range(sub):
             for i in range(sub):
@@ -373,35 +376,42 @@ def resolve_samples(
                 hit = sample_hit(sample_key, img, fx, fy, fw, fhgt, triangles, tri_label, vertices, texcoords, w, R,
                                  t, Rt, kf, eye, fn, fa, fb, floor_eye, fh)
                 alb = surface_albedo(look, w, hit.label, hit.mat)
-                g = int(-1)
-                for q in range(ng):
-                    if gid[q] == hit.surface:
-                        g = q
-                if g < 0 and ng < MAX_GROUPS:
-                    g = ng
-                    gid[g] = hit.surface
-                    gfirst[g] = j * sub + i
-                    gcount[g] = 0
-                    gr[g] = 0.0
-                    gg[g] = 0.0
-                    gb[g] = 0.0
-                    ng = ng + 1
-                    if g == 0:
-                        hit0 = hit
-                if g >= 0:
-                    gcount[g] = gcount[g] + 1
-                    gr[g] = gr[g] + alb[0]
-                    gg[g] = gg[g] + alb[1]
-                    gb[g] = gb[g] + alb[2]
-                else:  # every group taken: this sample is lit on its own
-                    acc = acc + shade_sample(look, lights, w, first, hit, alb, eye, bg, transmit, gain)
-        for g in range(ng):
-            hit = hit0
-            if g > 0:  # the first sample of each further surface, again (most pixels see one surface)
-                first_sample = gfirst[g]
-                fx, fy = sample_point(x, y, first_sample % sub, first_sample / sub, sub, lens, u0, v0, jac)
-                hit = sample_hit(sample_key, img, fx, fy, fw, fhgt, triangles, tri_label, vertices, texcoords, w, R,
-                                 t, Rt, kf, eye, fn, fa, fb, floor_eye, fh)
+                if count0 == 0:
+                    hit0 = hit
+                    count0 = 1
+                    alb0 = alb
+                elif hit.surface == hit0.surface:
+                    count0 = count0 + 1
+                    alb0 = alb0 + alb
+                else:
+                    g = int(-1)
+                    for q in range(ng):
+                        if gid[q] == hit.surface:
+                            g = q
+                    if g < 0 and ng < MAX_GROUPS - 1:
+                        g = ng
+                        gid[g] = hit.surface
+                        gfirst[g] = j * sub + i
+                        gcount[g] = 0
+                        gr[g] = 0.0
+                        gg[g] = 0.0
+                        gb[g] = 0.0
+                        ng = ng + 1
+                    if g >= 0:
+                        gcount[g] = gcount[g] + 1
+                        gr[g] = gr[g] + alb[0]
+                        gg[g] = gg[g] + alb[1]
+                        gb[g] = gb[g] + alb[2]
+                    else:  # every group taken: this sample is lit on its own
+                        acc = acc + shade_sample(look, lights, w, first, hit, alb, eye, bg, transmit, gain)
+        inv_n0 = 1.0 / float(count0)
+        color0 = shade_sample(look, lights, w, first, hit0, alb0 * inv_n0, eye, bg, transmit, gain)
+        acc = acc + color0 * float(count0)
+        for g in range(ng):  # the first sample of each further surface, again
+            first_sample = gfirst[g]
+            fx, fy = sample_point(x, y, first_sample % sub, first_sample / sub, sub, lens, u0, v0, jac)
+            hit = sample_hit(sample_key, img, fx, fy, fw, fhgt, triangles, tri_label, vertices, texcoords, w, R,
+                             t, Rt, kf, eye, fn, fa, fb, floor_eye, fh)
             inv_n = 1.0 / float(gcount[g])
             alb = wp.vec3(gr[g] * inv_n, gg[g] * inv_n, gb[g] * inv_n)
             color = shade_sample(look, lights, w, first, hit, alb, eye, bg, transmit, gain)

@@ -3,7 +3,7 @@ colour (white balance, hue and saturation, contrast, brightness), a Gaussian def
 read + shot noise with the final quantization. Each image has its own values; the arithmetic follows OpenCV's
 (``cv2.cvtColor`` float HSV, ``cv2.GaussianBlur`` with ``ksize (0, 0)``: kernel side ``round(8 sigma + 1) | 1``,
 ``BORDER_REFLECT_101``), so the host reference (:func:`warpworm.render.sensor.apply_sensor_opencv`) agrees to
-float rounding. Noise comes from Warp's counter-based generator keyed by each image's seed and pixel.
+float rounding. Noise comes from Warp's counter-based generator keyed by each image's seed and row.
 """
 
 from __future__ import annotations
@@ -155,6 +155,21 @@ def sensor_blur_rows(
             dst[img, y * width + x] = blur_taps(src, img, y * width, x, width, 1, weights, r)
 
 
+@wp.func
+def gaussian_pair(state: wp.uint32):
+    """Two independent standard normal draws from ``state`` by Marsaglia's polar method (one log and one square
+    root per pair, no trigonometry; about 1.27 pairs of uniforms per pair on average) and the advanced state."""
+    s = float(2.0)
+    x = float(0.0)
+    y = float(0.0)
+    while s >= 1.0 or s == 0.0:
+        x = 2.0 * wp.randf(state) - 1.0
+        y = 2.0 * wp.randf(state) - 1.0
+        s = x * x + y * y
+    f = wp.sqrt(-2.0 * wp.log(s) / s)
+    return wp.vec2(x * f, y * f), state
+
+
 @wp.kernel
 def sensor_blur_cols_noise(
     src: wp.array2d(dtype=wp.vec3),
@@ -168,24 +183,35 @@ def sensor_blur_cols_noise(
     rgb: wp.array2d(dtype=wp.vec3ub),
 ):
     """The blur along columns, then noise of std ``noise[img][0] + noise[img][1] sqrt(clip(c, 0, 1))`` (read and
-    shot, fractions of full scale; a normal draw per channel from ``seed[img]`` and the pixel) and the 8-bit
-    quantization ``floor(clip(c, 0, 1) 255 + 0.5)`` (launched (N, H): a row per thread)."""
+    shot, fractions of full scale; a normal draw per channel from the row's stream, keyed by ``seed[img]`` and the
+    row, three polar pairs per two pixels) and the 8-bit quantization ``floor(clip(c, 0, 1) 255 + 0.5)`` (launched
+    (N, H): a row per thread, on every device, so the draws do not depend on it)."""
     img, y = wp.tid()
     r = radius[img]
     ns = noise[img]
     noisy = ns[0] > 0.0 or ns[1] > 0.0
+    state = wp.rand_init(seed[img], y)
+    z = wp.vec3(0.0)
+    z_next = wp.vec3(0.0)
     for x in range(width):
         pix = y * width + x
         c = src[img, pix]
         if r != 0:
             c = blur_taps(src, img, x, y, height, width, weights, r)
         if noisy:
-            state = wp.rand_init(seed[img], pix)
-            for ch in range(3):
-                std = ns[0]
-                if ns[1] > 0.0:
-                    std = ns[0] + ns[1] * wp.sqrt(wp.clamp(c[ch], 0.0, 1.0))
-                c[ch] = c[ch] + wp.randn(state) * std
+            if x % 2 == 0:  # this pixel's and the next one's six draws
+                p0, state = gaussian_pair(state)
+                p1, state = gaussian_pair(state)
+                p2, state = gaussian_pair(state)
+                z = wp.vec3(p0[0], p0[1], p1[0])
+                z_next = wp.vec3(p1[1], p2[0], p2[1])
+            else:
+                z = z_next
+            std = wp.vec3(ns[0])
+            if ns[1] > 0.0:
+                std = std + ns[1] * wp.vec3(wp.sqrt(wp.clamp(c[0], 0.0, 1.0)), wp.sqrt(wp.clamp(c[1], 0.0, 1.0)),
+                                            wp.sqrt(wp.clamp(c[2], 0.0, 1.0)))
+            c = c + wp.cw_mul(z, std)
         rgb[img, pix] = wp.vec3ub(wp.uint8(int(wp.clamp(c[0], 0.0, 1.0) * 255.0 + 0.5)),
                                   wp.uint8(int(wp.clamp(c[1], 0.0, 1.0) * 255.0 + 0.5)),
                                   wp.uint8(int(wp.clamp(c[2], 0.0, 1.0) * 255.0 + 0.5)))

@@ -19,7 +19,7 @@ from warpworm.render.raster_math import (
     spec_power,
     wrow,
 )
-from warpworm.render.shadow_kernels import Lights, is_dark, point_light, shadow_factor
+from warpworm.render.shadow_kernels import Lights, is_dark, point_light, visibility
 
 wp.set_module_options({"enable_backward": False})
 
@@ -55,33 +55,36 @@ def light_surface(albedo: wp.vec3, spec: wp.vec2, p: wp.vec3, n: wp.vec3, to_eye
 
     ``to_eye`` points from the surface toward the camera (any length); a point light's irradiance falls with the
     inverse square of the distance. Specular terms are evaluated only where ``spec[0] > 0`` (magnets), with
-    Schlick's approximation of the power, so matte surfaces pay for Lambert only. ``first``: the world's first
-    shadow map (< 0: unshadowed).
+    Schlick's approximation of the power, so matte surfaces pay for Lambert only; a light's shadow lookup serves
+    both terms. ``first``: the world's first shadow map (< 0: unshadowed).
     """
     sd = L.sun_dir[wrow(w, L.sun_dir.shape[0])]
     sc = L.sun_color[wrow(w, L.sun_color.shape[0])]
     wl = wrow(w, L.pos.shape[0])
+    shiny = spec[0] > 0.0
+    v = wp.vec3(0.0)
+    if shiny:
+        v = wp.normalize(to_eye)
     ndl = wp.max(wp.dot(n, sd), 0.0)
-    irr = L.ambient[wrow(w, L.ambient.shape[0])] + sc * shadow_factor(L, first, 0, ndl, p, n)
+    irr = L.ambient[wrow(w, L.ambient.shape[0])]
+    highlights = wp.vec3(0.0)
+    if ndl > 0.0:
+        vis = visibility(L, first, 0, p, n)
+        irr = irr + sc * (ndl * vis)
+        if shiny:
+            hs = wp.max(wp.dot(n, wp.normalize(sd + v)), 0.0)
+            highlights = sc * (spec[0] * spec_power(hs, spec[1]) * vis)
     for i in range(L.pos.shape[1]):
         if is_dark(L, wl, i):
             continue
         ldir, lpow, ndp = point_light(L, wl, i, p, n)
-        irr = irr + lpow * shadow_factor(L, first, 1 + i, ndp, p, n)
-    color = wp.cw_mul(albedo, irr)
-    if spec[0] > 0.0:
-        v = wp.normalize(to_eye)
-        hs = wp.max(wp.dot(n, wp.normalize(sd + v)), 0.0)
-        if ndl > 0.0:
-            color = color + sc * (spec[0] * spec_power(hs, spec[1]) * shadow_factor(L, first, 0, 1.0, p, n))
-        for i in range(L.pos.shape[1]):
-            if is_dark(L, wl, i):
-                continue
-            ldir, lpow, ndp = point_light(L, wl, i, p, n)
-            hl = wp.max(wp.dot(n, wp.normalize(ldir + v)), 0.0)
-            if ndp > 0.0:
-                color = color + lpow * (spec[0] * spec_power(hl, spec[1]) * shadow_factor(L, first, 1 + i, 1.0, p, n))
-    return color
+        if ndp > 0.0:
+            vis = visibility(L, first, 1 + i, p, n)
+            irr = irr + lpow * (ndp * vis)
+            if shiny:
+                hl = wp.max(wp.dot(n, wp.normalize(ldir + v)), 0.0)
+                highlights = highlights + lpow * (spec[0] * spec_power(hl, spec[1]) * vis)
+    return wp.cw_mul(albedo, irr) + highlights
 
 
 @wp.func
@@ -114,7 +117,7 @@ def paper_surface(albedo: wp.vec3, p: wp.vec3, n: wp.vec3, to_eye: wp.vec3, L: L
     sd = L.sun_dir[wrow(w, L.sun_dir.shape[0])]
     vis = float(1.0)
     if wp.dot(n, sd) + pb[0] > 0.0:
-        vis = shadow_factor(L, first, 0, 1.0, p, n)
+        vis = visibility(L, first, 0, p, n)
     color = color + paper_light(albedo, n, v, ndv, sd, L.sun_color[wrow(w, L.sun_color.shape[0])], vis, pb)
     wl = wrow(w, L.pos.shape[0])
     for i in range(L.pos.shape[1]):
@@ -123,7 +126,7 @@ def paper_surface(albedo: wp.vec3, p: wp.vec3, n: wp.vec3, to_eye: wp.vec3, L: L
         ldir, lpow, ndp = point_light(L, wl, i, p, n)
         vis = 1.0
         if wp.dot(n, ldir) + pb[0] > 0.0:
-            vis = shadow_factor(L, first, 1 + i, 1.0, p, n)
+            vis = visibility(L, first, 1 + i, p, n)
         color = color + paper_light(albedo, n, v, ndv, ldir, lpow, vis, pb)
     return color
 
@@ -288,11 +291,25 @@ def floor_albedo_at(look: Look, w: int, mat: wp.vec3) -> wp.vec3:
 @wp.func(inline=True)
 def floor_lit(look: Look, L: Lights, w: int, first: int, albedo: wp.vec3, p: wp.vec3, to_eye: wp.vec3) -> wp.vec3:
     """The floor of albedo ``albedo`` at ``p``: ambient + sun + every point light, and, for a glossy plate (floor
-    specular strength > 0), their highlights seen along ``to_eye``. Linear in ``albedo`` plus the highlights."""
+    specular strength > 0), their Blinn-Phong highlights seen along ``to_eye``, shadowed like the diffuse term (one
+    lookup per light serves both). Linear in ``albedo`` plus the highlights."""
     fn = look.floor_normal[wrow(w, look.floor_normal.shape[0])]
+    sd = L.sun_dir[wrow(w, L.sun_dir.shape[0])]
     sc = L.sun_color[wrow(w, L.sun_color.shape[0])]
-    ndl = wp.max(wp.dot(fn, L.sun_dir[wrow(w, L.sun_dir.shape[0])]), 0.0)
-    irr = L.ambient[wrow(w, L.ambient.shape[0])] + sc * shadow_factor(L, first, 0, ndl, p, fn)
+    spec = look.specular[wrow(w, look.specular.shape[0]), SEG_FLOOR]
+    glossy = spec[0] > 0.0  # a glossy plate (render.plate_materials)
+    v = wp.vec3(0.0)
+    if glossy:
+        v = wp.normalize(to_eye)
+    ndl = wp.max(wp.dot(fn, sd), 0.0)
+    irr = L.ambient[wrow(w, L.ambient.shape[0])]
+    highlights = wp.vec3(0.0)
+    if ndl > 0.0:
+        vis = visibility(L, first, 0, p, fn)
+        irr = irr + sc * (ndl * vis)
+        if glossy:
+            hs = wp.max(wp.dot(fn, wp.normalize(sd + v)), 0.0)
+            highlights = sc * (spec[0] * spec_power(hs, spec[1]) * vis)
     wl = wrow(w, L.pos.shape[0])
     for i in range(L.pos.shape[1]):
         if is_dark(L, wl, i):
@@ -300,35 +317,14 @@ def floor_lit(look: Look, L: Lights, w: int, first: int, albedo: wp.vec3, p: wp.
         to_lamp = L.pos[wl, i] - p
         inv_r2 = 1.0 / wp.max(wp.dot(to_lamp, to_lamp), 1.0e-6)
         ndp = wp.max(wp.dot(fn, to_lamp), 0.0) * wp.sqrt(inv_r2)
-        irr = irr + L.power[wl, i] * (shadow_factor(L, first, 1 + i, ndp, p, fn) * inv_r2)
-    color = wp.cw_mul(albedo, irr)
-    spec = look.specular[wrow(w, look.specular.shape[0]), SEG_FLOOR]
-    if spec[0] > 0.0:  # a glossy plate (render.plate_materials): Blinn-Phong highlights of every light
-        color = color + floor_highlights(L, w, first, spec, p, fn, to_eye)
-    return color
-
-
-@wp.func(inline=True)
-def floor_highlights(L: Lights, w: int, first: int, spec: wp.vec2, p: wp.vec3, fn: wp.vec3, to_eye: wp.vec3
-                     ) -> wp.vec3:
-    """Blinn-Phong highlights (strength, exponent ``spec``) of the sun and every point light on the floor at ``p``
-    seen along ``to_eye``, shadowed like the diffuse term."""
-    v = wp.normalize(to_eye)
-    sd = L.sun_dir[wrow(w, L.sun_dir.shape[0])]
-    out = wp.vec3(0.0)
-    if wp.dot(fn, sd) > 0.0:
-        hs = wp.max(wp.dot(fn, wp.normalize(sd + v)), 0.0)
-        out = L.sun_color[wrow(w, L.sun_color.shape[0])] * (spec[0] * spec_power(hs, spec[1]) *
-                                                       shadow_factor(L, first, 0, 1.0, p, fn))
-    wl = wrow(w, L.pos.shape[0])
-    for i in range(L.pos.shape[1]):
-        if is_dark(L, wl, i):
-            continue
-        ldir, lpow, ndp = point_light(L, wl, i, p, fn)
         if ndp > 0.0:
-            hl = wp.max(wp.dot(fn, wp.normalize(ldir + v)), 0.0)
-            out = out + lpow * (spec[0] * spec_power(hl, spec[1]) * shadow_factor(L, first, 1 + i, 1.0, p, fn))
-    return out
+            vis = visibility(L, first, 1 + i, p, fn)
+            irr = irr + L.power[wl, i] * (ndp * vis * inv_r2)
+            if glossy:
+                ldir = to_lamp * wp.sqrt(inv_r2)
+                hl = wp.max(wp.dot(fn, wp.normalize(ldir + v)), 0.0)
+                highlights = highlights + L.power[wl, i] * inv_r2 * (spec[0] * spec_power(hl, spec[1]) * vis)
+    return wp.cw_mul(albedo, irr) + highlights
 
 
 @wp.func(inline=True)

@@ -18,13 +18,14 @@ class Lights:
 
     ``pos``, ``power``, ``size``: point lights, shape (Wl, L): position [m], irradiance at 1 m (falls as 1/r²; zero
     pads a world with fewer lights), radius [m]. ``sun_dir`` (unit, toward the light), ``sun_color`` (irradiance),
-    ``ambient``: per world. Shadow map ``m`` is a depth image (packed keys of :func:`raster_triangles`, side
-    ``map_side``) seen by a pinhole ``map_rot``/``map_trans``/``map_intr`` at the light; world ``w``'s maps are
-    ``map_first[w]`` (the sun) and ``map_first[w] + 1 + i`` (point light i); ``map_first[w] < 0``: none (lit).
-    ``map_light_size``: the light's radius [m] as placed for the map (it sets the penumbra). ``map_tile_min``
-    (M, map_tiles²): the smallest key of each ``SHADOW_TILE`` x ``SHADOW_TILE`` block of texels
-    (:func:`shadow_tile_min`), so a point whose blocker search region holds no nearer texel is known lit from a few
-    reads (:func:`region_unblocked`).
+    ``ambient``: per world. Shadow map ``m`` is a depth image ``map_depth`` (M, side²) [m] of the nearest caster per
+    texel (1e30: none; side ``map_side``) seen by a pinhole ``map_rot``/``map_trans``/``map_intr`` at the light;
+    world ``w``'s maps are ``map_first[w]`` (the sun) and ``map_first[w] + 1 + i`` (point light i);
+    ``map_first[w] < 0``: none (lit). ``map_light_size``: the light's radius [m] as placed for the map (it sets the
+    penumbra). ``map_tile_min`` (M, map_tiles²): the nearest depth [m] of each ``SHADOW_TILE``² block of texels,
+    ``map_reach`` the nearest within ``SHADOW_REACH`` blocks of each (:func:`shadow_tile_min`,
+    :func:`shadow_reach_min`): a point whose blocker search can reach no nearer texel is known lit from one read, or
+    a few (:func:`region_unblocked`).
     """
 
     ambient: wp.array(dtype=wp.vec3)
@@ -35,87 +36,135 @@ class Lights:
     size: wp.array2d(dtype=float)
     shadows: int
     map_first: wp.array(dtype=wp.int32)
-    map_key: wp.array2d(dtype=wp.int64)
+    map_depth: wp.array2d(dtype=float)
     map_rot: wp.array(dtype=wp.mat33)
     map_trans: wp.array(dtype=wp.vec3)
     map_intr: wp.array(dtype=wp.vec4)
     map_light_size: wp.array(dtype=float)
     map_side: int
-    map_tile_min: wp.array2d(dtype=wp.int64)
+    map_tile_min: wp.array2d(dtype=float)
+    map_reach: wp.array2d(dtype=float)
     map_tiles: int
 
 
+NO_CASTER = wp.constant(1.0e30)
+"""Depth [m] of a shadow-map texel that no caster covers."""
+
+
 @wp.func
-def map_depth(L: Lights, m: int, x: int, y: int) -> float:
-    """Camera z [m] of the nearest occluder in texel (x, y) of shadow map ``m``; 1e30 where nothing (or outside)."""
-    s = L.map_side
-    z = float(1.0e30)
+def map_depth(depth: wp.array2d(dtype=float), s: int, m: int, x: int, y: int) -> float:
+    """Camera z [m] of the nearest occluder in texel (x, y) of shadow map ``m`` (``depth`` (M, s²)); 1e30 where
+    nothing (or outside)."""
+    z = float(NO_CASTER)
     if x >= 0 and y >= 0 and x < s and y < s:
-        key = L.map_key[m, y * s + x]
-        if key != _EMPTY:
-            z = float(key / _TRI_SCALE) / _DEPTH_SCALE
+        z = depth[m, y * s + x]
     return z
 
 
 SHADOW_TILE = 8
-"""Side [texels] of the blocks whose minimum key :func:`shadow_tile_min` keeps."""
+"""Side [texels] of the blocks whose nearest depth :func:`shadow_reach_min` keeps."""
 _SHADOW_TILE = wp.constant(SHADOW_TILE)
+SHADOW_REACH = wp.constant(2)
+"""Tiles on each side of a point's own tile that :func:`pcf_taps` can read: its taps lie within 8 texels (the widest
+search) plus one of rounding and one of margin of the point's texel, at most two 8-texel tiles away."""
 
 
 @wp.kernel
 def shadow_tile_min(map_key: wp.array2d(dtype=wp.int64), side: int, tiles: int,
-                    tile_min: wp.array2d(dtype=wp.int64)):
-    """Smallest key of each ``SHADOW_TILE``² block of every shadow map: ``map_key`` (M, side²) ->
-    ``tile_min`` (M, tiles²); launched as (M, tiles²)."""
+                    depth: wp.array2d(dtype=float), tile_min: wp.array2d(dtype=float)):
+    """Shadow-map depths [m] from the raster pass's packed keys ``map_key`` (M, side²) -> ``depth`` (1e30 where
+    empty), and the nearest of each ``SHADOW_TILE``² block -> ``tile_min`` (M, tiles²); launched as (M, tiles²)."""
     m, b = wp.tid()
     x0 = (b % tiles) * _SHADOW_TILE
     y0 = (b / tiles) * _SHADOW_TILE
-    best = _EMPTY
+    best = float(NO_CASTER)
     for y in range(y0, wp.min(y0 + _SHADOW_TILE, side)):
         for x in range(x0, wp.min(x0 + _SHADOW_TILE, side)):
-            best = wp.min(best, map_key[m, y * side + x])
+            key = map_key[m, y * side + x]
+            z = float(NO_CASTER)
+            if key != _EMPTY:
+                z = float(key / _TRI_SCALE) / _DEPTH_SCALE
+            depth[m, y * side + x] = z
+            best = wp.min(best, z)
     tile_min[m, b] = best
 
 
+@wp.kernel
+def shadow_reach_min(tile_min: wp.array2d(dtype=float), tiles: int, reach: wp.array2d(dtype=float)):
+    """Nearest depth [m] over the blocks within ``SHADOW_REACH`` of each block (clamped to the map); launched as
+    (M, tiles²)."""
+    m, b = wp.tid()
+    bx = b % tiles
+    by = b / tiles
+    best = float(NO_CASTER)
+    for y in range(wp.max(by - SHADOW_REACH, 0), wp.min(by + SHADOW_REACH + 1, tiles)):
+        for x in range(wp.max(bx - SHADOW_REACH, 0), wp.min(bx + SHADOW_REACH + 1, tiles)):
+            best = wp.min(best, tile_min[m, y * tiles + x])
+    reach[m, b] = best
+
+
 @wp.func
-def region_unblocked(L: Lights, m: int, u: float, v: float, z: float, radius: float) -> bool:
-    """True when no texel :func:`pcf_taps` reads about (u, v) at ``radius`` can hold an occluder nearer than ``z``,
-    judged from the tile minima (a texel wider than the taps on each side, so rounding cannot escape): then the
-    blocker search would find none, and the point is lit. Exact: the same answer as the 16 taps."""
-    s = L.map_side
+def blocks_clear(tile_min: wp.array2d(dtype=float), tiles: int, s: int, m: int, u: float, v: float, z: float,
+                 radius: float) -> bool:
+    """True when no block that the texels :func:`pcf_taps` reads about (u, v) at ``radius``, widened by one on each
+    side against rounding, overlap holds a depth nearer than ``z`` (``tile_min`` (M, tiles²): :class:`Lights`'
+    ``map_tile_min``; ``s`` the maps' side [texels]): then none of the 16 taps is nearer. Exact where True."""
     x0 = wp.max(int(wp.floor(u - radius + 0.5)) - 1, 0)
     x1 = wp.min(int(wp.floor(u + radius + 0.5)) + 1, s - 1)
     y0 = wp.max(int(wp.floor(v - radius + 0.5)) - 1, 0)
     y1 = wp.min(int(wp.floor(v + radius + 0.5)) + 1, s - 1)
     clear = bool(True)
     if x0 <= x1 and y0 <= y1:
-        for ty in range(y0 / _SHADOW_TILE, y1 / _SHADOW_TILE + 1):
-            for tx in range(x0 / _SHADOW_TILE, x1 / _SHADOW_TILE + 1):
-                key = L.map_tile_min[m, ty * L.map_tiles + tx]
-                if key != _EMPTY:
-                    if float(key / _TRI_SCALE) / _DEPTH_SCALE < z:
-                        clear = False
+        for by in range(y0 / _SHADOW_TILE, y1 / _SHADOW_TILE + 1):
+            for bx in range(x0 / _SHADOW_TILE, x1 / _SHADOW_TILE + 1):
+                if tile_min[m, by * tiles + bx] < z:
+                    clear = False
     return clear
 
 
 @wp.func
-def pcf_taps(L: Lights, m: int, u: float, v: float, z: float, radius: float) -> wp.vec2:
-    """4 x 4 taps of shadow map ``m`` on a grid spanning ``radius`` texels about (u, v): (number of taps nearer than
-    ``z``, their summed depth) -- the blocker search and the percentage-closer filter of PCSS share it."""
+def region_unblocked(reach: wp.array2d(dtype=float), tile_min: wp.array2d(dtype=float), tiles: int, s: int, m: int,
+                     u: float, v: float, z: float, radius: float) -> bool:
+    """True when no texel :func:`pcf_taps` reads about (u, v) at ``radius`` (<= 8) can hold an occluder nearer than
+    ``z``: then the blocker search would find none, and the point is lit. Judged first from the nearest depth within
+    reach of the point's block (``reach``: :class:`Lights`' ``map_reach``; one read: most of a map is far from every
+    caster), then from the blocks the taps overlap (:func:`blocks_clear`). Exact: True only where the 16 taps find
+    no blocker. (Arrays, not the whole Lights: Warp passes a struct by value, a copy per call.)"""
+    tx = wp.clamp(int(wp.floor(u + 0.5)), 0, s - 1) / _SHADOW_TILE
+    ty = wp.clamp(int(wp.floor(v + 0.5)), 0, s - 1) / _SHADOW_TILE
+    clear = bool(True)
+    if reach[m, ty * tiles + tx] < z:
+        clear = blocks_clear(tile_min, tiles, s, m, u, v, z, radius)
+    return clear
+
+
+@wp.func
+def pcf_taps(depth: wp.array2d(dtype=float), s: int, m: int, u: float, v: float, z: float, radius: float) -> wp.vec2:
+    """4 x 4 taps of shadow map ``m`` (``depth`` (M, s²)) on a grid spanning ``radius`` texels about (u, v): (number of taps nearer than
+    ``z``, their summed depth) -- the blocker search and the percentage-closer filter of PCSS share it. The grid's
+    four columns and rows are found once; a grid inside the map reads its texels without per-tap bounds checks."""
+    xs = wp.vec4i()
+    ys = wp.vec4i()
+    for i in range(4):
+        xs[i] = int(wp.floor(u + radius * (float(i) - 1.5) / 1.5 + 0.5))
+        ys[i] = int(wp.floor(v + radius * (float(i) - 1.5) / 1.5 + 0.5))
+    inside = xs[0] >= 0 and ys[0] >= 0 and xs[3] < s and ys[3] < s
     hits = float(0.0)
     zsum = float(0.0)
     for j in range(4):
         for i in range(4):
-            x = int(wp.floor(u + radius * (float(i) - 1.5) / 1.5 + 0.5))
-            y = int(wp.floor(v + radius * (float(j) - 1.5) / 1.5 + 0.5))
-            d = map_depth(L, m, x, y)
+            d = float(NO_CASTER)
+            if inside:
+                d = depth[m, ys[j] * s + xs[i]]
+            else:
+                d = map_depth(depth, s, m, xs[i], ys[j])
             if d < z:
                 hits += 1.0
                 zsum += d
     return wp.vec2(hits, zsum)
 
 
-@wp.func
+@wp.func(inline=True)
 def light_visibility(L: Lights, m: int, p: wp.vec3, n: wp.vec3) -> float:
     """Fraction [0, 1] of light ``m`` reaching surface point ``p`` (normal ``n`` toward the viewer/light side), by
     percentage-closer soft shadows: a blocker search over the texels the light's disk can be hidden by, then a
@@ -124,28 +173,29 @@ def light_visibility(L: Lights, m: int, p: wp.vec3, n: wp.vec3) -> float:
     R = L.map_rot[m]
     t = L.map_trans[m]
     pc = R * p + t
-    if pc[2] <= 0.0:
-        return 1.0
-    texel = pc[2] / k[0]  # a texel's size [m] at the receiver
-    pc = R * (p + n * (1.5 * texel)) + t  # normal offset against self-shadowing of the receiver's own surface
-    u = k[0] * pc[0] / pc[2] + k[2]
-    v = k[1] * pc[1] / pc[2] + k[3]
-    z = pc[2] - texel
-    size = L.map_light_size[m]
-    search = wp.clamp(size * k[0] / z, 1.0, 8.0)
-    side = float(L.map_side)
-    if u < -search - 1.0 or v < -search - 1.0 or u > side + search or v > side + search:
-        return 1.0  # outside the map, which covers every caster: nothing between the point and the light
-    if region_unblocked(L, m, u, v, z, search):
-        return 1.0
-    blk = pcf_taps(L, m, u, v, z, search)
-    if blk[0] == 0.0:
-        return 1.0
-    zb = blk[1] / blk[0]
-    # the 4 x 4 grid's taps at +-r, +-r/3 have the second moment (5/9 r^2) of a disk light's edge profile (its
-    # penumbra half-width p: p^2 / 4) for r = 0.67 p
-    penumbra = wp.clamp(0.67 * size * (z - zb) / zb * k[0] / z, 1.0, 8.0)
-    return 1.0 - pcf_taps(L, m, u, v, z, penumbra)[0] / 16.0
+    out = float(1.0)
+    if pc[2] > 0.0:  # else behind the light's map camera: lit
+        texel = pc[2] / k[0]  # a texel's size [m] at the receiver
+        pc = R * (p + n * (1.5 * texel)) + t  # normal offset against self-shadowing of the receiver's own surface
+        u = k[0] * pc[0] / pc[2] + k[2]
+        v = k[1] * pc[1] / pc[2] + k[3]
+        z = pc[2] - texel
+        size = L.map_light_size[m]
+        search = wp.clamp(size * k[0] / z, 1.0, 8.0)
+        side = float(L.map_side)
+        # outside the map, which covers every caster, nothing is between the point and the light
+        inside = u >= -search - 1.0 and v >= -search - 1.0 and u <= side + search and v <= side + search
+        if inside and not region_unblocked(L.map_reach, L.map_tile_min, L.map_tiles, L.map_side, m, u, v, z, search):
+            blk = pcf_taps(L.map_depth, L.map_side, m, u, v, z, search)
+            if blk[0] != 0.0:
+                zb = blk[1] / blk[0]
+                # the 4 x 4 grid's taps at +-r, +-r/3 have the second moment (5/9 r^2) of a disk light's edge
+                # profile (its penumbra half-width p: p^2 / 4) for r = 0.67 p
+                penumbra = wp.clamp(0.67 * size * (z - zb) / zb * k[0] / z, 1.0, 8.0)
+                # the filter's own footprint may hold no blocker (the search's is wider): lit, from the blocks
+                if not blocks_clear(L.map_tile_min, L.map_tiles, L.map_side, m, u, v, z, penumbra):
+                    out = 1.0 - pcf_taps(L.map_depth, L.map_side, m, u, v, z, penumbra)[0] / 16.0
+    return out
 
 
 @wp.func(inline=True)
@@ -167,9 +217,10 @@ def is_dark(L: Lights, wl: int, i: int) -> bool:
 
 
 @wp.func(inline=True)
-def shadow_factor(L: Lights, first: int, light: int, ndl: float, p: wp.vec3, n: wp.vec3) -> float:
-    """``ndl`` times the visibility of light ``light`` (0 = sun, 1 + i = point light i) when shadows are on."""
-    out = ndl
-    if L.shadows != 0 and first >= 0 and ndl > 0.0:
-        out = ndl * light_visibility(L, first + light, p, n)
+def visibility(L: Lights, first: int, light: int, p: wp.vec3, n: wp.vec3) -> float:
+    """Fraction [0, 1] of light ``light`` (0 = sun, 1 + i = point light i) reaching ``p`` when shadows are on (1
+    otherwise): the world's map ``first + light``."""
+    out = float(1.0)
+    if L.shadows != 0 and first >= 0:
+        out = light_visibility(L, first + light, p, n)
     return out

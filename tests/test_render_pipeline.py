@@ -75,8 +75,9 @@ def test_launches_do_not_grow_with_the_batch(monkeypatch, lens):
         scene, cams, sensor = _batch(n, lens=lens)
         counts.append(0)
         r.render(scene, cams, sensor=sensor)
-    # shadow maps (raster + tile minima), two raster passes, one resolve, three sensor launches
-    assert counts[0] == counts[1] == 8, counts
+    # shadow maps (raster, depths + block minima, minima within reach), two raster passes, one resolve, three
+    # sensor launches
+    assert counts[0] == counts[1] == 9, counts
 
 
 def test_results_do_not_depend_on_the_batch_split():

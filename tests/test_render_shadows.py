@@ -153,3 +153,26 @@ def test_lit_surfaces_do_not_shadow_themselves():
     top = seg == 10
     assert top.sum() > 100
     assert np.array_equal(on[top], off[top])
+
+
+@pytest.mark.parametrize("size", [0.002, 0.02])
+def test_block_minima_early_out_is_exact(monkeypatch, size):
+    # the one-read and the few-read early-outs (render.shadow_kernels.region_unblocked) may only skip points the 16
+    # blocker taps would find lit: with every block minimum forced below any depth no point skips, and the images
+    # must not change by a bit. Light placed so the penumbra, the umbra and the far floor are all in view.
+    import warpworm.render.rasterizer as rz
+
+    lp = np.array([0.06, 0.03, 0.25])
+    fast = Renderer(SIZE, SIZE, shadows=True, shadow_map=256).render(_scene(lp, size, 0.04), _camera())["rgb"]
+    make = rz.Renderer._shadow_maps
+
+    def no_early_out(self, s, worlds):
+        lights = make(self, s, worlds)
+        lights.map_tile_min.fill_(-1.0)
+        lights.map_reach.fill_(-1.0)
+        return lights
+
+    monkeypatch.setattr(rz.Renderer, "_shadow_maps", no_early_out)
+    slow = Renderer(SIZE, SIZE, shadows=True, shadow_map=256).render(_scene(lp, size, 0.04), _camera())["rgb"]
+    assert np.array_equal(fast, slow)
+    assert (slow[0].astype(int).sum(-1) < fast[0].astype(int).sum(-1).max() * 0.5).sum() > 30  # a shadow in view

@@ -70,9 +70,10 @@ class WarpStages:
                 max_workers = len(os.sched_getaffinity(0))
             except AttributeError:  # pragma: no cover - not Linux
                 max_workers = os.cpu_count() or 1
-        modules = [wp.get_module(n) for n in self.kernel_modules()]
-        if cfg.render.supersample > 1 or cfg.render.distortion:  # the sample resolve (supersampling or a lens)
-            modules.append(wp.get_module("warpworm.render.sample_kernels"))
+        # the sample resolve only where the config supersamples or has a lens
+        needs_samples = cfg.render.supersample > 1 or cfg.render.distortion
+        modules = [wp.get_module(n) for n in self.kernel_modules()
+                   if needs_samples or n != "warpworm.render.sample_kernels"]
         wp.force_load(device=cfg.sim.device, modules=modules, max_workers=max_workers)
 
     def _pattern(self, n_units: int):
