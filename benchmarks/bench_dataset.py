@@ -31,8 +31,8 @@ from warpworm.data import dataset as ds
 from warpworm.data import workers as wk
 from warpworm.data.config import load_config
 from warpworm.data.job import generate
-from warpworm.data.sampling import dataset_cameras, draw_group, draw_worm, worm_params
-from warpworm.data.stages import WarpStages
+from warpworm.data.sampling import appearance_draws, dataset_cameras, draw_worlds, render_draws
+from warpworm.data.warp_stages import WarpStages
 
 NOTES = ("storage: bytes/sample and samples/s per image codec; end_to_end: overhead = 1 - (sim + render) / total; "
          "workers: speedup of 2 processes over 1; memory: RSS growth over the job (see module docstring)")
@@ -127,18 +127,18 @@ def bench_end_to_end(W: int, width: int = 128, height: int = 96) -> tuple[dict, 
     # the stages alone, on the same draws
     st = WarpStages()
     traj = np.arange(W)
-    d = draw_worm(cfg, traj, np.zeros(W, np.int64))
-    p = worm_params(cfg, d)
+    worlds = draw_worlds(cfg, traj, np.zeros(W, np.int64))
+    p = worlds.groups[0][1] if len(worlds.groups) == 1 else None
+    if p is None:
+        raise SystemExit("end_to_end: the config draws more than one solver batch (make worm.magnet_model constant)")
     t0 = time.perf_counter()
     res = st.simulate_batch(p, W, cfg)
     t_sim = time.perf_counter() - t0
-    app = {}
-    for g in ("light", "color", "texture", "sensor"):
-        app.update(draw_group(cfg, g, traj).values)
     cams, _ = dataset_cameras(cfg, traj, np.concatenate([f["positions"] for f in res.frames], axis=1))
+    draws = render_draws(cfg, worlds.values, appearance_draws(cfg, traj), np.arange(W), cams, np.arange(W))
     t0 = time.perf_counter()
     for f in res.frames:
-        st.render_batch(f, p, cams, app, np.arange(W), cfg)
+        st.render_batch(f, draws, cfg)
     t_render = time.perf_counter() - t0
     row = {"bench": "end_to_end", "worlds": W, "samples": W * F, "image": f"{width}x{height}",
            "settle_s+frames_s": "0.008+4x0.008", "total_s": total, "samples_s": W * F / total,
@@ -183,12 +183,10 @@ def bench_memory(num_shards: int, W: int) -> dict:
 
     real = wk.run_shards
 
-    def tracking(*a, on_shard=None, **kw):  # note when each shard finishes
-        def cb(st):
+    def tracking(*a, **kw):  # note when each shard finishes
+        for st in real(*a, **kw):
             marks.append(time.perf_counter())
-            on_shard(st)
-
-        return real(*a, on_shard=cb, **kw)
+            yield st
 
     out = Path(tempfile.mkdtemp(prefix="ww-mem-")) / "d"
     th = threading.Thread(target=sampler, daemon=True)

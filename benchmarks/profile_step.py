@@ -39,7 +39,7 @@ import warp as wp
 from warpworm import quiet_warp
 from warpworm.kernels import implicit_euler as ie
 from warpworm.kernels import substep as sub
-from warpworm.kernels.band_cholesky import ALL_ROWS, band_cholesky_factor, band_cholesky_solve
+from warpworm.kernels.banded_cholesky import ALL_ROWS, banded_cholesky_factor, banded_cholesky_solve
 from warpworm.kernels.hinge_lanes import add_hinges, update_hinge_angles_lanes
 from warpworm.physics import gaits
 from warpworm.sim.model import Model
@@ -196,12 +196,12 @@ def _parts_kernel():
                     for k in range(bw + 1):
                         w.hess[world, i, k] = hess0[world, i, k]
                 if part == 5:
-                    band_cholesky_factor(world, nv, bw, w.hess)
+                    banded_cholesky_factor(world, nv, bw, w.hess)
             elif part == 6 or part == 7:
                 for i in range(nv):
                     w.grad[world, i] = grad0[world, i]
                 if part == 7:
-                    band_cholesky_solve(world, nv, bw, w.hess, w.grad)
+                    banded_cholesky_solve(world, nv, bw, w.hess, w.grad)
             elif part == 8:
                 add_hinges(world, c, m, True, s, w)
             elif part == 9:

@@ -201,7 +201,7 @@ def wing_contact(p0: wp.vec3, p1: wp.vec3, p2: wp.vec3, lh: float):
     p0) (|n| = altitude × hinge length) and q = |n| − A |p1 − p2|² (A = :data:`PANEL_CONTACT_ALTITUDE`), the energy is
     ½ κ q² while q < 0, κ = :data:`PANEL_CONTACT_EA` / lh³ [N/m³]. Returns (κ q [N/m], ∂q/∂p0, ∂q/∂p1, ∂q/∂p2 [m],
     κ): the force on p_a is −κ q ∂q/∂p_a, the Gauss–Newton stiffness κ ∂q/∂p_a ∂q/∂p_bᵀ; κ = 0 while the wing is
-    clear (q ≥ 0). Shared by the band and tile kernels (through :func:`wing_contact_of_normal`)."""
+    clear (q ≥ 0). Shared by the banded and tile kernels (through :func:`wing_contact_of_normal`)."""
     e = p1 - p2
     return wing_contact_of_normal(wp.cross(p1 - p0, p2 - p0), wp.dot(e, e), p0, p1, p2, lh)
 
@@ -241,7 +241,7 @@ def hinge_angle_at_substep_end(prev: float, xi: wp.vec3, xj: wp.vec3, xk: wp.vec
                                fold_tolerance: float):
     """A hinge's angle at the end of a substep, unwrapped from its angle ``prev`` [rad] at the start, and whether
     the sheet crumpled there: the angle more than ``fold_tolerance`` [rad] outside the hinge's NoFoldThrough range,
-    or a wing collapsed (:func:`wings_collapsed`). Returns (phi, crumpled); shared by the band and tile kernels."""
+    or a wing collapsed (:func:`wings_collapsed`). Returns (phi, crumpled); shared by the banded and tile kernels."""
     n1, n2, r_kj, len2, length, psi = dihedral_angle_and_normals(xi, xj, xk, xl)
     phi = prev + wrap_angle(psi - prev)
     lo, hi = fold_range(label)

@@ -1,7 +1,7 @@
-"""The band layout's hinges :data:`LANES` at a time: the same numbers as :func:`.substep.add_hinge` and
+"""The banded layout's hinges :data:`LANES` at a time: the same numbers as :func:`.substep.add_hinge` and
 :func:`.substep.update_hinge_angles`, to the bit, in about half the time on the CPU.
 
-A Newton step of the band kernel (one thread per world) spent about half its time on the 105 hinges, scalar code
+A Newton step of the banded kernel (one thread per world) spent about half its time on the 105 hinges, scalar code
 (three cross products, a square root, an atan2, divisions per hinge). Here the geometry of :data:`LANES`
 consecutive hinges (positions gathered into vectors of lanes: the wings' normals, the hinge's length, the dihedral
 angle and its gradient) is computed with Warp's component-wise vector operations, which the CPU compiler turns into
@@ -10,7 +10,7 @@ no multiply-add in this code, on either side), so each hinge's numbers are the s
 hinge in the original order: the torque, the adds into the gradient and the Gauss–Newton blocks, and a wing's
 panel contact, which is only evaluated for a hinge whose wing is inside the barrier (rare; the test is the
 scalar one, |n|² < (A L²)²). The tile layout keeps the scalar functions (one row per thread), so its bit-for-bit
-tests against the band layout (``tests/test_tile_solver.py``, panel contact included) check this module too.
+tests against the banded layout (``tests/test_tile_solver.py``, panel contact included) check this module too.
 float32, SI units.
 """
 
@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from .band_cholesky import ALL_ROWS
+from .banded_cholesky import ALL_ROWS
 from .common import (LANES, PANEL_CONTACT_ALTITUDE, SLIVER_ALTITUDE, atan2_f32, fold_range, lanes, lanes_cross,
                      lanes_dot, lanes_sqrt, on_gpu, wrap_angle)
 from .substep import (BarHingeModel, BarHingeState, NewtonScratch, WorldCoefficients, add_hinge, add_hinge_rows,

@@ -1,9 +1,9 @@
-"""The band layout of the implicit-Euler substep: one thread per world, elements added whole, chord Newton steps.
+"""The banded layout of the implicit-Euler substep: one thread per world, elements added whole, chord Newton steps.
 
 :func:`implicit_step` is launched over worlds (``world = wp.tid()``); each thread runs its world's substeps with the
 physics of :mod:`.substep` (adders called with ``ALL_ROWS``, per-vertex phases with stride 1; the hinges
 :data:`~.hinge_lanes.LANES` at a time, :mod:`.hinge_lanes`, the same numbers) and solves each Newton system with the
-block-band Cholesky of :mod:`.band_cholesky`. With ``refactor`` 0 (the default) only the first step
+block-banded Cholesky of :mod:`.banded_cholesky`. With ``refactor`` 0 (the default) only the first step
 of every other substep, and a step after a contact changed, assembles and factors; the others are chord steps on the
 last factor, taken only if they at least halve the last step, and ending a substep only with the error estimate
 θ/(1 − θ)·step below :data:`STOP_ERROR` times the tolerance (docs/dynamics.md, "Newton convergence").
@@ -13,13 +13,12 @@ from __future__ import annotations
 
 import warp as wp
 
-from .band_cholesky import ALL_ROWS, band_cholesky_factor, band_cholesky_solve
+from .banded_cholesky import ALL_ROWS, banded_cholesky_factor, banded_cholesky_solve
 from .common import freeze_world
 from .hinge_lanes import add_hinges, update_hinge_angles_lanes
-from .substep import (  # noqa: F401  (CONTACT_SLIDING, CONTACT_STUCK, friction_force: read from here by tests)
-    CONTACT_SLIDING, CONTACT_STUCK, CONTACTS_LANDED, WORLD_CRUMPLED, BarHingeModel, BarHingeState, NewtonScratch,
-    SubstepOptions, WorldCoefficients, add_anchors, add_bar, apply_step, finish_vertices, friction_force,
-    friction_row, inertia_row, predict, project_row, project_rhs, update_contacts, world_coefficients)
+from .substep import (CONTACTS_LANDED, WORLD_CRUMPLED, BarHingeModel, BarHingeState, NewtonScratch, SubstepOptions,
+                      WorldCoefficients, add_anchors, add_bar, apply_step, finish_vertices, friction_row, inertia_row,
+                      predict, project_row, project_rhs, update_contacts, world_coefficients)
 
 wp.set_module_options({"enable_backward": False})
 
@@ -31,7 +30,7 @@ STOP_ERROR = wp.constant(0.1)  # a chord step ends a substep only if θ/(1 − �
 def elastic_terms(world: int, c: WorldCoefficients, m: BarHingeModel, opt: SubstepOptions,
                   anchor_target: wp.array2d(dtype=wp.vec3), with_hessian: bool, s: BarHingeState,
                   w: NewtonScratch) -> int:
-    """Inertia, bars, hinges and anchors into ``grad`` (and the unprojected band): all but the friction, which is
+    """Inertia, bars, hinges and anchors into ``grad`` (and the unprojected banded matrix): all but the friction, which is
     tangential and so not in the floor's normal balance that the contact update reads. Returns 1 if a bar is
     strained beyond its limit (or non-finite)."""
     for i in range(s.x.shape[1]):
@@ -62,7 +61,7 @@ def project_on_contacts(world: int, c: WorldCoefficients, m: BarHingeModel, s: B
 @wp.func
 def assemble(world: int, c: WorldCoefficients, m: BarHingeModel, opt: SubstepOptions,
              anchor_target: wp.array2d(dtype=wp.vec3), s: BarHingeState, w: NewtonScratch) -> int:
-    """The whole Newton system: gradient and Gauss–Newton band, friction included, projected on the contacts.
+    """The whole Newton system: gradient and Gauss–Newton banded matrix, friction included, projected on the contacts.
     Returns 1 if a bar is strained beyond its limit."""
     if elastic_terms(world, c, m, opt, anchor_target, True, s, w) != 0:
         return 1
@@ -80,8 +79,8 @@ def newton_solve(world: int, c: WorldCoefficients, factor: bool, s: BarHingeStat
     for i in range(nv):
         project_rhs(world, i, c, s, w)
     if factor:
-        band_cholesky_factor(world, nv, bw, w.hess)
-    band_cholesky_solve(world, nv, bw, w.hess, w.grad)
+        banded_cholesky_factor(world, nv, bw, w.hess)
+    banded_cholesky_solve(world, nv, bw, w.hess, w.grad)
     step = float(0.0)
     for i in range(nv):
         length = wp.length(w.grad[world, i])

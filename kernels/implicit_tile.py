@@ -2,15 +2,15 @@
 
 The physics is :mod:`.substep`'s, called with a vertex as ``row`` (thread ``lane`` gathers the bars and hinges
 incident on its vertices u = lane, lane + T, ... from host-built incidence lists, ascending element index) and with
-(lane, T) as the per-vertex stride, so every block of the Newton system gets the band layout's contributions in the
-band layout's order: the systems are :func:`.implicit_euler.implicit_step`'s bit for bit. Launched with
+(lane, T) as the per-vertex stride, so every block of the Newton system gets the banded layout's contributions in the
+banded layout's order: the systems are :func:`.implicit_euler.implicit_step`'s bit for bit. Launched with
 ``wp.launch_tiled(kernel, dim=W, block_dim=T)``; full Newton steps (no chord steps). The solve:
 
-- ``dense``: the band scattered into a 3V × 3V float32 tile in shared memory (``wp.tile_scatter_masked``, one entry
+- ``dense``: the banded matrix scattered into a 3V × 3V float32 tile in shared memory (``wp.tile_scatter_masked``, one entry
   per thread per call), ``wp.tile_cholesky_inplace`` / ``wp.tile_cholesky_solve_inplace`` (cuSolverDx where Warp has
-  libmathdx). Zeroed once per launch: the in-place factor keeps each row's envelope, inside the band. The factor
-  rounds differently from the band layout's;
-- band: the block band factored in place column-parallel (:func:`block_band_cholesky_factor`, the band layout's
+  libmathdx). Zeroed once per launch: the in-place factor keeps each row's envelope, inside the banded part. The factor
+  rounds differently from the banded layout's;
+- band: the block band factored in place column-parallel (:func:`block_banded_cholesky_factor`, the banded layout's
   arithmetic, so bit for bit its result), solved by thread 0; ~no shared memory, one warp per world.
 
 :func:`block_max` is the block barrier and makes a flag the whole block's, so every thread takes the same branches
@@ -25,7 +25,7 @@ import functools
 
 import warp as wp
 
-from .band_cholesky import band_cholesky_solve, inverse_lower_cholesky3
+from .banded_cholesky import banded_cholesky_solve, inverse_lower_cholesky3
 from .common import freeze_world
 from .substep import (CONTACTS_LANDED, WORLD_CRUMPLED, BarHingeModel, BarHingeState, NewtonScratch, SubstepOptions,
                       WorldCoefficients, add_anchors, add_bar, add_hinge, apply_step, finish_vertices, friction_row,
@@ -61,7 +61,7 @@ def block_max(flag: int) -> int:
 def assemble_row(world: int, u: int, c: WorldCoefficients, m: BarHingeModel, opt: SubstepOptions,
                  anchor_target: wp.array2d(dtype=wp.vec3), inc: VertexIncidence, s: BarHingeState,
                  w: NewtonScratch) -> int:
-    """Vertex ``u``'s row of the gradient and of the lower block band, friction excepted; writes only that row, so
+    """Vertex ``u``'s row of the gradient and of the lower block-banded part, friction excepted; writes only that row, so
     rows need no atomics. Reads every vertex's x: call it after a barrier. Returns 1 for an over-strained bar."""
     inertia_row(world, u, c, m, True, w)
     for q in range(inc.bar_start[u], inc.bar_start[u + 1]):
@@ -89,7 +89,7 @@ def assemble_rows(world: int, lane: int, bd: int, c: WorldCoefficients, m: BarHi
 def newton_system(world: int, lane: int, bd: int, it: int, c: WorldCoefficients, m: BarHingeModel,
                   opt: SubstepOptions, anchor_target: wp.array2d(dtype=wp.vec3), inc: VertexIncidence,
                   s: BarHingeState, w: NewtonScratch) -> int:
-    """The system of Newton step ``it``, in the band layout's order: the rows without friction, the contact update
+    """The system of Newton step ``it``, in the banded layout's order: the rows without friction, the contact update
     (after the first step), anew if a vertex landed, then each row's friction and projection. Returns the block's
     bad flag."""
     bad = assemble_rows(world, lane, bd, c, m, opt, anchor_target, inc, s, w)
@@ -109,8 +109,8 @@ def newton_system(world: int, lane: int, bd: int, it: int, c: WorldCoefficients,
 
 
 @wp.func
-def block_band_cholesky_factor(world: int, lane: int, bd: int, nv: int, bw: int, mat: wp.array3d(dtype=wp.mat33)):
-    """:func:`~.band_cholesky.band_cholesky_factor` column-parallel over the block's ``bd`` threads, entry by entry
+def block_banded_cholesky_factor(world: int, lane: int, bd: int, nv: int, bw: int, mat: wp.array3d(dtype=wp.mat33)):
+    """:func:`~.banded_cholesky.banded_cholesky_factor` column-parallel over the block's ``bd`` threads, entry by entry
     its arithmetic (so bit for bit its factor): per column, thread 0 the diagonal block, a barrier, the ≤ B blocks
     below it one row per thread. Every thread must call it."""
     for j in range(nv):
@@ -131,14 +131,14 @@ def block_band_cholesky_factor(world: int, lane: int, bd: int, nv: int, bw: int,
 
 
 @wp.func
-def band_solve_and_apply(world: int, lane: int, bd: int, bw: int, tol: float, s: BarHingeState,
+def banded_solve_and_apply(world: int, lane: int, bd: int, bw: int, tol: float, s: BarHingeState,
                          w: NewtonScratch) -> int:
-    """Factor and solve the band in place and take the step. Returns 1 if this thread's vertices moved ``tol`` or
+    """Factor and solve the banded matrix in place and take the step. Returns 1 if this thread's vertices moved ``tol`` or
     more (or non-finitely)."""
     nv = s.x.shape[1]
-    block_band_cholesky_factor(world, lane, bd, nv, bw, w.hess)
+    block_banded_cholesky_factor(world, lane, bd, nv, bw, w.hess)
     if lane == 0:
-        band_cholesky_solve(world, nv, bw, w.hess, w.grad)
+        banded_cholesky_solve(world, nv, bw, w.hess, w.grad)
     block_max(0)  # barrier: the step solved before every thread reads its rows
     moving = int(0)
     for i in range(lane, nv, bd):
@@ -150,8 +150,8 @@ def band_solve_and_apply(world: int, lane: int, bd: int, bw: int, tol: float, s:
 
 
 @wp.func
-def band_entry(world: int, q: int, bw: int, slots: int, hess: wp.array3d(dtype=wp.mat33)):
-    """Slot ``q`` of the lower block band as a dense-matrix entry: (row, col, value, ok); block (u, u − d) entry
+def banded_entry(world: int, q: int, bw: int, slots: int, hess: wp.array3d(dtype=wp.mat33)):
+    """Slot ``q`` of the lower block-banded part as a dense-matrix entry: (row, col, value, ok); block (u, u − d) entry
     (a, b); the diagonal blocks' upper entries are skipped (the factorisation reads the lower triangle only)."""
     u = q // (9 * (bw + 1))
     rem = q - u * 9 * (bw + 1)
@@ -201,23 +201,23 @@ MAX_REGISTERS = 128
 
 
 @functools.cache
-def make_tile_substep_kernel(num_vertices: int, bandwidth: int, dense: bool = True,
+def make_tile_substep_kernel(num_vertices: int, half_bandwidth: int, dense: bool = True,
                              max_registers: int | None = MAX_REGISTERS):
     """The block-per-world substep kernel for worms of ``num_vertices`` vertices and Newton-matrix half-bandwidth
-    ``bandwidth`` (vertex blocks), dense or band solve (module docstring); one module per (shape, solve)."""
-    if num_vertices < 1 or bandwidth < 0:
-        raise ValueError(f"num_vertices must be >= 1 and bandwidth >= 0, got {num_vertices}, {bandwidth}")
+    ``half_bandwidth`` (vertex blocks), dense or banded solve (module docstring); one module per (shape, solve)."""
+    if num_vertices < 1 or half_bandwidth < 0:
+        raise ValueError(f"num_vertices must be >= 1 and half_bandwidth >= 0, got {num_vertices}, {half_bandwidth}")
     N = 3 * num_vertices
     DENSE = bool(dense)
-    BW = int(bandwidth)
-    SLOTS = num_vertices * (bandwidth + 1) * 9  # 3x3 entries of the lower block band, with the out-of-range ones
+    BW = int(half_bandwidth)
+    SLOTS = num_vertices * (half_bandwidth + 1) * 9  # 3x3 entries of the lower block-banded part, with the out-of-range ones
 
     @wp.kernel(enable_backward=False, module="unique", cuda_max_registers=max_registers)
     def implicit_step_tile(m: BarHingeModel, opt: SubstepOptions, f_ext: wp.array2d(dtype=wp.vec3),
                            anchor_target: wp.array2d(dtype=wp.vec3), inc: VertexIncidence, s: BarHingeState,
                            w: NewtonScratch):
         """:func:`.implicit_euler.implicit_step`'s substeps, one world per block: launch_tiled dim (W,), any
-        block_dim; ``w.hess`` has ``bandwidth + 1`` blocks per row."""
+        block_dim; ``w.hess`` has ``half_bandwidth + 1`` blocks per row."""
         world, lane = wp.tid()
         bd = wp.block_dim()
         if s.unstable[world] != 0:  # the same for every thread of the block: the whole block leaves
@@ -242,7 +242,7 @@ def make_tile_substep_kernel(num_vertices: int, bandwidth: int, dense: bool = Tr
                 moving = int(0)
                 if wp.static(DENSE):
                     for r in range((SLOTS + bd - 1) // bd):
-                        row, col, val, ok = band_entry(world, r * bd + lane, BW, SLOTS, w.hess)
+                        row, col, val, ok = banded_entry(world, r * bd + lane, BW, SLOTS, w.hess)
                         wp.tile_scatter_masked(mat, row, col, val, ok)
                     for r in range((N + bd - 1) // bd):
                         idx, val, ok = rhs_entry(world, r * bd + lane, N, w.grad)
@@ -255,10 +255,10 @@ def make_tile_substep_kernel(num_vertices: int, bandwidth: int, dense: bool = Tr
                         if not (wp.length(dx) < opt.newton_tol):
                             moving = 1
                 else:
-                    moving = band_solve_and_apply(world, lane, bd, BW, opt.newton_tol, s, w)
+                    moving = banded_solve_and_apply(world, lane, bd, BW, opt.newton_tol, s, w)
                 moving = block_max(moving)  # also the barrier: the step taken before the next rows read x
                 if it >= 1 and moving == 0:
-                    converged = 1  # the band layout's test: no vertex moved by newton_tol or more
+                    converged = 1  # the banded layout's test: no vertex moved by newton_tol or more
                     break
             if bad != 0:
                 if lane == 0:

@@ -8,7 +8,8 @@ import sys
 
 import pytest
 
-from warpworm.data.config import (PARAM_SPECS, ConfigError, OutputConfig, RenderConfig, SimConfig, check_output_dir,
+from warpworm.data.dataset import check_output_dir
+from warpworm.data.config import (PARAM_SPECS, ConfigError, OutputConfig, RenderConfig, SimConfig,
                              config_packaged_names, load_config)
 from warpworm.physics.params import WormParams
 from warpworm.data.randomize import Constant, Uniform

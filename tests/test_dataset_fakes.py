@@ -38,7 +38,7 @@ def _topology(n: int):
 
 
 class FakeStages:
-    """Deterministic closed-form stand-in for :class:`warpworm.data.stages.WarpStages` (tests only)."""
+    """Deterministic closed-form stand-in for :class:`warpworm.data.warp_stages.WarpStages` (tests only)."""
 
     def metadata(self, cfg):
         V, tri, edges, hinges, seg = _topology(cfg.sim.n_units)
@@ -75,7 +75,8 @@ class FakeStages:
         unstable = k > float(os.environ.get("WARPWORM_FAKE_UNSTABLE_ABOVE", "0.9"))
         return SimResult(frames=frames, unstable=unstable)
 
-    def render_batch(self, frame, params, cameras, appearance, seeds, cfg):
+    def render_batch(self, frame, draws, cfg):
+        cameras, appearance, seeds = draws.cameras, draws.appearance, draws.seeds
         B = len(seeds)
         H, W = cameras.height, cameras.width
         pos = frame["positions"]

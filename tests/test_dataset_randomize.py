@@ -6,6 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from warpworm import rng
 from warpworm.data import randomize as rnd
 
 
@@ -27,7 +28,7 @@ def test_draws_do_not_depend_on_batching():
 
 def test_distributions_have_the_right_law():
     n = 200_000
-    u = rnd.uniform01(rnd.sample_keys(1, np.arange(n)), "s")
+    u = rng.uniform01(rng.sample_keys(1, np.arange(n)), "s")
     assert 0 <= u.min() and u.max() < 1 and abs(u.mean() - 0.5) < 0.005
     idx = np.arange(n)
     x = rnd.LogUniform(0.01, 1.0).sample(u, idx)
@@ -42,7 +43,7 @@ def test_distributions_have_the_right_law():
     assert set(np.unique(c)) == {1.0, 3.0} and abs(np.mean(c == 3.0) - 0.75) < 0.01
     g = rnd.Grid(("p", "q")).sample(u, idx)
     assert list(g[:4]) == ["p", "q", "p", "q"]
-    assert np.abs(rnd.norm_ppf(np.array([0.001, 0.5, 0.975])) - [-3.090232306, 0.0, 1.959963985]).max() < 1e-8
+    assert np.abs(rng.norm_ppf(np.array([0.001, 0.5, 0.975])) - [-3.090232306, 0.0, 1.959963985]).max() < 1e-8
 
 
 @pytest.mark.parametrize("spec", [{"uniform": [1, 0]}, {"loguniform": [0, 1]}, {"normal": {"mean": 0, "std": -1}},
@@ -63,13 +64,13 @@ def test_seed_uniforms_are_the_counter_generator_keyed_by_seed():
         return x ^ (x >> 31)
 
     seeds, stream = [0, 7, 2**40 + 3], 0xCA3E0 + 2
-    got = rnd.seed_uniforms(seeds, stream, 5)
+    got = rng.seed_uniforms(seeds, stream, 5)
     for i, s in enumerate(seeds):
         x = mix((s * 0x9E3779B97F4A7C15 + stream * 0xD1B54A32D192ED03) & M)
         want = [(mix(x ^ (((j + 1) * 0x9E3779B97F4A7C15) & M)) >> 11) / 2.0**53 for j in range(5)]
         assert got[i].tolist() == want
     # batch-independent
-    assert np.array_equal(rnd.seed_uniforms(seeds[1:2], stream, 5)[0], got[1])
+    assert np.array_equal(rng.seed_uniforms(seeds[1:2], stream, 5)[0], got[1])
 
 
 def test_randomized_params_are_the_dataset_jobs_draws():
@@ -104,10 +105,10 @@ def test_different_seeds_draw_different_samples():
     used to join the index unmixed, so seed s + 1 at index i − 1 gave seed s's sample i), and seed 1's draws are
     not seed 0's shifted by one index."""
     idx = np.arange(4096)
-    keys = np.concatenate([rnd.sample_keys(s, idx) for s in range(8)])
+    keys = np.concatenate([rng.sample_keys(s, idx) for s in range(8)])
     assert len(np.unique(keys)) == keys.size
-    u0 = rnd.uniform01(rnd.sample_keys(0, idx), "worm.hinge_stiffness")
-    u1 = rnd.uniform01(rnd.sample_keys(1, idx), "worm.hinge_stiffness")
+    u0 = rng.uniform01(rng.sample_keys(0, idx), "worm.hinge_stiffness")
+    u1 = rng.uniform01(rng.sample_keys(1, idx), "worm.hinge_stiffness")
     assert not np.any(np.isclose(u0[1:], u1[:-1]))
 
 

@@ -10,7 +10,7 @@ import pytest
 from warpworm.data import dataset as ds
 from warpworm.data.config import ConfigError, load_config
 from warpworm.data.job import generate
-from warpworm.data.stages import frame_steps
+from warpworm.data.warp_stages import frame_steps
 
 COMMON = ["sim.worlds=4", "shard_size=8", "sim.settle_time=0.02", "render.width=32", "render.height=24",
           "output.preview=false"]

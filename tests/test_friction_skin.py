@@ -1,4 +1,4 @@
-"""Friction that differs by direction (kernels.implicit_euler.friction_force with ``mu_back`` ≠ 1) against its
+"""Friction that differs by direction (kernels.floor_contact.friction_force with ``mu_back`` ≠ 1) against its
 definition: the force is −∇D and the stiffness is D's Hessian, for the dissipation D = mu_k F_n |v| g(θ) sliding and
 (mu_s F_n / 2ε) |v|² g(θ) stuck, g(θ) = 1 + (r − 1) S((1 − cos θ) / 2), S(w) = 3w² − 2w³, θ the angle of v from the
 head-ward tangent; D is differentiated numerically in float64 here. And g's own limits: 1 head-ward, r tail-ward,
@@ -11,7 +11,7 @@ import pytest
 import warp as wp
 
 from warpworm import quiet_warp
-from warpworm.kernels import implicit_euler as ie
+from warpworm.kernels import floor_contact as fc
 
 quiet_warp()
 
@@ -26,7 +26,7 @@ LAT = np.cross(N, FWD)
 def _friction_kernel(status: int, vt: wp.array(dtype=wp.vec3), mu_back: float, fwd: wp.vec3, n: wp.vec3,
                      f: wp.array(dtype=wp.vec3), k: wp.array(dtype=wp.mat33)):
     i = wp.tid()
-    fi, kf, t, ks = ie.friction_force(status, vt[i], FN, MU_S, MU_K, mu_back, fwd, n, EPS)
+    fi, kf, t, ks = fc.friction_force(status, vt[i], FN, MU_S, MU_K, mu_back, fwd, n, EPS)
     f[i] = fi
     k[i] = (wp.identity(n=3, dtype=float) - wp.outer(n, n) - wp.outer(t, t)) * kf + ks
 
@@ -48,7 +48,7 @@ def _g(v, r):
 
 def _dissipation(status, v, r):
     speed = np.linalg.norm(v)
-    if status == int(ie.CONTACT_STUCK):
+    if status == int(fc.CONTACT_STUCK):
         return MU_S * FN / (2.0 * EPS) * speed ** 2 * _g(v, r)
     return MU_K * FN * speed * _g(v, r)
 
@@ -61,7 +61,7 @@ def _velocities(rng, m, scale):
 
 
 @pytest.mark.parametrize("r", [0.5, 2.0, 3.0])
-@pytest.mark.parametrize("status, scale", [(int(ie.CONTACT_SLIDING), 1e-3), (int(ie.CONTACT_STUCK), 1e-5)],
+@pytest.mark.parametrize("status, scale", [(int(fc.CONTACT_SLIDING), 1e-3), (int(fc.CONTACT_STUCK), 1e-5)],
                          ids=["sliding", "stuck"])
 def test_skin_friction_is_minus_the_gradient_of_its_dissipation_with_its_hessian(status, scale, r):
     rng = np.random.default_rng(3)
@@ -92,7 +92,7 @@ def test_skin_scales_the_friction_head_ward_by_1_tail_ward_by_r_sideways_by_the_
     """Sliding straight head-ward, tail-ward and sideways: |f| = mu_k F_n × (1, r, (1 + r) / 2), along −v except
     sideways, where maximal dissipation also pushes the slide toward the easier direction."""
     v = np.stack([FWD, -FWD, LAT]) * 1e-3
-    f, _ = _friction(int(ie.CONTACT_SLIDING), v, r)
+    f, _ = _friction(int(fc.CONTACT_SLIDING), v, r)
     np.testing.assert_allclose(f[0], -MU_K * FN * FWD, rtol=1e-5, atol=1e-9)
     np.testing.assert_allclose(f[1], MU_K * FN * r * FWD, rtol=1e-5, atol=1e-9)
     np.testing.assert_allclose(f[2] @ LAT, -MU_K * FN * 0.5 * (1.0 + r), rtol=1e-5)
@@ -105,10 +105,10 @@ def test_isotropic_friction_is_the_coulomb_law():
     and no extra stiffness: the paper's friction, as before the skin existed."""
     rng = np.random.default_rng(5)
     v = _velocities(rng, 16, 1e-3)
-    f, _ = _friction(int(ie.CONTACT_SLIDING), v, 1.0)
+    f, _ = _friction(int(fc.CONTACT_SLIDING), v, 1.0)
     np.testing.assert_allclose(f, -MU_K * FN * v / np.linalg.norm(v, axis=1, keepdims=True), rtol=1e-5, atol=1e-10)
     vs = _velocities(rng, 16, 1e-5)
-    f, _ = _friction(int(ie.CONTACT_STUCK), vs, 1.0)
+    f, _ = _friction(int(fc.CONTACT_STUCK), vs, 1.0)
     np.testing.assert_allclose(f, -MU_S * FN / EPS * vs, rtol=1e-5, atol=1e-10)
 
 
@@ -117,14 +117,14 @@ def test_isotropic_friction_adds_no_skin_stiffness_and_a_held_vertex_at_rest_get
     held vertex exactly at rest (every one at a substep's start): no force, and D's Hessian, which has no value at
     v = 0, taken as the mean of head-ward and tail-ward, c0 (1 + r) / 2 on the plane."""
     v = np.stack([FWD, LAT]) * 1e-3
-    _, k = _friction(int(ie.CONTACT_SLIDING), v, 1.0)
+    _, k = _friction(int(fc.CONTACT_SLIDING), v, 1.0)
     for i in range(2):
         u = v[i] / np.linalg.norm(v[i])
         np.testing.assert_allclose(k[i], MU_K * FN / 1e-3 * (np.eye(3) - np.outer(N, N) - np.outer(u, u)),
                                    rtol=1e-5, atol=1e-6)
-    _, k = _friction(int(ie.CONTACT_STUCK), v * 1e-2, 1.0)
+    _, k = _friction(int(fc.CONTACT_STUCK), v * 1e-2, 1.0)
     np.testing.assert_allclose(k, np.broadcast_to(MU_S * FN / EPS * (np.eye(3) - np.outer(N, N)), k.shape),
                                rtol=1e-5, atol=1e-3)
-    f, k = _friction(int(ie.CONTACT_STUCK), np.zeros((1, 3)), 3.0)
+    f, k = _friction(int(fc.CONTACT_STUCK), np.zeros((1, 3)), 3.0)
     np.testing.assert_array_equal(f, 0.0)
     np.testing.assert_allclose(k[0], MU_S * FN / EPS * 2.0 * (np.eye(3) - np.outer(N, N)), rtol=1e-5, atol=1e-3)

@@ -7,7 +7,7 @@ import numpy as np
 from warpworm.render import look_at, sample_cameras
 from warpworm.render.camera import intrinsics, make_cameras
 from warpworm.render.demo import default_pattern, posed_worm_states
-from warpworm.data.randomize import seed_uniforms as uniforms
+from warpworm.rng import seed_uniforms as uniforms
 from warpworm.render.sensor import apply_sensor
 
 from warpworm import quiet_warp

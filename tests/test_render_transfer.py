@@ -9,7 +9,7 @@ import pytest
 
 from warpworm import quiet_warp
 from warpworm.data.config import ConfigError, load_config
-from warpworm.data.randomize import seed_uniforms
+from warpworm.rng import seed_uniforms
 from warpworm.data.sampling import appearance_draws, dataset_cameras, sample_appearance
 from warpworm.render import Renderer, build_scene, default_appearance, make_cameras
 from warpworm.render.camera import intrinsics, look_at

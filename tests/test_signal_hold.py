@@ -12,7 +12,7 @@ import pytest
 from warpworm.data import dataset as ds
 from warpworm.data import signal_hold
 from warpworm.data.job import SignalGuard
-from warpworm.data.shard import Interrupted
+from warpworm.data.signal_hold import Interrupted
 
 
 def test_signal_inside_an_io_section_is_raised_when_it_ends():

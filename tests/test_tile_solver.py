@@ -1,7 +1,7 @@
-"""The block-per-world implicit substeps (:class:`warpworm.sim.tile_solver.TileSolver`, the GPU path) against the band path.
+"""The block-per-world implicit substeps (:class:`warpworm.sim.tile_solver.TileSolver`, the GPU path) against the banded path.
 
-The truth is the band path with full Newton steps (``Simulator(chord=False).run_substeps``: one thread per world,
-block-band Cholesky; the tile kernels take no chord steps, the band default does). The tile path
+The truth is the banded path with full Newton steps (``Simulator(chord=False).run_substeps``: one thread per world,
+block-banded Cholesky; the tile kernels take no chord steps, the band default does). The tile path
 assembles the same Newton systems bit for bit (row by row instead of element by element). With
 ``factorization="band"`` it also factors them with the same arithmetic, column-parallel, so the runs must be
 identical to the last bit in every scenario here: falling, landing, sticking and sliding on inclines, anchors, worlds
@@ -42,7 +42,7 @@ from warpworm.sim.tile_solver import DEFAULT_CUDA_BLOCK_DIM, FACTORIZATIONS, Til
 quiet_warp()
 
 TOL = 1.0e-6
-"""Position agreement [m] of the dense tile factorisation with the band path after 200 substeps."""
+"""Position agreement [m] of the dense tile factorisation with the banded path after 200 substeps."""
 
 FIELDS = ("positions", "velocities", "floor_force", "contact", "crease_angle", "bar_strain", "unstable", "step_count")
 """The State arrays the substeps write."""
@@ -109,7 +109,7 @@ def _gait_steps(sim, band, tile, tiles, steps: int) -> None:
 
 
 def gait():
-    """The peristaltic preset on two worlds: settled 0.1 s by the band path, then steps of 2 ms (2 substeps)."""
+    """The peristaltic preset on two worlds: settled 0.1 s by the banded path, then steps of 2 ms (2 substeps)."""
     model = Model.from_params(gaits.preset_params("peristaltic"), 2, "cpu")
     sim = Simulator(model, dt=2.0e-3, substeps=2, chord=False)
     band = sim.initial_state()
@@ -122,7 +122,7 @@ def gait():
 def gait_off_floor():
     """The peristaltic preset's magnets driving two worms held 3 cm above the floor without gravity: magnet-driven
     and contact-free, so the dynamics is continuous and rounding differences stay rounding-sized (on the floor, a
-    stick/slip or landing decision near its threshold amplifies them: the band path itself moves 1.3e-5 m at a
+    stick/slip or landing decision near its threshold amplifies them: the banded path itself moves 1.3e-5 m at a
     landing when its start moves by 4e-9 m; there the band factorization is compared bit for bit instead)."""
     model = Model.from_params(gaits.preset_params("peristaltic", gravity=0.0), 2, "cpu")
     sim = Simulator(model, dt=2.0e-3, substeps=2, chord=False)
@@ -175,7 +175,7 @@ def test_band_factorization_is_bit_for_bit_the_band_path_landing_and_sliding():
 def test_band_factorization_is_bit_for_bit_the_band_path_with_a_one_way_skin():
     """Friction that differs by direction (``friction_backward_ratio`` per world 2, ½, 2) on floors of 0, +0.35 and
     −0.35 rad: the head-up worm slides tail-ward on half the friction, the head-down one head-ward; the tile path's
-    friction, contact updates and landings scale μ as the band path's, bit for bit."""
+    friction, contact updates and landings scale μ as the banded path's, bit for bit."""
     sim, band, tile = landing(incline=(0.0, 0.35, -0.35), friction_backward_ratio=np.array([2.0, 0.5, 2.0]))
     x0 = band.positions.numpy().copy()
     _run_substeps(sim, band, tile, TileSolver(sim.model, sim.settings, "band"), 200)
@@ -194,7 +194,7 @@ def test_band_factorization_is_bit_for_bit_the_band_path_anchored():
 
 
 def test_both_layouts_count_the_same_newton_steps():
-    """The one solver interface: ``newton_stats`` of the tile layout (band factorization) and of the band layout with
+    """The one solver interface: ``newton_stats`` of the tile layout (band factorization) and of the banded layout with
     full steps agree world by world (the same iterations: the same systems, the same stopping test), over landings
     and slides where the count varies between worlds."""
     sim, band, tile = landing()
@@ -208,7 +208,7 @@ def test_both_layouts_count_the_same_newton_steps():
 
 def test_band_factorization_freezes_the_same_worlds():
     """The speed check at 0.17 m/s: the worlds dropped 2 and 3 mm (0.20, 0.24 m/s at impact) are frozen, the one
-    dropped 1 mm (0.14 m/s) is not; a frozen world stays as the band path leaves it."""
+    dropped 1 mm (0.14 m/s) is not; a frozen world stays as the banded path leaves it."""
     sim, band, tile = landing(speed_limit=0.17)
     _run_substeps(sim, band, tile, TileSolver(sim.model, sim.settings, "band"), 60)
     np.testing.assert_array_equal(band.unstable.numpy(), [0, 1, 1])
@@ -226,13 +226,13 @@ def test_band_factorization_is_bit_for_bit_the_band_path_under_the_gait_magnets(
 def test_band_factorization_is_bit_for_bit_the_band_path_at_the_panel_contact():
     """The inchworm's EPM 7 mm under the plate (w 20, a 50 mm) presses wings against the panels' contact barrier
     (common.wing_contact, altitude below 2 % of the hinge length) at its second closest approach: the barrier's
-    terms, assembled row by row in the tile kernel, are the band path's bit for bit."""
+    terms, assembled row by row in the tile kernel, are the banded path's bit for bit."""
     model = Model.from_params(gaits.preset_params("inchworm", wavelength=0.020, amplitude=0.05, closest_approach=0.007),
                               2, "cpu")
     sim = Simulator(model, dt=2.0e-3, substeps=2, chord=False)
     band = sim.initial_state()
     sim.settle(band, 0.05)
-    sim.step(band, 700)  # the band path alone to t = 1.4 s, before the second closest approach (t = 1.5 s)
+    sim.step(band, 700)  # the banded path alone to t = 1.4 s, before the second closest approach (t = 1.5 s)
     tile = model.state()
     _copy_state(band, tile)
     tiles = TileSolver(sim.model, sim.settings, "band")
@@ -334,7 +334,7 @@ def test_tile_kernel_compiles_for_sm90(factorization, use_ptx):
     from warpworm.kernels.implicit_tile import MAX_REGISTERS, make_tile_substep_kernel
 
     model = Model.from_params(WormParams(), 1, "cpu")
-    kernel = make_tile_substep_kernel(model.num_vertices, model.vertex_bandwidth, factorization == "dense")
+    kernel = make_tile_substep_kernel(model.num_vertices, model.half_bandwidth, factorization == "dense")
     module = kernel.module  # a module of this kernel alone: its options are ours to set
     module.options["block_dim"] = DEFAULT_CUDA_BLOCK_DIM[factorization]
     paths = wp.compile_aot_module(module, arch=90, use_ptx=use_ptx)  # into the kernel cache: rebuilt only on change
@@ -351,7 +351,7 @@ def test_tile_kernel_compiles_for_sm90(factorization, use_ptx):
 
 def test_simulator_solver_option_runs_the_tile_path_bit_for_bit():
     """``Simulator(solver="tile-band")``: the whole gait step (poses, wrench, substeps) through the tile kernel gives
-    the band solver's trajectory with full Newton steps (``chord=False``; the tile kernels take no chord steps) bit
+    the banded solver's trajectory with full Newton steps (``chord=False``; the tile kernels take no chord steps) bit
     for bit; an unknown solver is refused by name."""
     p = gaits.preset_params("inchworm", magnet_model="analytic")
     out = {}

@@ -9,7 +9,7 @@ read their ids from here.
 
 from __future__ import annotations
 
-# --- segmentation ids of the rendered label image (docs/architecture.md) ------------------------------------------
+# --- segmentation ids of the rendered label image ------------------------------------------
 SEG_BACKGROUND = 0
 SEG_FLOOR = 1
 SEG_WORM_FIRST = 2

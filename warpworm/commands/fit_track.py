@@ -70,7 +70,7 @@ def _base_params(args, gait, backward, path_fields):
         except ValueError:
             raise ValueError(f"--set {item!r}: got {v!r}; expected a number") from None
     base = replace(base, **known)
-    from warpworm.data.config import check_worm_params
+    from warpworm.physics.param_specs import check_worm_params
 
     check_worm_params(base)
     return base, known

@@ -56,7 +56,7 @@ def main(args: argparse.Namespace) -> int:
     import signal
     import threading
 
-    from warpworm.data.job import Interrupted
+    from warpworm.data.signal_hold import Interrupted
 
     phase = ["job"]
 
@@ -152,7 +152,7 @@ def _check_arguments(args) -> None:
 def write_previews_or_warn(cfg, out, stages) -> None:
     """``preview.png`` / ``preview.mp4`` of the finished dataset; a failure is a warning (a preview must never fail a
     finished dataset)."""
-    from warpworm.data.job import Interrupted
+    from warpworm.data.signal_hold import Interrupted
     from warpworm.data.previews import write_previews
 
     try:

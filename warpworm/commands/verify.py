@@ -36,7 +36,7 @@ VIS_EPS = 5e-4
 TOL_ROT = 1e-8
 """Orthonormality tolerance of rotations computed on the host in float64 (camera, body frame)."""
 TOL_ROT_F32 = 8 * float(np.finfo(np.float32).eps)
-"""... and of the magnets' rotations, which come from the simulator's float32 state (measured 7.2e-8 on real data)."""
+"""... and of the magnets' rotations, which come from the simulator's float32 state."""
 TOL_M = 1e-9  # [m] frames and keypoints are float64
 TOL_PX = 1e-6  # [px]
 

@@ -18,7 +18,7 @@ Scenes hold 1000 images: sample i is image ``i % 1000`` of scene ``i // 1000``. 
 2 tail IPM, 3 centre IPM, 4 head IPM, 5 EPM. BOP units are mm for translations and depth.
 
 Models: the worm is its rest-shape mesh in its body frame (``poses/body``: x tail -> head, z dorsal, origin the mean
-of the segment centres; docs/render.md) for the first sample's a, b, l0 (a dataset that randomizes them has one mesh
+of the segment centres) for the first sample's a, b, l0 (a dataset that randomizes them has one mesh
 per sample: the model is then that of sample 0, as ``models_info.json``'s note says); a deformed worm differs from it
 by its folds. The IPMs are disks (axis +z, the moment), the EPM a cuboid of its extents (long axis +z). Symmetries
 (BOP's ``symmetries_discrete``: 4x4 row-major, translation in mm; ``symmetries_continuous``: axis and offset): the worm
@@ -35,7 +35,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import cv2
 import numpy as np
+import trimesh
 
 from warpworm import ids
 from warpworm.data import dataset as ds
@@ -80,8 +82,6 @@ def _turn_z(quarters: int) -> list[float]:
 
 def object_meshes(reader) -> dict:
     """obj_id -> trimesh.Trimesh in the object's own frame [m] (module docstring), from sample 0's parameters."""
-    import trimesh  # start-up time: trimesh loads on first use
-
     p = {k: float(reader.read(f"params/worm.{k}", [0])[0]) for k in
          ("a", "b", "l0", "ipm_diameter", "ipm_thickness", "epm_size_x", "epm_size_y", "epm_size_z")}
     n_units = _n_units(reader)
@@ -194,8 +194,6 @@ def begin_export(src, out, limit: int | None):
 
 def export_bop(src, out, *, split: str = "train_pbr", limit: int | None = None) -> dict:
     """Write the BOP layout of dataset ``src`` to ``out``; returns {"images": n, "scenes": k}."""
-    import cv2  # start-up time: OpenCV loads on first use
-
     reader, out, n = begin_export(src, out, limit)
     scenes = 0
     for s0 in range(0, n, SCENE_SIZE):

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from warpworm import ids
@@ -48,8 +49,6 @@ def skeleton(names: list[str]) -> list[list[int]]:
 
 def export_coco(src, out, limit: int | None = None, overwrite: bool = False) -> dict:
     """Write ``out``; returns {"images": n, "annotations": n, "file": path}."""
-    import cv2  # start-up time
-
     reader = ds.open(src)
     out = Path(out)
     if out.exists() and any(out.iterdir()) and not overwrite:

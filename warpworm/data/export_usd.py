@@ -37,6 +37,7 @@ from pathlib import Path
 
 import h5py
 import numpy as np
+from pxr import Gf, Sdf, Usd, UsdGeom, UsdUtils, Vt
 
 from warpworm import transforms as tf
 from warpworm.data import dataset as ds
@@ -205,15 +206,11 @@ def _strain_colour(strain: np.ndarray) -> np.ndarray:
 
 def _gf_matrix(T: np.ndarray):
     """4x4 column-vector transform (object -> world) -> Gf.Matrix4d (USD uses row vectors: transpose)."""
-    from pxr import Gf  # start-up time: USD loads on first use
-
     return Gf.Matrix4d(*np.asarray(T, np.float64).T.reshape(-1).tolist())
 
 
 def _define_floor(stage, incline: float, floor_half: float) -> None:
     """A square in the inclined plane (normal (-sin i, 0, cos i)), as in the simulator and renderer."""
-    from pxr import Gf, UsdGeom, Vt  # start-up time: USD loads on first use
-
     u = np.array([np.cos(incline), 0.0, np.sin(incline)])
     v = np.array([0.0, 1.0, 0.0])
     corners = np.array([floor_half * (su * u + sv * v) for su, sv in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
@@ -227,8 +224,6 @@ def _define_floor(stage, incline: float, floor_half: float) -> None:
 
 def _define_worm(stage, root: str, tr: Track, codes) -> None:
     """The worm's mesh, time-sampled points and extent, and per-vertex crease / strain primvars."""
-    from pxr import Gf, Sdf, UsdGeom, Vt  # start-up time: USD loads on first use
-
     V = tr.points.shape[1]
     mesh = UsdGeom.Mesh.Define(stage, f"{root}/Worm")
     mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(tr.triangles), 3, np.int32)))
@@ -262,8 +257,6 @@ def _define_worm(stage, root: str, tr: Track, codes) -> None:
 
 def _define_magnets(stage, root: str, tr: Track, codes) -> None:
     """The EPM (a cube scaled to its extents) and the IPMs (cylinders), each a time-sampled transform."""
-    from pxr import Gf, UsdGeom  # start-up time: USD loads on first use
-
     for slot, name in enumerate(MAGNET_NAMES):
         mx = UsdGeom.Xform.Define(stage, f"{root}/{name}")
         op = mx.AddTransformOp()
@@ -287,8 +280,6 @@ def _define_magnets(stage, root: str, tr: Track, codes) -> None:
 def _define_camera(stage, root: str, cam: ViewCamera) -> None:
     """A dataset view's OpenCV pinhole camera as a USD camera: fixed values if it does not move over the frames,
     else time-sampled at the frames' times."""
-    from pxr import Gf, Usd, UsdGeom  # start-up time: USD loads on first use
-
     w, h = cam.width, cam.height
     c2w = np.broadcast_to(np.eye(4), (len(cam.time), 4, 4)).copy()
     # OpenCV camera (+z forward, +y down) -> USD camera (-z forward, +y up): flip the y and z axes
@@ -318,8 +309,6 @@ def _define_camera(stage, root: str, cam: ViewCamera) -> None:
 
 def write_stage(tracks: list[Track], path, *, spacing: float = 0.0, floor_half: float = 0.3) -> Path:
     """Write a time-sampled USD stage (``.usda`` or ``.usdc``) of ``tracks``; returns the path."""
-    from pxr import Gf, Usd, UsdGeom  # start-up time: USD loads on first use
-
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     stage = Usd.Stage.CreateNew(str(path))
@@ -354,15 +343,13 @@ def compliance_errors(path, *, include_warnings: bool = False) -> list[str]:
     ``pxr.UsdUtils.ComplianceChecker`` where the installed USD has it (usd-core <= 25.x); USD 26 removed it in favour of
     the ``UsdValidation`` framework (what ``usdchecker`` runs now), so there every registered validator is run.
     """
-    from pxr import Usd, UsdUtils  # start-up time: USD loads on first use
-
     if hasattr(UsdUtils, "ComplianceChecker"):
         checker = UsdUtils.ComplianceChecker(arkit=False, skipARKitRootLayerCheck=False, rootPackageOnly=False,
                                              skipVariants=False, verbose=False)
         checker.CheckCompliance(str(path))
         out = list(checker.GetErrors()) + list(checker.GetFailedChecks())
         return out + (list(checker.GetWarnings()) if include_warnings else [])
-    from pxr import UsdValidation  # start-up time: USD loads on first use
+    from pxr import UsdValidation  # version: USD 26+ only (the framework that replaced ComplianceChecker)
 
     validators = UsdValidation.ValidationRegistry().GetOrLoadAllValidators()
     errors = UsdValidation.ValidationContext(validators).Validate(Usd.Stage.Open(str(path)))
@@ -375,8 +362,6 @@ def compliance_errors(path, *, include_warnings: bool = False) -> list[str]:
 
 def read_points(path, prim: str = "/World/w000/Worm") -> tuple[np.ndarray, np.ndarray]:
     """(times [s] (F,), points (F, V, 3)) of a worm mesh read back from a stage."""
-    from pxr import Usd, UsdGeom  # start-up time: USD loads on first use
-
     stage = Usd.Stage.Open(str(path))
     attr = UsdGeom.Mesh(stage.GetPrimAtPath(prim)).GetPointsAttr()
     codes = attr.GetTimeSamples()

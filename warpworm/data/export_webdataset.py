@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import io
 
+import cv2
 import numpy as np
 
 from warpworm.data import export_bop as bop
@@ -39,8 +40,6 @@ SHARD_SIZE = 1000
 
 
 def _png(img: np.ndarray) -> bytes:
-    import cv2  # start-up time: OpenCV loads on first use
-
     ok, buf = cv2.imencode(".png", img)
     if not ok:
         raise OSError("PNG encoding failed")
@@ -101,7 +100,5 @@ def export_webdataset(src, out, *, limit: int | None = None, shard_size: int = S
 
 def decode_png(data: bytes) -> np.ndarray:
     """A PNG from a shard as an array (uint8 RGB for rgb.png, as stored for depth.png)."""
-    import cv2  # start-up time: OpenCV loads on first use
-
     img = cv2.imdecode(np.frombuffer(io.BytesIO(data).getvalue(), np.uint8), cv2.IMREAD_UNCHANGED)
     return img[..., ::-1] if img.ndim == 3 else img

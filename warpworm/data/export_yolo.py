@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import cv2
 import numpy as np
 import yaml
 
@@ -53,8 +54,6 @@ def label_line(bbox, uv, vis, W: int, H: int) -> str | None:
 
 def export_yolo(src, out, *, limit: int | None = None, val_fraction: float = 0.1) -> dict:
     """Write ``out``; returns {"train": n, "val": n, "labels": lines written, "yaml": path}."""
-    import cv2  # start-up time: OpenCV loads on first use
-
     reader = ds.open(src)
     out = Path(out)
     n = len(reader) if limit is None else min(limit, len(reader))

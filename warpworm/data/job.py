@@ -8,8 +8,8 @@ them afterwards (:func:`warpworm.data.previews.write_previews`).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
-import functools
 import json
 import math
 import os
@@ -21,7 +21,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import h5py
-import numpy as np
 import yaml
 from tqdm import tqdm
 
@@ -29,9 +28,10 @@ import warpworm
 from warpworm.data import dataset as ds
 from warpworm.data import signal_hold
 from warpworm.data import workers as wk
-from warpworm.data.config import ConfigError, DatasetConfig, check_output_dir, load_config
+from warpworm.data.config import ConfigError, DatasetConfig, load_config
 from warpworm.data.export_json import jsonable
-from warpworm.data.shard import Interrupted, ShardStats, warp_version
+from warpworm.data.shard import ShardStats
+from warpworm.data.signal_hold import Interrupted
 from warpworm.data.stages import DEFAULT_STAGES, load_stages
 
 
@@ -54,7 +54,7 @@ class Summary:
     new_samples: int = 0
     cameras_below_min: int = 0
     kernels_s: float = 0.0
-    """Wall time [s] loading the Warp kernels before the first shard (compiling them on a cold cache: ~20-30 s)."""
+    """Wall time [s] loading the Warp kernels before the first shard (compiling them on a cold cache)."""
 
     @property
     def samples_per_s(self) -> float:
@@ -71,32 +71,6 @@ class Summary:
                 f"write {self.write_s:.1f} s\n"
                 f"  unstable worlds dropped and replaced: {self.replaced_worlds}; cameras below "
                 f"camera.min_in_frame after max_tries: {self.cameras_below_min}")
-
-
-@functools.lru_cache(maxsize=None)
-def _versions() -> dict:
-    return {"warpworm": warpworm.__version__, "warp": warp_version(), "numpy": np.__version__,
-            "h5py": h5py.__version__, "python": sys.version.split()[0]}
-
-
-def _manifest(cfg: DatasetConfig, done: dict[int, ShardStats | dict], complete: bool, summary=None,
-              shard_size_requested: int | None = None) -> dict:
-    shards = []
-    for k in sorted(done):
-        s = done[k]
-        s = dataclasses.asdict(s) if isinstance(s, ShardStats) else s
-        a, b = cfg.shard_range(k)
-        shards.append({"index": k, "file": ds.shard_name(k), "first_sample": a, "count": b - a,
-                       "bytes": s.get("bytes", 0), "sha256": s.get("sha256", ""), "replaced": s.get("replaced", 0)})
-    return {
-        "format": ds.FORMAT, "schema_version": ds.SCHEMA_VERSION, "complete": complete,
-        "num_samples": cfg.num_samples, "shard_size": cfg.shard_size, "num_shards": cfg.num_shards,
-        "shard_size_requested": cfg.shard_size if shard_size_requested is None else shard_size_requested,
-        "samples_written": int(sum(s["count"] for s in shards)), "shards": shards,
-        "config": cfg.to_dict(), "versions": _versions(), "quaternion_order": ds.QUATERNION_ORDER,
-        "units": ds.UNITS, "segmentation_ids": ds.SEGMENTATION_IDS,
-        "summary": dataclasses.asdict(summary) if summary is not None else None,
-    }
 
 
 def _config_diff(a, b, path="") -> list[str]:
@@ -184,11 +158,11 @@ KERNEL_NOTICE_S = 3.0
 """Loading the kernels longer than this [s] means they are compiling: say so (a cold cache sits ~24 s at 0 %)."""
 
 
-def warm_kernels(cfg: DatasetConfig, stages: str, log) -> float:
-    """Load (on a cold cache: compile) the stages' Warp kernels before the progress bar starts; returns the wall
-    time [s]. If it takes longer than :data:`KERNEL_NOTICE_S`, one line says that kernels are compiling, roughly how
-    long it takes and that it happens once, and another how long it took."""
-    warm = getattr(load_stages(stages), "warm", None)
+def warm_kernels(cfg: DatasetConfig, stages, log) -> float:
+    """Load (on a cold cache: compile) the Warp kernels of ``stages`` (a loaded stages object) before the progress
+    bar starts; returns the wall time [s]. If it takes longer than :data:`KERNEL_NOTICE_S`, one line says that
+    kernels are compiling, roughly how long it takes and that it happens once, and another how long it took."""
+    warm = getattr(stages, "warm", None)
     if warm is None:
         return 0.0
     t0 = time.perf_counter()
@@ -338,7 +312,7 @@ def generate(cfg: DatasetConfig, out_dir, *, workers: int = 1, resume: bool = Fa
     if holder is not None:
         raise ds.DatasetLockedError(f"{out_dir} is in use by another job: {ds.FolderLock.describe(holder)}; wait for it "
                                     "to finish or stop it (kill -TERM <pid>), then rerun with --resume")
-    check_output_dir(out_dir, resume)
+    ds.check_output_dir(out_dir, resume)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     lock = ds.FolderLock(out).acquire()
@@ -364,26 +338,26 @@ def _generate_locked(cfg, out, t0, guard, log, *, workers, resume, stages, engin
 
     def save(complete, summary=None):
         with guard.critical():
-            ds.atomic_write_json(out / ds.MANIFEST, _manifest(cfg, done, complete=complete, summary=summary,
-                                                              shard_size_requested=requested))
+            ds.atomic_write_json(out / ds.MANIFEST, ds.manifest(
+                cfg, done, complete=complete, summary=dataclasses.asdict(summary) if summary is not None else None,
+                shard_size_requested=requested))
 
     save(complete=not todo)
-    kernels_s = warm_kernels(cfg, stages, log) if todo and engine == "local" else 0.0
+    loaded = load_stages(stages)  # once: the shards that run in this process use it; worker processes load the spec
+    kernels_s = warm_kernels(cfg, loaded, log) if todo and engine == "local" else 0.0
 
     total_new = sum(cfg.shard_range(k)[1] - cfg.shard_range(k)[0] for k in todo)
     bar = tqdm(total=total_new, unit="sample", disable=not progress, dynamic_ncols=True, smoothing=0.1,
                desc=f"generate {cfg.name}", file=sys.stderr)
     written: dict[int, ShardStats] = {}
-
-    def on_shard(st: ShardStats):
-        with guard.critical():
-            written[st.index] = st
-            done[st.index] = dataclasses.asdict(st)
-            save(complete=False)
-
     try:
-        wk.run_shards(cfg, out, todo, stages, workers=workers, engine=engine, address=address,
-                      on_progress=bar.update, on_shard=on_shard)
+        with contextlib.closing(wk.run_shards(cfg, out, todo, stages, loaded=loaded, workers=workers, engine=engine,
+                                              address=address, on_progress=bar.update)) as shards:
+            for st in shards:
+                with guard.critical():
+                    written[st.index] = st
+                    done[st.index] = dataclasses.asdict(st)
+                    save(complete=False)
     except Interrupted:
         _discard_unrecorded(out, todo, done)
         raise
@@ -418,4 +392,4 @@ def _summary(cfg, out, written: dict[int, ShardStats], *, wall_s, done_before, w
                    cameras_below_min=sum(s.cameras_below_min for s in w))
 
 
-__all__ = ["Interrupted", "Summary", "device_line", "generate", "plan_job", "shard_plan"]
+__all__ = ["Summary", "device_line", "generate", "plan_job", "shard_plan"]

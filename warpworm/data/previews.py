@@ -9,11 +9,12 @@ import dataclasses
 import os
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from warpworm.data import dataset as ds
 from warpworm.data.config import DatasetConfig
-from warpworm.data.sampling import appearance_draws, worm_params
+from warpworm.data.sampling import appearance_draws, render_draws
 from warpworm.data.shard import ShardStats, simulate_with_replacement
 from warpworm.data.stages import DEFAULT_STAGES, load_stages
 from warpworm.render import make_cameras
@@ -33,8 +34,6 @@ def remove_preview_temporaries(out) -> None:
 
 def legend(width: int) -> np.ndarray:
     """A key under the contact sheet (RGB uint8, ``width`` px wide): what the third column's colours and marks mean."""
-    import cv2  # start-up time: OpenCV loads on first use
-
     groups: dict = {}  # the sheet's own colours, grouped: each colour once, with the keypoints drawn in it
     for name in KEYPOINT_NAMES:
         groups.setdefault(tuple(_kp_color(name)), []).append(name)
@@ -66,8 +65,6 @@ def write_previews(cfg: DatasetConfig, out, stages=DEFAULT_STAGES, max_rows: int
     """``preview.png``: the renderer's contact sheet (:func:`warpworm.render.contact_sheet.contact_sheet`) of the
     first samples; ``preview.mp4``: trajectory 0 resimulated at 20 fps over ``sim.frame_times`` with the same draws,
     seen from sample 0's stored camera (one world, small)."""
-    import cv2  # start-up time: OpenCV loads on first use
-
     out = Path(out)
     reader = ds.open(out)
     try:
@@ -91,15 +88,15 @@ def write_previews(cfg: DatasetConfig, out, stages=DEFAULT_STAGES, max_rows: int
     dense = dataclasses.replace(cfg, sim=dataclasses.replace(cfg.sim, frame_times=list(np.linspace(0, T, nf)),
                                                              worlds=1), shard_size=nf, num_samples=nf)
     stg = load_stages(stages)
-    frames, wdraws, _ = simulate_with_replacement(stg, dense, np.array([0]), ShardStats(0, 0))
-    cams = make_cameras(cam["K"], cam["R"], cam["t"], 0, cfg.render.width, cfg.render.height)
     traj = np.array([0])
-    app = appearance_draws(cfg, traj)
+    frames, world_values, _ = simulate_with_replacement(stg, dense, traj, ShardStats(0, 0))
+    cams = make_cameras(cam["K"], cam["R"], cam["t"], 0, cfg.render.width, cfg.render.height)
+    draws = render_draws(cfg, world_values, appearance_draws(cfg, traj), np.array([0]), cams, np.zeros(1, np.int64))
     vw = cv2.VideoWriter(str(out / ".preview.tmp.mp4"), cv2.VideoWriter_fourcc(*"mp4v"), 20,
                          (cfg.render.width, cfg.render.height))
     try:
         for f in frames:
-            img = stg.render_batch(f, worm_params(cfg, wdraws), cams, app, np.zeros(1, np.int64), cfg)["rgb"][0]
+            img = stg.render_batch(f, draws, cfg)["rgb"][0]
             vw.write(np.ascontiguousarray(img[..., ::-1]))
     finally:
         vw.release()

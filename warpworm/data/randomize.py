@@ -26,8 +26,7 @@ from typing import Any
 
 import numpy as np
 
-# the generator's names, importable from here as before (shim, issue 42: new code imports warpworm.rng)
-from warpworm.rng import derive_seeds, derived_seed, norm_ppf, sample_keys, seed_uniforms, stream_id, uniform01  # noqa: F401
+from warpworm.rng import norm_ppf, sample_keys, uniform01
 
 
 def _norm_cdf(x: float) -> float:

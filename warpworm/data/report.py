@@ -1,7 +1,7 @@
 """What a dataset (or a domain-randomization sweep of several) contains: the spread of every randomized parameter and of
 the labels, as JSON numbers and a PNG of histograms (``warpworm report DIR [DIR2 ...]``).
 
-Quantities, per folder (every one from the shards' datasets; docs/dataset.md has the schema):
+Quantities, per folder (every one from the shards' datasets):
 
 * every ``params/<group>.<name>``: per sample; numbers as min / mean / max and a histogram, text and booleans as counts;
 * crease angles ``creases/angle`` [deg], every crease of every sample;

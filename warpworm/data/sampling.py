@@ -10,18 +10,23 @@ What each draw is keyed by (so that any shard size, worker count, engine or devi
 * cameras (``camera.*``): (seed, trajectory) or (seed, sample) with ``render.camera_per_frame`` --
   :func:`dataset_cameras`.
 
+A shard draws through two calls, one per side of the simulation: :func:`draw_worlds` (the simulator's parameters of a
+batch of trajectories, per solver batch) and, once the worlds have moved, :func:`draw_views` (for each render call:
+cameras, looks, sensor values, seeds and the ``params/*`` columns, as a :class:`RenderDraws` the renderer is handed).
+
 :func:`randomized_params` draws ``WormParams`` for W worlds outside a dataset job (``warpworm simulate --randomize``).
 """
 
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import dataclass
 
 import numpy as np
 
 from warpworm import rng
 from warpworm.data import randomize as rnd
-from warpworm.data.config import ConfigError, load_config
+from warpworm.data.config import BATCH_SHARED, ConfigError, load_config
 from warpworm.physics.gaits import GAIT_PRESETS, gait_theta
 from warpworm.physics.params import WormParams
 from warpworm.render import default_appearance, hsv_to_rgb, sample_cameras
@@ -126,7 +131,7 @@ def appearance_draws(cfg, traj: np.ndarray) -> dict[str, np.ndarray]:
     for g in APPEARANCE_GROUPS:
         app.update(draw_group(cfg, g, traj).values)
     app["texture.seed"] = rng.derived_seed(rng.sample_keys(cfg.seed, traj), "texture") % (2**31 - 1)
-    r = cfg.render  # issue 24: the plate's pose and material, the lights, distractors (per trajectory)
+    r = cfg.render  # the plate's pose and material, the lights, distractors (per trajectory)
     if r.plate_pose or r.lights != "fixed" or r.distractors[1] > 0 or r.plate_materials != ["matte"] or r.paper_bsdf:
         app.update(placement_draws(cfg.render, rng.sample_keys(cfg.seed, traj)))
     return app
@@ -187,7 +192,7 @@ def sensor_values(app: dict) -> dict:
     """
     q = np.asarray(app["sensor.jpeg_quality"]).astype(np.int64)
     B = len(q)
-    f32 = np.float32  # float32 values keep the per-image arithmetic in float32 (measured ~25 % faster than float64)
+    f32 = np.float32  # float32 values keep the per-image arithmetic in float32 (faster than float64)
     return {"wb_r": np.ones(B), "wb_g": np.ones(B), "wb_b": np.ones(B), "hue_deg": np.zeros(B),
             "saturation": np.ones(B), "contrast": np.asarray(app["sensor.contrast"], f32),
             "brightness": (np.asarray(app["sensor.brightness"], np.float64) / 255.0).astype(f32),
@@ -235,7 +240,7 @@ def dataset_cameras(cfg, index: np.ndarray, worm_points: np.ndarray, view: np.nd
         roll_deg=deg("roll"), fov_deg=deg("fov_y"), fov_axis="y", lookat_jitter=_range(c["lookat_jitter"])[0],
         aspect_jitter=0.0, principal_jitter=0.0, min_in_frame=_range(c["min_in_frame"])[0],
         max_tries=int(_range(c["max_tries"])[0]))
-    if cfg.render.distortion:  # issue 24: lens distortion per camera, from the camera's seed (stored as camera/dist)
+    if cfg.render.distortion:  # lens distortion per camera, from the camera's seed (stored as camera/dist)
         cams.dist = draw_distortion(cfg.render, seeds, cams.K, cfg.render.width, cfg.render.height)
     d = cams.draws
     n = len(index)
@@ -250,5 +255,105 @@ def dataset_cameras(cfg, index: np.ndarray, worm_points: np.ndarray, view: np.nd
     return cams, values
 
 
-__all__ = ["appearance_draws", "appearance_from_draws", "dataset_cameras", "draw_group", "draw_worm",
-           "randomized_params", "sample_appearance", "sensor_values", "worm_params"]
+# ---------------------------------------------------------------------------------------------------------------------
+# What a shard draws: one call before the simulation, one after
+@dataclass
+class WorldDraws:
+    """The ``worm.*`` draws of n trajectories at their attempts, and the simulator's parameters per solver batch."""
+
+    values: dict[str, np.ndarray]
+    """Parameter name -> (n,) values (gait presets resolved, kinetic friction clipped to static)."""
+    groups: list[tuple[np.ndarray, WormParams]]
+    """(positions among the n (m,), ``WormParams`` of those m worlds): one solver batch per value of the batch-shared
+    fields (:data:`warpworm.data.config.BATCH_SHARED`: gait, direction, magnet model)."""
+
+
+def draw_worlds(cfg, traj: np.ndarray, attempt: np.ndarray) -> WorldDraws:
+    """The worm draws of trajectories ``traj`` (n,) at ``attempt`` (n,), split into solver batches."""
+    d = draw_worm(cfg, traj, attempt)
+    return WorldDraws(values=d.values, groups=[(sel, worm_params(cfg, d, sel)) for sel in _solver_groups(d)])
+
+
+def _solver_groups(d: rnd.Draws) -> list[np.ndarray]:
+    """Positions in ``d`` split by the batch-shared fields (gait, direction, magnet model): one solver batch each."""
+    keys = np.stack([np.asarray(d[n], dtype=str) for n in BATCH_SHARED], axis=1)
+    _, group_of = np.unique(keys, axis=0, return_inverse=True)
+    group_of = group_of.reshape(-1)
+    return [np.flatnonzero(group_of == g) for g in np.unique(group_of)]
+
+
+@dataclass
+class RenderDraws:
+    """Everything drawn for the n images of one render call: what the renderer is told, and what the rows store.
+
+    Image i shows world i (the snapshot of its sample's trajectory and frame) through ``cameras`` image i.
+    """
+
+    params: WormParams
+    """The trajectories' accepted worm parameters, (n,) worlds."""
+    cameras: object
+    """:class:`warpworm.render.Cameras` of the n images (``world`` = 0..n-1)."""
+    appearance: dict[str, np.ndarray]
+    """The drawn ``light / color / texture / sensor`` (and placement) values, (n,) each."""
+    look: object
+    """The renderer's :class:`~warpworm.render.Appearance` of ``appearance`` (:func:`appearance_from_draws`)."""
+    sensor: dict[str, np.ndarray]
+    """Sensor values (n,) each for :class:`warpworm.render.sensor.SensorBatch` (:func:`sensor_values`)."""
+    seeds: np.ndarray
+    """(n,) int64 per-sample seeds every pixel noise derives from."""
+    columns: dict[str, np.ndarray]
+    """``params/<name>`` values (n,) each: worm, appearance and camera draws, in that order."""
+
+
+def render_draws(cfg, world_values: dict, appearance: dict, tsel: np.ndarray, cameras, seeds: np.ndarray,
+                 camera_values: dict | None = None) -> RenderDraws:
+    """The :class:`RenderDraws` of n images: trajectory ``tsel`` (n,) of ``world_values`` / ``appearance`` (B,)
+    each, seen through ``cameras`` (n images) with per-image ``seeds`` (n,)."""
+    app = _take(appearance, tsel)
+    cameras.world = np.arange(len(seeds), dtype=np.int32)
+    return RenderDraws(params=worm_params(cfg, rnd.Draws(world_values), tsel), cameras=cameras, appearance=app,
+                       look=appearance_from_draws(app, seeds, cfg.render.band_colors), sensor=sensor_values(app),
+                       seeds=seeds, columns={**_take(world_values, tsel), **app, **(camera_values or {})})
+
+
+def draw_views(cfg, traj: np.ndarray, world_values: dict, positions: np.ndarray,
+               calls: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]) -> tuple[list[RenderDraws], int]:
+    """Everything the render calls of a simulated batch need, drawn at once.
+
+    ``traj`` (B,) trajectories with accepted worm draws ``world_values`` (B,) each and vertex positions
+    ``positions`` (B, F, V, 3) [m] at their F frames; ``calls``: per render call (sample ids, trajectory position in
+    the batch, frame, view), (n,) each. A camera is keyed by (trajectory, view) and shows the worm over all its
+    frames, or with ``render.camera_per_frame`` by the sample id and shows that frame. Returns one
+    :class:`RenderDraws` per call and the number of cameras below ``camera.min_in_frame`` after ``camera.max_tries``.
+    """
+    B, K = len(traj), int(getattr(cfg.render, "views_per_frame", 1))
+    appearance = appearance_draws(cfg, traj)
+    below = 0
+    if not cfg.render.camera_per_frame:  # K cameras per trajectory: the worm (all its frames) in view of each
+        pts = positions.reshape(B, -1, 3)
+        if K == 1:
+            cams, cam_values = dataset_cameras(cfg, traj, pts)
+        else:
+            cams, cam_values = dataset_cameras(cfg, np.repeat(traj, K), np.repeat(pts, K, axis=0),
+                                               view=np.tile(np.arange(K), B))
+        below += int((~cams.accepted).sum())
+    out = []
+    for sid, tsel, fidx, vidx in calls:
+        if cfg.render.camera_per_frame:  # a camera per sample, keyed by the sample id
+            c, cv = dataset_cameras(cfg, sid, positions[tsel, fidx])
+            below += int((~c.accepted).sum())
+        else:
+            csel = tsel * K + vidx
+            c, cv = cams.take(csel), _take(cam_values, csel)
+        seeds = rng.derived_seed(rng.sample_keys(cfg.seed, sid))
+        out.append(render_draws(cfg, world_values, appearance, tsel, c, seeds, cv))
+    return out, below
+
+
+def _take(d: dict, sel) -> dict:
+    return {k: v[sel] for k, v in d.items()}
+
+
+__all__ = ["RenderDraws", "WorldDraws", "appearance_draws", "appearance_from_draws", "dataset_cameras", "draw_group",
+           "draw_views", "draw_worlds", "draw_worm", "randomized_params", "render_draws", "sample_appearance",
+           "sensor_values", "worm_params"]

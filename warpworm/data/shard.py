@@ -26,14 +26,11 @@ from dataclasses import dataclass
 import numpy as np
 
 import warpworm
-from warpworm import ids, rng
+from warpworm import ids
 from warpworm.data import dataset as ds
-from warpworm.data import randomize as rnd
-from warpworm.data.config import BATCH_SHARED, PARAM_SPECS, DatasetConfig
-from warpworm.data.sampling import appearance_draws, dataset_cameras, draw_worm, worm_params
-from warpworm.data.stages import load_stages
+from warpworm.data.config import PARAM_SPECS, DatasetConfig
+from warpworm.data.sampling import RenderDraws, draw_views, draw_worlds
 from warpworm.render.placement import MATERIALS
-from warpworm.data.signal_hold import Interrupted  # noqa: F401  (re-exported: the workers and job raise it)
 
 
 @dataclass
@@ -55,16 +52,12 @@ class ShardStats:
     sha256: str = ""
 
 
-def _take(d: dict, sel) -> dict:
-    return {k: v[sel] for k, v in d.items()}
-
-
 # ---------------------------------------------------------------------------------------------------------------------
 # Simulation with replacement of unstable worlds
 def simulate_with_replacement(stages, cfg: DatasetConfig, traj: np.ndarray, stats: ShardStats):
     """Simulate trajectories ``traj`` (B,); unstable worlds are redrawn with attempt + 1 until stable.
 
-    Returns (frames: list of dicts (B, ...), draws of the accepted attempt, attempt (B,)).
+    Returns (frames: list of dicts (B, ...), the accepted attempt's worm draws {name: (B,)}, attempt (B,)).
     """
     B = len(traj)
     attempt = np.zeros(B, dtype=np.int64)
@@ -76,10 +69,10 @@ def simulate_with_replacement(stages, cfg: DatasetConfig, traj: np.ndarray, stat
             bad = traj[todo]
             raise RuntimeError(f"trajectories {bad[:8].tolist()} were unstable in all {cfg.sim.max_attempts} attempts; "
                                "narrow the randomization ranges, lower sim.dt or raise sim.substeps")
-        d = draw_worm(cfg, traj[todo], attempt[todo])
+        worlds = draw_worlds(cfg, traj[todo], attempt[todo])
         unstable = np.zeros(todo.size, dtype=bool)
-        for sel in _solver_groups(d):
-            res = _simulate_group(stages, cfg, worm_params(cfg, d, sel), len(sel), stats)
+        for sel, params in worlds.groups:
+            res = _simulate_group(stages, cfg, params, len(sel), stats)
             unstable[sel] = np.asarray(res.unstable, dtype=bool)
             if frames is None:
                 frames = [{k: np.zeros((B,) + np.asarray(v).shape[1:], np.asarray(v).dtype) for k, v in f.items()}
@@ -89,22 +82,14 @@ def simulate_with_replacement(stages, cfg: DatasetConfig, traj: np.ndarray, stat
                 for k, v in f.items():
                     frames[fi][k][todo[ok]] = np.asarray(v)[~unstable[sel]]
         accepted = todo[~unstable]
-        for k, v in d.values.items():
+        for k, v in worlds.values.items():
             if k not in draws_out:
                 draws_out[k] = np.empty(B, dtype=v.dtype)
             draws_out[k][accepted] = v[~unstable]
         stats.replaced += int(unstable.sum())
         todo = todo[unstable]
         attempt[todo] += 1
-    return frames, rnd.Draws(draws_out), attempt
-
-
-def _solver_groups(d: rnd.Draws) -> list[np.ndarray]:
-    """Positions in ``d`` split by the batch-shared fields (gait, direction, magnet model): one solver batch each."""
-    keys = np.stack([np.asarray(d[n], dtype=str) for n in BATCH_SHARED], axis=1)
-    _, group_of = np.unique(keys, axis=0, return_inverse=True)
-    group_of = group_of.reshape(-1)
-    return [np.flatnonzero(group_of == g) for g in np.unique(group_of)]
+    return frames, draws_out, attempt
 
 
 def _simulate_group(stages, cfg, params, num_worlds: int, stats: ShardStats):
@@ -122,7 +107,7 @@ def root_attributes(cfg: DatasetConfig, meta: dict) -> dict:
         "format": ds.FORMAT,
         "schema_version": ds.SCHEMA_VERSION,
         "warpworm_version": warpworm.__version__,
-        "warp_version": warp_version(),
+        "warp_version": ds.warp_version(),
         "config_yaml": cfg.to_yaml(),
         "seed_master": cfg.seed,
         "num_samples": cfg.num_samples,
@@ -141,16 +126,6 @@ def root_attributes(cfg: DatasetConfig, meta: dict) -> dict:
         "mesh_triangle_segment": np.asarray(meta["triangle_segment"], dtype=np.int32),
         "params_names": json.dumps(sorted(cfg.flat_distributions())),
     }
-
-
-@functools.lru_cache(maxsize=None)
-def warp_version() -> str:
-    try:
-        import warp  # start-up time: Warp loads on first use
-
-        return str(warp.__version__)
-    except Exception:  # noqa: BLE001 - the fake stages in tests do not need Warp
-        return "unavailable"
 
 
 # ---------------------------------------------------------------------------------------------------------------------
@@ -188,9 +163,9 @@ class _WriteBehind:
 
 
 def run_shard(cfg: DatasetConfig, out_dir, k: int, stages, progress=None) -> ShardStats:
-    """Produce and commit shard ``k``; the written content depends only on (cfg, k)."""
+    """Produce and commit shard ``k`` with ``stages`` (a loaded stages object, :class:`warpworm.data.stages.Stages`);
+    the written content depends only on (cfg, k)."""
     t_start = time.perf_counter()
-    stages = load_stages(stages)
     start, stop = cfg.shard_range(k)
     F = cfg.samples_per_trajectory  # K views x frames
     stats = ShardStats(index=k, count=stop - start)
@@ -223,89 +198,51 @@ def run_shard(cfg: DatasetConfig, out_dir, k: int, stages, progress=None) -> Sha
     return stats
 
 
-@dataclass
-class _Trajectories:
-    """A simulated batch of B trajectories and everything drawn for them (camera fields None when per frame)."""
-
-    traj: np.ndarray
-    stacked: dict
-    """Snapshot arrays (B, F, ...)."""
-    draws: rnd.Draws
-    attempt: np.ndarray
-    appearance: dict
-    cams: object = None
-    """Cameras of every (trajectory, view), trajectory-major: camera ``b * K + v`` is view v of trajectory b."""
-    cam_draws: dict | None = None
-
-
-def _views(cfg: DatasetConfig) -> int:
-    return int(getattr(cfg.render, "views_per_frame", 1))
-
-
 def _trajectory_rows(stages, cfg: DatasetConfig, traj: np.ndarray, stop: int, stats: ShardStats):
     """Simulate trajectories ``traj`` and render their samples below ``stop``; yields (first sample id, rows) per
     render call, rows in sample order (trajectory-major, then view, then frame) so every write is a contiguous row
-    range: strided HDF5 writes into chunked, compressed datasets measured ~25x slower than contiguous ones."""
-    F, K = cfg.frames_per_trajectory, _views(cfg)
-    frames, wdraws, attempt = simulate_with_replacement(stages, cfg, traj, stats)
+    range (strided writes into chunked, compressed HDF5 datasets are far slower)."""
+    F, K = cfg.frames_per_trajectory, int(getattr(cfg.render, "views_per_frame", 1))
+    frames, world_values, attempt = simulate_with_replacement(stages, cfg, traj, stats)
     stats.trajectories += len(traj)
-    batch = _Trajectories(traj=traj, stacked=_stack_frames(frames), draws=wdraws, attempt=attempt,
-                          appearance=appearance_draws(cfg, traj))
-    B = len(traj)
-    if not cfg.render.camera_per_frame:
-        # K cameras per trajectory, keyed by (trajectory, view): the worm (all its frames) in view of each
-        pts = np.concatenate([f["positions"] for f in frames], axis=1)
-        if K == 1:
-            batch.cams, batch.cam_draws = dataset_cameras(cfg, traj, pts)
-        else:
-            batch.cams, batch.cam_draws = dataset_cameras(cfg, np.repeat(traj, K), np.repeat(pts, K, axis=0),
-                                                          view=np.tile(np.arange(K), B))
-        stats.cameras_below_min += int((~batch.cams.accepted).sum())
-    S = F * K
+    stacked = _stack_frames(frames)  # (B, F, ...)
+    B, S = len(traj), F * K
     sid_all = (traj[:, None] * S + np.arange(S)[None]).reshape(-1)
     tsel_all = np.repeat(np.arange(B), S)  # trajectory (position in this batch) of each sample
     vidx_all = np.tile(np.repeat(np.arange(K), F), B)
     fidx_all = np.tile(np.arange(F), B * K)
     n_keep = int(np.sum(sid_all < stop))
     step = max(S, (cfg.render.batch // S) * S)  # images per render call: whole trajectories
-    for r0 in range(0, n_keep, step):
-        sl = slice(r0, min(r0 + step, n_keep))
-        yield sid_all[sl][0], _render_rows(stages, cfg, batch, sid_all[sl], tsel_all[sl], fidx_all[sl], stats,
-                                           vidx_all[sl])
+    calls = [(sid_all[sl], tsel_all[sl], fidx_all[sl], vidx_all[sl])
+             for sl in (slice(r0, min(r0 + step, n_keep)) for r0 in range(0, n_keep, step))]
+    views, below = draw_views(cfg, traj, world_values, stacked["positions"], calls)
+    stats.cameras_below_min += below
+    for (sid, tsel, fidx, vidx), draws in zip(calls, views):
+        yield sid[0], _render_rows(stages, cfg, stacked, traj, attempt, draws, sid, tsel, fidx, vidx, stats)
 
 
-def _render_rows(stages, cfg: DatasetConfig, batch: _Trajectories, sid: np.ndarray, tsel: np.ndarray,
-                 fidx: np.ndarray, stats: ShardStats, vidx: np.ndarray) -> dict:
-    """The dataset rows of samples ``sid`` (n,): trajectory ``batch.traj[tsel]``, frame ``fidx``, view ``vidx``."""
-    K = _views(cfg)
+def _render_rows(stages, cfg: DatasetConfig, stacked: dict, traj: np.ndarray, attempt: np.ndarray, draws: RenderDraws,
+                 sid: np.ndarray, tsel: np.ndarray, fidx: np.ndarray, vidx: np.ndarray, stats: ShardStats) -> dict:
+    """The dataset rows of samples ``sid`` (n,): trajectory ``traj[tsel]``, frame ``fidx``, view ``vidx``."""
     # the snapshot of each sample's (trajectory, frame), stacked: (n, ...) "worlds" of the renderer
-    fr = _gather_frames(batch.stacked, tsel, fidx)
-    if cfg.render.camera_per_frame:  # a camera per sample, keyed by the sample id
-        cams, cam_draws = dataset_cameras(cfg, sid, fr["positions"])
-        stats.cameras_below_min += int((~cams.accepted).sum())
-    else:
-        csel = tsel * K + vidx
-        cam_draws = _take(batch.cam_draws, csel)
-        cams = batch.cams.take(csel)
-    cams.world = np.arange(len(sid), dtype=np.int32)
-    seeds = rng.derived_seed(rng.sample_keys(cfg.seed, sid))
-    app = _take(batch.appearance, tsel)
+    fr = _gather_frames(stacked, tsel, fidx)
     t0 = time.perf_counter()
-    out = stages.render_batch(fr, worm_params(cfg, batch.draws, tsel), cams, app, seeds, cfg)
+    out = stages.render_batch(fr, draws, cfg)
     stats.render_s += time.perf_counter() - t0
     t0 = time.perf_counter()
+    cams = draws.cameras
     rows = {
         **out,
         "camera/K": cams.K, "camera/R": cams.R, "camera/t": cams.t,
         "camera/position": cams.position, "camera/in_frame": cams.in_frame.astype(np.float32),
         "time": (fr["frame_time"].astype(np.float32) if "frame_time" in fr  # sim.frame_unit: cycle (per world)
                  else np.asarray(cfg.sim.frame_times, dtype=np.float32)[fidx]),
-        "trajectory": batch.traj[tsel], "frame": fidx.astype(np.int32),
-        "attempt": batch.attempt[tsel].astype(np.int32), "sample_id": sid, "seed": seeds,
+        "trajectory": traj[tsel], "frame": fidx.astype(np.int32),
+        "attempt": attempt[tsel].astype(np.int32), "sample_id": sid, "seed": draws.seeds,
     }
-    if K > 1:  # only then: a dataset of views_per_frame = 1 keeps exactly the datasets of before the option
+    if int(getattr(cfg.render, "views_per_frame", 1)) > 1:  # only then: views_per_frame = 1 keeps the old datasets
         rows["view"] = vidx.astype(np.int32)
-    for name, v in {**_take(batch.draws.values, tsel), **app, **cam_draws}.items():
+    for name, v in draws.columns.items():
         rows[f"params/{name}"] = text_column(name, v) if np.asarray(v).dtype.kind in "OSU" else v
     stats.write_s += time.perf_counter() - t0
     return rows
@@ -347,5 +284,5 @@ def _gather_frames(stacked: dict, tsel: np.ndarray, fidx: np.ndarray) -> dict:
     return {k: v[tsel, fidx] for k, v in stacked.items()}
 
 
-__all__ = ["Interrupted", "ShardStats", "root_attributes", "run_shard",
+__all__ = ["ShardStats", "root_attributes", "run_shard",
            "simulate_with_replacement", "text_column", "text_widths"]

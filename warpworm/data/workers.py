@@ -4,9 +4,10 @@ Why processes: Warp runs CPU kernels on one thread, so P cores need P processes.
 native state that must not be forked. Each shard is an independent task whose output depends only on (config, k), so
 the engine and worker count never change the data.
 
-Start-up: the parent starts the workers, then loads the stages' Warp kernel modules once (``WarpStages.warm``: with a
-cold kernel cache the modules compile in parallel threads, into the cache every worker reads); meanwhile each worker
-does its heavy imports (``preload``) and then waits for the parent, so no two processes compile the same module.
+Start-up: the job has loaded the stages' Warp kernel modules once before it starts the shards
+(:func:`warpworm.data.job.warm_kernels`: with a cold kernel cache the modules compile in parallel threads, into the
+cache every worker reads), so no two processes compile the same module; each worker does its heavy imports
+(``preload``) when it starts.
 
 A worker that dies (SIGKILL, out of memory) breaks the local pool: the job stops with a clear error, finished shards stay
 committed, the half-written shard is a temporary file, and ``--resume`` redoes exactly the missing shards. A worker whose
@@ -23,19 +24,21 @@ import multiprocessing as mp
 import os
 import queue as queue_mod
 import signal
-import sys
 import threading
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-from typing import Callable
+from typing import Callable, Iterator
 
 from warpworm.data import signal_hold
 from warpworm.data.dataset import DatasetWriteError, clean_temporaries, shard_name
-from warpworm.data.shard import Interrupted, run_shard
+from warpworm.data.shard import ShardStats, run_shard
+from warpworm.data.signal_hold import Interrupted
 from warpworm.data.stages import load_stages
 
 _progress_queue = None
 _in_shard = False
+_stages = None
+"""This worker process's stages object, loaded once from the job's spec (:func:`_init_worker`)."""
 
 
 def _worker_signal(signum, frame):
@@ -48,8 +51,8 @@ def _worker_signal(signum, frame):
     os._exit(128 + signum)
 
 
-def _init_worker(q, parent_pid: int, stages=None, ready=None):
-    global _progress_queue
+def _init_worker(q, parent_pid: int, stages):
+    global _progress_queue, _stages
 
     _progress_queue = q
     for sig in (signal.SIGTERM, signal.SIGINT):
@@ -62,14 +65,10 @@ def _init_worker(q, parent_pid: int, stages=None, ready=None):
             time.sleep(0.5)
 
     threading.Thread(target=watchdog, daemon=True, name="warpworm-parent-watchdog").start()
-    if stages is not None:
-        # heavy imports now, while the parent warms the kernel cache; then wait for it, so that no worker compiles
-        # a kernel module the parent is compiling (each would compile its own copy: ~33 s of CPU per worker here)
-        preload = getattr(load_stages(stages), "preload", None)
-        if preload is not None:
-            preload()
-    if ready is not None:
-        ready.wait()
+    _stages = load_stages(stages)
+    preload = getattr(_stages, "preload", None)
+    if preload is not None:  # heavy imports (Warp, the simulator, the renderer) before the first shard
+        preload()
 
 
 def _report(n: int):
@@ -77,52 +76,47 @@ def _report(n: int):
         _progress_queue.put(n)
 
 
-def _run_shard_task(cfg, out, k, stages):
+def _run_shard_task(cfg, out, k):
     global _in_shard
     _in_shard = True
     try:
-        return run_shard(cfg, out, k, stages, progress=_report)
+        return run_shard(cfg, out, k, _stages, progress=_report)
     except Interrupted as exc:  # the temporary is gone (run_shard aborted the writer): stop this process now
         os._exit(128 + exc.signum)
     finally:
         _in_shard = False
 
 
-def _warm(cfg, stages) -> None:
-    """Load / compile the stages' kernels once in this process (``stages.warm(cfg)``, when the stages have it)."""
-    warm = getattr(load_stages(stages), "warm", None)
-    if warm is None:
-        return
-    try:
-        warm(cfg)
-    except Exception as exc:  # noqa: BLE001 - a failed warm-up only costs time; the shards report real errors
-        print(f"warning: kernel warm-up failed ({type(exc).__name__}: {exc}); modules load on first use",
-              file=sys.stderr)
-
-
 class WorkerError(RuntimeError):
     """A worker failed; completed shards are intact and ``--resume`` continues the job."""
 
 
-def run_shards(cfg, out, todo: list[int], stages, *, workers: int = 1, engine: str = "local",
-               address: str | None = None, on_progress: Callable[[int], None] = lambda n: None,
-               on_shard: Callable = lambda st: None) -> None:
-    """Run shards ``todo``; calls ``on_progress(samples)`` as batches finish and ``on_shard(stats)`` per shard."""
+def run_shards(cfg, out, todo: list[int], stages, *, loaded=None, workers: int = 1, engine: str = "local",
+               address: str | None = None,
+               on_progress: Callable[[int], None] = lambda n: None) -> Iterator[ShardStats]:
+    """Run shards ``todo``, yielding each one's :class:`~warpworm.data.shard.ShardStats` as it is committed (in the
+    order they finish); calls ``on_progress(samples)`` as batches finish. Closing the generator early (the caller
+    stopped: a signal, an error) stops the workers; use it in ``contextlib.closing``.
+
+    ``stages``: the ``"module:attr"`` spec worker processes and Ray tasks load (or a stages object, in this process
+    only); ``loaded``: the stages object already loaded here, for shards run in this process (None: load ``stages``).
+    """
     if not todo:
         return
     if engine == "ray":
-        return _run_ray(cfg, out, todo, stages, address, on_progress, on_shard)
+        yield from _run_ray(cfg, out, todo, stages, address, on_progress)
+        return
     if engine != "local":
         raise ValueError(f"--engine: got {engine!r}; expected 'local' or 'ray'")
     if workers <= 1:
-        _warm(cfg, stages)  # cold cache: the kernel modules compile in parallel threads
+        here = load_stages(stages) if loaded is None else loaded
         for k in todo:
-            on_shard(run_shard(cfg, out, k, stages, progress=on_progress))
+            yield run_shard(cfg, out, k, here, progress=on_progress)
         return
-    _run_local_pool(cfg, out, todo, stages, workers, on_progress, on_shard)
+    yield from _run_local_pool(cfg, out, todo, stages, workers, on_progress)
 
 
-def _run_local_pool(cfg, out, todo, stages, workers, on_progress, on_shard):
+def _run_local_pool(cfg, out, todo, stages, workers, on_progress):
     ctx = mp.get_context("spawn")
     q = ctx.Queue()
     # one thread per process: BLAS/OpenMP pools would oversubscribe the cores the other workers use
@@ -141,15 +135,10 @@ def _run_local_pool(cfg, out, todo, stages, workers, on_progress, on_shard):
 
     t = threading.Thread(target=drain, daemon=True)
     t.start()
-    ready = ctx.Event()
     pool = ProcessPoolExecutor(max_workers=min(workers, len(todo)), mp_context=ctx, initializer=_init_worker,
-                               initargs=(q, os.getpid(), stages, ready))
+                               initargs=(q, os.getpid(), stages))
     try:
-        pending = {pool.submit(_run_shard_task, cfg, str(out), k, stages): k for k in todo}  # starts the workers
-        try:
-            _warm(cfg, stages)  # once, here, while the workers start up
-        finally:
-            ready.set()
+        pending = {pool.submit(_run_shard_task, cfg, str(out), k): k for k in todo}  # starts the workers
         while pending:
             finished, _ = wait(pending, return_when=FIRST_COMPLETED)
             for fut in finished:
@@ -165,8 +154,8 @@ def _run_local_pool(cfg, out, todo, stages, workers, on_progress, on_shard):
                         raise exc from None
                     raise WorkerError(f"shard {k} failed in a worker: {type(exc).__name__}: {exc}. Completed shards "
                                       "are intact; rerun the same command with --resume to finish the job") from exc
-                on_shard(st)
-    except BaseException:
+                yield st
+    except BaseException:  # GeneratorExit too: the caller stopped
         _stop_workers(pool)  # SIGTERM / SIGINT in the parent, or a failure: no worker keeps writing
         raise
     finally:
@@ -198,7 +187,7 @@ the task, e.g. disk full, is not retried). A re-run is safe: shard k's content d
 shard is written under a temporary name and renamed when complete."""
 
 
-def _run_ray(cfg, out, todo, stages, address, on_progress, on_shard):
+def _run_ray(cfg, out, todo, stages, address, on_progress):
     try:
         import ray  # optional dependency: ray (the ray extra)
     except ImportError:
@@ -218,7 +207,7 @@ def _run_ray(cfg, out, todo, stages, address, on_progress, on_shard):
             raise WorkerError(f"shard {k} failed in a Ray task: {exc}. Completed shards are intact; rerun with "
                               "--resume") from exc
         on_progress(st.count)
-        on_shard(st)
+        yield st
     _remove_dead_attempts(out, todo)
 
 
@@ -232,7 +221,7 @@ def _remove_dead_attempts(out, shards) -> list[str]:
 
 def _ray_shard(cfg, out, k, stages):
     # Ray workers may not see the driver's sys.path (tests' fake stages): it travels with the task
-    return run_shard(cfg, out, k, stages)
+    return run_shard(cfg, out, k, load_stages(stages))
 
 
 def default_workers() -> int:

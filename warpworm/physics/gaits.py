@@ -40,8 +40,8 @@ inchworm       north pole up (θ = +π/2): anterior half an   between centre and
                                                                                                   centre and tail
 =============  ===========================================  ====================================  =====================
 
-:func:`preset_params` returns :class:`~warpworm.physics.params.WormParams` with a gait's tuned path (w, a, h, period); the
-tuning (``warpworm search-gait``, a batched grid search as the paper's Table I) is documented in ``docs/dynamics.md``.
+:func:`preset_params` returns :class:`~warpworm.physics.params.WormParams` with a gait's tuned path (w, a, h,
+period); the tuning is ``warpworm search-gait``, a batched grid search as the paper's Table I.
 """
 
 from __future__ import annotations
@@ -56,7 +56,7 @@ DEFAULT_DT = 4.0e-3
 """Step of the gait runs [s]: the magnetic wrench and EPM pose are refreshed every step."""
 DEFAULT_SUBSTEPS = 2
 """Implicit substeps per step in the gait runs (2 ms substeps): converged for the six presets against 0.5 ms ones,
-at less Newton work per simulated second than 1 ms ones (docs/dynamics.md, "Newton convergence")."""
+at less Newton work per simulated second than 1 ms ones."""
 
 SINE_FIELDS = ("start_x", "start_y", "wavelength", "amplitude", "depth", "theta", "period", "direction", "phase",
                "rewind")
@@ -71,17 +71,9 @@ GAIT_ORIENTATION = {
 }
 GAIT_PLACEMENT = {"peristaltic": 0.4, "omega": 0.0, "inchworm": 0.2}
 
-# Tuned paths per gait (docs/dynamics.md, "Gaits"): batched grid searches (warpworm search-gait, the default
-# mineral-paper worm with its crease damping), the best distance per cycle among the worlds that stay stable and
-# unfolded, keep up with the EPM (<= 1.05 w per cycle) and deform, then kept only where they are robust: stable
-# over 3 cycles under both magnet models, both wrench refresh intervals (2 and 4 ms) and both directions (8 runs
-# per point, benchmarks/gait_robustness.py), and checked again once the Newton solve iterated to convergence and
-# contacts stopped cycling within a substep: omega moved from h 23 to 25 mm (23 crumpled with a converged solve);
-# the inchworm, whose crumples at h <= 13 mm came from contact cycling, is robust from 9 mm and sat at 10 mm. Once
-# the panels' contact barrier kept wings from folding flat (kernels.common.wing_contact), nothing crumples down to
-# h = 4 mm, and peristalsis moved from 24 / 40 / 17 mm to 24 / 45 / 5 (anterior pair 0.87 where it was 0.97) and the
-# inchworm from 20 / 50 / 10 to 20 / 60 / 5.5 (0.82 where it was 0.95), each among robust neighbours and with its
-# 2 ms substeps converged (tests/test_dynamics_gaits.py).
+# Tuned paths per gait: the best distance per cycle of batched grid searches (warpworm search-gait) among the worlds
+# that stay stable and unfolded, keep up with the EPM and deform, kept where they are robust (both magnet models,
+# wrench refresh intervals and directions).
 GAIT_PRESETS = {
     "peristaltic": dict(wavelength=0.024, amplitude=0.045, closest_approach=0.005, cycle_period=1.0),
     "omega": dict(wavelength=0.016, amplitude=0.03, closest_approach=0.025, cycle_period=1.0),

@@ -43,7 +43,7 @@ DEFAULT_DENSITY = 64e6
 """Default dipole density of the 'dipoles' model: 64 per cm³ [1/m³]."""
 
 DEFAULT_QUAD_ORDER = 4
-"""Gauss-Legendre points per panel side of the 'analytic' surface integral (see docs/magnets.md for the study)."""
+"""Gauss-Legendre points per panel side of the 'analytic' surface integral."""
 
 DEFAULT_MAX_PANELS = 8
 """Largest number of composite panels per face side of the 'analytic' surface integral."""
@@ -465,7 +465,7 @@ def dipole_grid(magnet: Magnet, density: float = DEFAULT_DENSITY) -> np.ndarray:
     point stands for a cell of equal volume and carries ``magnet.moment / N``. Cuboid: cell centres of an
     n_x × n_y × n_z lattice, n_i = max(1, round(size_i · density^(1/3))). Cylinder: n_z mid-height layers, each an
     equal-area polar partition (rings of width ≈ h, sectors of area ≈ h²) with the dipoles on radii that keep the
-    grid's traceless second moment exact (see the kernel module and docs/magnets.md).
+    grid's traceless second moment exact (see the kernel module).
     """
     per_m = float(np.float32(density)) ** (1.0 / 3.0)
     if magnet.shape != SHAPE_CYLINDER:

@@ -1,6 +1,6 @@
 """Sheet materials: one physical parameterization of the origami's stiffness, and three named presets.
 
-The worm is a bar-and-hinge model (docs/crease.md). Its stiffness and damping are material constants:
+The worm is a bar-and-hinge model. Its stiffness and damping are material constants:
 
 - ``hinge_stiffness`` k_α [N·m/rad per metre of crease = N/rad]: the crease's rotational spring. A crease of length
   L resists a fold-angle change Δφ with the moment k_α L Δφ.
@@ -10,7 +10,7 @@ The worm is a bar-and-hinge model (docs/crease.md). Its stiffness and damping ar
 - ``bar_stiffness`` EA [N]: every other bar, near-rigid (panels do not stretch).
 - ``hinge_damping`` c_α [N·m·s/rad per metre of crease]: the crease's viscous resistance to folding speed (paper
   creases are viscoelastic). Without it a soft worm near the EPM snaps dynamically and crumples; 20 ms relaxation
-  (c_α = 1e-4 for mineral paper) keeps the force-plate runs and closer approaches stable (docs/dynamics.md).
+  (c_α = 1e-4 for mineral paper) keeps the force-plate runs and closer approaches stable.
 
 The fold-through barrier (``fold_limit_stiffness``) is independent of all three.
 

@@ -2,7 +2,7 @@
 
 Every per-world field is either one float (shared by all worlds) or an array of shape ``(num_worlds,)``;
 :func:`per_world` broadcasts either to ``(num_worlds,)``. Vector fields take ``(3,)`` or ``(num_worlds, 3)``.
-Defaults follow the paper (Swaminathan et al., RA-L 2021) and the calibrations in docs/. SI units.
+Defaults follow the paper (Swaminathan et al., RA-L 2021) and the calibrations. SI units.
 
 Frames: world z is up, the floor is z = 0 (tilted by ``floor_incline`` about world y), the worm lies along +x with
 its tail at the smaller x. Magnet slots in every world: 0 = EPM, 1 = tail IPM, 2 = centre IPM, 3 = head IPM.
@@ -50,21 +50,21 @@ class WormParams:
     Near-rigid: strains of ~1e-3 under the magnets' ~0.02 N. Not stiffer by default: the implicit solver reads the
     floor's normal forces off the bar forces, and a float32 position (~4e-9 m rounding at 0.05 m) gives a bar of
     EA / L0 ~ 1e6 N/m (EA = 1e4) a force noise of ~4 mN, more than a vertex's share of the worm's weight (~1 mN);
-    at 20 N it is ~8 µN (docs/dynamics.md)."""
+    at 20 N it is ~8 µN."""
     valley_bar_stiffness: float | np.ndarray = 0.3
     """Axial rigidity EA_w of the VALLEY-ring (waist) bars at the unit middles [N], shape () or (W,): the sheet's
-    in-plane compliance. The tube is isostatic (docs/crease.md): these bars stand for the panel bending near the
+    in-plane compliance. The tube is isostatic: these bars stand for the panel bending near the
     waists that lets the paper bellows fold, so they must be far softer than ``bar_stiffness`` for the worm to
     shorten under the magnets (default: mineral paper, warpworm.physics.materials)."""
     waist_close_strain: float | np.ndarray = 0.3
     """How far a waist (VALLEY) bar may shorten, as a strain magnitude ε_c [1], before it turns as stiff as the rigid
     bars, shape () or (W,). The bellows' folding mode shrinks its waists (they close completely at about 17 %
-    shortening, docs/crease.md), so this caps how far each unit can contract."""
+    shortening), so this caps how far each unit can contract."""
     waist_stop_strain: float | np.ndarray = 0.3
     """Stretch ε_t [1] beyond which a waist (VALLEY) bar turns as stiff as the rigid ones (``bar_stiffness``), shared
     shape () or (W,): the panels it stands for bend only so far. Without the stop a hard squeeze flattens the waist
-    triangles into slivers (their crease gradients blow up) or pinches the waist through the axis (docs/crease.md:
-    the waist closes at α = 92.4°)."""
+    triangles into slivers (their crease gradients blow up) or pinches the waist through the axis (the waist closes
+    at α = 92.4°)."""
     fold_limit_stiffness: float | np.ndarray = 2.0
     """NoFoldThrough barrier k_lim per metre of crease [N·m/rad/m = N/rad], shape () or (W,): a crease past its range
     (mountain [−π, 0], valley [0, π]) feels k_lim L (φ − bound). A material constant of its own, not a multiple of
@@ -74,7 +74,7 @@ class WormParams:
     hinge_damping: float | np.ndarray = 1.0e-4
     """Crease damping c_α per metre of crease [N·m·s/rad/m]: a hinge resists folding speed with c_α L dψ/dt,
     shape () or (W,). Default: mineral paper's (warpworm.physics.materials), a crease relaxation time c_α / k_α = 20 ms.
-    Without it a soft worm close to the EPM snaps and crumples (docs/dynamics.md)."""
+    Without it a soft worm close to the EPM snaps and crumples."""
 
     # --- floor ---
     mu_static: float | np.ndarray = 0.268

@@ -40,8 +40,8 @@ def _scalar_param(value, num_worlds: int, name: str) -> np.ndarray:
     raise ValueError(f"WormParams.{name}: expected a scalar or shape ({num_worlds},), got {arr.shape}")
 
 
-def vertex_bandwidth(edges: np.ndarray, hinges: np.ndarray) -> int:
-    """Half-bandwidth, in 3×3 vertex blocks, of the implicit solver's Newton matrix (kernels/band_cholesky.py): every
+def half_bandwidth(edges: np.ndarray, hinges: np.ndarray) -> int:
+    """Half-bandwidth, in 3×3 vertex blocks, of the implicit solver's Newton matrix (kernels/banded_cholesky.py): every
     bar and crease couples the vertices it touches, so it is the largest vertex-index span of an element."""
     return max(int(np.ptp(np.asarray(edges), axis=1).max(initial=0)),
                int(np.ptp(np.asarray(hinges), axis=1).max(initial=0)))
@@ -240,7 +240,7 @@ class ModelBuilder:
         ipm_h = per_world(p.ipm_thickness, W)
         ipm_mass = per_world(p.magnet_mass_density, W) * np.pi * (0.5 * ipm_d) ** 2 * ipm_h  # (W,)
         # The IPM mass goes on its mount vertices with least-norm weights that keep the total mass and the centre of
-        # mass (so gravity's moment on the mount is exact); docs/dynamics.md discusses the inertia this implies.
+        # mass (so gravity's moment on the mount is exact).
         mv = pat.mount_vertices
         mpos_rest, _ = crease.mount_poses(pat, xm)  # (mrows, 3, 3)
         # least-norm weights w (K,) with sum(w) = 1 and sum(w x_k) = mount centre: a batched 4 x K pseudo-inverse over
@@ -261,7 +261,7 @@ class ModelBuilder:
         """Shared topology: bars, hinges, mounts, anchors."""
         pat, A_idx = self.info["pattern"], self.anchors
         A = len(A_idx)
-        self.info["vertex_bandwidth"] = vertex_bandwidth(pat.edges, pat.hinges)
+        self.info["half_bandwidth"] = half_bandwidth(pat.edges, pat.hinges)
         self._put("edges", pat.edges, wp.int32)
         self._put("hinges", pat.hinges, wp.int32)
         self._put("hinge_label", pat.hinge_label.astype(np.int32), wp.int32)
@@ -276,7 +276,7 @@ class ModelBuilder:
     def add_material(self) -> None:
         """Per-bar rigidity and stops, crease stiffness, damping, friction, floor, gravity."""
         p, W, pat = self.params, self.num_worlds, self.info["pattern"]
-        # Per-bar rigidity: the valley rings get their own (soft) EA so the isostatic tube can fold (docs/crease.md).
+        # Per-bar rigidity: the valley rings get their own (soft) EA so the isostatic tube can fold.
         ea_rigid = _scalar_param(p.bar_stiffness, W, "bar_stiffness")
         ea_valley = _scalar_param(p.valley_bar_stiffness, W, "valley_bar_stiffness")
         is_valley = pat.edge_label == crease.VALLEY
@@ -364,8 +364,8 @@ class Model:
     """A, anchored vertices (0 without a force plate)."""
     pattern: crease.CreasePattern
     """World 0's crease pattern (host; topology shared by every world)."""
-    vertex_bandwidth: int
-    """Half-bandwidth of the Newton matrix in vertex blocks (:func:`vertex_bandwidth`)."""
+    half_bandwidth: int
+    """Half-bandwidth of the Newton matrix in vertex blocks (:func:`half_bandwidth`)."""
     # --- geometry and mass
     rest_length: wp.array
     """Bar rest lengths [m], shape (R, E), float."""
@@ -507,7 +507,7 @@ class Model:
         total = sum(getattr(s, f).capacity for f in State.__dataclass_fields__)
         W, V = self.num_worlds, self.num_vertices
         total += W * self.num_anchors * 12  # anchor targets (Control)
-        total += W * V * (12 + 12 + 12) + W * V * (self.vertex_bandwidth + 1) * 36  # solver scratch
+        total += W * V * (12 + 12 + 12) + W * V * (self.half_bandwidth + 1) * 36  # solver scratch
         per = [self.rest_length, self.hinge_rest_angle, self.hinge_length, self.inv_mass, self.magnet_size,
                self.magnet_moment]
         total += sum(a.capacity * self.num_worlds // a.shape[0] for a in per)

@@ -29,7 +29,7 @@ from warpworm.physics.gaits import DEFAULT_DT, DEFAULT_SUBSTEPS
 from warpworm.physics.magnets import launch_world_wrenches, pair_wrench_scratch
 from warpworm.sim import capture_gate
 from warpworm.sim.model import Control, Model, State
-from warpworm.sim.solver import BandSolver, SolverBase, SubstepSettings, put_bounded
+from warpworm.sim.solver import BandedSolver, SolverBase, SubstepSettings, put_bounded
 from warpworm.sim.tile_solver import TileSolver
 from warpworm.transforms import quat_wxyz_to_matrix, quat_xyzw_to_wxyz
 
@@ -76,11 +76,12 @@ SOLVERS = ("band", "tile-band", "tile-dense")
 
 
 def make_solver(name: str, model: Model, settings: SubstepSettings) -> SolverBase:
-    """The solver :data:`SOLVERS` calls ``name``: :class:`BandSolver` or a :class:`TileSolver` of that factorization."""
+    """The solver :data:`SOLVERS` calls ``name``: :class:`BandedSolver` or a :class:`TileSolver` of that
+    factorization."""
     if name not in SOLVERS:
         raise ValueError(f"solver: got {name!r}; expected one of {SOLVERS}")
     if name == "band":
-        return BandSolver(model, settings)
+        return BandedSolver(model, settings)
     return TileSolver(model, settings, factorization=name[len("tile-"):])
 
 
@@ -106,12 +107,12 @@ class Simulator:
             first). 24: a stick–slip transition can take 15–25 at 2 ms substeps.
         newton_tol: a Newton step (the second or later) changing no vertex's velocity by more than this [m/s] ends
             the substep (default 1e-4; 0 takes every step). A fixed step count is not converged through a
-            snap-through (docs/dynamics.md, "Newton convergence").
+            snap-through.
         chord: chord Newton steps (reuse the last factor; :mod:`warpworm.kernels.implicit_euler`); default on for
-            the band solver, which alone has them.
+            the banded solver, which alone has them.
         slip_speed: static friction's regularisation speed ε [m/s]: a worm held by friction creeps at most ~ε.
-        solver: one of :data:`SOLVERS`: ``"band"`` one thread per world (:class:`~warpworm.sim.solver.BandSolver`);
-            ``"tile-band"`` / ``"tile-dense"`` a block of threads per world, the band factored column-parallel
+        solver: one of :data:`SOLVERS`: ``"band"`` one thread per world (:class:`~warpworm.sim.solver.BandedSolver`);
+            ``"tile-band"`` / ``"tile-dense"`` a block of threads per world, the banded matrix factored column-parallel
             (bit-identical to "band") or a dense tile Cholesky in shared memory
             (:class:`~warpworm.sim.tile_solver.TileSolver`; the GPU layouts).
     """
@@ -255,7 +256,6 @@ class Simulator:
                 # the first step of a new graph runs as plain launches, so that whatever a first launch creates
                 # lazily (a Warp module, the wrench's quadrature arrays, a tile solver's scratch) exists before the
                 # capture: inside a capture, an array made from host data has its copy recorded, not done
-                # (tests/test_step_graph.py; docs/dynamics.md, "Notes moved from the code")
                 self._one_step(state, control, moment)
                 n -= 1
                 try:
@@ -327,7 +327,7 @@ class Simulator:
 
     # ------------------------------------------------------------------------------------------------------------
     def snapshot(self, state: State, control: Control | None = None) -> dict:
-        """Host copies (NumPy) of the state, keyed as in docs/architecture.md.
+        """Host copies (NumPy) of the state.
 
         Returns ``positions (W, V, 3)``, ``velocities (W, V, 3)`` [m, m/s]; ``magnet_pos (W, 4, 3)`` [m],
         ``magnet_rot (W, 4, 3, 3)`` (magnet -> world; slots EPM, tail, centre, head); ``magnet_force``,

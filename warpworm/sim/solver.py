@@ -2,7 +2,7 @@
 
 As Newton's ``SolverBase``: a solver is built for a :class:`~warpworm.sim.model.Model` and its
 :class:`SubstepSettings`, owns its scratch, and ``step(state, num_substeps, control)`` advances every world in place
-(one launch; ``command`` returns it recorded, for graph capture). :class:`BandSolver` launches
+(one launch; ``command`` returns it recorded, for graph capture). :class:`BandedSolver` launches
 :func:`warpworm.kernels.implicit_euler.implicit_step` (one thread per world);
 :class:`warpworm.sim.tile_solver.TileSolver` the block-per-world kernel of :mod:`warpworm.kernels.implicit_tile`.
 Both run the physics of :mod:`warpworm.kernels.substep`. Nothing loops over worlds on the host.
@@ -42,7 +42,7 @@ class SubstepSettings:
     newton_tol: float = 1.0e-4
     """[m/s] a Newton step (the second or later) changing no vertex's velocity by more than this ends the substep."""
     chord: bool = False
-    """Chord Newton steps (band layout only)."""
+    """Chord Newton steps (banded layout only)."""
     slip_speed: float = 1.0e-5
     """Static friction's regularisation speed ε [m/s]."""
     strain_limit: float = 0.5
@@ -99,7 +99,7 @@ class SolverBase:
         the Newton counters (W,) int32."""
         s = self.scratch
         s.x_prev, s.delta, s.grad = (wp.zeros((W, V), dtype=wp.vec3, device=dev) for _ in range(3))
-        s.hess = wp.zeros((W, V, model.vertex_bandwidth + 1), dtype=wp.mat33, device=dev)
+        s.hess = wp.zeros((W, V, model.half_bandwidth + 1), dtype=wp.mat33, device=dev)
         s.released = wp.zeros((W, V), dtype=wp.int32, device=dev)
         s.newton_steps, s.newton_capped, s.newton_factors = (wp.zeros(W, dtype=wp.int32, device=dev)
                                                              for _ in range(3))
@@ -153,8 +153,8 @@ class SolverBase:
         return out
 
 
-class BandSolver(SolverBase):
-    """One thread per world, block-band Cholesky, chord steps if ``settings.chord``
+class BandedSolver(SolverBase):
+    """One thread per world, block-banded Cholesky, chord steps if ``settings.chord``
     (:func:`warpworm.kernels.implicit_euler.implicit_step`)."""
 
     def _record(self, state, control, num_substeps: int):

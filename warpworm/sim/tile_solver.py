@@ -1,7 +1,7 @@
 """The block-per-world solver (:mod:`warpworm.kernels.implicit_tile`), the GPU layout of the substep.
 
-:class:`TileSolver` is a :class:`~warpworm.sim.solver.SolverBase`: ``step(state, n, control)`` runs the band
-layout's substeps with one block of ``block_dim`` threads per world instead of one thread. It assembles the band
+:class:`TileSolver` is a :class:`~warpworm.sim.solver.SolverBase`: ``step(state, n, control)`` runs the banded
+layout's substeps with one block of ``block_dim`` threads per world instead of one thread. It assembles the banded
 layout's Newton systems bit for bit; ``factorization="band"`` also factors them with the same arithmetic (identical
 results on the CPU), "dense" (``wp.tile_cholesky``) rounds differently.
 """
@@ -74,7 +74,7 @@ class TileSolver(SolverBase):
             start, index = vertex_incidence(elements.numpy(), V)
             setattr(inc, f"{kind}_start", wp.array(start, dtype=wp.int32, device=model.device))
             setattr(inc, kind, wp.array(index, dtype=wp.int32, device=model.device))
-        self.kernel = make_tile_substep_kernel(V, int(model.vertex_bandwidth), factorization == "dense",
+        self.kernel = make_tile_substep_kernel(V, int(model.half_bandwidth), factorization == "dense",
                                                max_registers)
 
     @property

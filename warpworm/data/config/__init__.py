@@ -1,7 +1,7 @@
 """Dataset job configuration: YAML -> validated dataclasses (a pydantic v2 schema), with dotted command-line overrides.
 
 The schema is the dataclasses of ``sections`` and ``dataset_config`` (their field docstrings are the documentation) and :data:`PARAM_SPECS` (every
-randomizable parameter); ``warpworm config-schema`` exports it as a JSON Schema for editors (docs/config.md).
+randomizable parameter); ``warpworm config-schema`` exports it as a JSON Schema for editors.
 All SI: m, s, rad, kg.
 
 Every mistake (unknown key, wrong type, negative size, low > high, unknown gait, unwritable output folder) raises
@@ -11,7 +11,7 @@ expected. Nothing is written by loading or validating a config. Building the dat
 
 Modules: ``specs`` (PARAM_SPECS, BATCH_SHARED), ``sections`` (SimConfig, RenderConfig, OutputConfig),
 ``randomize_schema`` (the randomize groups), ``dataset_config`` (DatasetConfig), ``validate`` (config_from_dict,
-check_option(s), messages), ``loading`` (read_yaml, apply_overrides, load_config), ``output_dir`` (check_output_dir).
+check_option(s), messages), ``loading`` (read_yaml, apply_overrides, load_config).
 Every public name is importable from here.
 """
 
@@ -19,12 +19,7 @@ from __future__ import annotations
 
 from warpworm.data.config.dataset_config import DatasetConfig, schema_adapter
 from warpworm.data.config.loading import apply_overrides, config_packaged_names, load_config, read_yaml
-from warpworm.data.config.output_dir import check_output_dir
 from warpworm.data.config.sections import RENDER_OFF_GROUPS, OutputConfig, RenderConfig, SimConfig
 from warpworm.data.config.specs import BATCH_SHARED, PARAM_SPECS
 from warpworm.data.config.validate import check_option, check_options, config_from_dict
 from warpworm.errors import ConfigError
-from warpworm.physics.param_specs import ParamSpec
-# shim (issue 42): the parameter contract's checks, importable from their old place; new code imports
-# warpworm.physics.param_specs
-from warpworm.physics.param_specs import check_worm_params, worm_param_problems

@@ -37,7 +37,7 @@ def _whole_trajectory_views(render: RenderConfig, info: ValidationInfo) -> Rende
 # ---------------------------------------------------------------------------------------------------------------------
 @dataclass
 class DatasetConfig:
-    """A dataset job: what to simulate and render, how much, and how it is stored (SI units; docs/dataset.md)."""
+    """A dataset job: what to simulate and render, how much, and how it is stored (SI units)."""
 
     __pydantic_config__ = SECTION
     name: Str = "dataset"

@@ -83,7 +83,7 @@ def _group(name: str, specs: dict[str, ParamSpec]):
 _DEFAULTS = {g: {n: rnd.parse_distribution(s.default) for n, s in specs.items()} for g, specs in PARAM_SPECS.items()}
 Randomize = TypedDict("Randomize", {g: _group(g, specs) for g, specs in PARAM_SPECS.items()}, total=False)
 Randomize.__pydantic_config__ = ConfigDict(extra="forbid")
-Randomize.__doc__ = "group -> parameter -> distribution (warpworm.data.randomize; docs/dataset.md)."
+Randomize.__doc__ = "group -> parameter -> distribution (warpworm.data.randomize)."
 
 
 def with_defaults(given: dict) -> dict:

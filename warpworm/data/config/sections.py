@@ -78,7 +78,7 @@ class SimConfig:
     settle_time: Annotated[Num, Field(ge=0)] = 0.3
     """Time [s] the worm settles under gravity with the EPM parked at the path start."""
     frame_unit: Literal["s", "cycle"] = "s"
-    """Unit of ``frame_times``: 's' (seconds, multiples of ``dt``), or 'cycle' (issue 24: cycles of each world's EPM
+    """Unit of ``frame_times``: 's' (seconds, multiples of ``dt``), or 'cycle' (cycles of each world's EPM
     path, ``worm.cycle_period``: frame f of a world is taken at ``round(frame_times[f] · period / dt) · dt``, so
     k + 0.5 is its k-th closest approach and a whole number a far point, whatever the period; ``time`` stores the
     seconds)."""
@@ -150,7 +150,7 @@ class RenderConfig:
     views_per_frame: Annotated[Int, Field(ge=1)] = 1
     """K: cameras rendered of every simulated frame, each its own sample (own camera draw, labels and sample id);
     a trajectory gives K * len(sim.frame_times) samples. 1 (the default) writes the datasets of before this option."""
-    # -- issue 24: nothing world-fixed relative to the worm; shadows (docs/render.md "Transfer"); OFF values keep the
+    # -- nothing world-fixed relative to the worm, and shadows; OFF values keep the
     # datasets of before (RENDER_OFF_GROUPS leaves them out of config_yaml)
     plate_pose: Bool = False
     """Draw the plate's pose relative to the worm per trajectory: yaw uniform in [0, 2π) about the floor normal and
@@ -183,16 +183,16 @@ class RenderConfig:
     """[lo, hi] in [0, 1]: each light's colour from cool daylight (0, ~6500 K) to warm tungsten (1, ~3000 K)."""
     shadows: Bool = False
     """Shadows from every light (the directional light and each point light): a depth map of the scene's meshes
-    rendered from the light by the same rasterizer, soft by percentage-closer filtering (docs/render.md)."""
+    rendered from the light by the same rasterizer, soft by percentage-closer filtering."""
     shadow_map: Annotated[Int, Field(ge=0, le=4096)] = 0
     """Side [px] of each light's shadow map; 0: the image's larger side (a texel about a pixel at the worm)."""
     supersample: Annotated[Int, Field(ge=1, le=8)] = 1
     """Anti-aliased RGB: s x s samples per pixel averaged in linear RGB (s = 1: one sample at the centre). Depth,
-    segmentation, masks and keypoint visibility stay exact at pixel centres (docs/render.md)."""
+    segmentation, masks and keypoint visibility stay exact at pixel centres."""
     distortion: Bool = False
     """Lens distortion drawn per camera (OpenCV's k1, k2, p1, p2, k3, each uniform in its range below), stored as
     camera/dist: images are warped through it; keypoints/pixel (= cv2.projectPoints with it), labels/bbox_obj and
-    visibility follow it (docs/render.md)."""
+    visibility follow it."""
     distortion_k1: Annotated[list[Num], Field(strict=True, min_length=2, max_length=2),
                              AfterValidator(_check_signed_range)] = field(default_factory=lambda: [-0.25, 0.05])
     """[lo, hi]: radial k1 (negative: barrel)."""
@@ -207,13 +207,13 @@ class RenderConfig:
     """[lo, hi]: radial k3."""
     motion_blur: Annotated[Num, Field(ge=0, le=0.2)] = 0.0
     """Shutter time [s]: RGB averaged over ``motion_blur_samples`` sub-frames of the open shutter, the sheet moved
-    along its simulated velocities (labels at the frame's time; docs/render.md). 0: no blur."""
+    along its simulated velocities (labels at the frame's time). 0: no blur."""
     motion_blur_samples: Annotated[Int, Field(ge=2, le=64)] = 4
     """Sub-frames of the shutter (``motion_blur``)."""
     paper_bsdf: Bool = False
     """The sheet as paper: wrapped diffuse (light through the thin sheet), a soft sheen and a hemispherical ambient
     (sky above, the floor's bounce below) instead of Lambert with a constant ambient; parameters per trajectory
-    (params/paper.*; docs/render.md)."""
+    (params/paper.*)."""
     plate_materials: Annotated[list[Literal["matte", "glossy", "acrylic"]], Field(min_length=1)] = \
         field(default_factory=lambda: ["matte"])
     """Plate materials drawn per trajectory, equally likely: 'matte' (as before), 'glossy' (highlights of every
@@ -231,7 +231,7 @@ class RenderConfig:
                              AfterValidator(_check_range)] = field(default_factory=lambda: [1.0, 1.0])
     """[lo, hi]: per-sample red and blue gains over green in linear light (a white-balance error), each uniform,
     stored as params/sensor.wb_red, params/sensor.wb_blue. [1, 1]: off."""
-    # -- issue 24: the path-traced engine (warpworm.render.pathtrace, the `pathtrace` extra); labels stay the raster's
+    # -- the path-traced engine (warpworm.render.pathtrace, the `pathtrace` extra); labels stay the raster's
     engine: Annotated[Literal["raster", "pathtraced"], AfterValidator(_check_engine)] = "raster"
     """'raster': every image from the rasterizer; 'pathtraced': every image path-traced by Mitsuba 3 (same meshes,
     cameras, colours, lights; depth, segmentation and every label from the rasterizer's exact passes)."""
@@ -240,7 +240,7 @@ class RenderConfig:
     sample's engine is stored in the ``engine`` dataset). 0: none."""
     pathtraced_spp: Annotated[Int, Field(ge=1)] = 16
     """Samples per pixel of the path-traced images."""
-    # -- issue 26: the marker bands' colours (randomize.texture.worm: bands)
+    # -- the marker bands' colours (randomize.texture.worm: bands)
     band_colors: Annotated[list[list[Num]] | None, AfterValidator(_check_band_colors)] = None
     """Five display colours [[r, g, b], ...] in [0, 1], tail -> head, of the worm painted in bands
     (``randomize.texture.worm: bands``; ``warpworm track --band-colors-from DATASET`` reads them back). None: the
@@ -275,8 +275,8 @@ class OutputConfig:
 
     __pydantic_config__ = SECTION
     compression: Literal["lzf", "gzip", "none"] = "gzip"
-    """HDF5 filter for images: 'gzip' (level 1 measured smaller *and* faster to write and read than 'lzf' on rendered
-    images; benchmarks/bench_dataset.py), 'lzf' or 'none'."""
+    """HDF5 filter for images: 'gzip' (level 1: smaller than 'lzf' on rendered images and readable by every HDF5
+    tool), 'lzf' or 'none'."""
     compression_level: Annotated[Int, Field(ge=0, le=9)] = 1
     """gzip level 0..9 (ignored for lzf/none)."""
     preview: Bool = True

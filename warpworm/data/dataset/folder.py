@@ -13,7 +13,8 @@ import h5py
 import numpy as np
 
 from warpworm.data.dataset.files import DatasetError, file_sha256
-from warpworm.data.dataset.schema import FORMAT
+from warpworm.data.dataset.schema import (FORMAT, QUATERNION_ORDER, SCHEMA_VERSION, SEGMENTATION_IDS, UNITS,
+                                          versions)
 
 MANIFEST = "manifest.json"
 SHARD_RE = re.compile(r"^shard-(\d{5})\.h5$")
@@ -60,6 +61,27 @@ def shard_problem(path, expected_first: int, expected_count: int, sha256: str | 
     except (OSError, KeyError, ValueError) as exc:
         return f"unreadable as HDF5 (truncated or damaged: {type(exc).__name__}: {str(exc)[:120]})"
     return None
+
+
+def manifest(cfg, done: dict[int, dict], complete: bool, summary: dict | None = None,
+             shard_size_requested: int | None = None) -> dict:
+    """The manifest of a dataset job: its config ``cfg`` (a :class:`~warpworm.data.config.DatasetConfig`), the shards
+    on disk ``done`` {k: {bytes, sha256, replaced}}, whether every shard is there, the job's summary (None while it
+    runs) and the shard size asked for (when the job split it for its workers)."""
+    shards = []
+    for k in sorted(done):
+        s = done[k]
+        a, b = cfg.shard_range(k)
+        shards.append({"index": k, "file": shard_name(k), "first_sample": a, "count": b - a,
+                       "bytes": s.get("bytes", 0), "sha256": s.get("sha256", ""), "replaced": s.get("replaced", 0)})
+    return {
+        "format": FORMAT, "schema_version": SCHEMA_VERSION, "complete": complete,
+        "num_samples": cfg.num_samples, "shard_size": cfg.shard_size, "num_shards": cfg.num_shards,
+        "shard_size_requested": cfg.shard_size if shard_size_requested is None else shard_size_requested,
+        "samples_written": int(sum(s["count"] for s in shards)), "shards": shards,
+        "config": cfg.to_dict(), "versions": versions(), "quaternion_order": QUATERNION_ORDER,
+        "units": UNITS, "segmentation_ids": SEGMENTATION_IDS, "summary": summary,
+    }
 
 
 def read_manifest(root) -> dict:

@@ -1,10 +1,16 @@
 """The dataset schema: every HDF5 dataset of a shard (name, shape, dtype, unit, meaning), the root attributes' units,
-and the docs table generated from it (docs/dataset.md holds exactly :func:`schema_markdown`'s text)."""
+and the docs table generated from it."""
 
 from __future__ import annotations
 
+import functools
+import sys
 from dataclasses import dataclass
 
+import h5py
+import numpy as np
+
+import warpworm
 from warpworm import ids
 
 SCHEMA_VERSION = 1
@@ -12,8 +18,26 @@ FORMAT = "warpworm-dataset"
 """The ``format`` of every shard's root attributes and of the manifest."""
 QUATERNION_ORDER = "wxyz"
 
+
+@functools.lru_cache(maxsize=None)
+def versions() -> dict[str, str]:
+    """The versions of the code that writes a dataset (the manifest's ``versions``)."""
+    return {"warpworm": warpworm.__version__, "warp": warp_version(), "numpy": np.__version__,
+            "h5py": h5py.__version__, "python": sys.version.split()[0]}
+
+
+@functools.lru_cache(maxsize=None)
+def warp_version() -> str:
+    """The Warp version that writes the files (root attribute ``warp_version``, the manifest's ``versions``)."""
+    try:
+        import warp  # start-up time: Warp loads on first use
+
+        return str(warp.__version__)
+    except Exception:  # noqa: BLE001 - the fake stages in tests do not need Warp
+        return "unavailable"
+
 SEGMENTATION_IDS = ids.SEGMENTATION_IDS
-"""Segmentation ids (:mod:`warpworm.ids`, docs/architecture.md): worm segments 0..4 run tail -> head."""
+"""Segmentation ids (:mod:`warpworm.ids`): worm segments 0..4 run tail -> head."""
 
 UNITS = {"length": "m", "depth": "m (camera z; 0 = background)", "angle": "rad", "time": "s", "pixel": "px",
          "mass": "kg", "moment": "A*m^2", "frames": "OpenCV camera (+z forward, +y down), x_cam = R x_world + t; "
@@ -102,7 +126,7 @@ SCHEMA_TABLE_END = "<!-- end of schema table -->"
 
 
 def schema_markdown() -> str:
-    """The docs' table of every HDF5 dataset (docs/dataset.md holds exactly this text; a test checks it)."""
+    """The docs' table of every HDF5 dataset."""
     def shape(f):
         return "(" + ", ".join(str(d) for d in f.shape) + ("," if len(f.shape) == 1 else "") + ")"
 

@@ -4,7 +4,7 @@ A :class:`CreasePattern` is the bar-and-hinge description of an origami sheet (L
 paper's Kangaroo model): every mesh edge is a bar, every interior edge is a hinge with a label (mountain / valley /
 flat) and a rest fold angle. Everything is float64, SI (m, rad), host-side; the solver uploads it.
 
-Geometry of the worm (paper §III, Fig. 3; the triangulation is ours, see ``docs/crease.md``)
+Geometry of the worm (paper §III, Fig. 3; the triangulation is ours)
 -----------------------------------------------------------------------------------------
 A tube with an equilateral triangular cross-section of side ``a`` runs along +x, tail at x = 0, one face on the floor
 z = 0. There are ``2 n + 1`` cross-sections, one every half unit (``s = 0 .. 2n``): even ``s`` are the unit

@@ -1,5 +1,5 @@
-"""The block-banded Cholesky factor and solve (kernels/band_cholesky.py) against NumPy's dense solve, and the
-unrolled solve at the worm's bandwidth against the loops it replaces, bit for bit (it claims the same operations in
+"""The block-banded Cholesky factor and solve (kernels/banded_cholesky.py) against NumPy's dense solve, and the
+unrolled solve at the worm's half-bandwidth against the loops it replaces, bit for bit (it claims the same operations in
 the same order). Random symmetric positive definite block-band matrices, float64 truth, float32 kernels."""
 
 from __future__ import annotations
@@ -8,22 +8,22 @@ import numpy as np
 import pytest
 import warp as wp
 
-from warpworm.kernels.band_cholesky import (UNROLLED_BANDWIDTH, band_cholesky_factor, band_cholesky_solve,
-                                            band_cholesky_solve_loops)
+from warpworm.kernels.banded_cholesky import (UNROLLED_HALF_BANDWIDTH, banded_cholesky_factor, banded_cholesky_solve,
+                                            banded_cholesky_solve_loops)
 
 
 @wp.kernel
 def _factor_solve(mode: int, nv: int, bw: int, mat: wp.array3d(dtype=wp.mat33), rhs: wp.array2d(dtype=wp.vec3)):
     world = wp.tid()
-    band_cholesky_factor(world, nv, bw, mat)
+    banded_cholesky_factor(world, nv, bw, mat)
     if mode == 0:
-        band_cholesky_solve(world, nv, bw, mat, rhs)
+        banded_cholesky_solve(world, nv, bw, mat, rhs)
     else:
-        band_cholesky_solve_loops(world, nv, bw, mat, rhs)
+        banded_cholesky_solve_loops(world, nv, bw, mat, rhs)
 
 
 def _system(nv: int, bw: int, worlds: int, seed: int):
-    """(A (W, 3nv, 3nv) float64 SPD with 3x3-block bandwidth bw, b (W, 3nv)) and A's lower block band as stored."""
+    """(A (W, 3nv, 3nv) float64 SPD with 3x3-block half-bandwidth bw, b (W, 3nv)) and A's lower block-banded part as stored."""
     rng = np.random.default_rng(seed)
     n = 3 * nv
     blk = np.abs(np.arange(n)[:, None] // 3 - np.arange(n)[None, :] // 3) <= bw
@@ -45,7 +45,7 @@ def _run(mode: int, nv: int, bw: int, band: np.ndarray, b: np.ndarray) -> np.nda
     return rhs.numpy().reshape(len(b), -1).astype(np.float64)
 
 
-@pytest.mark.parametrize("bw", [1, 3, UNROLLED_BANDWIDTH])
+@pytest.mark.parametrize("bw", [1, 3, UNROLLED_HALF_BANDWIDTH])
 def test_factor_and_solve_match_numpy(bw):
     nv, W = 13, 4
     A, b, band = _system(nv, bw, W, seed=bw)
@@ -58,6 +58,6 @@ def test_factor_and_solve_match_numpy(bw):
 
 def test_unrolled_solve_is_the_loops_bit_for_bit():
     nv = 39  # the worm's 13 sections x 3 corners
-    A, b, band = _system(nv, int(UNROLLED_BANDWIDTH), 6, seed=7)
-    np.testing.assert_array_equal(_run(0, nv, int(UNROLLED_BANDWIDTH), band, b),
-                                  _run(1, nv, int(UNROLLED_BANDWIDTH), band, b))
+    A, b, band = _system(nv, int(UNROLLED_HALF_BANDWIDTH), 6, seed=7)
+    np.testing.assert_array_equal(_run(0, nv, int(UNROLLED_HALF_BANDWIDTH), band, b),
+                                  _run(1, nv, int(UNROLLED_HALF_BANDWIDTH), band, b))
