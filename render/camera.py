@@ -205,7 +205,7 @@ def sample_cameras(
     """Cameras on a shell around each world's worm, resampled until the worm is in frame.
 
     Every image ``i`` draws from its own ``seeds[i]`` with the counter-based generator
-    (:func:`warpworm.data.randomize.seed_uniforms`), so its camera does not depend on the batch it is drawn in. Attempts are vectorised over images; an image whose worm is less
+    (:func:`warpworm.rng.seed_uniforms`), so its camera does not depend on the batch it is drawn in. Attempts are vectorised over images; an image whose worm is less
     than ``min_in_frame`` inside the image (fraction of ``worm_points`` projecting at least ``margin`` px inside,
     in front of the camera) draws again, up to ``max_tries``; then the best attempt is kept and ``accepted`` is False.
 

@@ -12,7 +12,7 @@ around the worm is drawn relative to it instead; the simulation, cameras and lab
 * ``render.lights: random``: ``light_count`` point lights, each at a uniform azimuth and the configured elevation,
   distance, radius, irradiance at the plate's centre and colour (cool daylight to warm tungsten), in the plate's frame.
 
-Draws are keyed by (master seed, trajectory) with :func:`warpworm.data.randomize.uniform01` streams ``plate`` and
+Draws are keyed by (master seed, trajectory) with :func:`warpworm.rng.uniform01` streams ``plate`` and
 ``lights.<i>``, so a trajectory's frames share them and any sharding gives the same values. Their names are the
 ``params/`` datasets they are stored under (docs/render.md).
 """
