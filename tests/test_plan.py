@@ -164,3 +164,17 @@ def test_fit_track_cli_fits_two_clips_jointly(tmp_path, capsys):
     s = json.loads(capsys.readouterr().out)
     assert s["clips"] == 2
     assert abs(s["value"][0] / (1.05 * 3.6) - 1) < 0.03, s["value"]
+
+
+def test_least_pinned_direction_is_the_valley():
+    """A Fisher matrix built from a known valley (a k_alpha / moment trade-off direction with little information,
+    two well-measured directions across it): least_pinned returns that direction and sqrt(3.84 / its
+    information) as the half-width along it."""
+    u = np.array([0.8, 0.0, 0.5])
+    u /= np.linalg.norm(u)
+    a = np.array([0.0, 1.0, 0.0])
+    b = np.cross(u, a)
+    F = 25.0 * np.outer(u, u) + 4e4 * np.outer(a, a) + 9e3 * np.outer(b, b)
+    v, hw = P.least_pinned(F)
+    np.testing.assert_allclose(v, u, atol=1e-9)
+    assert abs(hw - np.sqrt(3.84 / 25.0)) < 1e-9
