@@ -178,3 +178,22 @@ def test_least_pinned_direction_is_the_valley():
     v, hw = P.least_pinned(F)
     np.testing.assert_allclose(v, u, atol=1e-9)
     assert abs(hw - np.sqrt(3.84 / 25.0)) < 1e-9
+
+
+def test_plan_clips_saves_the_fisher_matrices(tmp_path, capsys):
+    """``plan-clips --fisher-out``: one omega clip, the moment alone (3 design worms x 3 worlds): the saved Fisher
+    matrices give the plan's predicted half-width, and the report names the plan's least pinned direction."""
+    from warpworm import quiet_warp
+    from warpworm.cli import main
+
+    quiet_warp()
+    out, npz = tmp_path / "plan.json", tmp_path / "fisher.npz"
+    assert main(["plan-clips", "--fit", "epm_moment", "--range", "epm_moment=3:4", "--gaits", "omega",
+                 "--w-scales", "1", "--a-scales", "1", "--h-scales", "1", "--cycles", "1", "--max-clips", "1",
+                 "--out", str(out), "--fisher-out", str(npz)]) == 0
+    assert "least pinned direction of the plan" in capsys.readouterr().out
+    z = np.load(npz)
+    assert z["fisher"].shape == (1, 3, 1, 1) and list(z["names"]) == ["epm_moment"]
+    plan = json.loads(out.read_text())
+    hw = np.expm1(np.sqrt(3.84 / z["fisher"][0, :, 0, 0])).max()
+    assert abs(plan["predicted_half_width_rel"][0] - hw) < 1e-9 * max(1.0, hw)
