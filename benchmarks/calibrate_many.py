@@ -25,6 +25,7 @@ import time
 import numpy as np
 
 NAMES = ["hinge_stiffness", "mu_static", "epm_moment"]
+TOL = (0.05, 0.05, 0.03)
 
 
 def draw_worm(rng: np.random.Generator) -> np.ndarray:
@@ -145,11 +146,20 @@ def table(path: str) -> None:
           "px worst")
 
 
-def combined_verdict(verdicts) -> str:
-    """The verdict of several takes of one worm (the same clips re-filmed or re-rendered): pinned only if every
-    take says pinned, not pinned only if every take says not pinned, else borderline."""
+def combined_verdict(verdicts, ranges=None) -> str:
+    """The verdict of several takes of one worm (the same clips re-filmed or re-rendered): not pinned if the takes'
+    acceptable ranges ``ranges`` (absolute (lo, hi) per take) have no value in common (the takes disagree: at least
+    one fit sits in a side valley), else pinned only if every take says pinned, not pinned only if every take says
+    not pinned, else borderline."""
+    if ranges is not None and max(lo for lo, _ in ranges) > min(hi for _, hi in ranges):
+        return "not pinned"
     v = set(verdicts)
     return next(iter(v)) if len(v) == 1 and v <= {"pinned", "not pinned"} else "borderline"
+
+
+def _abs_range(row: dict, i: int) -> tuple[float, float]:
+    lo, hi = row["range_rel"][i]
+    return row["fitted"][i] * (1 + lo), row["fitted"][i] * (1 + hi)
 
 
 def stability(*paths: str) -> None:
@@ -181,15 +191,29 @@ def stability(*paths: str) -> None:
             c_changed = c_flipped = c_pairs = 0
             duos = list(itertools.combinations(range(len(takes)), 2))
             for w in both:
-                comb = {d: combined_verdict([takes[k][w]["verdict"][i] for k in d]) for d in duos}
+                comb = {d: combined_verdict([takes[k][w]["verdict"][i] for k in d],
+                                            [_abs_range(takes[k][w], i) for k in d]) for d in duos}
                 for d1, d2 in itertools.combinations(duos, 2):
                     c_pairs += 1
                     c_changed += comb[d1] != comb[d2]
                     c_flipped += {comb[d1], comb[d2]} == {"pinned", "not pinned"}
             line += f" | two takes: {c_changed} of {c_pairs} changed, {c_flipped} pinned <-> not pinned"
+        if len(takes) >= 2:
+            right = wrong = 0
+            for w in both:
+                for d in itertools.combinations(range(len(takes)), 2):
+                    v = combined_verdict([takes[k][w]["verdict"][i] for k in d], [_abs_range(takes[k][w], i) for k in d])
+                    if v == "pinned":
+                        ok = all(abs(takes[k][w]["error"][i]) <= TOL[i] for k in d)
+                        right += ok
+                        wrong += not ok
+            line += f" | two-take pinned: {right} within tolerance in both takes, {wrong} not"
         print(line + " |")
     for w in both:
+        two = [combined_verdict([t[w]["verdict"][i] for t in takes], [_abs_range(t[w], i) for t in takes])
+               for i in range(len(NAMES))]
         print(f"  worm {w}: " + "  ".join("->".join(t[w]["verdict"][i] for t in takes) for i in range(len(NAMES)))
+              + "  (all takes: " + "/".join(two) + ")"
               + "  errors " + " ".join("/".join(f"{100 * t[w]['error'][i]:+.1f}" for t in takes) + "%"
                                        for i in range(len(NAMES))))
 
