@@ -11,6 +11,7 @@ through each clip's camera). Prints per worm and the table: recovery error and v
     python benchmarks/calibrate_many.py --table many.jsonl
     nice -n 10 python benchmarks/calibrate_many.py --plan plan.json --worms 3 --noise-seed 1 ... --json noise.jsonl
     python benchmarks/calibrate_many.py --stability many.jsonl noise.jsonl    # do verdicts flip on re-rendering?
+    python benchmarks/calibrate_many.py --stability many.jsonl noise1.jsonl noise2.jsonl  # and two-take verdicts?
 
 Numbers: docs/calibration.md ("Many worms").
 """
@@ -24,6 +25,7 @@ import time
 import numpy as np
 
 NAMES = ["hinge_stiffness", "mu_static", "epm_moment"]
+TOL = (0.05, 0.05, 0.03)
 
 
 def draw_worm(rng: np.random.Generator) -> np.ndarray:
@@ -144,28 +146,76 @@ def table(path: str) -> None:
           "px worst")
 
 
-def stability(path_a: str, path_b: str) -> None:
-    """Verdicts of the same worms rendered with two noise seeds (--noise-seed): per parameter, how many verdicts
-    changed, how many flipped between pinned and not pinned, and the range half-widths' relative change."""
-    a = {json.loads(line)["worm"]: json.loads(line) for line in open(path_a)}
-    b = {json.loads(line)["worm"]: json.loads(line) for line in open(path_b)}
-    both = sorted(set(a) & set(b))
-    print(f"{len(both)} worms rendered twice")
+def combined_verdict(verdicts, ranges=None) -> str:
+    """The verdict of several takes of one worm (the same clips re-filmed or re-rendered): not pinned if the takes'
+    acceptable ranges ``ranges`` (absolute (lo, hi) per take) have no value in common (the takes disagree: at least
+    one fit sits in a side valley), else pinned only if every take says pinned, not pinned only if every take says
+    not pinned, else borderline."""
+    if ranges is not None and max(lo for lo, _ in ranges) > min(hi for _, hi in ranges):
+        return "not pinned"
+    v = set(verdicts)
+    return next(iter(v)) if len(v) == 1 and v <= {"pinned", "not pinned"} else "borderline"
+
+
+def _abs_range(row: dict, i: int) -> tuple[float, float]:
+    lo, hi = row["range_rel"][i]
+    return row["fitted"][i] * (1 + lo), row["fitted"][i] * (1 + hi)
+
+
+def stability(*paths: str) -> None:
+    """Verdicts of the same worms rendered with different noise seeds (--noise-seed), one --json file per take: per
+    parameter and pair of takes, how many verdicts changed, how many flipped between pinned and not pinned, and the
+    range half-widths' relative change; with three takes or more also the two-take verdict
+    (:func:`combined_verdict`) of every pair of takes against every other pair: does it change when one take is
+    replaced by another?"""
+    import itertools
+
+    takes = [{json.loads(line)["worm"]: json.loads(line) for line in open(p)} for p in paths]
+    both = sorted(set.intersection(*(set(t) for t in takes)))
+    print(f"{len(both)} worms rendered {len(takes)} times")
     for i, n in enumerate(NAMES):
-        changed = flipped = 0
+        changed = flipped = pairs = 0
         rel = []
-        for w in both:
-            va, vb = a[w]["verdict"][i], b[w]["verdict"][i]
-            changed += va != vb
-            flipped += {va, vb} == {"pinned", "not pinned"}
-            ha = max(-a[w]["range_rel"][i][0], a[w]["range_rel"][i][1])
-            hb = max(-b[w]["range_rel"][i][0], b[w]["range_rel"][i][1])
-            rel.append(hb / ha - 1)
-        print(f"| {n} | {changed} of {len(both)} changed | {flipped} pinned <-> not pinned | half-width change "
-              f"median {100 * np.median(np.abs(rel)):.0f} %, max {100 * np.max(np.abs(rel)):.0f} % |")
+        for ta, tb in itertools.combinations(takes, 2):
+            for w in both:
+                va, vb = ta[w]["verdict"][i], tb[w]["verdict"][i]
+                pairs += 1
+                changed += va != vb
+                flipped += {va, vb} == {"pinned", "not pinned"}
+                ha = max(-ta[w]["range_rel"][i][0], ta[w]["range_rel"][i][1])
+                hb = max(-tb[w]["range_rel"][i][0], tb[w]["range_rel"][i][1])
+                rel.append(hb / ha - 1)
+        line = (f"| {n} | one take: {changed} of {pairs} changed, {flipped} pinned <-> not pinned | half-width change "
+                f"median {100 * np.median(np.abs(rel)):.0f} %, max {100 * np.max(np.abs(rel)):.0f} %")
+        if len(takes) >= 3:
+            c_changed = c_flipped = c_pairs = 0
+            duos = list(itertools.combinations(range(len(takes)), 2))
+            for w in both:
+                comb = {d: combined_verdict([takes[k][w]["verdict"][i] for k in d],
+                                            [_abs_range(takes[k][w], i) for k in d]) for d in duos}
+                for d1, d2 in itertools.combinations(duos, 2):
+                    c_pairs += 1
+                    c_changed += comb[d1] != comb[d2]
+                    c_flipped += {comb[d1], comb[d2]} == {"pinned", "not pinned"}
+            line += f" | two takes: {c_changed} of {c_pairs} changed, {c_flipped} pinned <-> not pinned"
+        if len(takes) >= 2:
+            right = wrong = 0
+            for w in both:
+                for d in itertools.combinations(range(len(takes)), 2):
+                    v = combined_verdict([takes[k][w]["verdict"][i] for k in d], [_abs_range(takes[k][w], i) for k in d])
+                    if v == "pinned":
+                        ok = all(abs(takes[k][w]["error"][i]) <= TOL[i] for k in d)
+                        right += ok
+                        wrong += not ok
+            line += f" | two-take pinned: {right} within tolerance in both takes, {wrong} not"
+        print(line + " |")
     for w in both:
-        print(f"  worm {w}: " + "  ".join(f"{x}->{y}" for x, y in zip(a[w]["verdict"], b[w]["verdict"])) + "  errors "
-              + " ".join(f"{100 * x:+.1f}/{100 * y:+.1f}%" for x, y in zip(a[w]["error"], b[w]["error"])))
+        two = [combined_verdict([t[w]["verdict"][i] for t in takes], [_abs_range(t[w], i) for t in takes])
+               for i in range(len(NAMES))]
+        print(f"  worm {w}: " + "  ".join("->".join(t[w]["verdict"][i] for t in takes) for i in range(len(NAMES)))
+              + "  (all takes: " + "/".join(two) + ")"
+              + "  errors " + " ".join("/".join(f"{100 * t[w]['error'][i]:+.1f}" for t in takes) + "%"
+                                       for i in range(len(NAMES))))
 
 
 if __name__ == "__main__":
@@ -173,7 +223,7 @@ if __name__ == "__main__":
 
     if len(sys.argv) == 3 and sys.argv[1] == "--table":
         table(sys.argv[2])
-    elif len(sys.argv) == 4 and sys.argv[1] == "--stability":
-        stability(sys.argv[2], sys.argv[3])
+    elif len(sys.argv) >= 4 and sys.argv[1] == "--stability":
+        stability(*sys.argv[2:])
     else:
         main()

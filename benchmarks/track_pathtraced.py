@@ -5,6 +5,7 @@ lens (:mod:`warpworm.analysis.footage`), the randomization's harshest sensor dra
 
     nice -n 10 python benchmarks/track_pathtraced.py --looks 4                  # ~1 min on the shared 2-core machine
     nice -n 10 python benchmarks/track_pathtraced.py --looks 4 --brightness-cut  # the first tracker's brightness rule
+    nice -n 10 python benchmarks/track_pathtraced.py --looks 4 --hard            # hard masks, no boundary unmixing
 
 Numbers: docs/calibration.md ("Track").
 """
@@ -40,6 +41,10 @@ def main() -> None:
     ap.add_argument("--spp", type=int, default=8)
     ap.add_argument("--truth", default="raster", choices=["raster", "pathtracer"])
     ap.add_argument("--brightness-cut", action="store_true", help="the first tracker (value >= half the colour's, hue within 25)")
+    ap.add_argument("--hard", action="store_true", help="centroids of the hard masks (soft=0: the tracker before "
+                    "the boundary unmixing)")
+    ap.add_argument("--threshold", action="append", default=[], metavar="NAME=VALUE",
+                    help="a tracker threshold (Thresholds.OVERRIDABLE), as warpworm track's")
     ap.add_argument("--no-distortion", action="store_true")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", default=None)
@@ -50,7 +55,9 @@ def main() -> None:
 
     quiet_warp()
     W, H = (int(x) for x in args.size.split("x"))
-    thr = T.Thresholds.from_colors(**({"brightness_cut": 1.0, "hue_tol": 25.0} if args.brightness_cut else {}))
+    thr = T.Thresholds.from_colors(**({"brightness_cut": 1.0, "hue_tol": 25.0} if args.brightness_cut else {}),
+                                   **({"soft": 0.0} if args.hard else {}),
+                                   **{k: float(v) for k, _, v in (t.partition("=") for t in args.threshold)})
     rows = []
     print(f"{'gait':12s} {'look':>4s} {'mean px':>8s} {'max px':>7s}  per band max (blue pink white green red)")
     for gait in args.gaits.split(","):
@@ -74,7 +81,7 @@ def main() -> None:
         e = np.concatenate(errs)
         rows.append({"gait": gait, "mean_px": float(np.mean(e[np.isfinite(e)])), "max_px": float(np.max(e)),
                      "p95_px": float(np.percentile(e, 95)), "band_max_px": e.max(axis=0).tolist(),
-                     "frames": int(len(e))})
+                     "frames": int(len(e)), "seed": args.seed, "errors": e.tolist()})
         print(f"{gait:12s}  all  {rows[-1]['mean_px']:8.2f} {rows[-1]['max_px']:7.2f}  (95 %: {rows[-1]['p95_px']:.2f} px, "
               f"{len(e)} frames x 5 bands)")
     if args.json:

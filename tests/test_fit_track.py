@@ -236,3 +236,19 @@ def test_fit_track_absorbs_the_dipole_model_error_into_the_analytic_moment(tmp_p
     print(f"dipole track, analytic fit: EPM moment absorbs {absorbed:+.2%}, range {s['range_rel'][0]}")
     assert abs(absorbed) < 0.03, absorbed
     assert s["rms_ratio"] < 0.01 and s["rms_displacement_m"] < 5e-4, (s["rms_ratio"], s["rms_displacement_m"])
+
+
+def test_two_take_verdict_rejects_takes_that_disagree():
+    """benchmarks/calibrate_many.combined_verdict: two takes both "pinned" whose acceptable ranges share no value
+    (one fit in a side valley: measured, worm 10 fitted -18.5 % and +1.8 % from two renders) are not pinned; takes
+    that agree keep the single-take rule (pinned only if both say so)."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from calibrate_many import combined_verdict
+
+    assert combined_verdict(["pinned", "pinned"], [(0.80, 0.82), (1.01, 1.03)]) == "not pinned"
+    assert combined_verdict(["pinned", "pinned"], [(0.98, 1.02), (1.01, 1.03)]) == "pinned"
+    assert combined_verdict(["pinned", "borderline"], [(0.98, 1.02), (1.01, 1.03)]) == "borderline"
+    assert combined_verdict(["not pinned", "not pinned"]) == "not pinned"

@@ -164,3 +164,36 @@ def test_fit_track_cli_fits_two_clips_jointly(tmp_path, capsys):
     s = json.loads(capsys.readouterr().out)
     assert s["clips"] == 2
     assert abs(s["value"][0] / (1.05 * 3.6) - 1) < 0.03, s["value"]
+
+
+def test_least_pinned_direction_is_the_valley():
+    """A Fisher matrix built from a known valley (a k_alpha / moment trade-off direction with little information,
+    two well-measured directions across it): least_pinned returns that direction and sqrt(3.84 / its
+    information) as the half-width along it."""
+    u = np.array([0.8, 0.0, 0.5])
+    u /= np.linalg.norm(u)
+    a = np.array([0.0, 1.0, 0.0])
+    b = np.cross(u, a)
+    F = 25.0 * np.outer(u, u) + 4e4 * np.outer(a, a) + 9e3 * np.outer(b, b)
+    v, hw = P.least_pinned(F)
+    np.testing.assert_allclose(v, u, atol=1e-9)
+    assert abs(hw - np.sqrt(3.84 / 25.0)) < 1e-9
+
+
+def test_plan_clips_saves_the_fisher_matrices(tmp_path, capsys):
+    """``plan-clips --fisher-out``: one omega clip, the moment alone (3 design worms x 3 worlds): the saved Fisher
+    matrices give the plan's predicted half-width, and the report names the plan's least pinned direction."""
+    from warpworm import quiet_warp
+    from warpworm.cli import main
+
+    quiet_warp()
+    out, npz = tmp_path / "plan.json", tmp_path / "fisher.npz"
+    assert main(["plan-clips", "--fit", "epm_moment", "--range", "epm_moment=3:4", "--gaits", "omega",
+                 "--w-scales", "1", "--a-scales", "1", "--h-scales", "1", "--cycles", "1", "--max-clips", "1",
+                 "--out", str(out), "--fisher-out", str(npz)]) == 0
+    assert "least pinned direction of the plan" in capsys.readouterr().out
+    z = np.load(npz)
+    assert z["fisher"].shape == (1, 3, 1, 1) and list(z["names"]) == ["epm_moment"]
+    plan = json.loads(out.read_text())
+    hw = np.expm1(np.sqrt(3.84 / z["fisher"][0, :, 0, 0])).max()
+    assert abs(plan["predicted_half_width_rel"][0] - hw) < 1e-9 * max(1.0, hw)

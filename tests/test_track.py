@@ -144,3 +144,48 @@ def test_harshest_sensor_is_the_randomization_ranges_upper_end():
     assert (v["jpeg_quality"] == 0).all()  # JPEG off
     d = T.harshest_sensor(1, load_config("default").randomize["sensor"])  # default.yaml: noise [0, 3]
     np.testing.assert_allclose(d["noise_sigma"], 3 / 255)
+
+
+def _two_band_scene(seed, S=8, H=96, W=128):
+    """A green band (a triangle, two faces: one at 55 % of the light) and a red one (a rectangle, its lower face at
+    40 %) on a dark floor, drawn at S x S sub-pixels per pixel, each pixel the mean of its sub-pixels' display
+    values (the area it covers), then the harshest sensor's blur (0.8 px) and noise (3 levels). The independent
+    truth: the centroid of each band's covered area, from the sub-pixels."""
+    from warpworm.render.scene import BAND_COLORS
+
+    yy, xx = (np.mgrid[:H * S, :W * S] + 0.5) / S - 0.5
+
+    def side(p, q):
+        return (xx - q[0]) * (p[1] - q[1]) - (p[0] - q[0]) * (yy - q[1])
+
+    a, b, c = (30.3, 20.7), (62.6, 48.2), (28.1, 70.4)
+    d1, d2, d3 = side(a, b), side(b, c), side(c, a)
+    green = ~(((d1 < 0) | (d2 < 0) | (d3 < 0)) & ((d1 > 0) | (d2 > 0) | (d3 > 0)))
+    red = (xx >= 62.2) & (xx <= 95.7) & (yy >= 25.4) & (yy <= 70.9) & ~green
+    light = np.ones(yy.shape)
+    light[red & (yy > 0.35 * (xx - 62.0) + 40.3)] = 0.4
+    light[green & (xx > 40)] = 0.55
+    col = np.full(yy.shape + (3,), 0.09)
+    col[green], col[red] = BAND_COLORS[3], BAND_COLORS[4]
+    disp = ((col ** 2.2) * light[..., None]) ** (1 / 2.2)
+    img = cv2.GaussianBlur((disp.reshape(H, S, W, S, 3).mean(axis=(1, 3)) * 255).astype(np.float32), (0, 0), 0.8)
+    img = np.clip(np.round(img + np.random.default_rng(seed).normal(0, 3, img.shape)), 0, 255).astype(np.uint8)
+    return img, np.array([[xx[m].mean(), yy[m].mean()] for m in (green, red)])
+
+
+def test_soft_weights_find_the_covered_area_centroid():
+    """Boundary unmixing (T.band_weights, the default): each band's centre within 0.25 px of the centroid of the
+    area it covers (measured 0.04-0.18 px over 4 noise draws), where the hard masks, gaining or losing whole pixels
+    at every blurred edge and more at a shaded face's, are off by 0.09-0.54 px (mean 0.31)."""
+    soft, hard = [], []
+    for seed in range(4):
+        img, truth = _two_band_scene(seed)
+        soft.append(np.linalg.norm(T.band_centroids(img, T.Thresholds.from_colors())[0][3:] - truth, axis=-1))
+        hard.append(np.linalg.norm(T.band_centroids(img, T.Thresholds.from_colors(soft=0))[0][3:] - truth, axis=-1))
+    soft, hard = np.array(soft), np.array(hard)
+    assert soft.max() <= 0.25 and soft.mean() <= 0.15, soft
+    assert hard.mean() > 0.25, hard  # the test can tell the two apart
+    # the weights are fractions, and a pixel's weights never sum above 1
+    img, _ = _two_band_scene(0)
+    w = T.band_weights(img, T.band_masks(img, T.Thresholds.from_colors()))
+    assert w.min() >= 0 and w.sum(axis=0).max() <= 1 + 1e-6

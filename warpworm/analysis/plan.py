@@ -177,6 +177,14 @@ def half_widths(F: np.ndarray) -> np.ndarray:
     return out
 
 
+def least_pinned(F: np.ndarray) -> tuple[np.ndarray, float]:
+    """The least pinned direction of a Fisher matrix (p, p) in log-parameters (unit vector, sign: largest component
+    positive) and its predicted acceptable half-width along it (sqrt(3.84 / smallest eigenvalue), in log)."""
+    lam, vec = np.linalg.eigh(F)
+    v = vec[:, 0] * np.sign(vec[np.argmax(np.abs(vec[:, 0])), 0])
+    return v, float(np.sqrt(3.84 / lam[0])) if lam[0] > 0 else float("inf")
+
+
 def greedy_plan(fisher: np.ndarray, ok: np.ndarray, tol: np.ndarray, *, max_clips: int = 3, margin: float = 0.5
                 ) -> tuple[list[int], np.ndarray]:
     """Clips (indices into fisher's first axis (C, D, p, p)) chosen one at a time to lower the worst ratio
@@ -256,4 +264,10 @@ def report_lines(res: dict) -> list[str]:
     w = np.expm1(res["plan_half"]).max(axis=0)
     out.append("predicted acceptable half-widths of the plan (worst design worm): " + ", ".join(
         f"{n} ±{100 * v:.2f} %" for n, v in zip(names, w)))
+    if res["chosen"]:
+        Fp = res["fisher"][res["chosen"]].sum(axis=0)  # (D, p, p)
+        d = int(np.argmax((res["plan_half"] / np.log1p(tol)).max(axis=1)))
+        v, hw = least_pinned(Fp[d])
+        out.append(f"least pinned direction of the plan at its worst design worm ({d}): " + " ".join(
+            f"{c:+.2f} log {n}" for c, n in zip(v, names)) + f"  (±{100 * np.expm1(hw):.1f} % along it)")
     return out

@@ -79,7 +79,7 @@ class CameraModel:
             raise ValueError(f"camera R: got det {np.linalg.det(self.R):.6g}; expected a rotation (det 1)")
 
 
-OVERRIDABLE = ("hue_tol", "sat_frac", "val_frac", "min_pixels", "blob_reach", "brightness_cut", "floor_sigma")
+OVERRIDABLE = ("hue_tol", "sat_frac", "val_frac", "min_pixels", "blob_reach", "brightness_cut", "floor_sigma", "soft")
 
 
 @dataclass
@@ -92,7 +92,7 @@ class Thresholds:
     val: np.ndarray
     white: np.ndarray
     hue_tol: float = 30.0
-    sat_frac: float = 0.5
+    sat_frac: float = 0.6
     val_frac: float = 0.5
     min_pixels: int = 12
     blob_reach: float = 1.5
@@ -104,6 +104,11 @@ class Thresholds:
     floor_sigma: float = 5.0
     """Noise levels of the floor a white pixel must stand above it (half as many for a coloured one, which its
     chroma also gates)."""
+    soft: float = 1.0
+    """1 (default): a band's centre is the centroid of its soft weights (:func:`band_weights`: every pixel on a
+    boundary unmixed into the two classes whose nearby colours explain it best), so the part of a band that blur
+    and antialiasing smear into its neighbours' pixels, or theirs into its, counts by the fraction it covers. 0: the
+    centroid of the hard masks (:func:`band_masks`). Ignored with ``brightness_cut``."""
 
     @classmethod
     def from_colors(cls, colors=None, **overrides) -> "Thresholds":
@@ -278,14 +283,82 @@ def _near_largest(mask: np.ndarray, reach: float) -> np.ndarray:
     return np.isin(lab, 1 + np.nonzero(near)[0])
 
 
+SOFT_CORE_PX = 1
+"""A class's core (:func:`band_weights`): its mask eroded by this many pixels."""
+SOFT_WINDOWS = (5, 9, 17)
+"""Windows [px] in which a class's nearby colour is looked for, the smallest with a core pixel first."""
+SOFT_MIN_CONTRAST = 12.0
+"""Two classes whose nearby colours differ by less than this (RGB units) are not unmixed against each other."""
+
+
+def band_weights(rgb: np.ndarray, masks: np.ndarray) -> np.ndarray:
+    """Soft band weights (5, H, W) in [0, 1] of one RGB uint8 image and its hard :func:`band_masks`.
+
+    Six classes: the five bands and the background (every pixel of no band). A class's *core* is its mask eroded
+    by :data:`SOFT_CORE_PX`: those pixels are its own (weight 1). Every other pixel lies on a boundary, where the
+    camera's blur and the renderer's antialiasing mix the colours of what meets there (linearly, in the display
+    values the blur acts on). Its colour c is explained by each pair of classes (i, j), not both background, whose
+    nearby colours r_i, r_j (the mean of the class's core pixels in the smallest of :data:`SOFT_WINDOWS` that holds
+    one: the local light, not the paint's) differ by at least :data:`SOFT_MIN_CONTRAST`: c = a r_i + (1 - a) r_j,
+    a in [0, 1] by least squares; the pair with the smallest residual gets a and 1 - a. A boundary pixel with no
+    such pair keeps its hard mask. Mass is conserved under blur (a symmetric blur moves no centroid of a linear
+    mixture): the centroid of the weights is that of the area each band covers, a sliver smeared over three pixels
+    included, where the hard masks gain or lose whole pixels at every edge."""
+    import cv2
+
+    B = masks.shape[0]
+    img = np.asarray(rgb, np.float32)
+    cls = np.concatenate([masks, ~masks.any(axis=0)[None]])
+    k = np.ones((2 * SOFT_CORE_PX + 1,) * 2, np.uint8)
+    core = np.stack([cv2.erode(c.astype(np.uint8), k, borderType=cv2.BORDER_REPLICATE) > 0 for c in cls])
+    C = len(cls)
+    H, W = masks.shape[1:]
+    ref = np.zeros((C, H, W, 3), np.float32)
+    have = np.zeros((C, H, W), bool)
+    for c in range(C):
+        cf = core[c].astype(np.float32)
+        for win in SOFT_WINDOWS:
+            n = cv2.boxFilter(cf, -1, (win, win), normalize=False)
+            sm = cv2.boxFilter(img * cf[..., None], -1, (win, win), normalize=False)
+            new = (n > 0.5) & ~have[c]
+            ref[c][new] = sm[new] / n[new][:, None]
+            have[c] |= new
+    zone = ~core.any(axis=0)
+    w = core[:B].astype(np.float32)
+    best = np.full((H, W), np.inf, np.float32)
+    alpha = np.zeros((H, W), np.float32)
+    first = np.full((H, W), -1)
+    second = np.full((H, W), -1)
+    for i in range(C):
+        for j in range(i + 1, C):
+            ok = zone & have[i] & have[j]
+            d = ref[i] - ref[j]
+            dd = (d * d).sum(-1)
+            ok &= dd > SOFT_MIN_CONTRAST ** 2
+            if not ok.any():
+                continue
+            a = np.clip(((img - ref[j]) * d).sum(-1) / np.maximum(dd, 1e-6), 0.0, 1.0)
+            res = ((img - ref[j] - a[..., None] * d) ** 2).sum(-1)
+            better = ok & (res < best)
+            best[better], alpha[better], first[better], second[better] = res[better], a[better], i, j
+    for b in range(B):
+        w[b] += np.where(first == b, alpha, 0.0) + np.where(second == b, 1.0 - alpha, 0.0)
+    nopair = zone & (first < 0)
+    w[:, nopair] = masks[:, nopair]
+    return w
+
+
 def band_centroids(rgb: np.ndarray, thr: Thresholds) -> tuple[np.ndarray, np.ndarray]:
-    """Pixel centroids (5, 2) (u = column, v = row; NaN when unseen) and pixel counts (5,) of the bands."""
+    """Pixel centroids (5, 2) (u = column, v = row; NaN when unseen) and pixel counts (5,) of the bands (the hard
+    masks' counts; the centroid is that of :func:`band_weights` unless ``thr.soft`` is 0)."""
     m = band_masks(rgb, thr)
     n = m.sum(axis=(1, 2))
+    wt = band_weights(rgb, m) if (thr.soft and not thr.brightness_cut) else m.astype(np.float64)
+    mass = wt.sum(axis=(1, 2))
     rows, cols = np.arange(rgb.shape[0]), np.arange(rgb.shape[1])
     with np.errstate(invalid="ignore", divide="ignore"):
-        u = (m.sum(axis=1) * cols).sum(axis=1) / n
-        v = (m.sum(axis=2) * rows).sum(axis=1) / n
+        u = (wt.sum(axis=1) * cols).sum(axis=1) / mass
+        v = (wt.sum(axis=2) * rows).sum(axis=1) / mass
     uv = np.stack([u, v], -1)
     uv[n < thr.min_pixels] = np.nan
     return uv, n

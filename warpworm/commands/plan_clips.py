@@ -33,6 +33,9 @@ def add_arguments(parser) -> None:
                              "fraction of their sum at any design worm (a track that jumps; default 0.5)")
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--out", default="plan.json")
+    parser.add_argument("--fisher-out", default=None, metavar="NPZ",
+                        help="also save every candidate's Fisher matrices (C, D, p, p), ok, nonlinearity and the "
+                             "design worms (for analyses of clip combinations: docs/calibration.md 3a.)")
 
 
 def _floats(text, key):
@@ -95,6 +98,9 @@ def main(args) -> int:
                            "half_width_rel": np.expm1(h).max(axis=0).tolist()}
                           for c, ok, nl, h in zip(res["clips"], res["ok"].all(axis=1), res["nonlin"], res["half"])]}
     Path(args.out).write_text(json.dumps(out, indent=1))
+    if args.fisher_out:
+        np.savez(args.fisher_out, fisher=res["fisher"], ok=res["ok"], nonlin=res["nonlin"], worms=res["worms"],
+                 names=np.array(names), tolerance=res["tolerance"], clips=json.dumps(res["clips"]))
     print(f"wrote {args.out}: film its {len(out['clips'])} clip(s), track each, then "
           f"warpworm fit-track T1.csv ... --plan {args.out} --fit {','.join(names)}")
     return 0
