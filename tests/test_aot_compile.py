@@ -10,8 +10,7 @@ that defines a kernel), not listed, so a new kernel file is covered the day it l
 
 Compiled artifacts go to Warp's kernel cache (keyed by a hash of the module's source and options): an unchanged module
 is not rebuilt, a changed one is. The modules compile in parallel threads (Warp generates code under a lock and runs
-NVRTC outside it), the largest first. Cold, one module at a time, the set took 84 s wall (59 s CPU) on the 2-core
-machine under a load of ~3, the magnet wrench most of it; warm, a few seconds.
+NVRTC outside it), the largest first (cold timings per module: docs/testing.md).
 """
 
 from __future__ import annotations
