@@ -49,6 +49,24 @@ def light_surface_plain(albedo: wp.vec3, spec: wp.vec2, p: wp.vec3, n: wp.vec3, 
 
 
 @wp.func(inline=True)
+def sun_light(L: Lights, w: int, first: int, p: wp.vec3, n: wp.vec3, v: wp.vec3, spec: wp.vec2, shiny: bool):
+    """World ``w``'s ambient plus its directional sun, Lambert and shadowed, at ``p`` (normal ``n``): (irradiance,
+    the sun's Blinn-Phong highlight seen along unit ``v`` when ``shiny``, strength and exponent ``spec``)."""
+    sd = L.sun_dir[wrow(w, L.sun_dir.shape[0])]
+    sc = L.sun_color[wrow(w, L.sun_color.shape[0])]
+    ndl = wp.max(wp.dot(n, sd), 0.0)
+    irr = L.ambient[wrow(w, L.ambient.shape[0])]
+    highlight = wp.vec3(0.0)
+    if ndl > 0.0:
+        vis = visibility(L, first, 0, p, n)
+        irr = irr + sc * (ndl * vis)
+        if shiny:
+            hs = wp.max(wp.dot(n, wp.normalize(sd + v)), 0.0)
+            highlight = sc * (spec[0] * spec_power(hs, spec[1]) * vis)
+    return irr, highlight
+
+
+@wp.func(inline=True)
 def light_surface(albedo: wp.vec3, spec: wp.vec2, p: wp.vec3, n: wp.vec3, to_eye: wp.vec3, L: Lights, w: int,
                   first: int) -> wp.vec3:
     """Ambient + Lambert + Blinn-Phong for the directional sun and every point light of world ``w``, linear RGB.
@@ -58,22 +76,12 @@ def light_surface(albedo: wp.vec3, spec: wp.vec2, p: wp.vec3, n: wp.vec3, to_eye
     Schlick's approximation of the power, so matte surfaces pay for Lambert only; a light's shadow lookup serves
     both terms. ``first``: the world's first shadow map (< 0: unshadowed).
     """
-    sd = L.sun_dir[wrow(w, L.sun_dir.shape[0])]
-    sc = L.sun_color[wrow(w, L.sun_color.shape[0])]
     wl = wrow(w, L.pos.shape[0])
     shiny = spec[0] > 0.0
     v = wp.vec3(0.0)
     if shiny:
         v = wp.normalize(to_eye)
-    ndl = wp.max(wp.dot(n, sd), 0.0)
-    irr = L.ambient[wrow(w, L.ambient.shape[0])]
-    highlights = wp.vec3(0.0)
-    if ndl > 0.0:
-        vis = visibility(L, first, 0, p, n)
-        irr = irr + sc * (ndl * vis)
-        if shiny:
-            hs = wp.max(wp.dot(n, wp.normalize(sd + v)), 0.0)
-            highlights = sc * (spec[0] * spec_power(hs, spec[1]) * vis)
+    irr, highlights = sun_light(L, w, first, p, n, v, spec, shiny)
     for i in range(L.pos.shape[1]):
         if is_dark(L, wl, i):
             continue
@@ -294,22 +302,12 @@ def floor_lit(look: Look, L: Lights, w: int, first: int, albedo: wp.vec3, p: wp.
     specular strength > 0), their Blinn-Phong highlights seen along ``to_eye``, shadowed like the diffuse term (one
     lookup per light serves both). Linear in ``albedo`` plus the highlights."""
     fn = look.floor_normal[wrow(w, look.floor_normal.shape[0])]
-    sd = L.sun_dir[wrow(w, L.sun_dir.shape[0])]
-    sc = L.sun_color[wrow(w, L.sun_color.shape[0])]
     spec = look.specular[wrow(w, look.specular.shape[0]), SEG_FLOOR]
     glossy = spec[0] > 0.0  # a glossy plate (render.plate_materials)
     v = wp.vec3(0.0)
     if glossy:
         v = wp.normalize(to_eye)
-    ndl = wp.max(wp.dot(fn, sd), 0.0)
-    irr = L.ambient[wrow(w, L.ambient.shape[0])]
-    highlights = wp.vec3(0.0)
-    if ndl > 0.0:
-        vis = visibility(L, first, 0, p, fn)
-        irr = irr + sc * (ndl * vis)
-        if glossy:
-            hs = wp.max(wp.dot(fn, wp.normalize(sd + v)), 0.0)
-            highlights = sc * (spec[0] * spec_power(hs, spec[1]) * vis)
+    irr, highlights = sun_light(L, w, first, p, fn, v, spec, glossy)
     wl = wrow(w, L.pos.shape[0])
     for i in range(L.pos.shape[1]):
         if is_dark(L, wl, i):
