@@ -19,28 +19,26 @@ def lens_inverse(xd: wp.float64, yd: wp.float64, k1: wp.float64, k2: wp.float64,
     two = wp.float64(2.0)
     u = xd
     v = yd
-    for _it in range(iterations):
+    ex = wp.float64(0.0)
+    ey = wp.float64(0.0)
+    a = one
+    b = wp.float64(0.0)
+    d = one
+    for it in range(iterations + 1):
         r2 = u * u + v * v
         radial = one + r2 * (k1 + r2 * (k2 + r2 * k3))
         drad = two * (k1 + r2 * (two * k2 + wp.float64(3.0) * k3 * r2))
-        fx = u * radial + two * p1 * u * v + p2 * (r2 + two * u * u) - xd
-        fy = v * radial + p1 * (r2 + two * v * v) + two * p2 * u * v - yd
+        ex = u * radial + two * p1 * u * v + p2 * (r2 + two * u * u) - xd
+        ey = v * radial + p1 * (r2 + two * v * v) + two * p2 * u * v - yd
         a = radial + u * u * drad + two * p1 * v + wp.float64(6.0) * p2 * u
         b = u * v * drad + two * p1 * u + two * p2 * v
         d = radial + v * v * drad + wp.float64(6.0) * p1 * v + two * p2 * u
-        det = a * d - b * b
-        u = u - (d * fx - b * fy) / det
-        v = v - (a * fy - b * fx) / det
+        if it < iterations:  # the last round only measures the residual and the Jacobian at the solution
+            det = a * d - b * b
+            u = u - (d * ex - b * ey) / det
+            v = v - (a * ey - b * ex) / det
     # where the polynomial folds back before this point's radius, no ray reaches it: Newton wanders or lands on the
     # far (folded) branch; say so instead of returning a wrong ray
-    r2 = u * u + v * v
-    radial = one + r2 * (k1 + r2 * (k2 + r2 * k3))
-    drad = two * (k1 + r2 * (two * k2 + wp.float64(3.0) * k3 * r2))
-    ex = u * radial + two * p1 * u * v + p2 * (r2 + two * u * u) - xd
-    ey = v * radial + p1 * (r2 + two * v * v) + two * p2 * u * v - yd
-    a = radial + u * u * drad + two * p1 * v + wp.float64(6.0) * p2 * u
-    b = u * v * drad + two * p1 * u + two * p2 * v
-    d = radial + v * v * drad + wp.float64(6.0) * p1 * v + two * p2 * u
     ok = ex * ex + ey * ey <= wp.float64(1.0e-18) and a > wp.float64(0.0) and a * d - b * b > wp.float64(0.0)
     return u, v, a, b, d, ok
 

@@ -54,6 +54,7 @@ from warpworm.render.shading import (
     mesh_surface,
     nearer_floor,
     plain_world,
+    ray_frame,
     shade_hit,
     shade_hit_plain,
 )
@@ -214,8 +215,7 @@ def make_resolve_shade(plain: bool, shade: bool = True):
         wa = wrow(w, look.albedo.shape[0])
         ws = wrow(w, look.specular.shape[0])
         # along a row the world ray is affine in x: d(x) = d0 + x * dx, and so are its dot products with the floor
-        d0 = Rt * wp.vec3(-k[2] / k[0], (py - k[3]) / k[1], 1.0)
-        dx = Rt * wp.vec3(1.0 / k[0], 0.0, 0.0)
+        d0, dx = ray_frame(Rt, k, py)
         fr = floor_row(look.floor_normal[wf], look.floor_axis[wrow(w, look.floor_axis.shape[0])],
                        look.floor_origin[wrow(w, look.floor_origin.shape[0])],
                        look.floor_half[wrow(w, look.floor_half.shape[0])], eye, d0, dx)

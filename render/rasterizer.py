@@ -225,7 +225,7 @@ class Renderer:
                 "rot": _vec_array(cams["R"], wp.mat33, d), "trans": _vec_array(cams["t"], wp.vec3, d),
                 "intr": _vec_array(cams["intr"], wp.vec4, d),
                 "size": wp.array(cams["size"].astype(np.float32), dtype=float, device=d)}
-        mask = wp.zeros((M, S * S), dtype=wp.uint8, device=d)  # (the raster pass's worm silhouette: unused here)
+        mask = wp.empty((M, S * S), dtype=wp.uint8, device=d)  # (the raster pass's worm silhouette: never read)
         wp.launch(rk.raster_triangles, dim=(M, s["triangles"].shape[0]), device=d,
                   inputs=[s["triangles"], s["tri_label"], s["vertices"],
                           wp.array(cams["world"].astype(np.int32), dtype=wp.int32, device=d), maps["rot"],
@@ -392,8 +392,8 @@ class Renderer:
             wp.launch(sk.resolve_samples, dim=(n, self.height, (self.width + span - 1) // span),
                       device=d,
                       inputs=[s["triangles"], s["tri_label"], s["look"], lights, s["vertices"], s["texcoords"],
-                              *common, b["cam_intr"], b["cam_dist"], b["cam_k3"], b["cam_gain"], b["zkey"], b["mask"],
-                              b["fine_key"], self.width, self.height, span, gw, gh, left, top, sub, int(lens),
+                              *common, b["cam_intr"], b["cam_dist"], b["cam_k3"], b["cam_gain"], b["fine_intr"],
+                              b["zkey"], b["mask"], b["fine_key"], self.width, self.height, span, gw, gh, left, top, sub, int(lens),
                               int(normals)],
                       outputs=[out["rgb"], out["depth"], out["seg"], out["worm_mask"], out_normals])
         if sensor is not None:

@@ -38,6 +38,7 @@ from warpworm.render.shading import (
     floor_row,
     mesh_surface,
     nearer_floor,
+    ray_frame,
     shade_surface,
     surface_albedo,
 )
@@ -48,13 +49,6 @@ wp.set_module_options({"enable_backward": False})
 SURFACE_FLOOR = wp.constant(-2)
 SURFACE_BACKGROUND = wp.constant(-1)
 """Surface ids of a sample that is not on a triangle (triangles are their index >= 0)."""
-
-
-@wp.func
-def ray_frame(Rt: wp.mat33, k: wp.vec4, py: float):
-    """World ray of row ``py`` through intrinsics ``k``: d(px) = d0 + px dx (a point at camera depth z lies at
-    eye + z d): (d0, dx), the same float operations as the plain resolve pass."""
-    return Rt * wp.vec3(-k[2] / k[0], (py - k[3]) / k[1], 1.0), Rt * wp.vec3(1.0 / k[0], 0.0, 0.0)
 
 
 @wp.func
@@ -266,6 +260,7 @@ def resolve_samples(
     image_world: wp.array(dtype=wp.int32),
     cam_rot: wp.array(dtype=wp.mat33), cam_trans: wp.array(dtype=wp.vec3), cam_intr: wp.array(dtype=wp.vec4),
     cam_dist: wp.array(dtype=wp.vec4), cam_k3: wp.array(dtype=float), cam_gain: wp.array(dtype=wp.vec3),
+    sample_intr: wp.array(dtype=wp.vec4),
     label_key: wp.array2d(dtype=wp.int64), label_mask: wp.array2d(dtype=wp.uint8),
     sample_key: wp.array2d(dtype=wp.int64),
     width: int, height: int, span: int, grid_w: int, grid_h: int, margin_x: int, margin_y: int,
@@ -280,7 +275,8 @@ def resolve_samples(
 
     ``cam_intr`` (N,): the label grid's pinhole (fx, fy, cx, cy) [px] (``grid_w`` x ``grid_h``; with a lens, the
     output's K shifted by the widening margins ``margin_x``, ``margin_y`` [px]); ``cam_dist`` (N,) OpenCV's
-    (k1, k2, p1, p2) and ``cam_k3`` (N,) its k3 (read only when ``lens``); ``label_key``/``label_mask``
+    (k1, k2, p1, p2) and ``cam_k3`` (N,) its k3 (read only when ``lens``); ``sample_intr`` (N,) the sample grid's
+    pinhole (the one its raster pass used: ``cam_intr`` times ``sub``, centres shifted by (sub - 1) / 2); ``label_key``/``label_mask``
     (N, grid_h * grid_w) and ``sample_key`` (N, sub² grid_h * grid_w) the raster pass's keys and worm silhouette;
     ``sub`` colour samples per pixel side (>= 1). Outputs (N, height * width): 8-bit ``rgb``, camera ``depth`` [m]
     (0: background), ``seg`` ids, ``worm_mask``, camera-frame ``normals`` when ``write_normals``.
@@ -304,8 +300,7 @@ def resolve_samples(
 
     fb = wp.cross(fn, fa)
     floor_eye = wp.vec3(wp.dot(eye - fo, fa), wp.dot(eye - fo, fb), wp.dot(fn, eye))
-    half_sub = 0.5 * float(sub - 1)
-    kf = wp.vec4(k[0] * float(sub), k[1] * float(sub), k[2] * float(sub) + half_sub, k[3] * float(sub) + half_sub)
+    kf = sample_intr[img]
     fw = grid_w * sub
     fhgt = grid_h * sub
     inv_ss = 1.0 / float(sub * sub)

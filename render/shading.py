@@ -201,6 +201,14 @@ class FloorRow:
 
 
 @wp.func
+def ray_frame(Rt: wp.mat33, k: wp.vec4, py: float):
+    """World ray of image row ``py`` through pinhole intrinsics ``k`` (camera-to-world rotation ``Rt``): along a row
+    it is affine in x, d(px) = d0 + px dx (a point at camera depth z lies at eye + z d). Returns (d0, dx); both
+    resolve passes call it, so their rays agree bit for bit."""
+    return Rt * wp.vec3(-k[2] / k[0], (py - k[3]) / k[1], 1.0), Rt * wp.vec3(1.0 / k[0], 0.0, 0.0)
+
+
+@wp.func
 def floor_row(fn: wp.vec3, fa: wp.vec3, fo: wp.vec3, half: float, eye: wp.vec3, d0: wp.vec3, dx: wp.vec3) -> FloorRow:
     """The :class:`FloorRow` of the row whose ray is ``d0 + x dx`` from ``eye``, for the floor square with normal
     ``fn``, in-plane axis ``fa`` and centre ``fo`` (a point of the plane through the world origin)."""
