@@ -66,26 +66,24 @@ def grid_key(keys: wp.array2d(dtype=wp.int64), img: int, px: float, py: float, g
 
 
 @wp.func
-def lens_inverse32(xd: float, yd: float, dist: wp.vec4, k3: float):
-    """:func:`~warpworm.render.lens_kernels.lens_inverse` in float32 for the renderer: the undistorted
-    normalized point (u, v) of the distorted (xd, yd) through OpenCV's lens ``dist`` = (k1, k2, p1, p2) and ``k3``,
-    by Newton's method from the radial first guess (xd, yd) / (1 + k1 r² + k2 r⁴ + k3 r⁶), and the forward map's
-    Jacobian (a, b, d) there; ``ok`` False where no ray reaches the point. Four steps reach float32 rounding
-    (1e-7 of the normalized radius, ~2e-5 px) over every lens that covers its image."""
+def lens_newton32(xd: float, yd: float, dist: wp.vec4, k3: float, u0: float, v0: float, steps: int):
+    """Newton's method for the undistorted normalized point (u, v) whose image through OpenCV's lens ``dist`` =
+    (k1, k2, p1, p2) and ``k3`` is (xd, yd), from the guess (u0, v0): ``steps`` updates, then a round that measures
+    the residual and the forward map's Jacobian (a, b, d) at the solution; ``ok`` False where no ray reaches the
+    point (residual above 1e-5 of the radius, or the map folded: a <= 0 or a d - b² <= 0)."""
     k1 = dist[0]
     k2 = dist[1]
     p1 = dist[2]
     p2 = dist[3]
     r2d = xd * xd + yd * yd
-    g = 1.0 + r2d * (k1 + r2d * (k2 + r2d * k3))
-    u = xd / g
-    v = yd / g
+    u = u0
+    v = v0
     a = float(1.0)
     b = float(0.0)
     d = float(1.0)
     ex = float(0.0)
     ey = float(0.0)
-    for it in range(5):
+    for it in range(steps + 1):
         r2 = u * u + v * v
         radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
         drad = 2.0 * (k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2))
@@ -94,12 +92,32 @@ def lens_inverse32(xd: float, yd: float, dist: wp.vec4, k3: float):
         a = radial + u * u * drad + 2.0 * p1 * v + 6.0 * p2 * u
         b = u * v * drad + 2.0 * p1 * u + 2.0 * p2 * v
         d = radial + v * v * drad + 6.0 * p1 * v + 2.0 * p2 * u
-        if it < 4:  # the last round only measures the residual and the Jacobian at the solution
+        if it < steps:  # the last round only measures the residual and the Jacobian at the solution
             det = a * d - b * b
             u = u - (d * ex - b * ey) / det
             v = v - (a * ey - b * ex) / det
     ok = ex * ex + ey * ey <= 1.0e-10 * (1.0 + r2d) and a > 0.0 and a * d - b * b > 0.0
     return u, v, a, b, d, ok
+
+
+@wp.func
+def lens_inverse32(xd: float, yd: float, dist: wp.vec4, k3: float):
+    """:func:`~warpworm.render.lens_kernels.lens_inverse` in float32 for the renderer: :func:`lens_newton32` from
+    the radial first guess (xd, yd) / (1 + k1 r² + k2 r⁴ + k3 r⁶). Four steps reach float32 rounding (1e-7 of the
+    normalized radius, ~2e-5 px) over every lens that covers its image."""
+    r2d = xd * xd + yd * yd
+    g = 1.0 + r2d * (dist[0] + r2d * (dist[1] + r2d * k3))
+    return lens_newton32(xd, yd, dist, k3, xd / g, yd / g, 4)
+
+
+@wp.func
+def lens_inverse_next32(xd: float, yd: float, dist: wp.vec4, k3: float, step: float, u: float, v: float, a: float,
+                        b: float, d: float):
+    """:func:`lens_inverse32` of the point ``step`` to the right of one already solved, (u, v) with the forward
+    Jacobian (a, b, d) there (a pixel's neighbour along its row): the guess (u, v) + J⁻¹ (step, 0) is within
+    ~(step)² of the root, so two Newton steps reach float32 rounding (against four from the radial guess)."""
+    inv_det = 1.0 / (a * d - b * b)
+    return lens_newton32(xd, yd, dist, k3, u + d * step * inv_det, v - b * step * inv_det, 2)
 
 
 @wp.func
@@ -306,6 +324,13 @@ def resolve_samples(
     inv_ss = 1.0 / float(sub * sub)
     transmit = look.floor_transmit[wrow(w, look.floor_transmit.shape[0])]
     gain = cam_gain[img]
+    # the lens solution of the previous pixel of this thread's run (a warm start for the next)
+    prev_ok = bool(False)
+    prev_u = float(0.0)
+    prev_v = float(0.0)
+    prev_a = float(1.0)
+    prev_b = float(0.0)
+    prev_d = float(1.0)
     for x in range(xb * span, wp.min(xb * span + span, width)):
         pix = y * width + x
         # the pinhole point the pixel centre sees, and d(pinhole px) / d(output px) for its samples
@@ -315,8 +340,24 @@ def resolve_samples(
         ok = bool(True)
         if lens != 0:
             # the output's principal point is the label grid's less the widening margins
-            u, v, a, b, d, ok = lens_inverse32((float(x + margin_x) - k[2]) / k[0], (float(y + margin_y) - k[3]) / k[1],
-                                               cam_dist[img], cam_k3[img])
+            xd = (float(x + margin_x) - k[2]) / k[0]
+            yd = (float(y + margin_y) - k[3]) / k[1]
+            u = float(0.0)
+            v = float(0.0)
+            a = float(1.0)
+            b = float(0.0)
+            d = float(1.0)
+            if prev_ok:  # the pixel to the left solved: start from it (along a CPU thread's row)
+                u, v, a, b, d, ok = lens_inverse_next32(xd, yd, cam_dist[img], cam_k3[img], 1.0 / k[0], prev_u,
+                                                        prev_v, prev_a, prev_b, prev_d)
+            if not ok or not prev_ok:
+                u, v, a, b, d, ok = lens_inverse32(xd, yd, cam_dist[img], cam_k3[img])
+            prev_ok = ok
+            prev_u = u
+            prev_v = v
+            prev_a = a
+            prev_b = b
+            prev_d = d
             u0 = k[0] * u + k[2]
             v0 = k[1] * v + k[3]
             inv_det = 1.0 / (a * d - b * b)
