@@ -25,7 +25,7 @@ class Lights:
     penumbra). ``map_tile_min`` (M, map_tiles²): the nearest depth [m] of each ``SHADOW_TILE``² block of texels,
     ``map_reach`` the nearest within ``SHADOW_REACH`` blocks of each (:func:`shadow_tile_min`,
     :func:`shadow_reach_min`): a point whose blocker search can reach no nearer texel is known lit from one read, or
-    a few (:func:`region_unblocked`).
+    a few (:func:`footprint_min`).
     """
 
     ambient: wp.array(dtype=wp.vec3)
@@ -104,38 +104,46 @@ def shadow_reach_min(tile_min: wp.array2d(dtype=float), tiles: int, reach: wp.ar
 
 
 @wp.func
-def blocks_clear(tile_min: wp.array2d(dtype=float), tiles: int, s: int, m: int, u: float, v: float, z: float,
-                 radius: float) -> bool:
-    """True when no block that the texels :func:`pcf_taps` reads about (u, v) at ``radius``, widened by one on each
-    side against rounding, overlap holds a depth nearer than ``z`` (``tile_min`` (M, tiles²): :class:`Lights`'
-    ``map_tile_min``; ``s`` the maps' side [texels]): then none of the 16 taps is nearer. Exact where True."""
+def footprint_min(tile_min: wp.array2d(dtype=float), tiles: int, s: int, m: int, u: float, v: float,
+                  radius: float) -> float:
+    """The nearest depth [m] of the blocks that the texels :func:`pcf_taps` reads about (u, v) at ``radius`` overlap,
+    widened by one texel on each side against rounding (``tile_min`` (M, tiles²): :class:`Lights`'
+    ``map_tile_min``; ``s`` the maps' side [texels]): no tap reads a nearer texel. ``radius`` <= 8 texels (the
+    callers clamp it), so the footprint spans at most four blocks each way."""
     x0 = wp.max(int(wp.floor(u - radius + 0.5)) - 1, 0)
     x1 = wp.min(int(wp.floor(u + radius + 0.5)) + 1, s - 1)
     y0 = wp.max(int(wp.floor(v - radius + 0.5)) - 1, 0)
     y1 = wp.min(int(wp.floor(v + radius + 0.5)) + 1, s - 1)
-    clear = bool(True)
+    near = float(NO_CASTER)
     if x0 <= x1 and y0 <= y1:
-        for by in range(y0 / _SHADOW_TILE, y1 / _SHADOW_TILE + 1):
-            for bx in range(x0 / _SHADOW_TILE, x1 / _SHADOW_TILE + 1):
-                if tile_min[m, by * tiles + bx] < z:
-                    clear = False
-    return clear
+        bx0 = x0 / _SHADOW_TILE
+        bx1 = x1 / _SHADOW_TILE
+        by0 = y0 / _SHADOW_TILE
+        by1 = y1 / _SHADOW_TILE
+        # unrolled over 4 x 4 blocks, skipping those past the footprint's end
+        for j in range(4):
+            if by0 + j <= by1:
+                row = (by0 + j) * tiles
+                for i in range(4):
+                    if bx0 + i <= bx1:
+                        near = wp.min(near, tile_min[m, row + bx0 + i])
+    return near
 
 
 @wp.func
-def region_unblocked(reach: wp.array2d(dtype=float), tile_min: wp.array2d(dtype=float), tiles: int, s: int, m: int,
-                     u: float, v: float, z: float, radius: float) -> bool:
-    """True when no texel :func:`pcf_taps` reads about (u, v) at ``radius`` (<= 8) can hold an occluder nearer than
-    ``z``: then the blocker search would find none, and the point is lit. Judged first from the nearest depth within
-    reach of the point's block (``reach``: :class:`Lights`' ``map_reach``; one read: most of a map is far from every
-    caster), then from the blocks the taps overlap (:func:`blocks_clear`). Exact: True only where the 16 taps find
-    no blocker. (Arrays, not the whole Lights: Warp passes a struct by value, a copy per call.)"""
+def blocks_clear(tile_min: wp.array2d(dtype=float), tiles: int, s: int, m: int, u: float, v: float, z: float,
+                 radius: float) -> bool:
+    """True when no block that the 16 taps of :func:`pcf_taps` about (u, v) at ``radius`` can read holds a depth
+    nearer than ``z`` (:func:`footprint_min`): then none of the taps is nearer. Exact where True."""
+    return not (footprint_min(tile_min, tiles, s, m, u, v, radius) < z)
+
+
+@wp.func
+def map_tile(u: float, v: float, s: int, tiles: int) -> int:
+    """Index of the ``SHADOW_TILE``² block of the texel nearest to (u, v) (clamped to the map of side ``s``)."""
     tx = wp.clamp(int(wp.floor(u + 0.5)), 0, s - 1) / _SHADOW_TILE
     ty = wp.clamp(int(wp.floor(v + 0.5)), 0, s - 1) / _SHADOW_TILE
-    clear = bool(True)
-    if reach[m, ty * tiles + tx] < z:
-        clear = blocks_clear(tile_min, tiles, s, m, u, v, z, radius)
-    return clear
+    return ty * tiles + tx
 
 
 @wp.func
@@ -164,6 +172,24 @@ def pcf_taps(depth: wp.array2d(dtype=float), s: int, m: int, u: float, v: float,
     return wp.vec2(hits, zsum)
 
 
+@wp.func
+def any_tap_nearer(depth: wp.array2d(dtype=float), s: int, m: int, u: float, v: float, z: float,
+                   radius: float) -> bool:
+    """Whether any of :func:`pcf_taps`' 16 taps (the same texels) is nearer than ``z``, stopping at the first."""
+    xs = wp.vec4i()
+    ys = wp.vec4i()
+    for i in range(4):
+        xs[i] = int(wp.floor(u + radius * (float(i) - 1.5) / 1.5 + 0.5))
+        ys[i] = int(wp.floor(v + radius * (float(i) - 1.5) / 1.5 + 0.5))
+    found = bool(False)
+    for j in range(4):
+        for i in range(4):
+            if not found:
+                if map_depth(depth, s, m, xs[i], ys[j]) < z:
+                    found = True
+    return found
+
+
 @wp.func(inline=True)
 def light_visibility(L: Lights, m: int, p: wp.vec3, n: wp.vec3) -> float:
     """Fraction [0, 1] of light ``m`` reaching surface point ``p`` (normal ``n`` toward the viewer/light side), by
@@ -185,16 +211,26 @@ def light_visibility(L: Lights, m: int, p: wp.vec3, n: wp.vec3) -> float:
         side = float(L.map_side)
         # outside the map, which covers every caster, nothing is between the point and the light
         inside = u >= -search - 1.0 and v >= -search - 1.0 and u <= side + search and v <= side + search
-        if inside and not region_unblocked(L.map_reach, L.map_tile_min, L.map_tiles, L.map_side, m, u, v, z, search):
-            blk = pcf_taps(L.map_depth, L.map_side, m, u, v, z, search)
-            if blk[0] != 0.0:
-                zb = blk[1] / blk[0]
-                # the 4 x 4 grid's taps at +-r, +-r/3 have the second moment (5/9 r^2) of a disk light's edge
-                # profile (its penumbra half-width p: p^2 / 4) for r = 0.67 p
-                penumbra = wp.clamp(0.67 * size * (z - zb) / zb * k[0] / z, 1.0, 8.0)
-                # the filter's own footprint may hold no blocker (the search's is wider): lit, from the blocks
-                if not blocks_clear(L.map_tile_min, L.map_tiles, L.map_side, m, u, v, z, penumbra):
-                    out = 1.0 - pcf_taps(L.map_depth, L.map_side, m, u, v, z, penumbra)[0] / 16.0
+        near = float(NO_CASTER)
+        if inside and L.map_reach[m, map_tile(u, v, L.map_side, L.map_tiles)] < z:
+            near = footprint_min(L.map_tile_min, L.map_tiles, L.map_side, m, u, v, search)
+        if near < z:  # a texel the blocker search may read is nearer (the rest of the map is known lit)
+            # the 4 x 4 grid's taps at +-r, +-r/3 have the second moment (5/9 r^2) of a disk light's edge
+            # profile (its penumbra half-width p: p^2 / 4) for r = 0.67 p; blockers no nearer than ``near`` give
+            # a penumbra under 0.999 texel, clamped to 1: then the search only needs to find one of them
+            penumbra = float(1.0)
+            blocked = bool(False)
+            if 0.67 * size * (z - near) / near * k[0] / z <= 0.999:
+                blocked = any_tap_nearer(L.map_depth, L.map_side, m, u, v, z, search)
+            else:
+                blk = pcf_taps(L.map_depth, L.map_side, m, u, v, z, search)
+                if blk[0] != 0.0:
+                    blocked = True
+                    zb = blk[1] / blk[0]
+                    penumbra = wp.clamp(0.67 * size * (z - zb) / zb * k[0] / z, 1.0, 8.0)
+            # the filter's own footprint may hold no blocker (the search's is wider): lit, from the blocks
+            if blocked and not blocks_clear(L.map_tile_min, L.map_tiles, L.map_side, m, u, v, z, penumbra):
+                out = 1.0 - pcf_taps(L.map_depth, L.map_side, m, u, v, z, penumbra)[0] / 16.0
     return out
 
 

@@ -157,9 +157,11 @@ def test_lit_surfaces_do_not_shadow_themselves():
 
 @pytest.mark.parametrize("size", [0.002, 0.02])
 def test_block_minima_early_out_is_exact(monkeypatch, size):
-    # the one-read and the few-read early-outs (render.shadow_kernels.region_unblocked) may only skip points the 16
-    # blocker taps would find lit: with every block minimum forced below any depth no point skips, and the images
-    # must not change by a bit. Light placed so the penumbra, the umbra and the far floor are all in view.
+    # the one-read and the few-read early-outs (render.shadow_kernels.footprint_min) may only skip points the 16
+    # blocker taps would find lit, and the penumbra bound from the footprint's nearest block may only skip the
+    # blocker average where the penumbra clamps to one texel anyway: with every block minimum forced to 1 um (below
+    # any depth, and a bound no penumbra meets) nothing skips, and the images must not change by a bit. Light
+    # placed so the penumbra, the umbra and the far floor are all in view.
     import warpworm.render.rasterizer as rz
 
     lp = np.array([0.06, 0.03, 0.25])
@@ -168,11 +170,46 @@ def test_block_minima_early_out_is_exact(monkeypatch, size):
 
     def no_early_out(self, s, worlds):
         lights = make(self, s, worlds)
-        lights.map_tile_min.fill_(-1.0)
-        lights.map_reach.fill_(-1.0)
+        lights.map_tile_min.fill_(1.0e-6)
+        lights.map_reach.fill_(1.0e-6)
         return lights
 
     monkeypatch.setattr(rz.Renderer, "_shadow_maps", no_early_out)
     slow = Renderer(SIZE, SIZE, shadows=True, shadow_map=256).render(_scene(lp, size, 0.04), _camera())["rgb"]
     assert np.array_equal(fast, slow)
     assert (slow[0].astype(int).sum(-1) < fast[0].astype(int).sum(-1).max() * 0.5).sum() > 30  # a shadow in view
+
+
+def test_footprint_min_covers_every_tap():
+    # render.shadow_kernels.footprint_min bounds the depth of every texel pcf_taps reads, for any point and radius
+    # in [1, 8] (its unrolled 4 x 4 blocks included: a radius-8 footprint straddles four blocks, its taps any three
+    # of them). One caster texel per map, points drawn around it: wherever a tap lands on the caster (found by brute
+    # force in NumPy, float64: the footprint's one-texel widening absorbs float32 rounding), the bound reaches it.
+    import warp as wp
+
+    from warpworm.render.shadow_kernels import NO_CASTER, SHADOW_TILE, footprint_min
+
+    s, n = 64, 20000
+    tiles = s // SHADOW_TILE
+    rng = np.random.default_rng(3)
+    cx, cy = rng.integers(0, s, (2, n))
+    tile_min = np.full((n, tiles * tiles), NO_CASTER, np.float32)
+    tile_min[np.arange(n), (cy // SHADOW_TILE) * tiles + cx // SHADOW_TILE] = 0.5
+    u, v = (np.stack([cx, cy]) + rng.uniform(-10.0, 10.0, (2, n))).astype(np.float32)
+    r = np.where(rng.random(n) < 0.5, 8.0, rng.uniform(1.0, 8.0, n)).astype(np.float32)  # half at the clamp
+
+    @wp.kernel
+    def bound(tile_min: wp.array2d(dtype=float), u: wp.array(dtype=float), v: wp.array(dtype=float),
+              r: wp.array(dtype=float), out: wp.array(dtype=float)):
+        i = wp.tid()
+        out[i] = footprint_min(tile_min, 8, 64, i, u[i], v[i], r[i])
+
+    out = wp.zeros(n, dtype=float, device="cpu")
+    wp.launch(bound, dim=n, inputs=[wp.array(tile_min, dtype=float, device="cpu"), wp.array(u, device="cpu"),
+                                    wp.array(v, device="cpu"), wp.array(r, device="cpu")], outputs=[out], device="cpu")
+    offsets = (np.arange(4) - 1.5) / 1.5
+    xs = np.floor(u[:, None] + r[:, None] * offsets + 0.5).astype(int)
+    ys = np.floor(v[:, None] + r[:, None] * offsets + 0.5).astype(int)
+    hit = (xs == cx[:, None]).any(axis=1) & (ys == cy[:, None]).any(axis=1)  # a tap on the caster
+    assert hit.sum() > 400  # ~800 of the draws
+    assert np.all(out.numpy()[hit] <= 0.5)
