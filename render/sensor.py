@@ -10,6 +10,7 @@ JPEG move no geometry). The renderer applies them inside its pass (``Renderer.re
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
+from statistics import NormalDist
 
 import cv2
 import numpy as np
@@ -140,6 +141,21 @@ def gaussian_taps(sigma: np.ndarray, max_radius: int) -> tuple[np.ndarray, np.nd
     return w.astype(np.float32), radius.astype(np.int32)
 
 
+_NORMAL_TABLES: dict = {}
+
+
+def normal_table(device) -> wp.array:
+    """The standard normal's quantiles at (i + 1/2) / 2^16, i = 0 .. 2^16 - 1 (float32, on ``device``; made once
+    per device): the sensor noise's inverse-transform table (:func:`~warpworm.render.sensor_kernels.normal_pair`)."""
+    key = str(device)
+    if key not in _NORMAL_TABLES:
+        n = 1 << snk.NORMAL_TABLE_BITS
+        quantile = NormalDist().inv_cdf
+        q = np.array([quantile((i + 0.5) / n) for i in range(n)], np.float32)
+        _NORMAL_TABLES[key] = wp.array(q, dtype=float, device=device)
+    return _NORMAL_TABLES[key]
+
+
 def launch_sensor(rgb, batch: SensorBatch, width: int, height: int, device) -> None:
     """The device effects of ``batch`` on ``rgb`` (a ``wp.array`` (N, H*W) of vec3ub, in place): colour, blur along
     rows, blur along columns + noise + quantization: three launches whatever N."""
@@ -161,7 +177,7 @@ def launch_sensor(rgb, batch: SensorBatch, width: int, height: int, device) -> N
     wp.launch(snk.sensor_colour, dim=(n, height), inputs=[rgb, wb, hscb, width], outputs=[a], device=d)
     wp.launch(snk.sensor_blur_rows, dim=(n, height), inputs=[a, weights, radius, width], outputs=[b], device=d)
     wp.launch(snk.sensor_blur_cols_noise, dim=(n, height),
-              inputs=[b, weights, radius, noise, seed, width, height], outputs=[rgb], device=d)
+              inputs=[b, weights, radius, noise, seed, normal_table(d), width, height], outputs=[rgb], device=d)
 
 
 def jpeg_round_trip(rgb: np.ndarray, quality) -> np.ndarray:

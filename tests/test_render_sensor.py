@@ -116,6 +116,8 @@ def test_noise_is_gaussian_and_independent():
     z = (apply_sensor(img, [5], values=_values(1, noise_sigma=0.1)).astype(float)[0] - 128) / 25.5
     flat = z.reshape(-1)
     n = flat.size  # 196,608 draws
+    assert abs(flat.mean()) < 5 / np.sqrt(n)  # centred (quantization by rounding adds no bias)
+    assert abs(flat.std() - 1.0) < 0.01
     assert abs(np.mean(np.abs(flat) < 1.0) - 0.6827) < 0.005  # ~4.7 sigma of its sampling error
     assert abs(np.mean(np.abs(flat) < 2.0) - 0.9545) < 0.003
     kurtosis = np.mean(flat ** 4) / np.mean(flat ** 2) ** 2
