@@ -131,13 +131,18 @@ def covering_key(keys: wp.array2d(dtype=wp.int64), img: int, px: float, py: floa
     best_z = float(1.0e30)
     x0 = int(wp.floor(px))
     y0 = int(wp.floor(py))
+    tested = wp.vec4i(-1, -1, -1, -1)  # triangles already tested (texels on one triangle hold different keys)
     for dy in range(2):
         for dx in range(2):
             ix = wp.clamp(x0 + dx, 0, gw - 1)
             iy = wp.clamp(y0 + dy, 0, gh - 1)
             key = keys[img, iy * gw + ix]
-            if key != _EMPTY and key != best:
-                f = triangles[int(key % _TRI_SCALE)]
+            tri = int(-1)
+            if key != _EMPTY:
+                tri = int(key % _TRI_SCALE)
+            if tri >= 0 and tri != tested[0] and tri != tested[1] and tri != tested[2]:
+                tested[dy * 2 + dx] = tri
+                f = triangles[tri]
                 p0 = R * vertices[w, f[0]] + t
                 p1 = R * vertices[w, f[1]] + t
                 p2 = R * vertices[w, f[2]] + t
