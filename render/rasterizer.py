@@ -91,7 +91,7 @@ class Renderer:
 
     def __init__(self, width: int, height: int, *, device=None, near: float = 1e-3,
                  max_chunk_pixels: int = 1 << 23, threads: int = 1, shadows: bool = False, shadow_map: int = 0,
-                 supersample: int = 1):
+                 supersample: int = 1, texture_filter: bool = True):
         """
         Args:
             width, height: image size [px].
@@ -105,6 +105,10 @@ class Renderer:
                 grid over its square, from a z-buffer s times finer (samples on one surface share its lighting, with
                 their mean albedo); depth, segmentation, the worm mask and normals still come from the pixel centre
                 (the s = 1 pass, bit for bit).
+            texture_filter: with s > 1, a pixel whose samples all see the floor takes the floor texture's mean over
+                its footprint (the checker's exact box average, the grain at the centre) instead of s x s texture
+                samples, lit at its first sample as before: the same picture for less than a third of the work
+                (most of an image is floor). False: every pixel sampled s x s.
             shadow_map: side [px] of each shadow map; 0: ``max(width, height)`` (the map fits the shadow casters,
                 so a texel is then about a pixel of an image framing the worm).
         """
@@ -123,6 +127,7 @@ class Renderer:
         if int(supersample) < 1:
             raise ValueError(f"supersample: got {supersample}; expected samples per pixel side >= 1")
         self.supersample = int(supersample)
+        self.texture_filter = bool(texture_filter)
         self._buffers: dict = {}
         # load the kernels once here: concurrent first launches from several threads would race to load them
         for module in (rk, shk, snk):
@@ -393,8 +398,8 @@ class Renderer:
                       device=d,
                       inputs=[s["triangles"], s["tri_label"], s["look"], lights, s["vertices"], s["texcoords"],
                               *common, b["cam_intr"], b["cam_dist"], b["cam_k3"], b["cam_gain"], b["fine_intr"],
-                              b["zkey"], b["mask"], b["fine_key"], self.width, self.height, span, gw, gh, left, top, sub, int(lens),
-                              int(normals)],
+                              b["zkey"], b["mask"], b["fine_key"], self.width, self.height, span, gw, gh, left, top,
+                              sub, int(lens), int(normals), int(self.texture_filter)],
                       outputs=[out["rgb"], out["depth"], out["seg"], out["worm_mask"], out_normals])
         if sensor is not None:
             launch_sensor(out["rgb"], sensor.take(slice(start, stop)), self.width, self.height, d)

@@ -35,6 +35,7 @@ from warpworm.render.raster_math import (
 )
 from warpworm.render.shading import (
     Look,
+    floor_albedo_box_at,
     floor_row,
     mesh_surface,
     nearer_floor,
@@ -240,6 +241,44 @@ def sample_point(x: int, y: int, i: int, j: int, sub: int, lens: int, u0: float,
     return fx, fy
 
 
+@wp.func
+def floor_footprint(fx: float, fy: float, jac: wp.vec4, sub: int, Rt: wp.mat33, k: wp.vec4, fn: wp.vec3, fa: wp.vec3,
+                    fb: wp.vec3, floor_eye: wp.vec3, half: float) -> wp.vec4:
+    """Where the floor plane is seen at sample-grid point (fx, fy) (intrinsics ``k``), the centre of an output
+    pixel, and how big the pixel is there: (u, v) floor coordinates [m] and the widths [m] of the box with the
+    second moments of the pixel's footprint, the parallelogram spanned by d(floor) / d(output px) (= d(floor) /
+    d(sample grid) x ``sub`` x the lens Jacobian ``jac``). Widths -1 where the footprint is not wholly on the
+    square of half side ``half`` (to first order) or the ray misses the plane."""
+    d = Rt * wp.vec3((fx - k[2]) / k[0], (fy - k[3]) / k[1], 1.0)
+    den = wp.dot(fn, d)
+    out = wp.vec4(0.0, 0.0, -1.0, -1.0)
+    if den < 0.0 and floor_eye[2] > 0.0:
+        zf = -floor_eye[2] / den
+        a = wp.dot(d, fa)
+        b = wp.dot(d, fb)
+        c0 = Rt * wp.vec3(1.0 / k[0], 0.0, 0.0)  # d(ray) / d(fx), d(ray) / d(fy)
+        c1 = Rt * wp.vec3(0.0, 1.0 / k[1], 0.0)
+        dx = wp.dot(fn, c0) / den
+        dy = wp.dot(fn, c1) / den
+        # u = eye_u + zf a with zf = -h / den: du/dfx = zf (da/dfx - a dden/dfx / den), and so on
+        ux = zf * (wp.dot(fa, c0) - a * dx)
+        uy = zf * (wp.dot(fa, c1) - a * dy)
+        vx = zf * (wp.dot(fb, c0) - b * dx)
+        vy = zf * (wp.dot(fb, c1) - b * dy)
+        s = float(sub)
+        # the footprint's edge vectors (per output pixel step in x and in y)
+        pu = s * (ux * jac[0] + uy * jac[2])
+        qu = s * (ux * jac[1] + uy * jac[3])
+        pv = s * (vx * jac[0] + vy * jac[2])
+        qv = s * (vx * jac[1] + vy * jac[3])
+        u = floor_eye[0] + zf * a
+        v = floor_eye[1] + zf * b
+        if wp.abs(u) + 0.5 * (wp.abs(pu) + wp.abs(qu)) <= half and wp.abs(v) + 0.5 * (wp.abs(pv) + wp.abs(qv)) <= half:
+            # a box of width w has variance w² / 12, the parallelogram (p² + q²) / 12 along each axis
+            out = wp.vec4(u, v, wp.sqrt(pu * pu + qu * qu), wp.sqrt(pv * pv + qv * qv))
+    return out
+
+
 @wp.func(inline=True)
 def shade_sample(look: Look, lights: Lights, w: int, first: int, hit: Hit, albedo: wp.vec3, eye: wp.vec3,
                  bg: wp.vec3, transmit: float, gain: wp.vec3) -> wp.vec3:
@@ -287,7 +326,7 @@ def resolve_samples(
     label_key: wp.array2d(dtype=wp.int64), label_mask: wp.array2d(dtype=wp.uint8),
     sample_key: wp.array2d(dtype=wp.int64),
     width: int, height: int, span: int, grid_w: int, grid_h: int, margin_x: int, margin_y: int,
-    sub: int, lens: int, write_normals: int,
+    sub: int, lens: int, write_normals: int, texture_filter: int,
     # Data out:
     rgb: wp.array2d(dtype=wp.vec3ub), depth: wp.array2d(dtype=float), seg: wp.array2d(dtype=wp.uint8),
     worm_mask: wp.array2d(dtype=wp.uint8), normals: wp.array2d(dtype=wp.vec3),
@@ -301,7 +340,10 @@ def resolve_samples(
     (k1, k2, p1, p2) and ``cam_k3`` (N,) its k3 (read only when ``lens``); ``sample_intr`` (N,) the sample grid's
     pinhole (the one its raster pass used: ``cam_intr`` times ``sub``, centres shifted by (sub - 1) / 2); ``label_key``/``label_mask``
     (N, grid_h * grid_w) and ``sample_key`` (N, sub² grid_h * grid_w) the raster pass's keys and worm silhouette;
-    ``sub`` colour samples per pixel side (>= 1). Outputs (N, height * width): 8-bit ``rgb``, camera ``depth`` [m]
+    ``sub`` colour samples per pixel side (>= 1); ``texture_filter`` 1: a pixel whose samples all see the floor
+    (no mesh key, its footprint inside the square) takes the floor's box-filtered albedo over its footprint
+    (:func:`~warpworm.render.shading.floor_albedo_box`) and one sample's hit for its lighting, not ``sub``² of
+    each. Outputs (N, height * width): 8-bit ``rgb``, camera ``depth`` [m]
     (0: background), ``seg`` ids, ``worm_mask``, camera-frame ``normals`` when ``write_normals``.
     """
     img, y, xb = wp.tid()
@@ -423,8 +465,28 @@ def resolve_samples(
         gb = GroupSums()
         ng = int(0)
         acc = wp.vec3(0.0)
-        for j in range(sub):
-            for i in range(sub):
+        nsub = sub
+        if texture_filter != 0 and sub > 1:
+            # a pixel wholly on the floor: the texture filtered over its footprint, the first sample lit
+            on_floor = bool(True)
+            for j in range(sub):
+                for i in range(sub):
+                    fx, fy = sample_point(x, y, i, j, sub, lens, u0, v0, jac)
+                    if sample_key[img, grid_key_index(fx, fy, fw, fhgt)] != _EMPTY:
+                        on_floor = False
+            if on_floor:
+                half_sub = 0.5 * float(sub - 1)
+                fp = floor_footprint(float(sub) * u0 + half_sub, float(sub) * v0 + half_sub, jac, sub, Rt, kf, fn,
+                                     fa, fb, floor_eye, fh)
+                if fp[2] >= 0.0:  # the whole pixel on the square (its samples lie inside the pixel's edges)
+                    fx, fy = sample_point(x, y, 0, 0, sub, lens, u0, v0, jac)
+                    nsub = 0
+                    hit0 = sample_hit(sample_key, img, fx, fy, fw, fhgt, triangles, tri_label, vertices, texcoords, w,
+                                      R, t, Rt, kf, eye, fn, fa, fb, floor_eye, fh)
+                    count0 = sub * sub
+                    alb0 = floor_albedo_box_at(look, w, wp.vec3(fp[0], fp[1], 0.0), fp[2], fp[3]) * float(count0)
+        for j in range(nsub):
+            for i in range(nsub):
                 fx, fy = sample_point(x, y, i, j, sub, lens, u0, v0, jac)
                 hit = sample_hit(sample_key, img, fx, fy, fw, fhgt, triangles, tri_label, vertices, texcoords, w, R,
                                  t, Rt, kf, eye, fn, fa, fb, floor_eye, fh)

@@ -295,6 +295,44 @@ def floor_albedo(base: wp.vec3, mat: wp.vec3, inv_tile: float, ft: wp.vec4, fc2:
     return albedo * (1.0 + ft[2] * (g - 0.5))
 
 
+@wp.func
+def box_square_wave(p: float, w: float) -> float:
+    """Mean over [p - w/2, p + w/2] of the square wave that is +1 on even unit cells and -1 on odd ones: the
+    difference of its integral, the triangle wave 1 - |(x mod 2) - 1|, over the width (the wave itself below
+    1e-6)."""
+    out = float(1.0)
+    if w > 1.0e-6:
+        a = p - 0.5 * w
+        b = p + 0.5 * w
+        ta = 1.0 - wp.abs(a - 2.0 * wp.floor(0.5 * a) - 1.0)
+        tb = 1.0 - wp.abs(b - 2.0 * wp.floor(0.5 * b) - 1.0)
+        out = (tb - ta) / w
+    elif (int(wp.floor(p)) & 1) != 0:
+        out = -1.0
+    return out
+
+
+@wp.func
+def floor_albedo_box(base: wp.vec3, mat: wp.vec3, wu: float, wv: float, inv_tile: float, ft: wp.vec4, fc2: wp.vec3,
+                     noise: wp.array2d(dtype=float), off_u: float, off_v: float) -> wp.vec3:
+    """:func:`floor_albedo` averaged over a ``wu`` x ``wv`` [m] box about floor coordinates ``mat``: the checker's
+    exact mean (its odd cells' share of the box, separable), the grain (smooth at that scale) at the centre."""
+    odd = 0.5 * (1.0 - box_square_wave(mat[0] * inv_tile, wu * inv_tile) * box_square_wave(mat[1] * inv_tile,
+                                                                                          wv * inv_tile))
+    albedo = wp.lerp(base, wp.lerp(base, fc2, ft[1]), odd)
+    g = noise_tex(noise, mat[0] * ft[3] + off_u, mat[1] * ft[3] + off_v)
+    return albedo * (1.0 + ft[2] * (g - 0.5))
+
+
+@wp.func(inline=True)
+def floor_albedo_box_at(look: Look, w: int, mat: wp.vec3, wu: float, wv: float) -> wp.vec3:
+    """World ``w``'s floor albedo averaged over a ``wu`` x ``wv`` [m] box about ``mat`` (:func:`floor_albedo_box`)."""
+    ft = look.floor_tex[wrow(w, look.floor_tex.shape[0])]
+    off = noise_offset(look, w)
+    return floor_albedo_box(look.albedo[wrow(w, look.albedo.shape[0]), SEG_FLOOR], mat, wu, wv, 1.0 / ft[0], ft,
+                            look.floor_color2[wrow(w, look.floor_color2.shape[0])], look.noise, off[0], off[1])
+
+
 @wp.func(inline=True)
 def floor_albedo_at(look: Look, w: int, mat: wp.vec3) -> wp.vec3:
     """World ``w``'s floor albedo (checker + grain, :func:`floor_albedo`) at floor coordinates ``mat`` [m]."""
