@@ -175,3 +175,44 @@ def test_lens_draws_cover_their_images():
     folding = load_config("production", ["render.distortion_k1=[-0.3, -0.28]", "render.distortion_k2=[-0.02, 0]"])
     with pytest.raises(ValueError, match=r"render.distortion_k1 \[-0.3, -0.28\], .*: 4000 of 4000 cameras drew no lens"):
         draw_distortion(folding.render, np.arange(n), K, 256, 256)
+
+
+@pytest.mark.parametrize("dist", [(-0.25, 0.08, 0.002, -0.002, 0.0), (0.15, -0.05, -0.003, 0.001, 0.01)])
+def test_warm_lens_inverse_matches_opencv(dist):
+    # the resolve solves each pixel's lens inverse from its left neighbour's solution with one Newton step
+    # (render.sample_kernels.lens_inverse_next32), the first of a row cold (lens_inverse32): against OpenCV's
+    # iterated float64 inverse over a 256² image, float32 rounding (~4e-5 px), as the cold solve alone
+    import warp as wp
+
+    from warpworm.render.sample_kernels import lens_inverse32, lens_inverse_next32
+
+    f, c, n = 200.0, 127.5, 256
+
+    @wp.kernel
+    def rows(dist: wp.vec4, k3: float, f: float, c: float, warm: int, out: wp.array2d(dtype=wp.vec2)):
+        y = wp.tid()
+        u = float(0.0)
+        v = float(0.0)
+        a = float(1.0)
+        b = float(0.0)
+        d = float(1.0)
+        ok = bool(False)
+        for x in range(256):
+            xd = (float(x) - c) / f
+            yd = (float(y) - c) / f
+            if warm != 0 and ok:
+                u, v, a, b, d, ok = lens_inverse_next32(xd, yd, dist, k3, 1.0 / f, u, v, a, b, d)
+            else:
+                u, v, a, b, d, ok = lens_inverse32(xd, yd, dist, k3)
+            out[y, x] = wp.vec2(u, v)
+
+    K = np.array([[f, 0.0, c], [0.0, f, c], [0.0, 0.0, 1.0]])
+    pts = np.stack(np.meshgrid(np.arange(n), np.arange(n)), -1).reshape(-1, 1, 2).astype(np.float64)
+    crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-15)
+    ref = cv2.undistortPoints(pts, K, np.array(dist), None, None, None, crit).reshape(n, n, 2)
+    err = {}
+    for warm in (0, 1):
+        out = wp.zeros((n, n), dtype=wp.vec2, device="cpu")
+        wp.launch(rows, dim=n, inputs=[wp.vec4(*dist[:4]), dist[4], f, c, warm], outputs=[out], device="cpu")
+        err[warm] = np.abs(out.numpy() - ref).max() * f
+    assert err[1] < 1e-4 and err[0] < 1e-4, err
