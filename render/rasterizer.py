@@ -129,6 +129,7 @@ class Renderer:
         self.supersample = int(supersample)
         self.texture_filter = bool(texture_filter)
         self._buffers: dict = {}
+        self._maps: dict = {}
         # load the kernels once here: concurrent first launches from several threads would race to load them
         for module in (rk, shk, snk):
             wp.load_module(module, device=self.device)
@@ -215,7 +216,23 @@ class Renderer:
         lights.map_tile_min, lights.map_reach = maps["tile_min"], maps["reach"]
         return lights
 
-    def _shadow_maps(self, s: dict, worlds: np.ndarray) -> shk.Lights:
+    def _map_buffers(self, M: int, slot: int) -> dict:
+        """Scratch arrays for ``M`` shadow maps of chunk stream ``slot`` (views of buffers kept between chunks and
+        batches, grown when a chunk needs more maps: fresh host memory would be paged in for every chunk)."""
+        S = self.shadow_map
+        tiles = -(-S // shk.SHADOW_TILE)
+        buf = self._maps.get(slot)
+        if buf is None or buf["key"].shape[0] < M:
+            d = self.device
+            buf = {"key": wp.empty((M, S * S), dtype=wp.int64, device=d),
+                   "depth": wp.empty((M, S * S), dtype=float, device=d),
+                   "mask": wp.empty((M, S * S), dtype=wp.uint8, device=d),  # the raster's worm silhouette: unread
+                   "tile_min": wp.empty((M, tiles * tiles), dtype=float, device=d),
+                   "reach": wp.empty((M, tiles * tiles), dtype=float, device=d)}
+            self._maps[slot] = buf
+        return {k: v[:M] for k, v in buf.items()}
+
+    def _shadow_maps(self, s: dict, worlds: np.ndarray, slot: int = 0) -> shk.Lights:
         """The scene's :class:`Lights` with the shadow maps of ``worlds`` (unique scene world ids) rasterized: one
         map for the sun and one per point light of each world (:func:`shadow_cameras`)."""
         d, S = self.device, self.shadow_map
@@ -224,21 +241,21 @@ class Renderer:
         M = len(cams["world"])
         first = np.full(scene.num_worlds, -1, np.int32)
         first[worlds] = np.arange(len(worlds), dtype=np.int32) * (M // len(worlds))
-        key = wp.full((M, S * S), EMPTY_KEY, dtype=wp.int64, device=d)
-        maps = {"first": wp.array(first, dtype=wp.int32, device=d),
-                "depth": wp.empty((M, S * S), dtype=float, device=d),
+        buf = self._map_buffers(M, slot)
+        key = buf["key"]
+        key.fill_(EMPTY_KEY)
+        maps = {"first": wp.array(first, dtype=wp.int32, device=d), "depth": buf["depth"],
                 "rot": _vec_array(cams["R"], wp.mat33, d), "trans": _vec_array(cams["t"], wp.vec3, d),
                 "intr": _vec_array(cams["intr"], wp.vec4, d),
                 "size": wp.array(cams["size"].astype(np.float32), dtype=float, device=d)}
-        mask = wp.empty((M, S * S), dtype=wp.uint8, device=d)  # (the raster pass's worm silhouette: never read)
         wp.launch(rk.raster_triangles, dim=(M, s["triangles"].shape[0]), device=d,
                   inputs=[s["triangles"], s["tri_label"], s["vertices"],
                           wp.array(cams["world"].astype(np.int32), dtype=wp.int32, device=d), maps["rot"],
                           maps["trans"], maps["intr"], S, S, self.near],
-                  outputs=[key, mask])
+                  outputs=[key, buf["mask"]])
         tiles = -(-S // shk.SHADOW_TILE)
-        maps["tile_min"] = wp.empty((M, tiles * tiles), dtype=float, device=d)
-        maps["reach"] = wp.empty((M, tiles * tiles), dtype=float, device=d)
+        maps["tile_min"] = buf["tile_min"]
+        maps["reach"] = buf["reach"]
         wp.launch(shk.shadow_tile_min, dim=(M, tiles * tiles), device=d, inputs=[key, S, tiles],
                   outputs=[maps["depth"], maps["tile_min"]])
         wp.launch(shk.shadow_reach_min, dim=(M, tiles * tiles), device=d, inputs=[maps["tile_min"], tiles],
@@ -355,7 +372,7 @@ class Renderer:
         out_normals = out["normals"] if normals else res["normals"]  # else a 1-element dummy, never written
         lights = s["lights"]
         if self.shadows:
-            lights = self._shadow_maps(s, np.unique(world[:n]))
+            lights = self._shadow_maps(s, np.unique(world[:n]), slot)
         common = [b["image_world"], b["cam_rot"], b["cam_trans"]]
         tris = s["triangles"].shape[0]
         if sub == 0:  # plain pinhole images: raster at pixel centres straight into the outputs, resolve and shade
@@ -402,7 +419,10 @@ class Renderer:
                               sub, int(lens), int(normals), int(self.texture_filter)],
                       outputs=[out["rgb"], out["depth"], out["seg"], out["worm_mask"], out_normals])
         if sensor is not None:
-            launch_sensor(out["rgb"], sensor.take(slice(start, stop)), self.width, self.height, d)
+            if "sensor" not in b:
+                b["sensor"] = tuple(wp.empty((chunk, self.width * self.height), dtype=wp.vec3, device=d)
+                                    for _ in range(2))
+            launch_sensor(out["rgb"], sensor.take(slice(start, stop)), self.width, self.height, d, b["sensor"])
 
 
 def shadow_cameras(scene: SceneBatch, worlds: np.ndarray, side: int) -> dict:

@@ -156,9 +156,10 @@ def normal_table(device) -> wp.array:
     return _NORMAL_TABLES[key]
 
 
-def launch_sensor(rgb, batch: SensorBatch, width: int, height: int, device) -> None:
+def launch_sensor(rgb, batch: SensorBatch, width: int, height: int, device, scratch: tuple | None = None) -> None:
     """The device effects of ``batch`` on ``rgb`` (a ``wp.array`` (N, H*W) of vec3ub, in place): colour, blur along
-    rows, blur along columns + noise + quantization: three launches whatever N."""
+    rows, blur along columns + noise + quantization: three launches whatever N. ``scratch``: two vec3 arrays of at
+    least (N, H*W) to work in (the renderer keeps them between chunks); None: allocated here."""
     n = len(batch)
     if n == 0:
         return
@@ -172,8 +173,9 @@ def launch_sensor(rgb, batch: SensorBatch, width: int, height: int, device) -> N
     radius = wp.array(r, dtype=wp.int32, device=d)
     noise = wp.array(np.stack([batch.noise_sigma, batch.shot_noise], axis=1).astype(f32), dtype=wp.vec2, device=d)
     seed = wp.array(np.asarray(batch.seed, np.int32), dtype=wp.int32, device=d)
-    a = wp.empty((n, width * height), dtype=wp.vec3, device=d)
-    b = wp.empty((n, width * height), dtype=wp.vec3, device=d)
+    if scratch is None:
+        scratch = tuple(wp.empty((n, width * height), dtype=wp.vec3, device=d) for _ in range(2))
+    a, b = scratch[0][:n], scratch[1][:n]
     wp.launch(snk.sensor_colour, dim=(n, height), inputs=[rgb, wb, hscb, width], outputs=[a], device=d)
     wp.launch(snk.sensor_blur_rows, dim=(n, height), inputs=[a, weights, radius, width], outputs=[b], device=d)
     wp.launch(snk.sensor_blur_cols_noise, dim=(n, height),

@@ -168,8 +168,8 @@ def test_block_minima_early_out_is_exact(monkeypatch, size):
     fast = Renderer(SIZE, SIZE, shadows=True, shadow_map=256).render(_scene(lp, size, 0.04), _camera())["rgb"]
     make = rz.Renderer._shadow_maps
 
-    def no_early_out(self, s, worlds):
-        lights = make(self, s, worlds)
+    def no_early_out(self, s, worlds, slot=0):
+        lights = make(self, s, worlds, slot)
         lights.map_tile_min.fill_(1.0e-6)
         lights.map_reach.fill_(1.0e-6)
         return lights
