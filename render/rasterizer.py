@@ -209,11 +209,11 @@ class Renderer:
             maps = {"first": wp.zeros(1, dtype=wp.int32, device=d), "depth": wp.zeros((1, 1), dtype=float, device=d),
                     "rot": wp.zeros(1, dtype=wp.mat33, device=d), "trans": wp.zeros(1, dtype=wp.vec3, device=d),
                     "intr": wp.zeros(1, dtype=wp.vec4, device=d), "size": wp.zeros(1, dtype=float, device=d),
-                    "tile_min": wp.zeros((1, 1), dtype=float, device=d),
+                    "pair_min": wp.zeros((1, 1), dtype=float, device=d),
                     "reach": wp.zeros((1, 1), dtype=float, device=d)}
         lights.map_first, lights.map_depth, lights.map_rot = maps["first"], maps["depth"], maps["rot"]
         lights.map_trans, lights.map_intr, lights.map_light_size = maps["trans"], maps["intr"], maps["size"]
-        lights.map_tile_min, lights.map_reach = maps["tile_min"], maps["reach"]
+        lights.map_pair_min, lights.map_reach = maps["pair_min"], maps["reach"]
         return lights
 
     def _map_buffers(self, M: int, slot: int) -> dict:
@@ -228,6 +228,7 @@ class Renderer:
                    "depth": wp.empty((M, S * S), dtype=float, device=d),
                    "mask": wp.empty((M, S * S), dtype=wp.uint8, device=d),  # the raster's worm silhouette: unread
                    "tile_min": wp.empty((M, tiles * tiles), dtype=float, device=d),
+                   "pair_min": wp.empty((M, tiles * tiles), dtype=float, device=d),
                    "reach": wp.empty((M, tiles * tiles), dtype=float, device=d)}
             self._maps[slot] = buf
         return {k: v[:M] for k, v in buf.items()}
@@ -256,10 +257,11 @@ class Renderer:
         tiles = -(-S // shk.SHADOW_TILE)
         maps["tile_min"] = buf["tile_min"]
         maps["reach"] = buf["reach"]
+        maps["pair_min"] = buf["pair_min"]
         wp.launch(shk.shadow_tile_min, dim=(M, tiles * tiles), device=d, inputs=[key, S, tiles],
                   outputs=[maps["depth"], maps["tile_min"]])
         wp.launch(shk.shadow_reach_min, dim=(M, tiles * tiles), device=d, inputs=[maps["tile_min"], tiles],
-                  outputs=[maps["reach"]])
+                  outputs=[maps["reach"], maps["pair_min"]])
         return self._lights(s["light_arrays"], maps)
 
     # -- rendering -----------------------------------------------------------------------------------------------------

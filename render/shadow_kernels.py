@@ -22,8 +22,9 @@ class Lights:
     texel (1e30: none; side ``map_side``) seen by a pinhole ``map_rot``/``map_trans``/``map_intr`` at the light;
     world ``w``'s maps are ``map_first[w]`` (the sun) and ``map_first[w] + 1 + i`` (point light i);
     ``map_first[w] < 0``: none (lit). ``map_light_size``: the light's radius [m] as placed for the map (it sets the
-    penumbra). ``map_tile_min`` (M, map_tiles²): the nearest depth [m] of each ``SHADOW_TILE``² block of texels,
-    ``map_reach`` the nearest within ``SHADOW_REACH`` blocks of each (:func:`shadow_tile_min`,
+    penumbra). ``map_pair_min`` (M, map_tiles²): the nearest depth [m] of the 2 x 2 ``SHADOW_TILE``² blocks of
+    texels from each block on (clamped at the map's edge), ``map_reach`` the nearest within ``SHADOW_REACH`` blocks
+    of each (:func:`shadow_tile_min`,
     :func:`shadow_reach_min`): a point whose blocker search can reach no nearer texel is known lit from one read, or
     a few (:func:`footprint_min`).
     """
@@ -42,7 +43,7 @@ class Lights:
     map_intr: wp.array(dtype=wp.vec4)
     map_light_size: wp.array(dtype=float)
     map_side: int
-    map_tile_min: wp.array2d(dtype=float)
+    map_pair_min: wp.array2d(dtype=float)
     map_reach: wp.array2d(dtype=float)
     map_tiles: int
 
@@ -90,9 +91,10 @@ def shadow_tile_min(map_key: wp.array2d(dtype=wp.int64), side: int, tiles: int,
 
 
 @wp.kernel
-def shadow_reach_min(tile_min: wp.array2d(dtype=float), tiles: int, reach: wp.array2d(dtype=float)):
-    """Nearest depth [m] over the blocks within ``SHADOW_REACH`` of each block (clamped to the map); launched as
-    (M, tiles²)."""
+def shadow_reach_min(tile_min: wp.array2d(dtype=float), tiles: int, reach: wp.array2d(dtype=float),
+                     pair_min: wp.array2d(dtype=float)):
+    """Nearest depth [m] over the blocks within ``SHADOW_REACH`` of each block -> ``reach``, and over the 2 x 2 blocks
+    from each block on -> ``pair_min`` (both clamped to the map); launched as (M, tiles²)."""
     m, b = wp.tid()
     bx = b % tiles
     by = b / tiles
@@ -101,41 +103,41 @@ def shadow_reach_min(tile_min: wp.array2d(dtype=float), tiles: int, reach: wp.ar
         for x in range(wp.max(bx - SHADOW_REACH, 0), wp.min(bx + SHADOW_REACH + 1, tiles)):
             best = wp.min(best, tile_min[m, y * tiles + x])
     reach[m, b] = best
+    x1 = wp.min(bx + 1, tiles - 1)
+    y1 = wp.min(by + 1, tiles - 1)
+    pair_min[m, b] = wp.min(wp.min(tile_min[m, by * tiles + bx], tile_min[m, by * tiles + x1]),
+                            wp.min(tile_min[m, y1 * tiles + bx], tile_min[m, y1 * tiles + x1]))
 
 
 @wp.func
-def footprint_min(tile_min: wp.array2d(dtype=float), tiles: int, s: int, m: int, u: float, v: float,
+def footprint_min(pair_min: wp.array2d(dtype=float), tiles: int, s: int, m: int, u: float, v: float,
                   radius: float) -> float:
-    """The nearest depth [m] of the blocks that the texels :func:`pcf_taps` reads about (u, v) at ``radius`` overlap,
-    widened by one texel on each side against rounding (``tile_min`` (M, tiles²): :class:`Lights`'
-    ``map_tile_min``; ``s`` the maps' side [texels]): no tap reads a nearer texel. ``radius`` <= 8 texels (the
-    callers clamp it), so the footprint spans at most four blocks each way."""
+    """A lower bound [m] on the depth of every texel that :func:`pcf_taps` reads about (u, v) at ``radius``: the
+    nearest of the blocks its footprint, widened by one texel on each side against rounding, overlaps (a few more
+    where it spans one block), from four 2 x 2-block minima (``pair_min`` (M, tiles²): :class:`Lights`'
+    ``map_pair_min``; ``s`` the maps' side [texels]). ``radius`` <= 8 texels (the callers clamp it): the footprint
+    spans at most four blocks each way, which two overlapping pairs cover."""
     x0 = wp.max(int(wp.floor(u - radius + 0.5)) - 1, 0)
     x1 = wp.min(int(wp.floor(u + radius + 0.5)) + 1, s - 1)
     y0 = wp.max(int(wp.floor(v - radius + 0.5)) - 1, 0)
     y1 = wp.min(int(wp.floor(v + radius + 0.5)) + 1, s - 1)
     near = float(NO_CASTER)
     if x0 <= x1 and y0 <= y1:
-        bx0 = x0 / _SHADOW_TILE
-        bx1 = x1 / _SHADOW_TILE
-        by0 = y0 / _SHADOW_TILE
-        by1 = y1 / _SHADOW_TILE
-        # unrolled over 4 x 4 blocks, skipping those past the footprint's end
-        for j in range(4):
-            if by0 + j <= by1:
-                row = (by0 + j) * tiles
-                for i in range(4):
-                    if bx0 + i <= bx1:
-                        near = wp.min(near, tile_min[m, row + bx0 + i])
+        xa = x0 / _SHADOW_TILE
+        ya = y0 / _SHADOW_TILE
+        xb = wp.max(x1 / _SHADOW_TILE - 1, xa)
+        yb = wp.max(y1 / _SHADOW_TILE - 1, ya)
+        near = wp.min(wp.min(pair_min[m, ya * tiles + xa], pair_min[m, ya * tiles + xb]),
+                      wp.min(pair_min[m, yb * tiles + xa], pair_min[m, yb * tiles + xb]))
     return near
 
 
 @wp.func
-def blocks_clear(tile_min: wp.array2d(dtype=float), tiles: int, s: int, m: int, u: float, v: float, z: float,
+def blocks_clear(pair_min: wp.array2d(dtype=float), tiles: int, s: int, m: int, u: float, v: float, z: float,
                  radius: float) -> bool:
     """True when no block that the 16 taps of :func:`pcf_taps` about (u, v) at ``radius`` can read holds a depth
     nearer than ``z`` (:func:`footprint_min`): then none of the taps is nearer. Exact where True."""
-    return not (footprint_min(tile_min, tiles, s, m, u, v, radius) < z)
+    return not (footprint_min(pair_min, tiles, s, m, u, v, radius) < z)
 
 
 @wp.func
@@ -213,7 +215,7 @@ def light_visibility(L: Lights, m: int, p: wp.vec3, n: wp.vec3) -> float:
         inside = u >= -search - 1.0 and v >= -search - 1.0 and u <= side + search and v <= side + search
         near = float(NO_CASTER)
         if inside and L.map_reach[m, map_tile(u, v, L.map_side, L.map_tiles)] < z:
-            near = footprint_min(L.map_tile_min, L.map_tiles, L.map_side, m, u, v, search)
+            near = footprint_min(L.map_pair_min, L.map_tiles, L.map_side, m, u, v, search)
         if near < z:  # a texel the blocker search may read is nearer (the rest of the map is known lit)
             # the 4 x 4 grid's taps at +-r, +-r/3 have the second moment (5/9 r^2) of a disk light's edge
             # profile (its penumbra half-width p: p^2 / 4) for r = 0.67 p; blockers no nearer than ``near`` give
@@ -229,7 +231,7 @@ def light_visibility(L: Lights, m: int, p: wp.vec3, n: wp.vec3) -> float:
                     zb = blk[1] / blk[0]
                     penumbra = wp.clamp(0.67 * size * (z - zb) / zb * k[0] / z, 1.0, 8.0)
             # the filter's own footprint may hold no blocker (the search's is wider): lit, from the blocks
-            if blocked and not blocks_clear(L.map_tile_min, L.map_tiles, L.map_side, m, u, v, z, penumbra):
+            if blocked and not blocks_clear(L.map_pair_min, L.map_tiles, L.map_side, m, u, v, z, penumbra):
                 out = 1.0 - pcf_taps(L.map_depth, L.map_side, m, u, v, z, penumbra)[0] / 16.0
     return out
 

@@ -170,7 +170,7 @@ def test_block_minima_early_out_is_exact(monkeypatch, size):
 
     def no_early_out(self, s, worlds, slot=0):
         lights = make(self, s, worlds, slot)
-        lights.map_tile_min.fill_(1.0e-6)
+        lights.map_pair_min.fill_(1.0e-6)
         lights.map_reach.fill_(1.0e-6)
         return lights
 
@@ -182,9 +182,10 @@ def test_block_minima_early_out_is_exact(monkeypatch, size):
 
 def test_footprint_min_covers_every_tap():
     # render.shadow_kernels.footprint_min bounds the depth of every texel pcf_taps reads, for any point and radius
-    # in [1, 8] (its unrolled 4 x 4 blocks included: a radius-8 footprint straddles four blocks, its taps any three
-    # of them). One caster texel per map, points drawn around it: wherever a tap lands on the caster (found by brute
-    # force in NumPy, float64: the footprint's one-texel widening absorbs float32 rounding), the bound reaches it.
+    # in [1, 8] (a radius-8 footprint straddles up to four blocks, its taps any three of them: two overlapping 2 x 2
+    # pairs must cover them). One caster texel per map, points drawn around it: wherever a tap lands on the caster
+    # (found by brute force in NumPy, float64: the footprint's one-texel widening absorbs float32 rounding), the
+    # bound reaches it.
     import warp as wp
 
     from warpworm.render.shadow_kernels import NO_CASTER, SHADOW_TILE, footprint_min
@@ -193,19 +194,22 @@ def test_footprint_min_covers_every_tap():
     tiles = s // SHADOW_TILE
     rng = np.random.default_rng(3)
     cx, cy = rng.integers(0, s, (2, n))
-    tile_min = np.full((n, tiles * tiles), NO_CASTER, np.float32)
-    tile_min[np.arange(n), (cy // SHADOW_TILE) * tiles + cx // SHADOW_TILE] = 0.5
+    tile_min = np.full((n, tiles, tiles), NO_CASTER, np.float32)
+    tile_min[np.arange(n), cy // SHADOW_TILE, cx // SHADOW_TILE] = 0.5
+    nxt = np.minimum(np.arange(tiles) + 1, tiles - 1)
+    pair = np.minimum(tile_min, tile_min[:, :, nxt])  # each block's 2 x 2 pair minimum (the renderer's map_pair_min)
+    pair = np.minimum(pair, pair[:, nxt, :]).reshape(n, -1)
     u, v = (np.stack([cx, cy]) + rng.uniform(-10.0, 10.0, (2, n))).astype(np.float32)
     r = np.where(rng.random(n) < 0.5, 8.0, rng.uniform(1.0, 8.0, n)).astype(np.float32)  # half at the clamp
 
     @wp.kernel
-    def bound(tile_min: wp.array2d(dtype=float), u: wp.array(dtype=float), v: wp.array(dtype=float),
+    def bound(pair_min: wp.array2d(dtype=float), u: wp.array(dtype=float), v: wp.array(dtype=float),
               r: wp.array(dtype=float), out: wp.array(dtype=float)):
         i = wp.tid()
-        out[i] = footprint_min(tile_min, 8, 64, i, u[i], v[i], r[i])
+        out[i] = footprint_min(pair_min, 8, 64, i, u[i], v[i], r[i])
 
     out = wp.zeros(n, dtype=float, device="cpu")
-    wp.launch(bound, dim=n, inputs=[wp.array(tile_min, dtype=float, device="cpu"), wp.array(u, device="cpu"),
+    wp.launch(bound, dim=n, inputs=[wp.array(pair, dtype=float, device="cpu"), wp.array(u, device="cpu"),
                                     wp.array(v, device="cpu"), wp.array(r, device="cpu")], outputs=[out], device="cpu")
     offsets = (np.arange(4) - 1.5) / 1.5
     xs = np.floor(u[:, None] + r[:, None] * offsets + 0.5).astype(int)
