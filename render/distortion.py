@@ -69,30 +69,41 @@ def undistort_maps(K: np.ndarray, dist: np.ndarray, width: int, height: int, dev
     return out.numpy().reshape(N, height, width, 2)
 
 
-def lens_margins(cameras) -> tuple[int, int, int, int]:
+def lens_margins(cameras, device=None) -> tuple[int, int, int, int]:
     """The widening a lens needs: (left, top, grid width, grid height) [px] of a pinhole image with the cameras' K
     shifted by (left, top) that holds the ray of every distorted pixel centre of ``cameras`` (``dist`` (N, 5)), with
     a pixel to spare. The lens map is one-to-one over the image (:func:`lens_covers_image`), so the extreme rays
-    are those of the image's border: only its 2 (W + H) pixel centres are undistorted (NumPy, float64). ValueError
-    when a lens folds back inside its image (no ray reaches some pixels)."""
+    are those of the image's border: only its 2 (W + H) pixel centres are undistorted (float64, the Warp kernel
+    :func:`warpworm.render.lens_kernels.border_rays` on ``device``, default the CPU). ValueError when a lens folds
+    back inside its image (no ray reaches some pixels)."""
+    import warp as wp
+
+    from warpworm.render import lens_kernels as lk
+
     H, W = int(cameras.height), int(cameras.width)
-    dist = np.asarray(cameras.dist, dtype=np.float64)
+    dist = np.ascontiguousarray(cameras.dist, dtype=np.float64)
     K = np.asarray(cameras.K, dtype=np.float64)
+    N = len(K)
     xs, ys = np.arange(W, dtype=np.float64), np.arange(H, dtype=np.float64)
     bx = np.concatenate([xs, xs, np.zeros(H), np.full(H, W - 1.0)])
     by = np.concatenate([np.zeros(W), np.full(W, H - 1.0), ys, ys])
-    fx, fy, cx, cy = (K[:, 0, 0, None], K[:, 1, 1, None], K[:, 0, 2, None], K[:, 1, 2, None])
-    u, v, res = undistort((bx[None] - cx) / fx, (by[None] - cy) / fy, dist[:, None, :])
-    off = ~(np.isfinite(u).all(axis=1) & np.isfinite(v).all(axis=1) & (res.max(axis=1, initial=0.0) <= 1e-9))
+    d = wp.get_device("cpu" if device is None else device)
+    intr = np.stack([K[:, 0, 0], K[:, 1, 1], K[:, 0, 2], K[:, 1, 2]], axis=1)
+    rays = wp.empty((N, len(bx)), dtype=wp.vec2d, device=d)
+    wp.launch(lk.border_rays, dim=(N, len(bx)), device=d,
+              inputs=[wp.array(intr, dtype=wp.vec4d, device=d), wp.array(dist, dtype=wp.float64, device=d),
+                      wp.array(bx, dtype=wp.float64, device=d), wp.array(by, dtype=wp.float64, device=d), 8],
+              outputs=[rays])
+    m = rays.numpy()
+    off = ~np.isfinite(m).all(axis=(1, 2))
     if off.any():  # the wider image would have to hold rays that do not exist
         i = int(np.flatnonzero(off)[0])
         raise ValueError(f"camera {i} of {len(off)} (and {int(off.sum()) - 1} more): its lens (k1, k2, p1, p2, k3) = "
                          f"{tuple(np.round(dist[i], 5).tolist())} folds back inside its {W}x{H} image (fx "
                          f"{K[i, 0, 0]:.1f} px): some pixels see no ray; expected a lens whose radial map "
                          "rises past the image corners (draw_distortion with K redraws such lenses)")
-    mx, my = fx * u + cx, fy * v + cy
-    lo = np.floor([mx.min(), my.min()]) - 1
-    hi = np.ceil([mx.max(), my.max()]) + 1
+    lo = np.floor(m.min(axis=(0, 1))) - 1
+    hi = np.ceil(m.max(axis=(0, 1))) + 1
     left, top = int(max(0, -lo[0])), int(max(0, -lo[1]))
     return left, top, W + left + int(max(0, hi[0] - (W - 1))), H + top + int(max(0, hi[1] - (H - 1)))
 
@@ -104,7 +115,7 @@ def widened_pinhole(cameras, device=None):
     import dataclasses
 
     H, W = int(cameras.height), int(cameras.width)
-    left, top, Wp, Hp = lens_margins(cameras)
+    left, top, Wp, Hp = lens_margins(cameras, device)
     maps = undistort_maps(cameras.K, np.asarray(cameras.dist, dtype=np.float64), W, H, device)  # (N, H, W, 2)
     K = cameras.K.copy()
     K[:, 0, 2] += left

@@ -63,3 +63,26 @@ def undistort_pixels(
         pinhole[img, y, x] = wp.vec2d(nan, nan)
         return
     pinhole[img, y, x] = wp.vec2d(k[0] * u + k[2], k[1] * v + k[3])
+
+
+@wp.kernel
+def border_rays(
+    intr: wp.array(dtype=wp.vec4d),
+    dist: wp.array2d(dtype=wp.float64),
+    px: wp.array(dtype=wp.float64),
+    py: wp.array(dtype=wp.float64),
+    iterations: int,
+    # Data out:
+    pinhole: wp.array2d(dtype=wp.vec2d),
+):
+    """:func:`undistort_pixels` at ``P`` given pixel centres (``px``, ``py``) (P,) of each image (an image's border,
+    for :func:`warpworm.render.distortion.lens_margins`): ``pinhole`` (N, P), NaN where no ray reaches the point."""
+    img, i = wp.tid()
+    k = intr[img]
+    u, v, _a, _b, _d, ok = lens_inverse((px[i] - k[2]) / k[0], (py[i] - k[3]) / k[1], dist[img, 0], dist[img, 1],
+                                       dist[img, 2], dist[img, 3], dist[img, 4], iterations)
+    if not ok:
+        nan = wp.float64(wp.nan)
+        pinhole[img, i] = wp.vec2d(nan, nan)
+        return
+    pinhole[img, i] = wp.vec2d(k[0] * u + k[2], k[1] * v + k[3])

@@ -300,7 +300,7 @@ class Renderer:
             raise ValueError("sensor: a JPEG round trip (jpeg_quality 1..99) runs on the host; expected out='host' "
                              "or jpeg_quality 0")
         lens = cameras.dist is not None and bool(np.any(np.asarray(cameras.dist) != 0))
-        left, top, gw, gh = lens_margins(cameras) if lens and N else (0, 0, W, H)
+        left, top, gw, gh = lens_margins(cameras, self.device) if lens and N else (0, 0, W, H)
         sub = self.supersample if (self.supersample > 1 or lens) else 0  # 0: the plain pixel-centre path
         d = self.device
         res = {"rgb": wp.empty((N, H * W), dtype=wp.vec3ub, device=d),
