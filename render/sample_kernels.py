@@ -339,13 +339,13 @@ def resolve_samples(
     ``cam_intr`` (N,): the label grid's pinhole (fx, fy, cx, cy) [px] (``grid_w`` x ``grid_h``; with a lens, the
     output's K shifted by the widening margins ``margin_x``, ``margin_y`` [px]); ``cam_dist`` (N,) OpenCV's
     (k1, k2, p1, p2) and ``cam_k3`` (N,) its k3 (read only when ``lens``); ``sample_intr`` (N,) the sample grid's
-    pinhole (the one its raster pass used: ``cam_intr`` times ``sub``, centres shifted by (sub - 1) / 2); ``label_key``/``label_mask``
-    (N, grid_h * grid_w) and ``sample_key`` (N, sub² grid_h * grid_w) the raster pass's keys and worm silhouette;
-    ``sub`` colour samples per pixel side (>= 1); ``texture_filter`` 1: a pixel whose samples all see the floor
-    (no mesh key, its footprint inside the square) takes the floor's box-filtered albedo over its footprint
-    (:func:`~warpworm.render.shading.floor_albedo_box`) and one sample's hit for its lighting, not ``sub``² of
-    each. Outputs (N, height * width): 8-bit ``rgb``, camera ``depth`` [m]
-    (0: background), ``seg`` ids, ``worm_mask``, camera-frame ``normals`` when ``write_normals``.
+    pinhole (the one its raster pass used: ``cam_intr`` times ``sub``, centres shifted by (sub - 1) / 2);
+    ``label_key``/``label_mask`` (N, grid_h * grid_w) and ``sample_key`` (N, sub² grid_h * grid_w) the raster
+    pass's keys and worm silhouette; ``sub`` colour samples per pixel side (>= 1); ``texture_filter`` 1: a pixel
+    whose samples all see the floor (no mesh key, its footprint inside the square) takes the floor's box-filtered
+    albedo over its footprint (:func:`~warpworm.render.shading.floor_albedo_box`) and its first sample's hit for
+    its lighting, not ``sub``² of each. Outputs (N, height * width): 8-bit ``rgb``, camera ``depth`` [m] (0:
+    background), ``seg`` ids, ``worm_mask``, camera-frame ``normals`` when ``write_normals``.
     """
     img, y, xb = wp.tid()
     w = image_world[img]

@@ -130,7 +130,8 @@ def blur_taps(src: wp.array2d(dtype=wp.vec3), img: int, base: int, pos: int, n: 
     acc = src[img, base + pos * stride] * weights[img, c]
     if pos >= radius and pos + radius < n:  # away from the border: no reflection (the same sums)
         for d in range(1, radius + 1):
-            acc = acc + (src[img, base + (pos - d) * stride] + src[img, base + (pos + d) * stride]) * weights[img, c + d]
+            pair = src[img, base + (pos - d) * stride] + src[img, base + (pos + d) * stride]
+            acc = acc + pair * weights[img, c + d]
     else:
         for d in range(1, radius + 1):
             a = src[img, base + reflect101(pos - d, n) * stride]
