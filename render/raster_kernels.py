@@ -69,97 +69,114 @@ wp.set_module_options({"enable_backward": False})
 # ---------------------------------------------------------------------------------------------------------------------
 
 
-@wp.kernel
-def raster_triangles(
-    # Model:
-    triangles: wp.array(dtype=wp.vec3i),
-    tri_label: wp.array(dtype=wp.int32),
-    # Data in:
-    vertices: wp.array2d(dtype=wp.vec3),
-    image_world: wp.array(dtype=wp.int32),
-    cam_rot: wp.array(dtype=wp.mat33),
-    cam_trans: wp.array(dtype=wp.vec3),
-    cam_intr: wp.array(dtype=wp.vec4),
-    width: int,
-    height: int,
-    near: float,
-    # Data out:
-    zkey: wp.array2d(dtype=wp.int64),
-    worm_mask: wp.array2d(dtype=wp.uint8),
-):
-    """Z-buffer one triangle into one image.
+def make_raster(depth_only: bool):
+    """The z-buffer kernel: packed (depth, triangle) keys and the worm silhouette, or with ``depth_only`` the depth
+    alone (a float ``zkey``, no silhouette: the shadow maps)."""
+    key_dtype = float if depth_only else wp.int64
 
-    Args:
-        triangles: vertex indices of every triangle of the (shared) scene topology, shape (T,).
-        tri_label: segmentation id of every triangle, shape (T,).
-        vertices: world positions [m] of every scene vertex of every world, shape (W, Vs).
-        image_world: world index of every image, shape (N,).
-        cam_rot: world-to-camera rotation R of every image (x_cam = R x_world + t), shape (N,).
-        cam_trans: world-to-camera translation t [m], shape (N,).
-        cam_intr: (fx, fy, cx, cy) [px] of every image, shape (N,).
-        width, height: image size [px].
-        near: triangles with a vertex at camera z < near [m] are skipped.
-        zkey: packed (depth, triangle) keys, shape (N, height * width); cleared to EMPTY_KEY before the launch.
-        worm_mask: set to 1 where a worm triangle covers the pixel, occluded or not, shape (N, height * width).
-    """
-    img, tri = wp.tid()
-    w = image_world[img]
-    f = triangles[tri]
-    R = cam_rot[img]
-    t = cam_trans[img]
-    p0 = R * vertices[w, f[0]] + t
-    p1 = R * vertices[w, f[1]] + t
-    p2 = R * vertices[w, f[2]] + t
-    if wp.min(wp.min(p0[2], p1[2]), p2[2]) < near:
-        return
-    k = cam_intr[img]
-    q0 = project(p0, k)
-    q1 = project(p1, k)
-    q2 = project(p2, k)
-    u0 = q0[0]
-    v0 = q0[1]
-    u1 = q1[0]
-    v1 = q1[1]
-    u2 = q2[0]
-    v2 = q2[1]
-    area = edge_fn(u0, v0, u1, v1, u2, v2)
-    if area == 0.0:
-        return
-    if area < 0.0:
-        # double-sided: reorder to positive screen area so one inside test and one top-left rule serve both sides
-        u1 = q2[0]
-        v1 = q2[1]
-        u2 = q1[0]
-        v2 = q1[1]
-    box = pixel_box(u0, v0, u1, v1, u2, v2, width, height)
-    if box[0] > box[1] or box[2] > box[3]:
-        return
-    plane = depth_plane(p0, p1, p2, k)
+    @wp.kernel(name="raster_depth" if depth_only else "raster_triangles")
+    def raster_triangles(
+        # Model:
+        triangles: wp.array(dtype=wp.vec3i),
+        tri_label: wp.array(dtype=wp.int32),
+        # Data in:
+        vertices: wp.array2d(dtype=wp.vec3),
+        image_world: wp.array(dtype=wp.int32),
+        cam_rot: wp.array(dtype=wp.mat33),
+        cam_trans: wp.array(dtype=wp.vec3),
+        cam_intr: wp.array(dtype=wp.vec4),
+        width: int,
+        height: int,
+        near: float,
+        # Data out:
+        zkey: wp.array2d(dtype=key_dtype),
+        worm_mask: wp.array2d(dtype=wp.uint8),
+    ):
+        """Z-buffer one triangle into one image.
 
-    tl0 = is_top_left(u1, v1, u2, v2)
-    tl1 = is_top_left(u2, v2, u0, v0)
-    tl2 = is_top_left(u0, v0, u1, v1)
-    worm = tri_label[tri] >= SEG_WORM_FIRST and tri_label[tri] <= SEG_WORM_LAST
-    tkey = wp.int64(tri)
+        Args:
+            triangles: vertex indices of every triangle of the (shared) scene topology, shape (T,).
+            tri_label: segmentation id of every triangle, shape (T,).
+            vertices: world positions [m] of every scene vertex of every world, shape (W, Vs).
+            image_world: world index of every image, shape (N,).
+            cam_rot: world-to-camera rotation R of every image (x_cam = R x_world + t), shape (N,).
+            cam_trans: world-to-camera translation t [m], shape (N,).
+            cam_intr: (fx, fy, cx, cy) [px] of every image, shape (N,).
+            width, height: image size [px].
+            near: triangles with a vertex at camera z < near [m] are skipped.
+            zkey: packed (depth, triangle) keys, shape (N, height * width); cleared to EMPTY_KEY before the launch.
+            worm_mask: set to 1 where a worm triangle covers the pixel, occluded or not, shape (N, height * width).
+        """
+        img, tri = wp.tid()
+        w = image_world[img]
+        f = triangles[tri]
+        R = cam_rot[img]
+        t = cam_trans[img]
+        p0 = R * vertices[w, f[0]] + t
+        p1 = R * vertices[w, f[1]] + t
+        p2 = R * vertices[w, f[2]] + t
+        if wp.min(wp.min(p0[2], p1[2]), p2[2]) < near:
+            return
+        k = cam_intr[img]
+        q0 = project(p0, k)
+        q1 = project(p1, k)
+        q2 = project(p2, k)
+        u0 = q0[0]
+        v0 = q0[1]
+        u1 = q1[0]
+        v1 = q1[1]
+        u2 = q2[0]
+        v2 = q2[1]
+        area = edge_fn(u0, v0, u1, v1, u2, v2)
+        if area == 0.0:
+            return
+        if area < 0.0:
+            # double-sided: reorder to positive screen area so one inside test and one top-left rule serve both sides
+            u1 = q2[0]
+            v1 = q2[1]
+            u2 = q1[0]
+            v2 = q1[1]
+        box = pixel_box(u0, v0, u1, v1, u2, v2, width, height)
+        if box[0] > box[1] or box[2] > box[3]:
+            return
+        plane = depth_plane(p0, p1, p2, k)
 
-    for y in range(box[2], box[3] + 1):
-        py = float(y)
-        entered = bool(False)
-        for x in range(box[0], box[1] + 1):
-            px = float(x)
-            e0 = edge_fn(u1, v1, u2, v2, px, py)
-            e1 = edge_fn(u2, v2, u0, v0, px, py)
-            e2 = edge_fn(u0, v0, u1, v1, px, py)
-            if covers(e0, tl0) and covers(e1, tl1) and covers(e2, tl2):
-                entered = True
-                z = plane[0] / (plane[1] * px + plane[2] * py + plane[3])
-                key = wp.int64(z * _DEPTH_SCALE) * _TRI_SCALE + tkey
-                pix = y * width + x
-                wp.atomic_min(zkey, img, pix, key)
-                if worm:
-                    worm_mask[img, pix] = wp.uint8(1)
-            elif entered:
-                break  # a row crosses a convex triangle in one run
+        tl0 = is_top_left(u1, v1, u2, v2)
+        tl1 = is_top_left(u2, v2, u0, v0)
+        tl2 = is_top_left(u0, v0, u1, v1)
+        worm = tri_label[tri] >= SEG_WORM_FIRST and tri_label[tri] <= SEG_WORM_LAST
+        tkey = wp.int64(tri)
+
+        for y in range(box[2], box[3] + 1):
+            py = float(y)
+            entered = bool(False)
+            for x in range(box[0], box[1] + 1):
+                px = float(x)
+                e0 = edge_fn(u1, v1, u2, v2, px, py)
+                e1 = edge_fn(u2, v2, u0, v0, px, py)
+                e2 = edge_fn(u0, v0, u1, v1, px, py)
+                if covers(e0, tl0) and covers(e1, tl1) and covers(e2, tl2):
+                    entered = True
+                    z = plane[0] / (plane[1] * px + plane[2] * py + plane[3])
+                    pix = y * width + x
+                    if wp.static(depth_only):
+                        wp.atomic_min(zkey, img, pix, key_dtype(z))  # (key_dtype: float here)
+                    else:
+                        key = wp.int64(z * _DEPTH_SCALE) * _TRI_SCALE + tkey
+                        wp.atomic_min(zkey, img, pix, key)
+                        if worm:
+                            worm_mask[img, pix] = wp.uint8(1)
+                elif entered:
+                    break  # a row crosses a convex triangle in one run
+
+    return raster_triangles
+
+
+raster_triangles = make_raster(False)
+"""Z-buffer one triangle into one image: packed (depth, triangle) keys and the worm silhouette."""
+raster_depth = make_raster(True)
+"""Z-buffer one triangle into one shadow map: the nearest depth [m] per texel (float ``zkey``, cleared to 1e30;
+``worm_mask`` unused, a 1-element dummy)."""
 
 
 def make_resolve_shade(plain: bool, shade: bool = True):

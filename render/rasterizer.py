@@ -130,6 +130,7 @@ class Renderer:
         self.texture_filter = bool(texture_filter)
         self._buffers: dict = {}
         self._maps: dict = {}
+        self._no_mask = wp.empty((1, 1), dtype=wp.uint8, device=self.device)  # raster_depth's unused silhouette
         # load the kernels once here: concurrent first launches from several threads would race to load them
         for module in (rk, shk, snk):
             wp.load_module(module, device=self.device)
@@ -222,11 +223,9 @@ class Renderer:
         S = self.shadow_map
         tiles = -(-S // shk.SHADOW_TILE)
         buf = self._maps.get(slot)
-        if buf is None or buf["key"].shape[0] < M:
+        if buf is None or buf["depth"].shape[0] < M:
             d = self.device
-            buf = {"key": wp.empty((M, S * S), dtype=wp.int64, device=d),
-                   "depth": wp.empty((M, S * S), dtype=float, device=d),
-                   "mask": wp.empty((M, S * S), dtype=wp.uint8, device=d),  # the raster's worm silhouette: unread
+            buf = {"depth": wp.empty((M, S * S), dtype=float, device=d),
                    "tile_min": wp.empty((M, tiles * tiles), dtype=float, device=d),
                    "pair_min": wp.empty((M, tiles * tiles), dtype=float, device=d),
                    "reach": wp.empty((M, tiles * tiles), dtype=float, device=d)}
@@ -243,23 +242,22 @@ class Renderer:
         first = np.full(scene.num_worlds, -1, np.int32)
         first[worlds] = np.arange(len(worlds), dtype=np.int32) * (M // len(worlds))
         buf = self._map_buffers(M, slot)
-        key = buf["key"]
-        key.fill_(EMPTY_KEY)
+        buf["depth"].fill_(shk.NO_CASTER)
         maps = {"first": wp.array(first, dtype=wp.int32, device=d), "depth": buf["depth"],
                 "rot": _vec_array(cams["R"], wp.mat33, d), "trans": _vec_array(cams["t"], wp.vec3, d),
                 "intr": _vec_array(cams["intr"], wp.vec4, d),
                 "size": wp.array(cams["size"].astype(np.float32), dtype=float, device=d)}
-        wp.launch(rk.raster_triangles, dim=(M, s["triangles"].shape[0]), device=d,
+        wp.launch(rk.raster_depth, dim=(M, s["triangles"].shape[0]), device=d,
                   inputs=[s["triangles"], s["tri_label"], s["vertices"],
                           wp.array(cams["world"].astype(np.int32), dtype=wp.int32, device=d), maps["rot"],
                           maps["trans"], maps["intr"], S, S, self.near],
-                  outputs=[key, buf["mask"]])
+                  outputs=[maps["depth"], self._no_mask])
         tiles = -(-S // shk.SHADOW_TILE)
         maps["tile_min"] = buf["tile_min"]
         maps["reach"] = buf["reach"]
         maps["pair_min"] = buf["pair_min"]
-        wp.launch(shk.shadow_tile_min, dim=(M, tiles * tiles), device=d, inputs=[key, S, tiles],
-                  outputs=[maps["depth"], maps["tile_min"]])
+        wp.launch(shk.shadow_tile_min, dim=(M, tiles * tiles), device=d, inputs=[maps["depth"], S, tiles],
+                  outputs=[maps["tile_min"]])
         wp.launch(shk.shadow_reach_min, dim=(M, tiles * tiles), device=d, inputs=[maps["tile_min"], tiles],
                   outputs=[maps["reach"], maps["pair_min"]])
         return self._lights(s["light_arrays"], maps)

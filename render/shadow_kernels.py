@@ -71,22 +71,16 @@ search) plus one of rounding and one of margin of the point's texel, at most two
 
 
 @wp.kernel
-def shadow_tile_min(map_key: wp.array2d(dtype=wp.int64), side: int, tiles: int,
-                    depth: wp.array2d(dtype=float), tile_min: wp.array2d(dtype=float)):
-    """Shadow-map depths [m] from the raster pass's packed keys ``map_key`` (M, side²) -> ``depth`` (1e30 where
-    empty), and the nearest of each ``SHADOW_TILE``² block -> ``tile_min`` (M, tiles²); launched as (M, tiles²)."""
+def shadow_tile_min(depth: wp.array2d(dtype=float), side: int, tiles: int, tile_min: wp.array2d(dtype=float)):
+    """The nearest depth [m] of each ``SHADOW_TILE``² block of the shadow maps ``depth`` (M, side²) (1e30 where no
+    caster) -> ``tile_min`` (M, tiles²); launched as (M, tiles²)."""
     m, b = wp.tid()
     x0 = (b % tiles) * _SHADOW_TILE
     y0 = (b / tiles) * _SHADOW_TILE
     best = float(NO_CASTER)
     for y in range(y0, wp.min(y0 + _SHADOW_TILE, side)):
         for x in range(x0, wp.min(x0 + _SHADOW_TILE, side)):
-            key = map_key[m, y * side + x]
-            z = float(NO_CASTER)
-            if key != _EMPTY:
-                z = float(key / _TRI_SCALE) / _DEPTH_SCALE
-            depth[m, y * side + x] = z
-            best = wp.min(best, z)
+            best = wp.min(best, depth[m, y * side + x])
     tile_min[m, b] = best
 
 
