@@ -58,7 +58,7 @@ from warpworm.render.shading import (
     shade_hit,
     shade_hit_plain,
 )
-from warpworm.render.shadow_kernels import Lights
+from warpworm.render.shadow_kernels import _SHADOW_TILE, Lights
 
 # forward only: nothing differentiates through rendering, and skipping adjoints halves the compile time
 wp.set_module_options({"enable_backward": False})
@@ -71,7 +71,7 @@ wp.set_module_options({"enable_backward": False})
 
 def make_raster(depth_only: bool):
     """The z-buffer kernel: packed (depth, triangle) keys and the worm silhouette, or with ``depth_only`` the depth
-    alone (a float ``zkey``, no silhouette: the shadow maps)."""
+    alone and its minimum per block (a float ``zkey`` and ``tile_min``, no silhouette: the shadow maps)."""
     key_dtype = float if depth_only else wp.int64
 
     @wp.kernel(name="raster_depth" if depth_only else "raster_triangles")
@@ -91,6 +91,7 @@ def make_raster(depth_only: bool):
         # Data out:
         zkey: wp.array2d(dtype=key_dtype),
         worm_mask: wp.array2d(dtype=wp.uint8),
+        tile_min: wp.array2d(dtype=float),
     ):
         """Z-buffer one triangle into one image.
 
@@ -105,7 +106,11 @@ def make_raster(depth_only: bool):
             width, height: image size [px].
             near: triangles with a vertex at camera z < near [m] are skipped.
             zkey: packed (depth, triangle) keys, shape (N, height * width); cleared to EMPTY_KEY before the launch.
-            worm_mask: set to 1 where a worm triangle covers the pixel, occluded or not, shape (N, height * width).
+                With ``depth_only`` (:data:`raster_depth`) the depth [m] itself, cleared to 1e30.
+            worm_mask: set to 1 where a worm triangle covers the pixel, occluded or not, shape (N, height * width)
+                (depth_only: unused, a 1-element dummy).
+            tile_min: depth_only: the nearest depth [m] of each ``SHADOW_TILE``² block, shape (N, tiles²) with
+                tiles = ceil(width / SHADOW_TILE), cleared to 1e30 (else unused, a 1-element dummy).
         """
         img, tri = wp.tid()
         w = image_world[img]
@@ -161,6 +166,8 @@ def make_raster(depth_only: bool):
                     pix = y * width + x
                     if wp.static(depth_only):
                         wp.atomic_min(zkey, img, pix, key_dtype(z))  # (key_dtype: float here)
+                        tiles = (width + _SHADOW_TILE - 1) / _SHADOW_TILE
+                        wp.atomic_min(tile_min, img, (y / _SHADOW_TILE) * tiles + x / _SHADOW_TILE, z)
                     else:
                         key = wp.int64(z * _DEPTH_SCALE) * _TRI_SCALE + tkey
                         wp.atomic_min(zkey, img, pix, key)
@@ -175,8 +182,7 @@ def make_raster(depth_only: bool):
 raster_triangles = make_raster(False)
 """Z-buffer one triangle into one image: packed (depth, triangle) keys and the worm silhouette."""
 raster_depth = make_raster(True)
-"""Z-buffer one triangle into one shadow map: the nearest depth [m] per texel (float ``zkey``, cleared to 1e30;
-``worm_mask`` unused, a 1-element dummy)."""
+"""Z-buffer one triangle into one shadow map: the nearest depth [m] per texel and per block of texels."""
 
 
 def make_resolve_shade(plain: bool, shade: bool = True):

@@ -131,6 +131,7 @@ class Renderer:
         self._buffers: dict = {}
         self._maps: dict = {}
         self._no_mask = wp.empty((1, 1), dtype=wp.uint8, device=self.device)  # raster_depth's unused silhouette
+        self._no_tiles = wp.empty((1, 1), dtype=float, device=self.device)  # raster_triangles' unused block minima
         # load the kernels once here: concurrent first launches from several threads would race to load them
         for module in (rk, shk, snk):
             wp.load_module(module, device=self.device)
@@ -243,6 +244,7 @@ class Renderer:
         first[worlds] = np.arange(len(worlds), dtype=np.int32) * (M // len(worlds))
         buf = self._map_buffers(M, slot)
         buf["depth"].fill_(shk.NO_CASTER)
+        buf["tile_min"].fill_(shk.NO_CASTER)
         maps = {"first": wp.array(first, dtype=wp.int32, device=d), "depth": buf["depth"],
                 "rot": _vec_array(cams["R"], wp.mat33, d), "trans": _vec_array(cams["t"], wp.vec3, d),
                 "intr": _vec_array(cams["intr"], wp.vec4, d),
@@ -251,13 +253,11 @@ class Renderer:
                   inputs=[s["triangles"], s["tri_label"], s["vertices"],
                           wp.array(cams["world"].astype(np.int32), dtype=wp.int32, device=d), maps["rot"],
                           maps["trans"], maps["intr"], S, S, self.near],
-                  outputs=[maps["depth"], self._no_mask])
+                  outputs=[maps["depth"], self._no_mask, buf["tile_min"]])
         tiles = -(-S // shk.SHADOW_TILE)
         maps["tile_min"] = buf["tile_min"]
         maps["reach"] = buf["reach"]
         maps["pair_min"] = buf["pair_min"]
-        wp.launch(shk.shadow_tile_min, dim=(M, tiles * tiles), device=d, inputs=[maps["depth"], S, tiles],
-                  outputs=[maps["tile_min"]])
         wp.launch(shk.shadow_reach_min, dim=(M, tiles * tiles), device=d, inputs=[maps["tile_min"], tiles],
                   outputs=[maps["reach"], maps["pair_min"]])
         return self._lights(s["light_arrays"], maps)
@@ -381,7 +381,7 @@ class Renderer:
             wp.launch(rk.raster_triangles, dim=(n, tris), device=d,
                       inputs=[s["triangles"], s["tri_label"], s["vertices"], *common, b["cam_intr"], gw, gh,
                               self.near],
-                      outputs=[b["zkey"], out["worm_mask"]])
+                      outputs=[b["zkey"], out["worm_mask"], self._no_tiles])
             # CPU: a thread per image row (per-thread overhead and per-row setup paid once); GPU: a thread per pixel
             span = self.width if d.is_cpu else 1
             wp.launch(s["shade"], dim=(n, self.height, (self.width + span - 1) // span), device=d,
@@ -405,11 +405,11 @@ class Renderer:
             wp.launch(rk.raster_triangles, dim=(n, tris), device=d,
                       inputs=[s["triangles"], s["tri_label"], s["vertices"], *common, b["cam_intr"], gw, gh,
                               self.near],
-                      outputs=[b["zkey"], b["mask"]])
+                      outputs=[b["zkey"], b["mask"], self._no_tiles])
             wp.launch(rk.raster_triangles, dim=(n, tris), device=d,
                       inputs=[s["triangles"], s["tri_label"], s["vertices"], *common, b["fine_intr"], gw * sub,
                               gh * sub, self.near],
-                      outputs=[b["fine_key"], b["fine_mask"]])
+                      outputs=[b["fine_key"], b["fine_mask"], self._no_tiles])
             span = self.width if d.is_cpu else 1
             wp.launch(sk.resolve_samples, dim=(n, self.height, (self.width + span - 1) // span),
                       device=d,

@@ -24,7 +24,7 @@ class Lights:
     ``map_first[w] < 0``: none (lit). ``map_light_size``: the light's radius [m] as placed for the map (it sets the
     penumbra). ``map_pair_min`` (M, map_tiles²): the nearest depth [m] of the 2 x 2 ``SHADOW_TILE``² blocks of
     texels from each block on (clamped at the map's edge), ``map_reach`` the nearest within ``SHADOW_REACH`` blocks
-    of each (:func:`shadow_tile_min`,
+    of each (:func:`~warpworm.render.raster_kernels.raster_depth`,
     :func:`shadow_reach_min`): a point whose blocker search can reach no nearer texel is known lit from one read, or
     a few (:func:`footprint_min`).
     """
@@ -68,20 +68,6 @@ _SHADOW_TILE = wp.constant(SHADOW_TILE)
 SHADOW_REACH = wp.constant(2)
 """Tiles on each side of a point's own tile that :func:`pcf_taps` can read: its taps lie within 8 texels (the widest
 search) plus one of rounding and one of margin of the point's texel, at most two 8-texel tiles away."""
-
-
-@wp.kernel
-def shadow_tile_min(depth: wp.array2d(dtype=float), side: int, tiles: int, tile_min: wp.array2d(dtype=float)):
-    """The nearest depth [m] of each ``SHADOW_TILE``² block of the shadow maps ``depth`` (M, side²) (1e30 where no
-    caster) -> ``tile_min`` (M, tiles²); launched as (M, tiles²)."""
-    m, b = wp.tid()
-    x0 = (b % tiles) * _SHADOW_TILE
-    y0 = (b / tiles) * _SHADOW_TILE
-    best = float(NO_CASTER)
-    for y in range(y0, wp.min(y0 + _SHADOW_TILE, side)):
-        for x in range(x0, wp.min(x0 + _SHADOW_TILE, side)):
-            best = wp.min(best, depth[m, y * side + x])
-    tile_min[m, b] = best
 
 
 @wp.kernel

@@ -75,9 +75,9 @@ def test_launches_do_not_grow_with_the_batch(monkeypatch, lens):
         scene, cams, sensor = _batch(n, lens=lens)
         counts.append(0)
         r.render(scene, cams, sensor=sensor)
-    # shadow maps (depth raster, block minima, minima within reach and pairs), two raster passes, one resolve, three
+    # shadow maps (depths and block minima, minima within reach and pairs), two raster passes, one resolve, three
     # sensor launches; through a lens one more, the image border's rays (the pinhole grid's margins)
-    assert counts[0] == counts[1] == 9 + lens, counts
+    assert counts[0] == counts[1] == 8 + lens, counts
 
 
 def test_results_do_not_depend_on_the_batch_split():
