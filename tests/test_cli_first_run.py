@@ -88,3 +88,17 @@ def test_commands_notice_a_cold_kernel_cache(tmp_path, monkeypatch, capfd):
     for m in ("warpworm.kernels.implicit_euler", "warpworm.kernels.magnet_wrench"):
         (tmp_path / f"wp_{m}_0123abc").mkdir()
     assert first_run_notice() is False and capfd.readouterr().err == ""
+
+
+def test_a_command_imports_its_own_module_only():
+    # start-up: `warpworm CMD` loads CMD's module, not every command's (their imports cost the job ~0.5 s); a fresh
+    # interpreter, so modules other tests imported do not count
+    import subprocess
+    import sys
+
+    code = ("import sys; from warpworm.cli import main; main(['config-schema']); "
+            "print('LOADED', sorted(m for m in sys.modules if m.startswith('warpworm.commands.')))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    loaded = out.rsplit("LOADED", 1)[1]
+    assert "warpworm.commands.config_schema" in loaded
+    assert "warpworm.commands.simulate" not in loaded and "warpworm.commands.generate" not in loaded, loaded

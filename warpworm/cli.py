@@ -1,8 +1,8 @@
 """The ``warpworm`` command line: one subcommand per module in :mod:`warpworm.commands`.
 
 Each command module defines ``HELP`` (one line), ``add_arguments(parser)`` and ``main(args) -> int``.
-Modules are imported lazily so that ``warpworm --help`` stays fast and one broken command cannot
-take the others down.
+Modules are imported lazily: a run of one command imports that command's module only (its dependencies are the
+job's start-up time), ``warpworm --help`` all of them; one broken command cannot take the others down.
 """
 
 from __future__ import annotations
@@ -53,7 +53,8 @@ class OneLineParser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(commands: list[str] | None = None) -> argparse.ArgumentParser:
+    """The CLI's parser with the subcommands ``commands`` (default: every one; each loads its module)."""
     from warpworm import __version__
 
     parser = OneLineParser(prog="warpworm", description="Batched simulation of magnetically actuated origami worms, "
@@ -61,6 +62,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"warpworm {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=OneLineParser)
     for name, module_name in COMMANDS.items():
+        if commands is not None and name not in commands:
+            continue
         module = _load(module_name)
         if module is None:
             continue
@@ -76,7 +79,9 @@ def main(argv: list[str] | None = None) -> int:
     from warpworm import quiet_warp
 
     quiet_warp()
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    named = next((a for a in argv if not a.startswith("-")), None)  # the top-level parser has no valued options
+    parser = build_parser([named] if named in COMMANDS else None)
     args = parser.parse_args(argv)
     if not getattr(args, "_main", None):
         parser.print_help()
