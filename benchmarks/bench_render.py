@@ -285,6 +285,8 @@ if __name__ == "__main__":
         print("  ".join(f"{r[c]:>13.4g}" if isinstance(r[c], float) else f"{r[c]:>13}" for c in cols))
     if "--json" in sys.argv:
         import json
+        from pathlib import Path
 
-        with open(sys.argv[sys.argv.index("--json") + 1], "w") as f:
-            json.dump(rows, f, indent=1)
+        out = Path(sys.argv[sys.argv.index("--json") + 1])
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps(rows, indent=1))
