@@ -6,14 +6,16 @@ It reads two z-buffers that :func:`~warpworm.render.raster_kernels.raster_triang
 grid* ``s`` times finer. An output pixel
 
 - finds the pinhole point it sees: itself, or through the lens the undistorted direction of its distorted centre
-  (:func:`lens_inverse32`), with the lens map's Jacobian for the samples;
+  (:func:`~warpworm.render.lens_kernels.lens_inverse32`), with the lens map's Jacobian for the samples;
 - takes its labels (depth, segmentation, normal) from the label grid: without a lens its own texel's key (the plain
   pass's labels bit for bit); through a lens, of the four texels around its ray, the nearest triangle that the ray
   hits (:func:`covering_key`), its depth on the exact ray; the worm mask from the nearest texel;
 - takes ``s x s`` colour samples on a regular grid over its square (through the lens, each sample's pinhole
   position from the Jacobian), each from the sample grid's nearest key; samples that land on one surface (triangle,
   floor or background) share one lighting evaluation (shadows included) with their mean albedo (the shading is
-  linear in albedo), so texture is supersampled while lights and shadows cost about once per surface per pixel;
+  linear in albedo), so texture is supersampled while lights and shadows cost about once per surface per pixel; a
+  pixel whose samples all see the floor takes, with ``texture_filter``, the floor texture's mean over its footprint
+  (:func:`floor_footprint`) and its first sample's lighting instead;
 - averages in linear RGB, applies the camera's gain and writes 8-bit display values (gamma 2).
 """
 
@@ -21,6 +23,7 @@ from __future__ import annotations
 
 import warp as wp
 
+from warpworm.render.lens_kernels import lens_inverse32, lens_inverse_next32
 from warpworm.render.raster_math import (
     _EMPTY,
     _TRI_SCALE,
@@ -64,62 +67,6 @@ def grid_key_index(px: float, py: float, gw: int, gh: int) -> int:
 def grid_key(keys: wp.array2d(dtype=wp.int64), img: int, px: float, py: float, gw: int, gh: int) -> wp.int64:
     """The z-buffer key of the grid texel nearest to point (px, py) [texels] of a ``gw`` x ``gh`` grid (clamped)."""
     return keys[img, grid_key_index(px, py, gw, gh)]
-
-
-@wp.func
-def lens_newton32(xd: float, yd: float, dist: wp.vec4, k3: float, u0: float, v0: float, steps: int):
-    """Newton's method for the undistorted normalized point (u, v) whose image through OpenCV's lens ``dist`` =
-    (k1, k2, p1, p2) and ``k3`` is (xd, yd), from the guess (u0, v0): ``steps`` updates, then a round that measures
-    the residual and the forward map's Jacobian (a, b, d) at the solution; ``ok`` False where no ray reaches the
-    point (residual above 1e-5 of the radius, or the map folded: a <= 0 or a d - b² <= 0)."""
-    k1 = dist[0]
-    k2 = dist[1]
-    p1 = dist[2]
-    p2 = dist[3]
-    r2d = xd * xd + yd * yd
-    u = u0
-    v = v0
-    a = float(1.0)
-    b = float(0.0)
-    d = float(1.0)
-    ex = float(0.0)
-    ey = float(0.0)
-    for it in range(steps + 1):
-        r2 = u * u + v * v
-        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-        drad = 2.0 * (k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2))
-        ex = u * radial + 2.0 * p1 * u * v + p2 * (r2 + 2.0 * u * u) - xd
-        ey = v * radial + p1 * (r2 + 2.0 * v * v) + 2.0 * p2 * u * v - yd
-        a = radial + u * u * drad + 2.0 * p1 * v + 6.0 * p2 * u
-        b = u * v * drad + 2.0 * p1 * u + 2.0 * p2 * v
-        d = radial + v * v * drad + 6.0 * p1 * v + 2.0 * p2 * u
-        if it < steps:  # the last round only measures the residual and the Jacobian at the solution
-            det = a * d - b * b
-            u = u - (d * ex - b * ey) / det
-            v = v - (a * ey - b * ex) / det
-    ok = ex * ex + ey * ey <= 1.0e-10 * (1.0 + r2d) and a > 0.0 and a * d - b * b > 0.0
-    return u, v, a, b, d, ok
-
-
-@wp.func
-def lens_inverse32(xd: float, yd: float, dist: wp.vec4, k3: float):
-    """:func:`~warpworm.render.lens_kernels.lens_inverse` in float32 for the renderer: :func:`lens_newton32` from
-    the radial first guess (xd, yd) / (1 + k1 r² + k2 r⁴ + k3 r⁶). Four steps reach float32 rounding (1e-7 of the
-    normalized radius, ~2e-5 px) over every lens that covers its image."""
-    r2d = xd * xd + yd * yd
-    g = 1.0 + r2d * (dist[0] + r2d * (dist[1] + r2d * k3))
-    return lens_newton32(xd, yd, dist, k3, xd / g, yd / g, 4)
-
-
-@wp.func
-def lens_inverse_next32(xd: float, yd: float, dist: wp.vec4, k3: float, step: float, u: float, v: float, a: float,
-                        b: float, d: float):
-    """:func:`lens_inverse32` of the point ``step`` to the right of one already solved, (u, v) with the forward
-    Jacobian (a, b, d) there (a pixel's neighbour along its row): the guess (u, v) + J⁻¹ (step, 0) is within
-    ~(step)² of the root, and one Newton step reaches float32 rounding, as four from the radial guess do
-    (tests/test_render_distortion.py::test_warm_lens_inverse_matches_opencv)."""
-    inv_det = 1.0 / (a * d - b * b)
-    return lens_newton32(xd, yd, dist, k3, u + d * step * inv_det, v - b * step * inv_det, 1)
 
 
 @wp.func

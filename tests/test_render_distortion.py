@@ -180,11 +180,11 @@ def test_lens_draws_cover_their_images():
 @pytest.mark.parametrize("dist", [(-0.25, 0.08, 0.002, -0.002, 0.0), (0.15, -0.05, -0.003, 0.001, 0.01)])
 def test_warm_lens_inverse_matches_opencv(dist):
     # the resolve solves each pixel's lens inverse from its left neighbour's solution with one Newton step
-    # (render.sample_kernels.lens_inverse_next32), the first of a row cold (lens_inverse32): against OpenCV's
+    # (render.lens_kernels.lens_inverse_next32), the first of a row cold (lens_inverse32): against OpenCV's
     # iterated float64 inverse over a 256² image, float32 rounding (~4e-5 px), as the cold solve alone
     import warp as wp
 
-    from warpworm.render.sample_kernels import lens_inverse32, lens_inverse_next32
+    from warpworm.render.lens_kernels import lens_inverse32, lens_inverse_next32
 
     f, c, n = 200.0, 127.5, 256
 
