@@ -54,7 +54,7 @@ def undistort(xd: np.ndarray, yd: np.ndarray, dist: np.ndarray, iterations: int 
 def undistort_maps(K: np.ndarray, dist: np.ndarray, width: int, height: int, device=None) -> np.ndarray:
     """For every pixel centre (u, v) of N distorted images, the pinhole pixel (same K) whose ray it sees:
     (N, H, W, 2) float64 [px]. ``K`` (N, 3, 3), ``dist`` (N, 5). Newton's method as :func:`undistort`, run by the
-    Warp kernel :func:`warpworm.render.lens_kernels.undistort_pixels` (NumPy took 70 ms per 256² image)."""
+    Warp kernel :func:`warpworm.render.lens_kernels.undistort_pixels`."""
     import warp as wp
 
     from warpworm.render import lens_kernels as lk

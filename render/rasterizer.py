@@ -75,7 +75,8 @@ def bake_noise(size: int = 128, seed: int = 20240611) -> np.ndarray:
 
 
 def plain_look(a) -> bool:
-    """True when appearance ``a`` uses no per-pixel shading option of issue 24, so that the plain resolve kernel
+    """True when appearance ``a`` uses no per-pixel shading option (several lights, the paper BSDF, a glossy or clear
+    plate), so that the plain resolve kernel
     (:func:`raster_kernels.make_resolve_shade`) renders it bit for bit: exactly one point light per world and it lit,
     no paper BSDF, no clear (transmitting) or glossy floor. Judged on the float32 values the kernels read."""
     f32 = lambda v: np.asarray(v, dtype=np.float32)  # noqa: E731
