@@ -192,8 +192,8 @@ def jpeg_round_trip(rgb: np.ndarray, quality) -> np.ndarray:
         return rgb
     out = rgb.copy()
     for i in sel:
-        ok, buf = cv2.imencode(".jpg", np.ascontiguousarray(rgb[i][..., ::-1]), [cv2.IMWRITE_JPEG_QUALITY, int(q[i])])
-        out[i] = cv2.imdecode(buf, cv2.IMREAD_COLOR)[..., ::-1]
+        ok, buf = cv2.imencode(".jpg", cv2.cvtColor(rgb[i], cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, int(q[i])])
+        cv2.cvtColor(cv2.imdecode(buf, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB, dst=out[i])
     return out
 
 
