@@ -1,11 +1,9 @@
-"""Shadow maps and lights: the :class:`Lights` every shading kernel reads, the per-tile minimum keys of the shadow
-maps, and percentage-closer soft shadows (PCSS) with an exact early-out for points no texel can shade."""
+"""Shadow maps and lights: the :class:`Lights` every shading kernel reads, the block minima of the shadow maps'
+depths, and percentage-closer soft shadows (PCSS) with exact early-outs for points no texel can shade."""
 
 from __future__ import annotations
 
 import warp as wp
-
-from warpworm.render.raster_math import _DEPTH_SCALE, _EMPTY, _TRI_SCALE
 
 wp.set_module_options({"enable_backward": False})
 
