@@ -181,3 +181,16 @@ def test_floor_texture_filter_beats_its_samples_when_tilted():
     err_filtered = np.abs(_linear(_checker_floor(2, True, tilt=1.0)[0]["rgb"]) - truth).mean()
     err_sampled = np.abs(_linear(_checker_floor(2, False, tilt=1.0)[0]["rgb"]) - truth).mean()
     assert err_filtered < 0.7 * err_sampled, (err_filtered, err_sampled)
+
+
+def test_texture_filter_config_reaches_the_renderer():
+    # render.texture_filter: absent from a config's YAML at its default (the files' config_yaml as before the key),
+    # recorded when off, and the dataset stages build their renderer with it
+    from warpworm.data.config import load_config
+    from warpworm.data.warp_stages import WarpStages
+
+    assert "texture_filter" not in load_config("production").to_dict()["render"]
+    off = load_config("production", ["render.texture_filter=false"])
+    assert off.to_dict()["render"]["texture_filter"] is False
+    assert WarpStages()._renderer(off).texture_filter is False
+    assert WarpStages()._renderer(load_config("production")).texture_filter is True

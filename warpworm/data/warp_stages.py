@@ -112,12 +112,13 @@ class WarpStages:
 
     def _renderer(self, cfg):
         key = (cfg.render.width, cfg.render.height, cfg.sim.device, cfg.render.shadows, cfg.render.shadow_map,
-               cfg.render.supersample)
+               cfg.render.supersample, cfg.render.texture_filter)
         r = self._renderers.get(key)
         if r is None:
             r = self._renderers[key] = Renderer(cfg.render.width, cfg.render.height, device=cfg.sim.device,
                                                 shadows=cfg.render.shadows, shadow_map=cfg.render.shadow_map,
-                                                supersample=cfg.render.supersample)
+                                                supersample=cfg.render.supersample,
+                                                texture_filter=cfg.render.texture_filter)
         return r
 
     def render_batch(self, frame, draws, cfg):

@@ -189,6 +189,10 @@ class RenderConfig:
     supersample: Annotated[Int, Field(ge=1, le=8)] = 1
     """Anti-aliased RGB: s x s samples per pixel averaged in linear RGB (s = 1: one sample at the centre). Depth,
     segmentation, masks and keypoint visibility stay exact at pixel centres."""
+    texture_filter: Bool = True
+    """With supersample > 1: a pixel wholly on the floor takes the floor texture's mean over its footprint (the
+    checker's exact box average) instead of s x s texture samples (closer to the pixel's true mean, a third of the
+    work); false: every pixel sampled s x s."""
     distortion: Bool = False
     """Lens distortion drawn per camera (OpenCV's k1, k2, p1, p2, k3, each uniform in its range below), stored as
     camera/dist: images are warped through it; keypoints/pixel (= cv2.projectPoints with it), labels/bbox_obj and
@@ -250,7 +254,7 @@ class RenderConfig:
 RENDER_OFF_GROUPS = {"plate_pose": ("plate_offset",),
                      "lights": ("light_count", "light_distance", "light_elevation", "light_size", "light_irradiance",
                                 "light_warmth"),
-                     "shadows": ("shadow_map",), "supersample": (),
+                     "shadows": ("shadow_map",), "supersample": (), "texture_filter": (),
                      "distortion": ("distortion_k1", "distortion_k2", "distortion_p", "distortion_k3"),
                      "exposure": (), "white_balance": (), "distractors": (), "plate_materials": (), "paper_bsdf": (),
                      "motion_blur": ("motion_blur_samples",),
