@@ -175,7 +175,7 @@ def test_an_internal_error_is_one_line_too(folder, capfd, monkeypatch):
         raise KeyError("something broke")
 
     monkeypatch.setattr(verify, "verify_dataset", boom)
-    monkeypatch.setattr("warpworm.commands.common.dataset_folder", lambda *a, **k: None)
+    monkeypatch.setattr(verify, "dataset_folder", lambda *a, **k: None)
     monkeypatch.delenv("WARPWORM_DEBUG", raising=False)
     assert _run(["verify", "junk"]) == 1
     err = capfd.readouterr().err

@@ -102,3 +102,10 @@ def test_a_command_imports_its_own_module_only():
     loaded = out.rsplit("LOADED", 1)[1]
     assert "warpworm.commands.config_schema" in loaded
     assert "warpworm.commands.simulate" not in loaded and "warpworm.commands.generate" not in loaded, loaded
+    # and --help lists every command with its help line, importing none (the lines are read from the sources)
+    code = ("import sys\nfrom warpworm.cli import main\ntry:\n    main(['--help'])\nexcept SystemExit:\n    pass\n"
+            "print('LOADED', sorted(m for m in sys.modules if m.startswith('warpworm.commands.')))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    listing, loaded = out.rsplit("LOADED", 1)
+    assert loaded.strip() == "[]", loaded
+    assert "Generate a labeled synthetic dataset" in " ".join(listing.split())

@@ -1,14 +1,16 @@
 """The ``warpworm`` command line: one subcommand per module in :mod:`warpworm.commands`.
 
-Each command module defines ``HELP`` (one line), ``add_arguments(parser)`` and ``main(args) -> int``.
-Modules are imported lazily: a run of one command imports that command's module only (its dependencies are the
-job's start-up time), ``warpworm --help`` all of them; one broken command cannot take the others down.
+Each command module defines ``HELP`` (one line), ``add_arguments(parser)`` and ``main(args) -> int``, and imports
+what it needs at its top. A run of one command imports that command's module only; ``warpworm --help`` imports
+none (each ``HELP`` is read from its source file); one broken command cannot take the others down.
 """
 
 from __future__ import annotations
 
 import argparse
+import ast
 import importlib
+import importlib.util
 import os
 import sys
 
@@ -45,6 +47,20 @@ def _load(module_name: str):
         raise
 
 
+def _help_of(module_name: str) -> str | None:
+    """The ``HELP`` string of command module ``module_name``, read from its source without importing it (None when
+    the module or the string is missing)."""
+    spec = importlib.util.find_spec(f"warpworm.commands.{module_name}")
+    if spec is None or not spec.origin:
+        return None
+    with open(spec.origin, encoding="utf-8") as f:
+        tree = ast.parse(f.read())
+    for node in tree.body:
+        if isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == "HELP" for t in node.targets):
+            return ast.literal_eval(node.value)
+    return None
+
+
 class OneLineParser(argparse.ArgumentParser):
     """An argument mistake is one line on stderr (``warpworm CMD: error: ...; see warpworm CMD --help``), exit 2,
     as every other refused input (warpworm.commands.common), not argparse's usage block."""
@@ -54,7 +70,8 @@ class OneLineParser(argparse.ArgumentParser):
 
 
 def build_parser(commands: list[str] | None = None) -> argparse.ArgumentParser:
-    """The CLI's parser with the subcommands ``commands`` (default: every one; each loads its module)."""
+    """The CLI's parser: the subcommands ``commands`` with their arguments (each loads its module), or, by default,
+    every subcommand named with its help line only (for ``warpworm --help`` and a mistyped name)."""
     from warpworm import __version__
 
     parser = OneLineParser(prog="warpworm", description="Batched simulation of magnetically actuated origami worms, "
@@ -62,7 +79,12 @@ def build_parser(commands: list[str] | None = None) -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"warpworm {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=OneLineParser)
     for name, module_name in COMMANDS.items():
-        if commands is not None and name not in commands:
+        if commands is None:
+            text = _help_of(module_name)
+            if text is not None:
+                sub.add_parser(name, help=text, description=text)
+            continue
+        if name not in commands:
             continue
         module = _load(module_name)
         if module is None:

@@ -2,6 +2,13 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
+import numpy as np
+
+from warpworm.analysis import calibration
+from warpworm.commands.common import check_positive, refuse
+
 HELP = "fit a magnet's dipole moment to a force-distance table (CSV: gap_m, force_N), least squares"
 
 
@@ -22,11 +29,6 @@ def add_arguments(parser) -> None:
 def _table(path):
     """The CSV's gaps and forces, refused (ValueError naming the file, row and value) unless it holds at least two
     rows of finite numbers with gaps > 0 (magnets apart) and forces > 0 (attraction)."""
-    from pathlib import Path
-
-    import numpy as np
-
-    from warpworm.analysis import calibration
 
     if not Path(path).is_file():
         raise ValueError(f"table: got '{path}'; expected a CSV file with columns gap_m, force_N (not a file)")
@@ -46,9 +48,6 @@ def _table(path):
 
 
 def main(args) -> int:
-    from warpworm.analysis import calibration
-    from warpworm.commands.common import check_positive, refuse
-
     try:
         if len(args.size) not in (1, 3):
             raise ValueError(f"--size: got {len(args.size)} values; expected 1 (edge) or 3 (x y z extents) [m]")

@@ -6,8 +6,14 @@ exit code 2 (:data:`EXIT_USAGE`), and writes nothing.
 
 from __future__ import annotations
 
+import math
 import sys
 from pathlib import Path
+
+import warp as wp
+
+from warpworm import quiet_warp
+from warpworm.data.config import ConfigError, check_option
 
 EXIT_USAGE = 2
 """Bad arguments, a missing or wrong file, an unavailable device: refused before any work, nothing written."""
@@ -22,7 +28,6 @@ def refuse(message) -> int:
 def check_minimum(**values) -> None:
     """``option_name=(value, minimum)``: ConfigError for each value below its minimum (None values are skipped);
     option names use ``_`` for ``-`` (``save_worlds`` is ``--save-worlds``)."""
-    from warpworm.data.config import ConfigError
 
     problems = [f"--{name.replace('_', '-')}: got {v}; expected >= {lo}"
                 for name, (v, lo) in values.items() if v is not None and not v >= lo]
@@ -32,9 +37,6 @@ def check_minimum(**values) -> None:
 
 def check_positive(**values) -> None:
     """``option_name=value``: ConfigError for each value that is not a finite number > 0 (None skipped)."""
-    import math
-
-    from warpworm.data.config import ConfigError
 
     problems = [f"--{name.replace('_', '-')}: got {v}; expected a number > 0"
                 for name, v in values.items() if v is not None and not (math.isfinite(v) and v > 0)]
@@ -45,7 +47,6 @@ def check_positive(**values) -> None:
 def device_option(value: str | None) -> str | None:
     """``--device`` checked as ``sim.device`` (so ``cuda`` on a machine without a GPU is refused as ``generate``
     refuses ``sim.device=cuda``); ``cuda`` becomes ``cuda:0``; None stays None (Warp's default)."""
-    from warpworm.data.config import check_option
 
     if value is None:
         return None
@@ -56,7 +57,6 @@ def device_option(value: str | None) -> str | None:
 def dataset_folder(path, option: str = "DIR"):
     """``path`` as a Path if it is a dataset folder written by ``warpworm generate`` (has manifest.json), else
     ValueError saying which it is not (no such folder / a file / a folder without a manifest)."""
-    from pathlib import Path
 
     p = Path(path)
     if not p.exists():
@@ -74,7 +74,6 @@ def dataset_folder(path, option: str = "DIR"):
 def output_folder(path, option: str = "OUT", *, overwrite: bool = False):
     """``path`` as a Path for an export: new, empty, or (with ``overwrite``) any folder; ValueError otherwise
     (a file, or a non-empty folder without ``overwrite``). Creates nothing."""
-    from pathlib import Path
 
     p = Path(path)
     if p.exists() and not p.is_dir():
@@ -105,9 +104,6 @@ def first_run_notice(modules=("warpworm.kernels.implicit_euler", "warpworm.kerne
     """Say on stderr, before a command's first kernel launch, that the Warp kernels compile now when none of
     ``modules`` has ever been built into Warp's kernel cache (a fresh machine or cache: ~20-60 s of silence
     otherwise). Returns whether it said so. A changed kernel source on an existing cache is not detected (rare)."""
-    import warp as wp
-
-    from warpworm import quiet_warp
 
     quiet_warp()
     root = wp.config.kernel_cache_dir

@@ -14,6 +14,8 @@ import argparse
 import json
 import sys
 
+from warpworm.data.config import PARAM_SPECS, schema_adapter
+
 HELP = "Print the JSON Schema of dataset configs (for editors: validation and completion of dataset_configs/*.yaml)."
 
 DRAFT = "http://json-schema.org/draft-07/schema#"
@@ -23,7 +25,6 @@ is only where the references point)."""
 
 def json_schema() -> dict:
     """The dataset config's JSON Schema (draft 7)."""
-    from warpworm.data.config import PARAM_SPECS, schema_adapter
 
     schema = schema_adapter().json_schema()
     defs = schema["$defs"]

@@ -7,7 +7,11 @@ from pathlib import Path
 
 import numpy as np
 
+from warpworm.analysis.field_plot import render_field_picture
+from warpworm.commands.common import check_positive, device_option, first_run_notice, refuse
 from warpworm.data import export_json as strict_json
+from warpworm.physics import crease, magnets
+from warpworm.physics.params import MAGNET_SLOTS, WormParams
 
 HELP = "Build the default worm and magnets, print the magnetic wrench on each IPM under both models, write GLB + PNG."
 
@@ -25,8 +29,6 @@ def demo_scene(height: float):
     The EPM stands vertically (south pole down, moment +z) between the centre and head IPMs, as in the peristaltic
     gait (paper §III-A). Returns (pattern, magnets, positions (4, 3) [m], rotations (4, 3, 3)).
     """
-    from warpworm.physics import crease, magnets
-    from warpworm.physics.params import WormParams
 
     p = WormParams()
     pattern = crease.build_worm(p.a, p.b, p.n_units, l0=p.l0)
@@ -40,12 +42,6 @@ def demo_scene(height: float):
 
 
 def main(args) -> int:
-    from warpworm.physics import crease, magnets
-    from warpworm.analysis.field_plot import render_field_picture
-    from warpworm.physics.params import MAGNET_SLOTS
-
-    from warpworm.commands.common import check_positive, device_option, refuse
-
     out = Path(args.out)
     try:
         check_positive(height=args.height)
@@ -54,7 +50,6 @@ def main(args) -> int:
             raise ValueError(f"--out: got '{out}'; expected a folder (it is a file)")
     except ValueError as exc:
         return refuse(exc)
-    from warpworm.commands.common import first_run_notice
 
     first_run_notice(("warpworm.kernels.magnet_wrench",))
     out.mkdir(parents=True, exist_ok=True)

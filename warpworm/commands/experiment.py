@@ -2,6 +2,20 @@
 
 from __future__ import annotations
 
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from warpworm.analysis import experiments as ex
+from warpworm.analysis import material_fit as mf
+from warpworm.commands.common import check_minimum, check_positive, first_run_notice, refuse
+from warpworm.physics.materials import material_params
+from warpworm.physics.param_specs import check_worm_params
+from warpworm.physics.params import parse_overrides
+
 HELP = "run the paper's virtual experiments (force-distance, compression, flexure, slope, force-plate, strain, " \
        "deformation, all): <name>.png + <name>.json"
 
@@ -38,16 +52,10 @@ def add_arguments(parser) -> None:
 
 
 def _sweep(lo: float, hi: float, n: int):
-    import numpy as np
-
     return np.geomspace(lo, hi, n) if n > 1 else np.array([lo])
 
 
 def _run(name: str, args, cache: dict, base=None):
-    import numpy as np
-
-    from warpworm.analysis import experiments as ex
-
     q = args.quick
     dur = args.duration if args.duration is not None else (0.3 if q else 2.0)
     workers = args.workers  # None: every core (split_run caps it at the world count)
@@ -83,12 +91,6 @@ def _fmt(v):
 
 def _fit(args, base) -> int:
     """``--fit TABLE.csv``: check the table (before any simulation), fit k_α, print and write JSON / PNG."""
-    import sys
-    import time
-    from pathlib import Path
-
-    from warpworm.analysis import experiments as ex
-    from warpworm.analysis import material_fit as mf
 
     if args.name not in mf.TESTS:
         print(f"error: --fit works with compression or flexure, not {args.name!r}", file=sys.stderr)
@@ -120,7 +122,7 @@ def _fit(args, base) -> int:
         except ImportError:
             note = "note: matplotlib is not installed (the 'plots' extra): PNG skipped"
         else:
-            from warpworm.analysis.plots import plot_fit
+            from warpworm.analysis.plots import plot_fit  # (matplotlib: checked just above)
 
             written.append(str(plot_fit(r, out / f"{stem}.png")))
     print(f"== {stem} ({time.perf_counter() - t0:.1f} s): " + ", ".join(written))
@@ -139,26 +141,11 @@ def _fit(args, base) -> int:
 
 
 def main(args) -> int:
-    import sys
-    import time
-    from pathlib import Path
-
-    import numpy as np
-
-    from warpworm.analysis import experiments as ex
-    from warpworm.physics.materials import material_params
-
-    from dataclasses import replace
-
-    from warpworm.physics.params import parse_overrides
-
     try:
         base = material_params(args.material)
     except ValueError as exc:
         print(f"error: --{exc}", file=sys.stderr)
         return 2
-    from warpworm.commands.common import check_minimum, check_positive, refuse
-    from warpworm.physics.param_specs import check_worm_params
 
     try:  # the rules generate applies (warpworm.data.config), before any work
         base = check_worm_params(replace(base, **parse_overrides(args.set)))
@@ -171,7 +158,6 @@ def main(args) -> int:
             raise ValueError(f"--out: got '{args.out}'; expected a folder (it is a file)")
     except ValueError as exc:
         return refuse(exc)
-    from warpworm.commands.common import first_run_notice
 
     first_run_notice()
     if args.fit is not None:
@@ -185,7 +171,7 @@ def main(args) -> int:
         jpath = ex.save_json(r, out / f"{name}.json")
         written = [str(jpath)]
         if not args.no_plot:
-            from warpworm.analysis.plots import PLOTS
+            from warpworm.analysis.plots import PLOTS  # here: the plots need matplotlib, an optional extra
 
             written.append(str(PLOTS[name](r, out / f"{name}.png")))
         print(f"== {name} ({time.perf_counter() - t0:.1f} s): " + ", ".join(written))

@@ -4,21 +4,19 @@ from __future__ import annotations
 
 import argparse
 
+from warpworm.commands.common import add_export_arguments, check_export_arguments, refuse
+from warpworm.data.export_bop import export_bop
+
 HELP = ("Export a generated dataset folder to the BOP format (camera.json, models/ PLY + models_info.json, "
         "scene_gt.json in mm, PNG rgb/depth/masks).")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from warpworm.commands.common import add_export_arguments
-
     add_export_arguments(parser, out_help="BOP output folder (new or empty, unless --overwrite)")
     parser.add_argument("--split", default="train_pbr", help="BOP split folder name (default train_pbr)")
 
 
 def main(args: argparse.Namespace) -> int:
-    from warpworm.commands.common import check_export_arguments, refuse
-    from warpworm.data.export_bop import export_bop
-
     try:
         check_export_arguments(args)
         if not args.split or "/" in args.split:

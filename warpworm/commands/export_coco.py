@@ -5,19 +5,18 @@ from __future__ import annotations
 
 import argparse
 
+from warpworm.commands.common import add_export_arguments, check_export_arguments, refuse
+from warpworm.data.export_coco import export_coco
+
 HELP = "Export a dataset folder to COCO keypoints (images/*.png + annotations/keypoints.json)."
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from warpworm.commands.common import add_export_arguments
-
     add_export_arguments(parser)
 
 
 def main(args: argparse.Namespace) -> int:
     # start-up time: the CLI imports every command module to build its parser; the library loads when one runs
-    from warpworm.commands.common import check_export_arguments, refuse
-    from warpworm.data.export_coco import export_coco
 
     try:
         check_export_arguments(args)

@@ -6,6 +6,9 @@ import argparse
 import sys
 from pathlib import Path
 
+from warpworm.commands.common import refuse
+from warpworm.data.export_usd import compliance_errors, export_usd
+
 HELP = ("Export worlds of a dataset folder or of `warpworm simulate`'s trajectory.npz to a time-sampled USD stage "
         "(.usda/.usdc).")
 
@@ -35,9 +38,6 @@ def _worlds(text: str) -> list[int]:
 
 
 def main(args: argparse.Namespace) -> int:
-    from warpworm.commands.common import refuse
-    from warpworm.data.export_usd import compliance_errors, export_usd
-
     out = Path(args.out)
     try:
         worlds = _worlds(args.worlds)

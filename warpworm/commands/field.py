@@ -2,6 +2,14 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
+import numpy as np
+
+from warpworm.analysis.field_plot import render_field_picture
+from warpworm.commands.common import check_positive, refuse
+from warpworm.physics import magnets as mg
+
 HELP = "draw the field around a 10x10x40 mm bar magnet, dipole model (1 and 64 per cm³) beside the exact field"
 
 
@@ -13,15 +21,6 @@ def add_arguments(parser) -> None:
 
 
 def main(args) -> int:
-    from pathlib import Path
-
-    import numpy as np
-
-    from warpworm.physics import magnets as mg
-    from warpworm.analysis.field_plot import render_field_picture
-
-    from warpworm.commands.common import check_positive, refuse
-
     out = Path(args.out)
     try:
         check_positive(densities=min(args.densities))

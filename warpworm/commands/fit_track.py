@@ -9,6 +9,20 @@ parameters as a config fragment; the ``simulate --set`` form in its header) and 
 
 from __future__ import annotations
 
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from warpworm.analysis import fit_track as FT
+from warpworm.analysis import track as T
+from warpworm.commands.common import refuse
+from warpworm.data import export_json as strict_json
+from warpworm.data.config import ConfigError
+from warpworm.physics import gaits
+from warpworm.physics.param_specs import check_worm_params
+from warpworm.physics.params import WormParams
 
 HELP = "fit worm parameters (k_alpha, friction, EPM moment, ...) to a band track from 'warpworm track' (batched CMA-ES)"
 
@@ -52,10 +66,6 @@ def add_arguments(parser) -> None:
 
 def _base_params(args, gait, backward, path_fields):
     """The gait preset with the video's path, magnet model and known values (checked by the config's rules)."""
-    from dataclasses import replace
-
-    from warpworm.physics import gaits
-    from warpworm.physics.params import WormParams
 
     base = gaits.preset_params(gait, backward, **path_fields)
     base = replace(base, magnet_model=args.magnet_model)
@@ -70,7 +80,6 @@ def _base_params(args, gait, backward, path_fields):
         except ValueError:
             raise ValueError(f"--set {item!r}: got {v!r}; expected a number") from None
     base = replace(base, **known)
-    from warpworm.physics.param_specs import check_worm_params
 
     check_worm_params(base)
     return base, known
@@ -78,10 +87,6 @@ def _base_params(args, gait, backward, path_fields):
 
 def _clips(args, n: int) -> list[tuple[str, bool, dict]]:
     """(gait, backward, path fields) of each of the ``n`` tracks, from --plan or --gait/--path/--backward."""
-    import json
-    from pathlib import Path
-
-    from warpworm.analysis import fit_track as FT
 
     if args.plan:
         try:
@@ -108,16 +113,6 @@ def _clips(args, n: int) -> list[tuple[str, bool, dict]]:
 
 
 def main(args) -> int:
-    from pathlib import Path
-
-    import numpy as np
-
-    from warpworm.analysis import fit_track as FT
-    from warpworm.analysis import track as T
-    from warpworm.commands.common import refuse
-    from warpworm.data import export_json as strict_json
-    from warpworm.data.config import ConfigError
-
     try:
         if args.budget < 1 or (args.popsize is not None and args.popsize < 2) or args.refine < 0 or args.profile < 0:
             raise ValueError(f"--budget/--popsize/--refine/--profile: got {args.budget}/{args.popsize}/{args.refine}/"

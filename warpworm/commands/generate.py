@@ -3,8 +3,19 @@
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import os
+import signal
 import sys
+import threading
+
+from warpworm.data.config import ConfigError, load_config
+from warpworm.data.dataset import DatasetError, DatasetLockedError, DatasetWriteError
+from warpworm.data.job import generate
+from warpworm.data.previews import remove_preview_temporaries, write_previews
+from warpworm.data.signal_hold import Interrupted
+from warpworm.data.stages import DEFAULT_STAGES
+from warpworm.data.workers import WorkerError
 
 HELP = "Generate a labeled synthetic dataset (sharded HDF5) from a YAML config (path or packaged name, e.g. 'default')."
 
@@ -53,11 +64,6 @@ def allow_intermixed(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    import signal
-    import threading
-
-    from warpworm.data.signal_hold import Interrupted
-
     phase = ["job"]
 
     def stop(signum, frame):
@@ -65,7 +71,6 @@ def main(args: argparse.Namespace) -> int:
         # here and now, without raising into whatever runs (an exception raised inside an h5py or OpenCV callback
         # becomes a SystemError): nothing of the dataset is in flight, a preview is only ever half-written under its
         # temporary name, which goes
-        from warpworm.data.previews import remove_preview_temporaries
 
         remove_preview_temporaries(args.out)
         name = signal.Signals(signum).name
@@ -97,11 +102,6 @@ def main(args: argparse.Namespace) -> int:
 def _generate(args, phase: list) -> int:
     """The command under the signal guard; ``phase[0]`` says whether the job ("job") or the previews ("previews")
     is running, for the message of a stop."""
-    from warpworm.data.config import ConfigError, load_config
-    from warpworm.data.dataset import DatasetError, DatasetLockedError, DatasetWriteError
-    from warpworm.data.job import generate
-    from warpworm.data.stages import DEFAULT_STAGES
-    from warpworm.data.workers import WorkerError
 
     stages = args.stages or DEFAULT_STAGES
     try:
@@ -127,8 +127,6 @@ def _generate(args, phase: list) -> int:
         return EXIT_FAILED
     phase[0] = "previews"
     if cfg.output.preview and not args.no_preview:
-        from warpworm.data.previews import remove_preview_temporaries
-
         remove_preview_temporaries(args.out)  # a killed run's
         write_previews_or_warn(cfg, args.out, stages)
     print(summary.text())
@@ -137,13 +135,10 @@ def _generate(args, phase: list) -> int:
 
 def _check_arguments(args) -> None:
     """The command-line values the config does not check (before anything is written to --out)."""
-    from warpworm.data.config import ConfigError
 
     if args.workers < 1:
         raise ConfigError([f"--workers: got {args.workers}; expected >= 1"])
     if args.engine == "ray":
-        import importlib.util
-
         if importlib.util.find_spec("ray") is None:
             raise ConfigError(["--engine: got 'ray'; expected Ray to be installed "
                                "(pip install 'warpworm[ray]') or --engine local"])
@@ -152,8 +147,6 @@ def _check_arguments(args) -> None:
 def write_previews_or_warn(cfg, out, stages) -> None:
     """``preview.png`` / ``preview.mp4`` of the finished dataset; a failure is a warning (a preview must never fail a
     finished dataset)."""
-    from warpworm.data.signal_hold import Interrupted
-    from warpworm.data.previews import write_previews
 
     try:
         write_previews(cfg, out, stages)

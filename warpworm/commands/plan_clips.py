@@ -7,6 +7,15 @@ each (``warpworm track``) and fit them jointly: ``warpworm fit-track T1.csv T2.c
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
+import numpy as np
+
+from warpworm.analysis import fit_track as FT
+from warpworm.analysis import plan as P
+from warpworm.commands.common import refuse
+
 HELP = "choose the EPM paths to film so that a track pins the parameters to calibrate (batched Fisher information)"
 
 
@@ -49,15 +58,6 @@ def _floats(text, key):
 
 
 def main(args) -> int:
-    import json
-    from pathlib import Path
-
-    import numpy as np
-
-    from warpworm.analysis import fit_track as FT
-    from warpworm.analysis import plan as P
-    from warpworm.commands.common import refuse
-
     try:
         names = FT.parse_fit(args.fit)
         ranges = dict(P.PRODUCTION_RANGES)

@@ -17,7 +17,19 @@ from pathlib import Path
 
 import numpy as np
 
+from warpworm.commands.common import check_minimum, device_option, first_run_notice, refuse
 from warpworm.data import export_json as strict_json
+from warpworm.data import sampling
+from warpworm.data.config import check_options, load_config
+from warpworm.physics import gaits
+from warpworm.render import Renderer, sample_cameras, scene_from_snapshot
+from warpworm.render.contact_sheet import contact_sheet, save_png
+from warpworm.render.demo import default_pattern, posed_worm_states
+from warpworm.render.labels import KEYPOINT_NAMES, schema_labels
+from warpworm.render.sensor import apply_sensor
+from warpworm.rng import derive_seeds
+from warpworm.sim.model import Model
+from warpworm.sim.simulator import Simulator
 
 HELP = "render W worlds from C seeded cameras each (RGB, depth, segmentation, labels) and write a contact sheet PNG"
 
@@ -47,10 +59,6 @@ def simulate_states(cfg, num_worlds: int, seed: int, gait: str, sim_time: float,
 
     Returns (snapshot dict, model).
     """
-    from warpworm.physics import gaits
-    from warpworm.data import sampling
-    from warpworm.sim.model import Model
-    from warpworm.sim.simulator import Simulator
 
     p = sampling.randomized_params(cfg, num_worlds, seed)
     if np.any(np.asarray(p.gait) != gait):
@@ -63,18 +71,6 @@ def simulate_states(cfg, num_worlds: int, seed: int, gait: str, sim_time: float,
 
 
 def main(args) -> int:
-    from warpworm.data import sampling
-    from warpworm.data.config import load_config
-    from warpworm.rng import derive_seeds
-    from warpworm.render import Renderer, sample_cameras, scene_from_snapshot
-    from warpworm.render.contact_sheet import contact_sheet, save_png
-    from warpworm.render.demo import default_pattern, posed_worm_states
-    from warpworm.render.labels import KEYPOINT_NAMES, schema_labels
-    from warpworm.render.sensor import apply_sensor
-
-    from warpworm.commands.common import check_minimum, device_option, refuse
-    from warpworm.data.config import check_options
-
     out = Path(args.out)
     try:  # the rules generate applies (warpworm.data.config), before any work
         check_options({"--worlds": (args.worlds, "sim.worlds"), "--size": (args.size, "render.width")})
@@ -86,7 +82,6 @@ def main(args) -> int:
             raise ValueError(f"--out: got '{out}'; expected a folder (it is a file)")
     except ValueError as exc:
         return refuse(exc)
-    from warpworm.commands.common import first_run_notice
 
     first_run_notice(("warpworm.kernels.implicit_euler", "warpworm.render.raster_kernels"))
     out.mkdir(parents=True, exist_ok=True)

@@ -6,6 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from warpworm.data.report import ReportError, build, text_summary
+
 HELP = ("Summarize datasets: histograms of every randomized parameter and of the labels (crease angles, their range "
         "within a trajectory, deformation, visibility, box size, camera distance) as PNG + JSON, side by side.")
 
@@ -17,8 +19,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from warpworm.data.report import ReportError, build, text_summary
-
     out = args.out or (str(Path(args.dirs[0]) / "report") if len(args.dirs) == 1 else "report")
     try:
         report, jpath, png, note = build(args.dirs, out)

@@ -4,11 +4,20 @@ from __future__ import annotations
 
 import os
 import time
+from dataclasses import replace
 from pathlib import Path
 
+import cv2
 import numpy as np
 
+from warpworm import quiet_warp
+from warpworm.analysis.gait_search import grid_points, parse_grid, search_gait, write_csv
+from warpworm.commands.common import check_minimum, first_run_notice, refuse
 from warpworm.data import export_json as strict_json
+from warpworm.physics import gaits
+from warpworm.physics.materials import material_params
+from warpworm.physics.param_specs import check_worm_params
+from warpworm.physics.params import parse_overrides
 
 HELP = "grid-search the EPM path (w, a, h) of a gait, every grid point one world; rank by distance per cycle"
 
@@ -43,8 +52,6 @@ def full_points(res: dict, params) -> dict:
 
 
 def _colour(u: np.ndarray) -> np.ndarray:
-    import cv2
-
     return cv2.applyColorMap((255 * np.clip(np.nan_to_num(u), 0, 1)).astype(np.uint8).reshape(-1, 1),
                              cv2.COLORMAP_VIRIDIS).reshape(u.shape + (3,))
 
@@ -52,7 +59,6 @@ def _colour(u: np.ndarray) -> np.ndarray:
 def write_heatmap(path, res: dict, pts: dict, title: str) -> Path:
     """Distance per cycle [mm] over w (x) and h (y), one panel per a, one colour scale with its colour bar; grey:
     unstable, crumpled or dragged (not valid). Every grid point is in one cell of one panel."""
-    import cv2
 
     per, valid = np.asarray(res["per_cycle_m"]) * 1e3, np.asarray(res["valid"], bool)
     xs, ys, zs = (np.unique(pts[k]) for k, _ in AXES)
@@ -93,13 +99,6 @@ def write_heatmap(path, res: dict, pts: dict, title: str) -> Path:
 
 def _check(args):
     """Every option, by the rules generate applies (warpworm.data.config), before any work; returns (grid, params)."""
-    from warpworm.commands.common import check_minimum
-    from warpworm.physics.param_specs import check_worm_params
-    from warpworm.physics import gaits
-    from warpworm.physics.materials import material_params
-    from warpworm.physics.params import parse_overrides
-
-    from warpworm.analysis.gait_search import parse_grid
 
     grid = parse_grid(args.grid)
     base = material_params(args.material) if args.material else None
@@ -111,25 +110,17 @@ def _check(args):
     params = gaits.preset_params(args.gait, args.backward, base=base, magnet_model=args.magnet_model,
                                  **parse_overrides(args.set))
     n = int(np.prod([len(v) for v in grid.values()]))
-    from dataclasses import replace
-
-    from warpworm.analysis.gait_search import grid_points
 
     check_worm_params(replace(params, **{k: v for k, v in grid_points(grid).items()}))
     return grid, params, n
 
 
 def main(args) -> int:
-    from warpworm import quiet_warp
-    from warpworm.analysis.gait_search import search_gait, write_csv
-    from warpworm.commands.common import refuse
-
     quiet_warp()
     try:
         grid, params, n = _check(args)
     except ValueError as e:
         return refuse(e)
-    from warpworm.commands.common import first_run_notice
 
     first_run_notice()
     workers = args.workers or os.cpu_count() or 1

@@ -17,10 +17,22 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
+import cv2
 import numpy as np
 
-from warpworm.data import export_json as strict_json
+from warpworm import quiet_warp
+from warpworm.analysis.gait_metrics import end_centres, segment_ratios
 from warpworm.analysis.gait_runs import randomized_params, run_gait_split
+from warpworm.analysis.track import parse_band_colors
+from warpworm.commands.common import check_minimum, check_positive, device_option, first_run_notice, refuse
+from warpworm.data import export_json as strict_json
+from warpworm.data import randomize as rnd
+from warpworm.data.config import check_options, load_config
+from warpworm.physics import gaits
+from warpworm.physics.param_specs import check_worm_params
+from warpworm.physics.params import parse_overrides
+from warpworm.render.scene import BAND_COLORS
+from warpworm.sim.model import Model
 
 HELP = "run a gait (peristaltic, omega, inchworm; forward or backward) on W worlds and report net displacement"
 
@@ -62,7 +74,6 @@ def _draw_frame(x, tri, mpos, mrot, msize, width=640, height=360, xlim=(-0.03, 0
     """Side view (x right, z up) of one world: facets, floor line (z = 0; the EPM moves beneath it), magnets (EPM red,
     IPMs orange); with ``edges`` (E, 2) and ``edge_colour`` (E, 3) BGR the bars are drawn in those colours; with
     ``facet_colour`` (T, 3) BGR the facets are filled in those (the marker bands)."""
-    import cv2
 
     img = np.full((height, width, 3), 255, np.uint8)
     sx = width / (xlim[1] - xlim[0])
@@ -104,9 +115,6 @@ def write_filmstrip(path: Path, frames: dict, model, params, world: int = 0, cou
     """A side-view filmstrip of ``world``: ``count`` frames over the last whole EPM cycle, bars coloured by their
     Cauchy strain (blue none → red the largest in the strip), the EPM (red) and IPMs (orange) drawn, the floor line at
     z = 0; time, the four deformation ratios and the head–tail length under each frame."""
-    import cv2
-
-    from warpworm.analysis.gait_metrics import end_centres, segment_ratios
 
     pat = model.pattern
     t = frames["time"]
@@ -155,7 +163,6 @@ def band_facet_colours(triangle_segment, colors) -> np.ndarray:
 def write_outputs(out: Path, result: dict, params, num_worlds: int, band_colors=None) -> list[Path]:
     """trajectory.npz, preview.mp4 and preview_strip.png (world 0); ``band_colors`` (5, 3) paints the previews'
     facets in the marker bands."""
-    import cv2
 
     out.mkdir(parents=True, exist_ok=True)
     model, fr = result["model"], result["frames"]
@@ -198,15 +205,10 @@ def write_outputs(out: Path, result: dict, params, num_worlds: int, band_colors=
 def _preview_bands(args):
     """The previews' band colours (5, 3), or None for the plain sheet: ``--texture-worm`` / ``--band-colors``, else
     the ``--randomize`` config's ``texture.worm`` (a constant ``bands``) and ``render.band_colors``."""
-    from warpworm.analysis.track import parse_band_colors
-    from warpworm.render.scene import BAND_COLORS
 
     colors = parse_band_colors(args.band_colors)
     texture = args.texture_worm
     if args.randomize and (texture is None or colors is None):
-        from warpworm.data import randomize as rnd
-        from warpworm.data.config import load_config
-
         cfg = load_config(args.randomize)
         worm = cfg.randomize["texture"]["worm"]
         if texture is None and isinstance(worm, rnd.Constant) and worm.value == "bands":
@@ -222,17 +224,7 @@ def _preview_bands(args):
 
 
 def main(args) -> int:
-    from warpworm import quiet_warp
-
     quiet_warp()
-    from warpworm.physics import gaits
-
-    from warpworm.sim.model import Model
-    from warpworm.physics.params import parse_overrides
-
-    from warpworm.commands.common import check_minimum, check_positive, device_option, refuse
-    from warpworm.data.config import check_options
-    from warpworm.physics.param_specs import check_worm_params
 
     try:  # the rules generate applies to the same values (warpworm.data.config), before any work
         check_options({"--worlds": (args.worlds, "sim.worlds"), "--dt": (args.dt, "sim.dt"),
@@ -256,7 +248,6 @@ def main(args) -> int:
     if args.worlds > 1 and not args.randomize:
         print(f"note: the {args.worlds} worlds are identical (one parameter set); add --randomize to draw each "
               "world's material, magnets and EPM path from the default dataset config", file=sys.stderr)
-    from warpworm.commands.common import first_run_notice
 
     first_run_notice()
     # one process per core on the CPU; a GPU runs every world in one batch

@@ -10,6 +10,14 @@ the same camera.
 
 from __future__ import annotations
 
+from pathlib import Path
+
+import numpy as np
+
+from warpworm.analysis import track as T
+from warpworm.analysis.track import OVERRIDABLE, Thresholds, dataset_band_colors, parse_band_colors
+from warpworm.commands.common import refuse
+from warpworm.data import export_json as strict_json
 
 HELP = "track the five marker bands in a video or image folder: deformation ratios and displacement per frame (CSV)"
 
@@ -37,8 +45,6 @@ def add_arguments(parser) -> None:
 
 
 def _thresholds(args):
-    from warpworm.analysis.track import OVERRIDABLE, Thresholds, dataset_band_colors, parse_band_colors
-
     over = {}
     for item in args.threshold:
         name, _, value = item.partition("=")
@@ -57,14 +63,6 @@ def _thresholds(args):
 
 
 def main(args) -> int:
-    from pathlib import Path
-
-    import numpy as np
-
-    from warpworm.analysis import track as T
-    from warpworm.commands.common import refuse
-    from warpworm.data import export_json as strict_json
-
     try:
         if args.fps is not None and not args.fps > 0:
             raise ValueError(f"--fps: got {args.fps}; expected a frame rate > 0")

@@ -25,9 +25,14 @@ import json
 import sys
 from pathlib import Path
 
+import h5py
 import numpy as np
 
 from warpworm import ids
+from warpworm.commands.common import dataset_folder
+from warpworm.data import dataset as ds
+from warpworm.data.dataset import DatasetError
+from warpworm.render.distortion import distort
 
 HELP = "Check a dataset folder: shard checksums, sample ids, shapes and label invariants (exit 0 only if all hold)."
 
@@ -98,8 +103,6 @@ def check_labels(d: dict, H: int, W: int) -> list[str]:
     with np.errstate(divide="ignore", invalid="ignore"):
         xn, yn = kc[..., 0] / z, kc[..., 1] / z
         if "camera/dist" in d:  # lens distortion (render.distortion): OpenCV's model, warpworm.render.distortion
-            from warpworm.render.distortion import distort
-
             xn, yn = distort(xn, yn, d["camera/dist"][:, None, :])
         u = K[:, None, 0, 0] * xn + K[:, None, 0, 1] * yn + K[:, None, 0, 2]
         v = K[:, None, 1, 1] * yn + K[:, None, 1, 2]
@@ -146,9 +149,6 @@ def check_labels(d: dict, H: int, W: int) -> list[str]:
 
 def verify_dataset(root, max_problems: int = 50) -> tuple[list[str], dict]:
     """All problems of dataset folder ``root`` (each line starts with the file it concerns), and counts."""
-    import h5py
-
-    from warpworm.data import dataset as ds
 
     root = Path(root)
     problems: list[str] = []
@@ -223,10 +223,6 @@ def verify_dataset(root, max_problems: int = 50) -> tuple[list[str], dict]:
 
 
 def main(args: argparse.Namespace) -> int:
-    from warpworm.data.dataset import DatasetError
-
-    from warpworm.commands.common import dataset_folder
-
     try:
         dataset_folder(args.dir)
         problems, counts = verify_dataset(args.dir, args.max_problems)
