@@ -100,6 +100,19 @@ def lens_inverse_next32(xd: float, yd: float, dist: wp.vec4, k3: float, step: fl
     return lens_newton32(xd, yd, dist, k3, u + d * step * inv_det, v - b * step * inv_det, 1)
 
 
+@wp.func
+def pinhole_pixel(k: wp.vec4d, dist: wp.array2d(dtype=wp.float64), img: int, x: wp.float64, y: wp.float64,
+                  iterations: int) -> wp.vec2d:
+    """The pinhole pixel (intrinsics ``k`` = (fx, fy, cx, cy)) whose ray distorted pixel point (x, y) of image ``img``
+    sees through its lens ``dist[img]`` (k1, k2, p1, p2, k3), by :func:`lens_inverse`; NaN where no ray reaches it."""
+    u, v, _a, _b, _d, ok = lens_inverse((x - k[2]) / k[0], (y - k[3]) / k[1], dist[img, 0], dist[img, 1],
+                                       dist[img, 2], dist[img, 3], dist[img, 4], iterations)
+    out = wp.vec2d(k[0] * u + k[2], k[1] * v + k[3])
+    if not ok:
+        out = wp.vec2d(wp.float64(wp.nan), wp.float64(wp.nan))
+    return out
+
+
 @wp.kernel
 def undistort_pixels(
     intr: wp.array(dtype=wp.vec4d),
@@ -112,14 +125,7 @@ def undistort_pixels(
     cy)) whose ray it sees, by :func:`lens_inverse` with ``dist`` (k1, k2, p1, p2, k3) (float64; the NumPy twin is
     :func:`warpworm.render.distortion.undistort`). ``pinhole``: (N, H, W); NaN where no ray reaches that pixel."""
     img, y, x = wp.tid()
-    k = intr[img]
-    u, v, _a, _b, _d, ok = lens_inverse((wp.float64(x) - k[2]) / k[0], (wp.float64(y) - k[3]) / k[1], dist[img, 0],
-                                       dist[img, 1], dist[img, 2], dist[img, 3], dist[img, 4], iterations)
-    if not ok:
-        nan = wp.float64(wp.nan)
-        pinhole[img, y, x] = wp.vec2d(nan, nan)
-        return
-    pinhole[img, y, x] = wp.vec2d(k[0] * u + k[2], k[1] * v + k[3])
+    pinhole[img, y, x] = pinhole_pixel(intr[img], dist, img, wp.float64(x), wp.float64(y), iterations)
 
 
 @wp.kernel
@@ -135,11 +141,4 @@ def border_rays(
     """:func:`undistort_pixels` at ``P`` given pixel centres (``px``, ``py``) (P,) of each image (an image's border,
     for :func:`warpworm.render.distortion.lens_margins`): ``pinhole`` (N, P), NaN where no ray reaches the point."""
     img, i = wp.tid()
-    k = intr[img]
-    u, v, _a, _b, _d, ok = lens_inverse((px[i] - k[2]) / k[0], (py[i] - k[3]) / k[1], dist[img, 0], dist[img, 1],
-                                       dist[img, 2], dist[img, 3], dist[img, 4], iterations)
-    if not ok:
-        nan = wp.float64(wp.nan)
-        pinhole[img, i] = wp.vec2d(nan, nan)
-        return
-    pinhole[img, i] = wp.vec2d(k[0] * u + k[2], k[1] * v + k[3])
+    pinhole[img, i] = pinhole_pixel(intr[img], dist, img, px[i], py[i], iterations)

@@ -282,6 +282,15 @@ def noise_offset(look: Look, w: int) -> wp.vec2:
 
 
 @wp.func
+def floor_grain(albedo: wp.vec3, mat: wp.vec3, ft: wp.vec4, noise: wp.array2d(dtype=float), off_u: float,
+                off_v: float) -> wp.vec3:
+    """``albedo`` with the floor's grain at floor coordinates ``mat`` [m]: amplitude ``ft[2]``, frequency ``ft[3]``
+    [1/m] of the shared noise texture at the world's offset (``off_u``, ``off_v``) [texels]."""
+    g = noise_tex(noise, mat[0] * ft[3] + off_u, mat[1] * ft[3] + off_v)
+    return albedo * (1.0 + ft[2] * (g - 0.5))
+
+
+@wp.func
 def floor_albedo(base: wp.vec3, mat: wp.vec3, inv_tile: float, ft: wp.vec4, fc2: wp.vec3,
                  noise: wp.array2d(dtype=float), off_u: float, off_v: float) -> wp.vec3:
     """The floor's checker (tiles ``1 / inv_tile`` [m], colours ``base`` and its mix with ``fc2``) and grain at floor
@@ -291,8 +300,7 @@ def floor_albedo(base: wp.vec3, mat: wp.vec3, inv_tile: float, ft: wp.vec4, fc2:
     albedo = base
     if ((cu + cv) & 1) != 0:
         albedo = wp.lerp(base, fc2, ft[1])
-    g = noise_tex(noise, mat[0] * ft[3] + off_u, mat[1] * ft[3] + off_v)
-    return albedo * (1.0 + ft[2] * (g - 0.5))
+    return floor_grain(albedo, mat, ft, noise, off_u, off_v)
 
 
 @wp.func
@@ -320,8 +328,7 @@ def floor_albedo_box(base: wp.vec3, mat: wp.vec3, wu: float, wv: float, inv_tile
     odd = 0.5 * (1.0 - box_square_wave(mat[0] * inv_tile, wu * inv_tile) * box_square_wave(mat[1] * inv_tile,
                                                                                           wv * inv_tile))
     albedo = wp.lerp(base, wp.lerp(base, fc2, ft[1]), odd)
-    g = noise_tex(noise, mat[0] * ft[3] + off_u, mat[1] * ft[3] + off_v)
-    return albedo * (1.0 + ft[2] * (g - 0.5))
+    return floor_grain(albedo, mat, ft, noise, off_u, off_v)
 
 
 @wp.func(inline=True)

@@ -127,15 +127,23 @@ def map_tile(u: float, v: float, s: int, tiles: int) -> int:
 
 
 @wp.func
-def pcf_taps(depth: wp.array2d(dtype=float), s: int, m: int, u: float, v: float, z: float, radius: float) -> wp.vec2:
-    """4 x 4 taps of shadow map ``m`` (``depth`` (M, s²)) on a grid spanning ``radius`` texels about (u, v): (number of taps nearer than
-    ``z``, their summed depth) -- the blocker search and the percentage-closer filter of PCSS share it. The grid's
-    four columns and rows are found once; a grid inside the map reads its texels without per-tap bounds checks."""
+def tap_grid(u: float, v: float, radius: float):
+    """The 4 columns and 4 rows [texels] of the tap grid spanning ``radius`` about (u, v): taps at ±r, ±r/3, rounded
+    to the nearest texel (the texels :func:`pcf_taps` and :func:`any_tap_nearer` read)."""
     xs = wp.vec4i()
     ys = wp.vec4i()
     for i in range(4):
         xs[i] = int(wp.floor(u + radius * (float(i) - 1.5) / 1.5 + 0.5))
         ys[i] = int(wp.floor(v + radius * (float(i) - 1.5) / 1.5 + 0.5))
+    return xs, ys
+
+
+@wp.func
+def pcf_taps(depth: wp.array2d(dtype=float), s: int, m: int, u: float, v: float, z: float, radius: float) -> wp.vec2:
+    """4 x 4 taps of shadow map ``m`` (``depth`` (M, s²)) on a grid spanning ``radius`` texels about (u, v): (number of taps nearer than
+    ``z``, their summed depth) -- the blocker search and the percentage-closer filter of PCSS share it. The grid's
+    four columns and rows are found once; a grid inside the map reads its texels without per-tap bounds checks."""
+    xs, ys = tap_grid(u, v, radius)
     inside = xs[0] >= 0 and ys[0] >= 0 and xs[3] < s and ys[3] < s
     hits = float(0.0)
     zsum = float(0.0)
@@ -156,11 +164,7 @@ def pcf_taps(depth: wp.array2d(dtype=float), s: int, m: int, u: float, v: float,
 def any_tap_nearer(depth: wp.array2d(dtype=float), s: int, m: int, u: float, v: float, z: float,
                    radius: float) -> bool:
     """Whether any of :func:`pcf_taps`' 16 taps (the same texels) is nearer than ``z``, stopping at the first."""
-    xs = wp.vec4i()
-    ys = wp.vec4i()
-    for i in range(4):
-        xs[i] = int(wp.floor(u + radius * (float(i) - 1.5) / 1.5 + 0.5))
-        ys[i] = int(wp.floor(v + radius * (float(i) - 1.5) / 1.5 + 0.5))
+    xs, ys = tap_grid(u, v, radius)
     found = bool(False)
     for j in range(4):
         for i in range(4):
