@@ -213,10 +213,10 @@ class Renderer:
                     "rot": wp.zeros(1, dtype=wp.mat33, device=d), "trans": wp.zeros(1, dtype=wp.vec3, device=d),
                     "intr": wp.zeros(1, dtype=wp.vec4, device=d), "size": wp.zeros(1, dtype=float, device=d),
                     "pair_min": wp.zeros((1, 1), dtype=float, device=d),
-                    "reach": wp.zeros((1, 1), dtype=float, device=d)}
+                    "reach": wp.zeros((1, 1), dtype=float, device=d), "floor": wp.zeros(1, dtype=wp.mat44, device=d)}
         lights.map_first, lights.map_depth, lights.map_rot = maps["first"], maps["depth"], maps["rot"]
         lights.map_trans, lights.map_intr, lights.map_light_size = maps["trans"], maps["intr"], maps["size"]
-        lights.map_pair_min, lights.map_reach = maps["pair_min"], maps["reach"]
+        lights.map_pair_min, lights.map_reach, lights.map_floor = maps["pair_min"], maps["reach"], maps["floor"]
         return lights
 
     def _map_buffers(self, M: int, slot: int) -> dict:
@@ -249,7 +249,9 @@ class Renderer:
         maps = {"first": wp.array(first, dtype=wp.int32, device=d), "depth": buf["depth"],
                 "rot": _vec_array(cams["R"], wp.mat33, d), "trans": _vec_array(cams["t"], wp.vec3, d),
                 "intr": _vec_array(cams["intr"], wp.vec4, d),
-                "size": wp.array(cams["size"].astype(np.float32), dtype=float, device=d)}
+                "size": wp.array(cams["size"].astype(np.float32), dtype=float, device=d),
+                "floor": wp.array(floor_projection(cams["R"], cams["t"], cams["intr"],
+                                                   scene.floor_normal[cams["world"]]), dtype=wp.mat44, device=d)}
         wp.launch(rk.raster_depth, dim=(M, s["triangles"].shape[0]), device=d,
                   inputs=[s["triangles"], s["tri_label"], s["vertices"],
                           wp.array(cams["world"].astype(np.int32), dtype=wp.int32, device=d), maps["rot"],
@@ -468,3 +470,31 @@ def shadow_cameras(scene: SceneBatch, worlds: np.ndarray, side: int) -> dict:
     f, c = np.where(dark, 0.0, f), np.where(dark, 0.0, c)
     return {"world": np.repeat(worlds, 1 + L), "R": R, "t": t, "intr": np.stack([f, f, c, c], axis=1),
             "size": size.reshape(-1)}
+
+
+def floor_projection(R, t, intr, floor_normal) -> np.ndarray:
+    """Each shadow map's projection of its world's floor plane (M, 4, 4) float32: rows (u·c, v·c, c, z) of (p, 1)
+    for a floor point p [m], c its depth in the map camera, (u, v) the texel position and z the depth [m] that
+    :func:`~warpworm.render.shadow_kernels.light_visibility` finds for p with normal ``floor_normal``: on a plane its
+    offset along the normal (1.5 texels) and its bias (one texel) are linear in c.
+
+    ``R`` (M, 3, 3), ``t`` (M, 3), ``intr`` (M, 4) = (fx, fy, cx, cy): the maps' cameras (fx = 0: a dark light's
+    map, never read: zeros); ``floor_normal`` (M, 3): the floor normal of each map's world."""
+    R = np.asarray(R, dtype=np.float64)
+    t = np.asarray(t, dtype=np.float64)
+    k = np.asarray(intr, dtype=np.float64)
+    live = k[:, 0] != 0.0
+    f = np.where(live, k[:, 0], 1.0)
+    rn = np.einsum("mij,mj->mi", R, np.asarray(floor_normal, dtype=np.float64))
+    # offset point: pc + rn * 1.5 * c / f, so its depth is c * s_w and its x, y are pc_xy + a_xy * c
+    a = 1.5 * rn / f[:, None]
+    s_w = 1.0 + a[:, 2]
+    rows = np.concatenate([R, t[:, :, None]], axis=2)  # (M, 3, 4): pc = rows @ (p, 1)
+    out = np.zeros((len(R), 4, 4))
+    for i, (fi, ci) in enumerate(((k[:, 0], k[:, 2]), (k[:, 1], k[:, 3]))):
+        # u = f (pc_x + a_x c) / (s_w c) + cx = [(f / s_w) pc_x + (f a_x / s_w + cx) c] / c
+        out[:, i] = (fi / s_w)[:, None] * rows[:, i] + (fi * a[:, i] / s_w + ci)[:, None] * rows[:, 2]
+    out[:, 2] = rows[:, 2]
+    out[:, 3] = (s_w - 1.0 / f)[:, None] * rows[:, 2]  # z = c s_w - c / f
+    out[~live] = 0.0
+    return out.astype(np.float32)

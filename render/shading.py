@@ -49,16 +49,18 @@ def light_surface_plain(albedo: wp.vec3, spec: wp.vec2, p: wp.vec3, n: wp.vec3, 
 
 
 @wp.func(inline=True)
-def sun_light(L: Lights, w: int, first: int, p: wp.vec3, n: wp.vec3, v: wp.vec3, spec: wp.vec2, shiny: bool):
-    """World ``w``'s ambient plus its directional sun, Lambert and shadowed, at ``p`` (normal ``n``): (irradiance,
-    the sun's Blinn-Phong highlight seen along unit ``v`` when ``shiny``, strength and exponent ``spec``)."""
+def sun_light(L: Lights, w: int, first: int, p: wp.vec3, n: wp.vec3, v: wp.vec3, spec: wp.vec2, shiny: bool,
+              on_floor: bool):
+    """World ``w``'s ambient plus its directional sun, Lambert and shadowed, at ``p`` (normal ``n``; ``on_floor``: on
+    the floor plane): (irradiance, the sun's Blinn-Phong highlight seen along unit ``v`` when ``shiny``, strength and
+    exponent ``spec``)."""
     sd = L.sun_dir[wrow(w, L.sun_dir.shape[0])]
     sc = L.sun_color[wrow(w, L.sun_color.shape[0])]
     ndl = wp.max(wp.dot(n, sd), 0.0)
     irr = L.ambient[wrow(w, L.ambient.shape[0])]
     highlight = wp.vec3(0.0)
     if ndl > 0.0:
-        vis = visibility(L, first, 0, p, n)
+        vis = visibility(L, first, 0, p, n, on_floor)
         irr = irr + sc * (ndl * vis)
         if shiny:
             hs = wp.max(wp.dot(n, wp.normalize(sd + v)), 0.0)
@@ -81,13 +83,13 @@ def light_surface(albedo: wp.vec3, spec: wp.vec2, p: wp.vec3, n: wp.vec3, to_eye
     v = wp.vec3(0.0)
     if shiny:
         v = wp.normalize(to_eye)
-    irr, highlights = sun_light(L, w, first, p, n, v, spec, shiny)
+    irr, highlights = sun_light(L, w, first, p, n, v, spec, shiny, False)
     for i in range(L.pos.shape[1]):
         if is_dark(L, wl, i):
             continue
         ldir, lpow, ndp = point_light(L, wl, i, p, n)
         if ndp > 0.0:
-            vis = visibility(L, first, 1 + i, p, n)
+            vis = visibility(L, first, 1 + i, p, n, False)
             irr = irr + lpow * (ndp * vis)
             if shiny:
                 hl = wp.max(wp.dot(n, wp.normalize(ldir + v)), 0.0)
@@ -125,7 +127,7 @@ def paper_surface(albedo: wp.vec3, p: wp.vec3, n: wp.vec3, to_eye: wp.vec3, L: L
     sd = L.sun_dir[wrow(w, L.sun_dir.shape[0])]
     vis = float(1.0)
     if wp.dot(n, sd) + pb[0] > 0.0:
-        vis = visibility(L, first, 0, p, n)
+        vis = visibility(L, first, 0, p, n, False)
     color = color + paper_light(albedo, n, v, ndv, sd, L.sun_color[wrow(w, L.sun_color.shape[0])], vis, pb)
     wl = wrow(w, L.pos.shape[0])
     for i in range(L.pos.shape[1]):
@@ -134,7 +136,7 @@ def paper_surface(albedo: wp.vec3, p: wp.vec3, n: wp.vec3, to_eye: wp.vec3, L: L
         ldir, lpow, ndp = point_light(L, wl, i, p, n)
         vis = 1.0
         if wp.dot(n, ldir) + pb[0] > 0.0:
-            vis = visibility(L, first, 1 + i, p, n)
+            vis = visibility(L, first, 1 + i, p, n, False)
         color = color + paper_light(albedo, n, v, ndv, ldir, lpow, vis, pb)
     return color
 
@@ -360,7 +362,7 @@ def floor_lit(look: Look, L: Lights, w: int, first: int, albedo: wp.vec3, p: wp.
     v = wp.vec3(0.0)
     if glossy:
         v = wp.normalize(to_eye)
-    irr, highlights = sun_light(L, w, first, p, fn, v, spec, glossy)
+    irr, highlights = sun_light(L, w, first, p, fn, v, spec, glossy, True)
     wl = wrow(w, L.pos.shape[0])
     for i in range(L.pos.shape[1]):
         if is_dark(L, wl, i):
@@ -369,7 +371,7 @@ def floor_lit(look: Look, L: Lights, w: int, first: int, albedo: wp.vec3, p: wp.
         inv_r2 = 1.0 / wp.max(wp.dot(to_lamp, to_lamp), 1.0e-6)
         ndp = wp.max(wp.dot(fn, to_lamp), 0.0) * wp.sqrt(inv_r2)
         if ndp > 0.0:
-            vis = visibility(L, first, 1 + i, p, fn)
+            vis = visibility(L, first, 1 + i, p, fn, True)
             irr = irr + L.power[wl, i] * (ndp * vis * inv_r2)
             if glossy:
                 ldir = to_lamp * wp.sqrt(inv_r2)

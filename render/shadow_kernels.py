@@ -24,7 +24,8 @@ class Lights:
     texels from each block on (clamped at the map's edge), ``map_reach`` the nearest within ``SHADOW_REACH`` blocks
     of each (:func:`~warpworm.render.raster_kernels.raster_depth`,
     :func:`shadow_reach_min`): a point whose blocker search can reach no nearer texel is known lit from one read, or
-    a few (:func:`footprint_min`).
+    a few (:func:`footprint_min`). ``map_floor`` (M,): the map's projection of its world's floor plane
+    (:func:`floor_projection`), so a floor point needs one matrix product and one division per light.
     """
 
     ambient: wp.array(dtype=wp.vec3)
@@ -44,6 +45,7 @@ class Lights:
     map_pair_min: wp.array2d(dtype=float)
     map_reach: wp.array2d(dtype=float)
     map_tiles: int
+    map_floor: wp.array(dtype=wp.mat44)
 
 
 NO_CASTER = wp.constant(1.0e30)
@@ -129,7 +131,7 @@ def map_tile(u: float, v: float, s: int, tiles: int) -> int:
 @wp.func
 def tap_grid(u: float, v: float, radius: float):
     """The 4 columns and 4 rows [texels] of the tap grid spanning ``radius`` about (u, v): taps at ±r, ±r/3, rounded
-    to the nearest texel (the texels :func:`pcf_taps` and :func:`any_tap_nearer` read)."""
+    to the nearest texel (the texels :func:`pcf_taps` reads)."""
     xs = wp.vec4i()
     ys = wp.vec4i()
     for i in range(4):
@@ -160,25 +162,11 @@ def pcf_taps(depth: wp.array2d(dtype=float), s: int, m: int, u: float, v: float,
     return wp.vec2(hits, zsum)
 
 
-@wp.func
-def any_tap_nearer(depth: wp.array2d(dtype=float), s: int, m: int, u: float, v: float, z: float,
-                   radius: float) -> bool:
-    """Whether any of :func:`pcf_taps`' 16 taps (the same texels) is nearer than ``z``, stopping at the first."""
-    xs, ys = tap_grid(u, v, radius)
-    found = bool(False)
-    for j in range(4):
-        for i in range(4):
-            if not found:
-                if map_depth(depth, s, m, xs[i], ys[j]) < z:
-                    found = True
-    return found
-
-
 @wp.func(inline=True)
 def light_visibility(L: Lights, m: int, p: wp.vec3, n: wp.vec3) -> float:
-    """Fraction [0, 1] of light ``m`` reaching surface point ``p`` (normal ``n`` toward the viewer/light side), by
-    percentage-closer soft shadows: a blocker search over the texels the light's disk can be hidden by, then a
-    percentage-closer filter as wide as the penumbra a blocker at their mean depth casts (at least one texel)."""
+    """Fraction [0, 1] of light ``m`` reaching surface point ``p`` (normal ``n`` toward the viewer/light side): the
+    point, offset along ``n`` by 1.5 texels against self-shadowing of its own surface, in map ``m``'s texels and
+    depth, then :func:`map_visibility`."""
     k = L.map_intr[m]
     R = L.map_rot[m]
     t = L.map_trans[m]
@@ -186,35 +174,58 @@ def light_visibility(L: Lights, m: int, p: wp.vec3, n: wp.vec3) -> float:
     out = float(1.0)
     if pc[2] > 0.0:  # else behind the light's map camera: lit
         texel = pc[2] / k[0]  # a texel's size [m] at the receiver
-        pc = R * (p + n * (1.5 * texel)) + t  # normal offset against self-shadowing of the receiver's own surface
-        u = k[0] * pc[0] / pc[2] + k[2]
-        v = k[1] * pc[1] / pc[2] + k[3]
-        z = pc[2] - texel
-        size = L.map_light_size[m]
-        search = wp.clamp(size * k[0] / z, 1.0, 8.0)
-        side = float(L.map_side)
-        # outside the map, which covers every caster, nothing is between the point and the light
-        inside = u >= -search - 1.0 and v >= -search - 1.0 and u <= side + search and v <= side + search
-        near = float(NO_CASTER)
-        if inside and L.map_reach[m, map_tile(u, v, L.map_side, L.map_tiles)] < z:
-            near = footprint_min(L.map_pair_min, L.map_tiles, L.map_side, m, u, v, search)
-        if near < z:  # a texel the blocker search may read is nearer (the rest of the map is known lit)
-            # the 4 x 4 grid's taps at +-r, +-r/3 have the second moment (5/9 r^2) of a disk light's edge
-            # profile (its penumbra half-width p: p^2 / 4) for r = 0.67 p; blockers no nearer than ``near`` give
-            # a penumbra under 0.999 texel, clamped to 1: then the search only needs to find one of them
-            penumbra = float(1.0)
-            blocked = bool(False)
-            if 0.67 * size * (z - near) / near * k[0] / z <= 0.999:
-                blocked = any_tap_nearer(L.map_depth, L.map_side, m, u, v, z, search)
-            else:
-                blk = pcf_taps(L.map_depth, L.map_side, m, u, v, z, search)
-                if blk[0] != 0.0:
-                    blocked = True
-                    zb = blk[1] / blk[0]
-                    penumbra = wp.clamp(0.67 * size * (z - zb) / zb * k[0] / z, 1.0, 8.0)
-            # the filter's own footprint may hold no blocker (the search's is wider): lit, from the blocks
-            if blocked and not blocks_clear(L.map_pair_min, L.map_tiles, L.map_side, m, u, v, z, penumbra):
-                out = 1.0 - pcf_taps(L.map_depth, L.map_side, m, u, v, z, penumbra)[0] / 16.0
+        pc = R * (p + n * (1.5 * texel)) + t
+        out = map_visibility(L, m, k[0] * pc[0] / pc[2] + k[2], k[1] * pc[1] / pc[2] + k[3], pc[2] - texel)
+    return out
+
+
+@wp.func(inline=True)
+def floor_visibility(L: Lights, m: int, p: wp.vec3) -> float:
+    """:func:`light_visibility` of a point ``p`` on its world's floor plane, through the map's floor projection
+    (:func:`floor_projection`: the same offset and texels, one division instead of four)."""
+    q = L.map_floor[m] * wp.vec4(p[0], p[1], p[2], 1.0)
+    out = float(1.0)
+    if q[2] > 0.0:  # else behind the light's map camera: lit
+        inv = 1.0 / q[2]
+        out = map_visibility(L, m, q[0] * inv, q[1] * inv, q[3])
+    return out
+
+
+@wp.func(inline=True)
+def map_visibility(L: Lights, m: int, u: float, v: float, z: float) -> float:
+    """Fraction [0, 1] of light ``m`` reaching a receiver at texel position (u, v) of its map and depth ``z`` [m]
+    (less a texel of bias), by percentage-closer soft shadows: a blocker search over the texels the light's disk can
+    be hidden by, then a percentage-closer filter as wide as the penumbra a blocker at their mean depth casts (at
+    least one texel)."""
+    out = float(1.0)
+    side = float(L.map_side)
+    # outside the map, which covers every caster, nothing is between the point and the light: first against the
+    # widest search (8 texels) and the blocks within reach, then against this receiver's own search width
+    if u >= -9.0 and v >= -9.0 and u <= side + 8.0 and v <= side + 8.0:
+        if L.map_reach[m, map_tile(u, v, L.map_side, L.map_tiles)] < z:
+            k0 = L.map_intr[m][0]
+            size = L.map_light_size[m]
+            search = wp.clamp(size * k0 / z, 1.0, 8.0)
+            near = float(NO_CASTER)
+            if u >= -search - 1.0 and v >= -search - 1.0 and u <= side + search and v <= side + search:
+                near = footprint_min(L.map_pair_min, L.map_tiles, L.map_side, m, u, v, search)
+            if near < z:  # a texel the blocker search may read is nearer (the rest of the map is known lit)
+                # the 4 x 4 grid's taps at +-r, +-r/3 have the second moment (5/9 r^2) of a disk light's edge
+                # profile (its penumbra half-width p: p^2 / 4) for r = 0.67 p; blockers no nearer than ``near``
+                # give a penumbra under 0.999 texel, clamped to 1: then no search is needed, the one-texel filter
+                # below is the answer (it finds no blocker where there is none)
+                penumbra = float(1.0)
+                blocked = bool(True)
+                if 0.67 * size * (z - near) / near * k0 / z > 0.999:
+                    blk = pcf_taps(L.map_depth, L.map_side, m, u, v, z, search)
+                    if blk[0] != 0.0:
+                        zb = blk[1] / blk[0]
+                        penumbra = wp.clamp(0.67 * size * (z - zb) / zb * k0 / z, 1.0, 8.0)
+                    else:
+                        blocked = False
+                # the filter's own footprint may hold no blocker (the search's is wider): lit, from the blocks
+                if blocked and not blocks_clear(L.map_pair_min, L.map_tiles, L.map_side, m, u, v, z, penumbra):
+                    out = 1.0 - pcf_taps(L.map_depth, L.map_side, m, u, v, z, penumbra)[0] / 16.0
     return out
 
 
@@ -237,10 +248,14 @@ def is_dark(L: Lights, wl: int, i: int) -> bool:
 
 
 @wp.func(inline=True)
-def visibility(L: Lights, first: int, light: int, p: wp.vec3, n: wp.vec3) -> float:
+def visibility(L: Lights, first: int, light: int, p: wp.vec3, n: wp.vec3, on_floor: bool) -> float:
     """Fraction [0, 1] of light ``light`` (0 = sun, 1 + i = point light i) reaching ``p`` when shadows are on (1
-    otherwise): the world's map ``first + light``."""
+    otherwise): the world's map ``first + light``; ``on_floor``: ``p`` lies on the floor plane (normal ``n``)."""
     out = float(1.0)
     if L.shadows != 0 and first >= 0:
-        out = light_visibility(L, first + light, p, n)
+        if on_floor:
+            out = floor_visibility(L, first + light, p)
+        else:
+            out = light_visibility(L, first + light, p, n)
     return out
+

@@ -217,3 +217,36 @@ def test_footprint_min_covers_every_tap():
     hit = (xs == cx[:, None]).any(axis=1) & (ys == cy[:, None]).any(axis=1)  # a tap on the caster
     assert hit.sum() > 400  # ~800 of the draws
     assert np.all(out.numpy()[hit] <= 0.5)
+
+
+def test_floor_projection_matches_the_offset_point_projection():
+    # render.rasterizer.floor_projection folds the normal offset (1.5 texels) and the depth bias (one texel) of
+    # shadow_kernels.light_visibility into one 4 x 4 matrix for points on the floor plane: for random map cameras
+    # and floor points, its (u, v, z) must equal the lookup's own steps written out in float64 (offset point, its
+    # pinhole projection, its depth less a texel).
+    from warpworm.render.rasterizer import floor_projection
+
+    rng = np.random.default_rng(7)
+    m = 64
+    eye = rng.uniform([-0.3, -0.3, 0.1], [0.3, 0.3, 0.6], (m, 3))
+    R, t = look_at(eye, rng.uniform(-0.05, 0.05, (m, 3)) * [1, 1, 0])
+    f = rng.uniform(150.0, 3000.0, m)
+    c = rng.uniform(60.0, 200.0, m)
+    intr = np.stack([f, f * rng.uniform(0.9, 1.1, m), c, c + rng.uniform(-5.0, 5.0, m)], axis=1)
+    tilt = rng.uniform(-0.3, 0.3, m)
+    n = np.stack([np.sin(tilt), np.zeros(m), np.cos(tilt)], axis=1)  # inclined floors through the origin
+    a = np.stack([np.cos(tilt), np.zeros(m), -np.sin(tilt)], axis=1)
+    p = rng.uniform(-0.2, 0.2, (m, 1)) * a + rng.uniform(-0.2, 0.2, (m, 1)) * np.array([0.0, 1.0, 0.0])
+    P = floor_projection(R, t, intr, n).astype(np.float64)
+    q = np.einsum("mij,mj->mi", P, np.concatenate([p, np.ones((m, 1))], axis=1))
+    pc = np.einsum("mij,mj->mi", R, p) + t
+    texel = pc[:, 2] / intr[:, 0]
+    po = np.einsum("mij,mj->mi", R, p + n * (1.5 * texel)[:, None]) + t
+    u = intr[:, 0] * po[:, 0] / po[:, 2] + intr[:, 2]
+    v = intr[:, 1] * po[:, 1] / po[:, 2] + intr[:, 3]
+    assert np.all(q[:, 2] > 0.0) and np.allclose(q[:, 2], pc[:, 2], rtol=1e-6)
+    np.testing.assert_allclose(q[:, 0] / q[:, 2], u, atol=2e-3)  # texels (float32 matrix)
+    np.testing.assert_allclose(q[:, 1] / q[:, 2], v, atol=2e-3)
+    np.testing.assert_allclose(q[:, 3], po[:, 2] - texel, rtol=1e-5)
+    dark = floor_projection(R[:2], t[:2], np.zeros((2, 4)), n[:2])
+    assert not dark.any()  # a dark light's map: zeros, never read
