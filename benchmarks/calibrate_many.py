@@ -65,6 +65,22 @@ def film_clip(clip: dict, truth: np.ndarray, rng: np.random.Generator, *, size=(
     return tr, meta, base, err_px
 
 
+def bench_hinge_stiffness(test: str, k_true: float, base, rng: np.random.Generator, noise: float) -> dict:
+    """k_alpha as a bench test of the worm measures it: the ``test`` curve (compression or flexure, 8 load steps,
+    the fit's rig settings) of ``base`` at ``k_true``, every force times (1 + ``noise`` N(0, 1)), fitted by
+    :func:`warpworm.analysis.material_fit.fit_hinge_stiffness` (24 + 16 candidates, the command's default) with
+    every other parameter at ``base``. Returns its dict (``hinge_stiffness``, ``interval_rel``, ...)."""
+    from warpworm.analysis import experiments as ex
+    from warpworm.analysis import material_fit as mf
+
+    fn = ex.compression if test == "compression" else ex.flexure
+    r = fn((k_true,), increments=8, base=base, **mf.FIT_SETTINGS[test])
+    d, f = r["displacement"][:, 0].copy(), r["force"][:, 0]
+    d[0] = 0.0  # the unloaded row
+    f = f * (1.0 + noise * rng.standard_normal(f.shape))
+    return mf.fit_hinge_stiffness(test, d, f, base=base)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--plan", required=True, help="plan.json of warpworm plan-clips (its clips are filmed)")
@@ -85,12 +101,21 @@ def main() -> None:
     ap.add_argument("--known-error", type=float, default=0.0,
                     help="relative error of the --known values handed to the fit (e.g. 0.05: k_alpha 5 %% high, as "
                          "an imperfect compression calibration would give)")
+    ap.add_argument("--known-from", choices=["compression", "flexure"], default=None,
+                    help="hold k_alpha at what a bench test of the planted worm gives: its compression (or 3-point "
+                         "flexure) curve simulated, 8 load steps to 2 mm, --curve-noise on every force, fitted as "
+                         "`warpworm experiment compression --fit` fits a measured table (implies --known "
+                         "hinge_stiffness; its 95 %% interval is k_alpha's verdict)")
+    ap.add_argument("--curve-noise", type=float, default=0.02,
+                    help="relative Gaussian noise of the simulated bench curve's forces (default 0.02)")
     ap.add_argument("--json", default=None, help="append one JSON line per worm here")
     args = ap.parse_args()
     from warpworm import quiet_warp
     from warpworm.analysis import fit_track as FT
 
     quiet_warp()
+    if args.known_from and "hinge_stiffness" not in args.known:
+        args.known.append("hinge_stiffness")
     plan = json.loads(open(args.plan).read())
     clips = plan["clips"]
     fit_names = [n for n in NAMES if n not in args.known]
@@ -116,6 +141,11 @@ def main() -> None:
         t_film = time.perf_counter() - t0
         tracks, metas, bases = [f[0] for f in filmed], [f[1] for f in filmed], [f[2] for f in filmed]
         held = {n: float(truth[NAMES.index(n)]) * (1.0 + args.known_error) for n in args.known}
+        bench = None
+        if args.known_from:  # k_alpha as the bench test measures it, with its own 95 % interval
+            bench = bench_hinge_stiffness(args.known_from, truth[0], bases[0], np.random.default_rng([41, j, 2]),
+                                          args.curve_noise)
+            held["hinge_stiffness"] = bench["hinge_stiffness"]
         bases = [dataclasses.replace(b, **held) for b in bases]
         px = np.concatenate([f[3].ravel() for f in filmed])
         res = FT.fit(tracks, bases, fit_names, meta=metas, budget=args.budget, refine=args.refine,
@@ -129,6 +159,14 @@ def main() -> None:
                "planted_inside": inside, "rms_ratio": res["rms_ratio"], "rms_disp_m": res["rms_disp_m"],
                "track_px_mean": float(np.nanmean(px)), "track_px_max": float(np.nanmax(px)),
                "worlds": res["worlds"], "film_s": t_film, "noise_seed": args.noise_seed, "wall_s": time.perf_counter() - t0, "clips": clips}
+        if bench is not None:
+            row["bench"] = {"test": args.known_from, "curve_noise": args.curve_noise, "planted": float(truth[0]),
+                            "fitted": bench["hinge_stiffness"], "error": bench["hinge_stiffness"] / truth[0] - 1,
+                            "interval_rel": bench["interval_rel"]}
+        if bench is not None:
+            lo, hi = bench["interval_rel"]
+            print(f"worm {j}: {args.known_from} curve: k_alpha {100 * row['bench']['error']:+.2f} % "
+                  f"[{100 * lo:+.1f},{100 * hi:+.1f}]", flush=True)
         print(f"worm {j}: planted k={truth[0]:.4g} mu={truth[1]:.3f} m={truth[2]:.3f}  error ({', '.join(fit_names)}) "
               + "  ".join(f"{100 * e:+.2f}%" for e in err) + "  ranges "
               + "  ".join(f"[{100 * lo:+.1f},{100 * hi:+.1f}]" for lo, hi in res["range_rel"]) + "  "
@@ -160,6 +198,18 @@ def table(path: str) -> None:
               f"{np.mean(inside[:, i]):.0%} |")
     allp = (ver == "pinned").all(axis=1)
     allw = (err <= tol).all(axis=1)
+    if all("bench" in r for r in rows):  # k_alpha from the bench curve: its error and 95 % interval
+        b_err = np.abs([r["bench"]["error"] for r in rows])
+        b_iv = np.array([r["bench"]["interval_rel"] for r in rows])
+        b_pin = np.maximum(-b_iv[:, 0], b_iv[:, 1]) <= TOL[0]
+        b_in = np.array([(1 + lo) <= 1 / (1 + e) <= (1 + hi)
+                         for (lo, hi), e in zip(b_iv, [r["bench"]["error"] for r in rows])])
+        print(f"| hinge_stiffness ({rows[0]['bench']['test']} curve, {100 * rows[0]['bench']['curve_noise']:g} % "
+              f"noise) | {100 * np.median(b_err):.2f} % | {100 * np.percentile(b_err, 90):.2f} % | "
+              f"{100 * b_err.max():.2f} % | {np.mean(b_err <= TOL[0]):.0%} | {b_pin.mean():.0%} | "
+              f"{np.mean(b_pin & (b_err <= TOL[0])):.0%} | | | {b_in.mean():.0%} |")
+        allp &= b_pin
+        allw &= b_err <= TOL[0]
     print(f"all pinned: {allp.mean():.0%}; all within tolerance: {allw.mean():.0%}; all pinned "
           f"and within tolerance: {(allp & allw).mean():.0%}; tracker "
           f"{np.mean([r['track_px_mean'] for r in rows]):.2f} px mean, {np.max([r['track_px_max'] for r in rows]):.2f} "

@@ -172,6 +172,28 @@ def _rms(a, axis=-1):
     return np.sqrt(np.mean(np.square(a), axis=axis))
 
 
+T_975 = (12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2.201, 2.179, 2.160, 2.145, 2.131,
+         2.120, 2.110, 2.101, 2.093, 2.086)
+"""Student's t 97.5 % quantiles for 1..20 degrees of freedom (beyond: 1.96 + 2.5 / dof, within 0.3 %)."""
+
+
+def t_975(dof: int) -> float:
+    """Student's t 97.5 % quantile for ``dof`` degrees of freedom: the half-width factor of a 95 % interval."""
+    return T_975[dof - 1] if dof <= len(T_975) else 1.96 + 2.5 / dof
+
+
+def log_half_width(residual, slope) -> float:
+    """Half-width of the linearized 95 % interval of a one-parameter least-squares fit: t sqrt(RSS / (N - 1) /
+    sum(slope²)) (t: :func:`t_975` of N - 1), from the ``residual`` (N,) at the fit and ``slope`` (N,), the model's
+    derivative by the parameter (here ln k_α, so the result is a half-width in ln k_α; 0.05 is about ±5 %).
+    Infinite with fewer than 2 points or a flat model."""
+    r = np.asarray(residual, np.float64).reshape(-1)
+    j = np.asarray(slope, np.float64).reshape(-1)
+    if len(r) < 2 or not np.any(j):
+        return float("inf")
+    return float(t_975(len(r) - 1) * np.sqrt(np.sum(r ** 2) / (len(r) - 1) / np.sum(j ** 2)))
+
+
 def fit_hinge_stiffness(test: str, displacement, force, *, base=None, k_range=(5.0e-4, 0.1), coarse: int = 24,
                         fine: int = 16, verify: bool = True, **kwargs) -> dict:
     """Fit k_α [N/rad] so that the simulated ``test`` curve matches a measured one (least squares in force).
@@ -179,8 +201,10 @@ def fit_hinge_stiffness(test: str, displacement, force, *, base=None, k_range=(5
     Every other parameter is held at ``base`` (e.g. :func:`warpworm.physics.materials.material_params`). Stage 1: ``coarse``
     candidates log-spaced over ``k_range``, one batch; stage 2: ``fine`` candidates log-spaced between the stage-1
     minimum's neighbours, one batch; the minimum of the sum of squared residuals is interpolated by a parabola in
-    log k_α through the stage-2 minimum and its neighbours. With ``verify`` the fitted k_α runs once more (one world)
-    and its residual and curve are reported; otherwise they are interpolated (in log k_α) from stage 2.
+    log k_α through the stage-2 minimum and its neighbours. With ``verify`` the fitted k_α runs once more, with k_α
+    2 % above and below it (one batch of three worlds): its residual and curve are reported, and how well the curve
+    pins k_α (:func:`log_half_width` from the residual and the curve's slope); otherwise the curve is interpolated
+    (in log k_α) from stage 2 and the half-width is not computed.
 
     Args:
         test: ``"compression"`` or ``"flexure"``.
@@ -192,8 +216,9 @@ def fit_hinge_stiffness(test: str, displacement, force, *, base=None, k_range=(5
     Returns a dict: ``hinge_stiffness`` (fitted k_α [N/rad]), ``rms_residual_n`` [N], ``relative_residual`` (RMS
     residual over the RMS measured force), ``at_bound`` (True when the coarse minimum sits at an end of ``k_range``:
     widen it), ``sensitivity`` (d ln RMS(F_sim) / d ln k_α at the fit: how strongly the curve depends on k_α),
-    ``coarse`` / ``fine`` (``k (W,)``, ``rms (W,)`` [N]), ``displacement (N,)``, ``force (N,)``, ``fitted_force
-    (N,)`` [N], and ``summary`` (JSON-ready).
+    ``half_width_log`` (the 95 % half-width in ln k_α, NaN without ``verify``) and ``interval_rel`` (that interval
+    relative to the fit, (low, high)), ``coarse`` / ``fine`` (``k (W,)``, ``rms (W,)`` [N]), ``displacement (N,)``,
+    ``force (N,)``, ``fitted_force (N,)`` [N], and ``summary`` (JSON-ready).
     """
     d = np.asarray(displacement, np.float64).reshape(-1)
     f = np.asarray(force, np.float64).reshape(-1)
@@ -222,9 +247,12 @@ def fit_hinge_stiffness(test: str, displacement, force, *, base=None, k_range=(5
         a, b, _ = np.polyfit(x - x[1], y, 2)
         if a > 0:
             k_fit = float(np.exp(x[1] + np.clip(-b / (2 * a), x[0] - x[1], x[2] - x[1])))
+    half = float("nan")
     if verify:
-        sim3 = simulate_curves(test, [k_fit], d, base=base, **kwargs)
+        step = 0.02
+        sim3 = simulate_curves(test, [k_fit, k_fit * np.exp(-step), k_fit * np.exp(step)], d, base=base, **kwargs)
         fitted = sim3["force"][0]
+        half = log_half_width(fitted - f, (sim3["force"][2] - sim3["force"][1]) / (2 * step))
     else:
         j = int(np.clip(np.searchsorted(lk, np.log(k_fit)) - 1, 0, fine - 2))
         w = (np.log(k_fit) - lk[j]) / (lk[j + 1] - lk[j])
@@ -236,17 +264,18 @@ def fit_hinge_stiffness(test: str, displacement, force, *, base=None, k_range=(5
     ja, jb = max(i1 - 1, 0), min(i1 + 1, coarse - 1)
     sens = float(np.log(rf[jb] / rf[ja]) / np.log(k1[jb] / k1[ja])) if jb > ja and rf[ja] > 0 else float("nan")
     unstable = int(sim1["result"]["unstable"].sum() + sim2["result"]["unstable"].sum())
+    half_rel = [float(np.expm1(-half)), float(np.expm1(half))]  # the 95 % interval of k_α, relative
     summary = {
         "test": test, "hinge_stiffness_N_per_rad": k_fit, "rms_residual_N": rms, "rms_residual_mN": 1e3 * rms,
         "relative_residual": rel, "at_search_bound": bool(at_bound), "sensitivity_dlnF_dlnk": sens,
         "search_range_N_per_rad": [lo, hi], "coarse_worlds": int(coarse), "fine_worlds": int(fine),
         "fine_range_N_per_rad": [float(k2[0]), float(k2[-1])], "rows": int(len(d)),
         "max_displacement_mm": 1e3 * float(d.max()), "max_force_mN": 1e3 * float(np.abs(f).max()),
-        "unstable_worlds": unstable,
+        "unstable_worlds": unstable, "hinge_stiffness_95_rel": half_rel,
     }
     return {
         "test": test, "hinge_stiffness": k_fit, "rms_residual_n": rms, "relative_residual": rel,
-        "at_bound": bool(at_bound), "sensitivity": sens,
+        "at_bound": bool(at_bound), "sensitivity": sens, "half_width_log": half, "interval_rel": half_rel,
         "coarse": {"k": k1, "rms": np.sqrt(s1 / len(d))}, "fine": {"k": k2, "rms": np.sqrt(s2 / len(d))},
         "displacement": d, "force": f, "fitted_force": fitted, "summary": summary,
     }

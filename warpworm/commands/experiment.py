@@ -129,8 +129,9 @@ def _fit(args, base) -> int:
     if note:
         print(note)
     s = r["summary"]
+    lo, hi = s["hinge_stiffness_95_rel"]
     print(f"   fitted k_α = {s['hinge_stiffness_N_per_rad']:.5g} N/rad ({args.material}, every other parameter "
-          "held)")
+          f"held); 95 % interval {100 * lo:+.1f} … {100 * hi:+.1f} % (from the residual and the curve's slope)")
     print(f"   RMS residual = {s['rms_residual_N']:.4g} N ({100 * s['relative_residual']:.2f} % of the RMS "
           "measured force)")
     if s["at_search_bound"]:
