@@ -2,7 +2,7 @@
 
 Every simulated worm starts at the origin heading +x, so anything drawn fixed in the world (the default lamp at
 (-0.15, 0.2, 0.3) m, floor textures along the world axes, the floor square's edges) is also fixed relative to the
-worm's head and tail, and a network can tell the two apart by it instead of by the worm (issue 24). Here the scene
+worm's head and tail, and a network can tell the two apart by it instead of by the worm. Here the scene
 around the worm is drawn relative to it instead; the simulation, cameras and labels are untouched:
 
 * ``render.plate_pose``: the plate (the floor square with its textures, and the room's lights) gets a yaw uniform in

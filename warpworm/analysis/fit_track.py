@@ -29,13 +29,13 @@ SIGMA_DISP = 5e-4
 PIN_REL = 0.05
 """Default relative tolerance: a parameter is pinned when its acceptable range stays within ± this."""
 TOLERANCE = {"epm_moment": 0.03}
-"""Per-parameter tolerances other than PIN_REL (issue #26: the EPM moment within 3 %)."""
+"""Per-parameter tolerances other than PIN_REL (the EPM moment within 3 %: the calibration's target for a magnet's strength)."""
 ACCEPT_DCHI2 = 3.84
 """Chi-square rise of an acceptable candidate: the 95 % quantile of chi-square with one degree of freedom."""
 PROFILE_FACTOR = 2.5
 """Geometric step of the global profile's grid, from the tolerance out to the search bound."""
 VERDICT_MARGIN = 0.25
-"""A verdict's margin (issue #41: verdicts that do not flip on noise): a parameter is *pinned* when its acceptable
+"""A verdict's margin, so that verdicts do not flip on image noise: a parameter is *pinned* when its acceptable
 range's half-width is below tolerance / (1 + margin), *not pinned* above tolerance x (1 + margin) or at a search
 bound, and *borderline* between. Where a re-rendering moves a range by less than these 25 % (the fit staying in its
 basin) a verdict can change only between a definite state and borderline; pinned <-> not pinned needs the range to
@@ -252,8 +252,8 @@ class _Batches:
 
 
 def tolerance(name: str) -> float:
-    """The relative accuracy a fitted parameter must be known to for the track to pin it (issue #26: k_α, μ_s and
-    the rest 5 %, the EPM moment 3 %)."""
+    """The relative accuracy a fitted parameter must be known to for the track to pin it (k_α, μ_s and the rest
+    5 %, the EPM moment 3 %)."""
     return TOLERANCE.get(name, PIN_REL)
 
 

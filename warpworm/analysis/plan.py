@@ -1,4 +1,4 @@
-"""Plan the clips to film before anyone films (issue #41): which EPM paths (gait, w, a, h, cycles, direction) make
+"""Plan the clips to film before anyone films: which EPM paths (gait, w, a, h, cycles, direction) make
 the parameters a user wants to calibrate identifiable from ``warpworm track``'s ratios and displacement, for any
 worm inside the expected ranges.
 
