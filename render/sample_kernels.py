@@ -112,6 +112,35 @@ def covering_key(keys: wp.array2d(dtype=wp.int64), img: int, px: float, py: floa
 
 
 @wp.struct
+class GridRays:
+    """The world ray through any point of a pinhole grid, without a division per ray: ``d(fx, fy) = origin + fx dx
+    + fy dy`` (a point at camera depth z lies at eye + z d)."""
+
+    origin: wp.vec3
+    dx: wp.vec3
+    dy: wp.vec3
+
+
+@wp.func
+def grid_rays(Rt: wp.mat33, k: wp.vec4) -> GridRays:
+    """:class:`GridRays` of a grid with intrinsics ``k`` = (fx, fy, cx, cy) [px] seen by a camera whose camera-to-world
+    rotation is ``Rt``."""
+    r = GridRays()
+    ix = 1.0 / k[0]
+    iy = 1.0 / k[1]
+    r.origin = Rt * wp.vec3(-k[2] * ix, -k[3] * iy, 1.0)
+    r.dx = Rt * wp.vec3(ix, 0.0, 0.0)
+    r.dy = Rt * wp.vec3(0.0, iy, 0.0)
+    return r
+
+
+@wp.func
+def grid_ray(r: GridRays, fx: float, fy: float) -> wp.vec3:
+    """The world ray of grid point (fx, fy) [texels] (:class:`GridRays`)."""
+    return r.origin + fx * r.dx + fy * r.dy
+
+
+@wp.struct
 class Hit:
     """What a colour sample's ray hits: ``z`` camera depth [m], ``label`` segmentation id, ``surface`` (triangle
     index, or SURFACE_FLOOR / SURFACE_BACKGROUND), ``n`` unnormalized mesh normal, ``mat`` material coordinates,
@@ -132,12 +161,13 @@ class Hit:
 def sample_hit(keys: wp.array2d(dtype=wp.int64), img: int, fx: float, fy: float, gw: int, gh: int,
                triangles: wp.array(dtype=wp.vec3i), tri_label: wp.array(dtype=wp.int32),
                vertices: wp.array2d(dtype=wp.vec3), texcoords: wp.array2d(dtype=wp.vec3), w: int, R: wp.mat33,
-               t: wp.vec3, Rt: wp.mat33, k: wp.vec4, eye: wp.vec3, fn: wp.vec3, fa: wp.vec3, fb: wp.vec3,
+               t: wp.vec3, rays: GridRays, k: wp.vec4, eye: wp.vec3, fn: wp.vec3, fa: wp.vec3, fb: wp.vec3,
                floor_eye: wp.vec3, half: float) -> Hit:
-    """The :class:`Hit` of the sample at (fx, fy) of a grid with intrinsics ``k``: the mesh surface its nearest grid
-    key holds, or the floor square (normal ``fn``, axes ``fa``, ``fb``, half side ``half``) where nearer;
-    ``floor_eye`` = the eye's floor coordinates and height (a ray-plane test, not the label pass's per-row form)."""
-    d = Rt * wp.vec3((fx - k[2]) / k[0], (fy - k[3]) / k[1], 1.0)
+    """The :class:`Hit` of the sample at (fx, fy) of a grid with intrinsics ``k`` (its world rays ``rays``): the mesh
+    surface its nearest grid key holds, or the floor square (normal ``fn``, axes ``fa``, ``fb``, half side
+    ``half``) where nearer; ``floor_eye`` = the eye's floor coordinates and height (a ray-plane test, not the label
+    pass's per-row form)."""
+    d = grid_ray(rays, fx, fy)
     key = grid_key(keys, img, fx, fy, gw, gh)
     mz, mlabel, n, mmat = mesh_surface(key, triangles, tri_label, vertices, texcoords, w, R, t, k, fx, fy, eye, d)
     h = Hit()
@@ -179,8 +209,9 @@ def sample_point(x: int, y: int, i: int, j: int, sub: int, lens: int, u0: float,
     fy = float(0.0)
     if lens != 0:
         half_sub = 0.5 * float(sub - 1)
-        ox = (float(i) + 0.5) / float(sub) - 0.5
-        oy = (float(j) + 0.5) / float(sub) - 0.5
+        inv_sub = 1.0 / float(sub)  # one division, not two (exact for sub = 2, 4)
+        ox = (float(i) + 0.5) * inv_sub - 0.5
+        oy = (float(j) + 0.5) * inv_sub - 0.5
         fx = float(sub) * (u0 + jac[0] * ox + jac[1] * oy) + half_sub
         fy = float(sub) * (v0 + jac[2] * ox + jac[3] * oy) + half_sub
     else:
@@ -190,24 +221,25 @@ def sample_point(x: int, y: int, i: int, j: int, sub: int, lens: int, u0: float,
 
 
 @wp.func
-def floor_footprint(fx: float, fy: float, jac: wp.vec4, sub: int, Rt: wp.mat33, k: wp.vec4, fn: wp.vec3, fa: wp.vec3,
+def floor_footprint(fx: float, fy: float, jac: wp.vec4, sub: int, rays: GridRays, fn: wp.vec3, fa: wp.vec3,
                     fb: wp.vec3, floor_eye: wp.vec3, half: float) -> wp.vec4:
-    """Where the floor plane is seen at sample-grid point (fx, fy) (intrinsics ``k``), the centre of an output
+    """Where the floor plane is seen at sample-grid point (fx, fy) (world rays ``rays``), the centre of an output
     pixel, and how big the pixel is there: (u, v) floor coordinates [m] and the widths [m] of the box with the
     second moments of the pixel's footprint, the parallelogram spanned by d(floor) / d(output px) (= d(floor) /
     d(sample grid) x ``sub`` x the lens Jacobian ``jac``). Widths -1 where the footprint is not wholly on the
     square of half side ``half`` (to first order) or the ray misses the plane."""
-    d = Rt * wp.vec3((fx - k[2]) / k[0], (fy - k[3]) / k[1], 1.0)
+    d = grid_ray(rays, fx, fy)
     den = wp.dot(fn, d)
     out = wp.vec4(0.0, 0.0, -1.0, -1.0)
     if den < 0.0 and floor_eye[2] > 0.0:
-        zf = -floor_eye[2] / den
+        inv_den = 1.0 / den
+        zf = -floor_eye[2] * inv_den
         a = wp.dot(d, fa)
         b = wp.dot(d, fb)
-        c0 = Rt * wp.vec3(1.0 / k[0], 0.0, 0.0)  # d(ray) / d(fx), d(ray) / d(fy)
-        c1 = Rt * wp.vec3(0.0, 1.0 / k[1], 0.0)
-        dx = wp.dot(fn, c0) / den
-        dy = wp.dot(fn, c1) / den
+        c0 = rays.dx  # d(ray) / d(fx), d(ray) / d(fy)
+        c1 = rays.dy
+        dx = wp.dot(fn, c0) * inv_den
+        dy = wp.dot(fn, c1) * inv_den
         # u = eye_u + zf a with zf = -h / den: du/dfx = zf (da/dfx - a dden/dfx / den), and so on
         ux = zf * (wp.dot(fa, c0) - a * dx)
         uy = zf * (wp.dot(fa, c1) - a * dy)
@@ -314,6 +346,9 @@ def resolve_samples(
     fb = wp.cross(fn, fa)
     floor_eye = wp.vec3(wp.dot(eye - fo, fa), wp.dot(eye - fo, fb), wp.dot(fn, eye))
     kf = sample_intr[img]
+    rays = grid_rays(Rt, kf)  # the sample grid's world rays
+    fxy = k[0] / k[1]  # the lens Jacobian's aspect terms
+    fyx = k[1] / k[0]
     fw = grid_w * sub
     fhgt = grid_h * sub
     inv_ss = 1.0 / float(sub * sub)
@@ -356,8 +391,7 @@ def resolve_samples(
             u0 = k[0] * u + k[2]
             v0 = k[1] * v + k[3]
             inv_det = 1.0 / (a * d - b * b)
-            fxy = k[0] / k[1]
-            jac = wp.vec4(d * inv_det, -b * inv_det * fxy, -b * inv_det / fxy, a * inv_det)
+            jac = wp.vec4(d * inv_det, -b * inv_det * fxy, -b * inv_det * fyx, a * inv_det)
         if not ok:  # no ray reaches this pixel (the host refuses such lenses; a guard, never data)
             rgb[img, pix] = wp.vec3ub(wp.uint8(0), wp.uint8(0), wp.uint8(0))
             depth[img, pix] = 0.0
@@ -424,20 +458,20 @@ def resolve_samples(
                         on_floor = False
             if on_floor:
                 half_sub = 0.5 * float(sub - 1)
-                fp = floor_footprint(float(sub) * u0 + half_sub, float(sub) * v0 + half_sub, jac, sub, Rt, kf, fn,
+                fp = floor_footprint(float(sub) * u0 + half_sub, float(sub) * v0 + half_sub, jac, sub, rays, fn,
                                      fa, fb, floor_eye, fh)
                 if fp[2] >= 0.0:  # the whole pixel on the square (its samples lie inside the pixel's edges)
                     fx, fy = sample_point(x, y, 0, 0, sub, lens, u0, v0, jac)
                     nsub = 0
                     hit0 = sample_hit(sample_key, img, fx, fy, fw, fhgt, triangles, tri_label, vertices, texcoords, w,
-                                      R, t, Rt, kf, eye, fn, fa, fb, floor_eye, fh)
+                                      R, t, rays, kf, eye, fn, fa, fb, floor_eye, fh)
                     count0 = sub * sub
                     alb0 = floor_albedo_box_at(look, w, wp.vec3(fp[0], fp[1], 0.0), fp[2], fp[3]) * float(count0)
         for j in range(nsub):
             for i in range(nsub):
                 fx, fy = sample_point(x, y, i, j, sub, lens, u0, v0, jac)
                 hit = sample_hit(sample_key, img, fx, fy, fw, fhgt, triangles, tri_label, vertices, texcoords, w, R,
-                                 t, Rt, kf, eye, fn, fa, fb, floor_eye, fh)
+                                 t, rays, kf, eye, fn, fa, fb, floor_eye, fh)
                 alb = surface_albedo(look, w, hit.label, hit.mat)
                 if count0 == 0:
                     hit0 = hit
@@ -475,7 +509,7 @@ def resolve_samples(
                 first_sample = gfirst[g - 1]
                 fx, fy = sample_point(x, y, first_sample % sub, first_sample / sub, sub, lens, u0, v0, jac)
                 hit = sample_hit(sample_key, img, fx, fy, fw, fhgt, triangles, tri_label, vertices, texcoords, w, R,
-                                 t, Rt, kf, eye, fn, fa, fb, floor_eye, fh)
+                                 t, rays, kf, eye, fn, fa, fb, floor_eye, fh)
                 count = gcount[g - 1]
                 inv_n = 1.0 / float(count)
                 alb = wp.vec3(gr[g - 1] * inv_n, gg[g - 1] * inv_n, gb[g - 1] * inv_n)

@@ -132,11 +132,11 @@ def map_tile(u: float, v: float, s: int, tiles: int) -> int:
 def tap_grid(u: float, v: float, radius: float):
     """The 4 columns and 4 rows [texels] of the tap grid spanning ``radius`` about (u, v): taps at ±r, ±r/3, rounded
     to the nearest texel (the texels :func:`pcf_taps` reads)."""
-    xs = wp.vec4i()
-    ys = wp.vec4i()
-    for i in range(4):
-        xs[i] = int(wp.floor(u + radius * (float(i) - 1.5) / 1.5 + 0.5))
-        ys[i] = int(wp.floor(v + radius * (float(i) - 1.5) / 1.5 + 0.5))
+    third = radius * (1.0 / 3.0)  # no division per tap: the offsets are -r, -r/3, r/3, r
+    xs = wp.vec4i(int(wp.floor(u - radius + 0.5)), int(wp.floor(u - third + 0.5)), int(wp.floor(u + third + 0.5)),
+                  int(wp.floor(u + radius + 0.5)))
+    ys = wp.vec4i(int(wp.floor(v - radius + 0.5)), int(wp.floor(v - third + 0.5)), int(wp.floor(v + third + 0.5)),
+                  int(wp.floor(v + radius + 0.5)))
     return xs, ys
 
 
@@ -216,7 +216,7 @@ def map_visibility(L: Lights, m: int, u: float, v: float, z: float) -> float:
                 # below is the answer (it finds no blocker where there is none)
                 penumbra = float(1.0)
                 blocked = bool(True)
-                if 0.67 * size * (z - near) / near * k0 / z > 0.999:
+                if 0.67 * size * (z - near) * k0 > 0.999 * near * z:  # the bound's penumbra over 0.999 texel
                     blk = pcf_taps(L.map_depth, L.map_side, m, u, v, z, search)
                     if blk[0] != 0.0:
                         zb = blk[1] / blk[0]
