@@ -202,14 +202,15 @@ possible with more than 8 samples per pixel) is counted with the last group."""
 
 
 @wp.func
-def sample_point(x: int, y: int, i: int, j: int, sub: int, lens: int, u0: float, v0: float, jac: wp.vec4):
+def sample_point(x: int, y: int, i: int, j: int, sub: int, inv_sub: float, lens: int, u0: float, v0: float,
+                 jac: wp.vec4):
     """Sample (i, j) of the ``sub`` x ``sub`` samples of output pixel (x, y) in the sample grid's coordinates [texels]:
-    a regular grid over the pixel's square, through the lens map's Jacobian ``jac`` about pinhole point (u0, v0)."""
+    a regular grid over the pixel's square, through the lens map's Jacobian ``jac`` about pinhole point (u0, v0);
+    ``inv_sub`` = 1 / ``sub``."""
     fx = float(0.0)
     fy = float(0.0)
     if lens != 0:
         half_sub = 0.5 * float(sub - 1)
-        inv_sub = 1.0 / float(sub)  # one division, not two (exact for sub = 2, 4)
         ox = (float(i) + 0.5) * inv_sub - 0.5
         oy = (float(j) + 0.5) * inv_sub - 0.5
         fx = float(sub) * (u0 + jac[0] * ox + jac[1] * oy) + half_sub
@@ -352,6 +353,7 @@ def resolve_samples(
     fw = grid_w * sub
     fhgt = grid_h * sub
     inv_ss = 1.0 / float(sub * sub)
+    inv_sub = 1.0 / float(sub)  # exact for sub = 2, 4
     transmit = look.floor_transmit[wrow(w, look.floor_transmit.shape[0])]
     gain = cam_gain[img]
     # the lens solution of the previous pixel of this thread's run (a warm start for the next)
@@ -453,7 +455,7 @@ def resolve_samples(
             on_floor = bool(True)
             for j in range(sub):
                 for i in range(sub):
-                    fx, fy = sample_point(x, y, i, j, sub, lens, u0, v0, jac)
+                    fx, fy = sample_point(x, y, i, j, sub, inv_sub, lens, u0, v0, jac)
                     if sample_key[img, grid_key_index(fx, fy, fw, fhgt)] != _EMPTY:
                         on_floor = False
             if on_floor:
@@ -461,7 +463,7 @@ def resolve_samples(
                 fp = floor_footprint(float(sub) * u0 + half_sub, float(sub) * v0 + half_sub, jac, sub, rays, fn,
                                      fa, fb, floor_eye, fh)
                 if fp[2] >= 0.0:  # the whole pixel on the square (its samples lie inside the pixel's edges)
-                    fx, fy = sample_point(x, y, 0, 0, sub, lens, u0, v0, jac)
+                    fx, fy = sample_point(x, y, 0, 0, sub, inv_sub, lens, u0, v0, jac)
                     nsub = 0
                     hit0 = sample_hit(sample_key, img, fx, fy, fw, fhgt, triangles, tri_label, vertices, texcoords, w,
                                       R, t, rays, kf, eye, fn, fa, fb, floor_eye, fh)
@@ -469,7 +471,7 @@ def resolve_samples(
                     alb0 = floor_albedo_box_at(look, w, wp.vec3(fp[0], fp[1], 0.0), fp[2], fp[3]) * float(count0)
         for j in range(nsub):
             for i in range(nsub):
-                fx, fy = sample_point(x, y, i, j, sub, lens, u0, v0, jac)
+                fx, fy = sample_point(x, y, i, j, sub, inv_sub, lens, u0, v0, jac)
                 hit = sample_hit(sample_key, img, fx, fy, fw, fhgt, triangles, tri_label, vertices, texcoords, w, R,
                                  t, rays, kf, eye, fn, fa, fb, floor_eye, fh)
                 alb = surface_albedo(look, w, hit.label, hit.mat)
@@ -507,7 +509,8 @@ def resolve_samples(
             alb = alb0 * (1.0 / float(count0))
             if g > 0:  # the first sample of each further surface, again
                 first_sample = gfirst[g - 1]
-                fx, fy = sample_point(x, y, first_sample % sub, first_sample / sub, sub, lens, u0, v0, jac)
+                fx, fy = sample_point(x, y, first_sample % sub, first_sample / sub, sub, inv_sub, lens, u0,
+                                      v0, jac)
                 hit = sample_hit(sample_key, img, fx, fy, fw, fhgt, triangles, tri_label, vertices, texcoords, w, R,
                                  t, rays, kf, eye, fn, fa, fb, floor_eye, fh)
                 count = gcount[g - 1]
