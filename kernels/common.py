@@ -3,8 +3,9 @@
 world, the dihedral angle of a hinge with its gradient, and vectors of :data:`LANES` float32 with the vec3 operations
 done lane by lane (:mod:`warpworm.kernels.hinge_lanes`, :mod:`warpworm.kernels.magnet_far_pair`).
 
-Per-world parameters are read as ``p[world % p.shape[0]]`` so that an array of one value (shared) or one value per
-world both work. float32, SI units.
+Per-world parameters are read as ``p[wrow(world, p.shape[0])]`` (:func:`wrow`: ``world % n`` without the division in
+the usual cases) so that an array of one value (shared) or one value per world both work; the renderer reads its
+per-world rows the same way. float32, SI units.
 """
 
 from __future__ import annotations
@@ -36,6 +37,18 @@ def on_gpu() -> bool:
     kernel take its CPU-only path (the SIMD lanes of :mod:`.hinge_lanes`) on the CPU and its scalar code on a GPU, where
     a thread per world has no vector units to fill (docs/dynamics.md, "Notes moved from the code")."""
     ...
+
+
+@wp.func
+def wrow(w: int, n: int) -> int:
+    """Row ``w % n`` of a per-world array of ``n`` rows for a world (or pair, or image) index ``w >= 0``, without the
+    integer division in the usual cases (n > w: a row each; n == 1: one row shared): a division costs more than the
+    rest of a plain pixel's shading, and the general resolve kernel reads ~15 rows per pixel."""
+    if w < n:
+        return w
+    if n == 1:
+        return 0
+    return w % n
 
 
 @wp.func

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from .common import PI, TWO_PI
+from .common import PI, TWO_PI, wrow
 
 # forward only (nothing differentiates these kernels): the adjoints doubled-to-tripled the cold compile (docs/dynamics.md)
 wp.set_module_options({"enable_backward": False})
@@ -115,16 +115,16 @@ def epm_sine_pose(
     """
     world = wp.tid()
     t = float(step_count[world]) * dt_sub
-    period = path.period[world % path.period.shape[0]]
-    phase = path.phase[world % path.phase.shape[0]]
-    rewind = path.rewind[world % path.rewind.shape[0]]
-    start_x = path.start_x[world % path.start_x.shape[0]]
-    start_y = path.start_y[world % path.start_y.shape[0]]
-    direction = path.direction[world % path.direction.shape[0]]
-    wavelength = path.wavelength[world % path.wavelength.shape[0]]
-    depth = path.depth[world % path.depth.shape[0]]
-    amplitude = path.amplitude[world % path.amplitude.shape[0]]
-    theta = path.theta[world % path.theta.shape[0]]
+    period = path.period[wrow(world, path.period.shape[0])]
+    phase = path.phase[wrow(world, path.phase.shape[0])]
+    rewind = path.rewind[wrow(world, path.rewind.shape[0])]
+    start_x = path.start_x[wrow(world, path.start_x.shape[0])]
+    start_y = path.start_y[wrow(world, path.start_y.shape[0])]
+    direction = path.direction[wrow(world, path.direction.shape[0])]
+    wavelength = path.wavelength[wrow(world, path.wavelength.shape[0])]
+    depth = path.depth[wrow(world, path.depth.shape[0])]
+    amplitude = path.amplitude[wrow(world, path.amplitude.shape[0])]
+    theta = path.theta[wrow(world, path.theta.shape[0])]
     s = t / period + phase
     s_adv = s
     if rewind != 0.0:
@@ -150,7 +150,7 @@ def epm_keyframe_pose(
     key. ``path`` as :class:`KeyframePath`. Launch dim (W,)."""
     world = wp.tid()
     t = float(step_count[world]) * dt_sub
-    row = world % path.pos.shape[0]
+    row = wrow(world, path.pos.shape[0])
     nk = path.time.shape[0]
     k = int(0)
     while k < nk - 2 and t >= path.time[k + 1]:
@@ -181,7 +181,7 @@ def ipm_poses(
     Launch dim (W, 3)."""
     world, m = wp.tid()
     o, R = mount_frame(x, world, mount_vertices, m)
-    row = world % mount_local_pos.shape[0]
+    row = wrow(world, mount_local_pos.shape[0])
     magnet_pos[world, m + 1] = o + R * mount_local_pos[row, m]
     magnet_rot[world, m + 1] = wp.quat_from_matrix(R * mount_local_rot[row, m])
 

@@ -15,7 +15,7 @@ import warp as wp
 
 from warpworm import ids
 
-from .common import SHAPE_CYLINDER
+from .common import SHAPE_CYLINDER, wrow
 from .magnet_charges import analytic_pair_wrench
 from .magnet_closed_form import F64_0, magnet_field_local
 from .magnet_dipoles import dipoles_field_local, dipoles_pair_wrench
@@ -148,12 +148,12 @@ def world_pair_wrench_kernel(
     the reaction, F_a = −F_b and τ_a = −τ_b − (c_b − c_a) × F_b (the pair's momentum and angular momentum conserved,
     as the exact wrenches do). Half the pair evaluations of summing each magnet's wrench over its sources; the two
     orders of a pair agree to the quadrature's ~1e-6 (``tests/test_magnets_far_pair.py``). A magnet with zero moment
-    is absent: its pairs are zero. Model arrays are read as ``a[world % a.shape[0]]``."""
+    is absent: its pairs are zero. Model arrays are read as ``a[wrow(world, a.shape[0])]``."""
     world, p = wp.tid()
     ab = pair_members(p, pos.shape[1])
     a = ab[0]
     b = ab[1]
-    mrow = world % moment.shape[0]
+    mrow = wrow(world, moment.shape[0])
     m_a = moment[mrow, a]
     m_b = moment[mrow, b]
     f = wp.vec3(0.0)
@@ -161,10 +161,10 @@ def world_pair_wrench_kernel(
     f_a = wp.vec3(0.0)
     t_a = wp.vec3(0.0)
     if wp.length_sq(m_a) > 0.0 and wp.length_sq(m_b) > 0.0:
-        row = world % shape.shape[0]
-        srow = world % size.shape[0]
+        row = wrow(world, shape.shape[0])
+        srow = wrow(world, size.shape[0])
         f, t = pair_wrench(
-            model[world % model.shape[0]],
+            model[wrow(world, model.shape[0])],
             shape[row, a],
             size[srow, a],
             m_a,
@@ -175,7 +175,7 @@ def world_pair_wrench_kernel(
             m_b,
             pos[world, b],
             rot[world, b],
-            density[world % density.shape[0]],
+            density[wrow(world, density.shape[0])],
             gl_x,
             gl_w,
             max_panels,
@@ -242,22 +242,22 @@ def pair_wrench_kernel(
 ):
     """Force and torque on target k from source k for a batch of N independent pairs (launch dim N).
 
-    Every input is read as ``a[k % a.shape[0]]``: one magnet / pose / density shared, or one per pair.
+    Every input is read as ``a[wrow(k, a.shape[0])]``: one magnet / pose / density shared, or one per pair.
     """
     k = wp.tid()
     f, t = pair_wrench(
-        model[k % model.shape[0]],
-        s_shape[k % s_shape.shape[0]],
-        s_size[k % s_size.shape[0]],
-        s_moment[k % s_moment.shape[0]],
-        s_pos[k % s_pos.shape[0]],
-        s_rot[k % s_rot.shape[0]],
-        t_shape[k % t_shape.shape[0]],
-        t_size[k % t_size.shape[0]],
-        t_moment[k % t_moment.shape[0]],
-        t_pos[k % t_pos.shape[0]],
-        t_rot[k % t_rot.shape[0]],
-        density[k % density.shape[0]],
+        model[wrow(k, model.shape[0])],
+        s_shape[wrow(k, s_shape.shape[0])],
+        s_size[wrow(k, s_size.shape[0])],
+        s_moment[wrow(k, s_moment.shape[0])],
+        s_pos[wrow(k, s_pos.shape[0])],
+        s_rot[wrow(k, s_rot.shape[0])],
+        t_shape[wrow(k, t_shape.shape[0])],
+        t_size[wrow(k, t_size.shape[0])],
+        t_moment[wrow(k, t_moment.shape[0])],
+        t_pos[wrow(k, t_pos.shape[0])],
+        t_rot[wrow(k, t_rot.shape[0])],
+        density[wrow(k, density.shape[0])],
         gl_x,
         gl_w,
         max_panels,

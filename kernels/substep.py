@@ -18,7 +18,7 @@ from warpworm import ids
 
 from .banded_cholesky import ALL_ROWS, banded_add_block, banded_add_gauss_newton3, banded_add_gauss_newton4
 from .common import (hinge_angle_at_substep_end, dihedral_angle_gradient_and_normals, fold_range,
-                     wing_contact_of_normal, wrap_angle)
+                     wing_contact_of_normal, wrap_angle, wrow)
 from .floor_contact import (CONTACT_FIXED, CONTACT_FREE, CONTACT_SLIDING, CONTACT_STUCK, RELEASED_LET_GO,
                             dof_projector, floor_landing, friction_force, landing_floor_force, mass_over_dt2,
                             newton_start, skin_scale, starting_contact, stick_slip_status)
@@ -131,24 +131,24 @@ class WorldCoefficients:
 @wp.func
 def world_coefficients(m: BarHingeModel, world: int, dt: float) -> WorldCoefficients:
     c = WorldCoefficients()
-    c.im_row = world % m.inv_mass.shape[0]
-    c.rl_row = world % m.rest_length.shape[0]
-    c.ea_row = world % m.bar_stiffness.shape[0]
-    c.hr_row = world % m.hinge_rest_angle.shape[0]
-    c.hl_row = world % m.hinge_length.shape[0]
-    c.ak_row = world % m.anchor_stiffness.shape[0]
-    c.ss_row = world % m.bar_stop_strain.shape[0]
-    c.sk_row = world % m.bar_stop_stiffness.shape[0]
-    c.gravity = wp.vec3(0.0, 0.0, -m.gravity[world % m.gravity.shape[0]])
-    c.damp = 1.0 / (1.0 + m.damping[world % m.damping.shape[0]] * dt)
-    c.hinge_stiffness = m.hinge_stiffness[world % m.hinge_stiffness.shape[0]]
-    c.hinge_damping = m.hinge_damping[world % m.hinge_damping.shape[0]]
-    c.fold_limit_stiffness = m.fold_limit_stiffness[world % m.fold_limit_stiffness.shape[0]]
-    beta = m.floor_incline[world % m.floor_incline.shape[0]]
+    c.im_row = wrow(world, m.inv_mass.shape[0])
+    c.rl_row = wrow(world, m.rest_length.shape[0])
+    c.ea_row = wrow(world, m.bar_stiffness.shape[0])
+    c.hr_row = wrow(world, m.hinge_rest_angle.shape[0])
+    c.hl_row = wrow(world, m.hinge_length.shape[0])
+    c.ak_row = wrow(world, m.anchor_stiffness.shape[0])
+    c.ss_row = wrow(world, m.bar_stop_strain.shape[0])
+    c.sk_row = wrow(world, m.bar_stop_stiffness.shape[0])
+    c.gravity = wp.vec3(0.0, 0.0, -m.gravity[wrow(world, m.gravity.shape[0])])
+    c.damp = 1.0 / (1.0 + m.damping[wrow(world, m.damping.shape[0])] * dt)
+    c.hinge_stiffness = m.hinge_stiffness[wrow(world, m.hinge_stiffness.shape[0])]
+    c.hinge_damping = m.hinge_damping[wrow(world, m.hinge_damping.shape[0])]
+    c.fold_limit_stiffness = m.fold_limit_stiffness[wrow(world, m.fold_limit_stiffness.shape[0])]
+    beta = m.floor_incline[wrow(world, m.floor_incline.shape[0])]
     c.floor_n = wp.vec3(-wp.sin(beta), 0.0, wp.cos(beta))
-    c.mu_static = m.mu_static[world % m.mu_static.shape[0]]
-    c.mu_kinetic = m.mu_kinetic[world % m.mu_kinetic.shape[0]]
-    c.friction_backward_ratio = m.friction_backward_ratio[world % m.friction_backward_ratio.shape[0]]
+    c.mu_static = m.mu_static[wrow(world, m.mu_static.shape[0])]
+    c.mu_kinetic = m.mu_kinetic[wrow(world, m.mu_kinetic.shape[0])]
+    c.friction_backward_ratio = m.friction_backward_ratio[wrow(world, m.friction_backward_ratio.shape[0])]
     c.floor_fwd = wp.vec3(wp.cos(beta), 0.0, wp.sin(beta))
     c.dt = dt
     c.inv_dt = 1.0 / dt

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import warp as wp
 
+from warpworm.kernels.common import wrow
 from warpworm.render.raster_math import (
     _DEPTH_SCALE,
     _TRI_SCALE,
@@ -46,7 +47,6 @@ from warpworm.render.raster_math import (
     pixel_box,
     project,
     to_srgb8,
-    wrow,
 )
 from warpworm.render.shading import (
     Look,

@@ -35,18 +35,6 @@ _EMPTY = wp.constant(wp.int64(EMPTY_KEY))
 
 
 @wp.func
-def wrow(w: int, n: int) -> int:
-    """Row ``w % n`` of a per-world array of ``n`` rows for a world ``w >= 0``, without the integer division in the
-    usual cases (n > w: an array per world; n == 1: one row shared): a division costs more than the rest of a plain
-    pixel's shading, and the general kernel read ~15 world rows per pixel."""
-    if w < n:
-        return w
-    if n == 1:
-        return 0
-    return w % n
-
-
-@wp.func
 def edge_fn(ax: float, ay: float, bx: float, by: float, px: float, py: float) -> float:
     """Edge function of directed edge a->b at p, positive on the interior side of a (y down) positive-area triangle."""
     return (bx - ax) * (py - ay) - (by - ay) * (px - ax)

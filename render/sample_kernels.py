@@ -24,6 +24,7 @@ from __future__ import annotations
 import warp as wp
 
 from warpworm.render.lens_kernels import lens_inverse32, lens_inverse_next32
+from warpworm.kernels.common import wrow
 from warpworm.render.raster_math import (
     _EMPTY,
     _TRI_SCALE,
@@ -34,7 +35,6 @@ from warpworm.render.raster_math import (
     edge_fn,
     project,
     to_srgb8,
-    wrow,
 )
 from warpworm.render.shading import (
     Look,

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import warp as wp
 
+from warpworm.kernels.common import wrow
 from warpworm.render.raster_math import (
     _EMPTY,
     _TRI_SCALE,
@@ -17,7 +18,6 @@ from warpworm.render.raster_math import (
     depth_plane,
     noise_tex,
     spec_power,
-    wrow,
 )
 from warpworm.render.shadow_kernels import Lights, is_dark, point_light, visibility
 
