@@ -12,7 +12,13 @@ The inverse (which undistorted direction a distorted pixel centre sees) is solve
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
+import warp as wp
+
+from warpworm.render import lens_kernels as lk
+from warpworm.rng import seed_uniforms
 
 DIST_NAMES = ("k1", "k2", "p1", "p2", "k3")
 """Order of the coefficients in ``Cameras.dist`` and ``camera/dist`` (OpenCV's)."""
@@ -55,10 +61,6 @@ def undistort_maps(K: np.ndarray, dist: np.ndarray, width: int, height: int, dev
     """For every pixel centre (u, v) of N distorted images, the pinhole pixel (same K) whose ray it sees:
     (N, H, W, 2) float64 [px]. ``K`` (N, 3, 3), ``dist`` (N, 5). Newton's method as :func:`undistort`, run by the
     Warp kernel :func:`warpworm.render.lens_kernels.undistort_pixels`."""
-    import warp as wp
-
-    from warpworm.render import lens_kernels as lk
-
     N = len(K)
     intr = np.stack([K[:, 0, 0], K[:, 1, 1], K[:, 0, 2], K[:, 1, 2]], axis=1).astype(np.float64)
     out = wp.empty((N, height, width), dtype=wp.vec2d, device=device)
@@ -76,10 +78,6 @@ def lens_margins(cameras, device=None) -> tuple[int, int, int, int]:
     are those of the image's border: only its 2 (W + H) pixel centres are undistorted (float64, the Warp kernel
     :func:`warpworm.render.lens_kernels.border_rays` on ``device``, default the CPU). ValueError when a lens folds
     back inside its image (no ray reaches some pixels)."""
-    import warp as wp
-
-    from warpworm.render import lens_kernels as lk
-
     H, W = int(cameras.height), int(cameras.width)
     dist = np.ascontiguousarray(cameras.dist, dtype=np.float64)
     K = np.asarray(cameras.K, dtype=np.float64)
@@ -112,8 +110,6 @@ def widened_pinhole(cameras, device=None):
     """The pinhole cameras a distorted image is warped from (the path tracer's lens path): the same K widened by
     :func:`lens_margins`, and where each distorted pixel centre lies in that wider image. Returns (cameras with the
     shifted K, ``dist`` None and the wider ``width``/``height``, mx (N, H, W) float32, my (N, H, W) float32) [px]."""
-    import dataclasses
-
     H, W = int(cameras.height), int(cameras.width)
     left, top, Wp, Hp = lens_margins(cameras, device)
     maps = undistort_maps(cameras.K, np.asarray(cameras.dist, dtype=np.float64), W, H, device)  # (N, H, W, 2)
@@ -153,8 +149,6 @@ def lens_covers_image(dist: np.ndarray, K: np.ndarray, width: int, height: int) 
 
 
 def _draw(render_cfg, seeds: np.ndarray, stream: int) -> np.ndarray:
-    from warpworm.rng import seed_uniforms
-
     u = seed_uniforms(seeds, stream, 5)
     r = render_cfg
     ranges = (r.distortion_k1, r.distortion_k2, r.distortion_p, r.distortion_p, r.distortion_k3)

@@ -23,11 +23,14 @@ from __future__ import annotations
 
 import math
 
+import cv2
 import numpy as np
 
 from warpworm import ids
 from warpworm.render.camera import Cameras
+from warpworm.render.distortion import widened_pinhole
 from warpworm.render.scene import SceneBatch
+from warpworm.rng import seed_uniforms
 
 VARIANT = "scalar_rgb"
 """Mitsuba variant: runs on any CPU from the PyPI wheel. ``llvm_ad_rgb`` is ~4x faster per sample (a 256² image:
@@ -56,8 +59,6 @@ def mitsuba():
 def choose_pathtraced(seeds: np.ndarray, fraction: float) -> np.ndarray:
     """Which samples are path-traced: (N,) bool, ``uniform(seed) < fraction``, one draw per sample from its own
     per-sample seed (so the choice does not depend on batches, shards or workers)."""
-    from warpworm.rng import seed_uniforms
-
     seeds = np.asarray(seeds, dtype=np.int64).reshape(-1)
     if fraction <= 0.0:
         return np.zeros(len(seeds), bool)
@@ -244,10 +245,6 @@ def _distorted(scene: SceneBatch, cameras: Cameras, spp: int, seeds: np.ndarray)
     """Images through ``cameras.dist`` as the rasterizer made them before it followed each pixel through the lens: a pinhole
     image with the same K widened by margins that hold the ray of every distorted pixel centre, warped bilinearly
     (``cv2.remap``) by :func:`warpworm.render.distortion.undistort_maps`. Linear (N, H, W, 3) float32."""
-    import cv2
-
-    from warpworm.render.distortion import widened_pinhole
-
     N, H, W = len(cameras), int(cameras.height), int(cameras.width)
     view, mx, my = widened_pinhole(cameras)
     pin = _trace(scene, view, spp, seeds)

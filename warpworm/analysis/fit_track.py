@@ -21,6 +21,14 @@ from dataclasses import fields, replace
 
 import numpy as np
 
+from warpworm.analysis.gait_runs import run_gait
+from warpworm.analysis.track import back_project, ratios_and_displacement
+from warpworm.physics import gaits
+from warpworm.physics.params import WormParams
+from warpworm.render import Renderer, make_cameras
+from warpworm.render.labels import band_centres, band_pixel_centroids
+from warpworm.render.scene import build_scene
+
 PATH_KEYS = {"w": "wavelength", "a": "amplitude", "h": "closest_approach"}
 SIGMA_RATIO = 0.01
 """Tracker accuracy of a deformation ratio (tests/test_track.py), the residual's scale."""
@@ -46,8 +54,6 @@ fit to another basin of a rugged cost and change a range by up to 124 % (docs/ca
 
 def fittable_fields() -> tuple[str, ...]:
     """Scalar positive WormParams fields a track may fit."""
-    from warpworm.physics.params import WormParams
-
     p = WormParams()
     return tuple(f.name for f in fields(WormParams) if isinstance(getattr(p, f.name), float) and getattr(p, f.name) > 0
                  and f.name not in ("n_units",))
@@ -102,9 +108,6 @@ def _interp(times_src, values, times):
 def simulate_frames(params, num_worlds: int, times, *, settle=0.2, device="cpu") -> dict:
     """Run the batch and return its frames at ``times`` (T,) [s after settling]: ``positions`` (T, W, V, 3),
     ``magnet_pos``, ``magnet_rot``, ``unstable`` (W,), ``model``."""
-    from warpworm.analysis.gait_runs import run_gait
-    from warpworm.physics import gaits
-
     dt = gaits.DEFAULT_DT
     period = float(np.max(np.asarray(params.cycle_period)))
     r = run_gait(params, num_worlds, (float(np.max(times)) + 4 * dt) / period, device=device, settle=settle,
@@ -121,10 +124,6 @@ def band_pixels_from_render(frames: dict, model, cam, width: int, height: int, s
                             device="cpu") -> np.ndarray:
     """Band pixel centroids (T, W, 5, 2) [px of ``cam``] of every frame and world as ``cam`` (no distortion) sees
     them, from the renderer's segmentation at ``scale`` times the resolution; NaN where a band is unseen."""
-    from warpworm.render import Renderer, make_cameras
-    from warpworm.render.scene import build_scene
-    from warpworm.render.labels import band_pixel_centroids
-
     T_, W = frames["positions"].shape[:2]
     w_s, h_s = max(8, int(round(width * scale))), max(8, int(round(height * scale)))
     sx, sy = w_s / width, h_s / height
@@ -161,9 +160,6 @@ def observe(params, num_worlds: int, times, ref: int, meta: dict | None, *, rend
     """The simulated track of every world: ``ratios`` (W, T, 4), ``displacement`` (W, T) [m], ``unstable`` (W,),
     ``centres`` (W, T, 5, 3). ``meta``: the track's camera (``camera`` CameraModel, ``width``, ``height``,
     ``height_m``) or None (band centres seen from above)."""
-    from warpworm.analysis.track import back_project, ratios_and_displacement
-    from warpworm.render.labels import band_centres
-
     fr = simulate_frames(params, num_worlds, np.asarray(times, np.float64), device=device)
     model = fr["model"]
     if meta is not None and meta.get("camera") is not None:

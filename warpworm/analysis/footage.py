@@ -14,7 +14,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from warpworm import ids
 from warpworm.analysis.track import CameraModel
+from warpworm.render import (Renderer, default_appearance, focal_from_fov, look_at, make_cameras,
+                             scene_from_snapshot)
+from warpworm.render.labels import band_pixel_centroids
+from warpworm.render.pathtrace import pixel_centre_seg, render_pathtraced
+from warpworm.render.scene import band_appearance
+from warpworm.render.sensor import apply_sensor
 
 
 def random_look(rng: np.random.Generator, *, shading: str = "hard") -> dict:
@@ -41,8 +48,6 @@ def random_camera(rng: np.random.Generator, width: int, height: int, *, centre=(
     rolled so image +x is roughly world +x, 24-30 degrees vertical field of view, square pixels, a principal point
     within ±3 % of the centre, radial distortion k1 in ±0.08 (``distortion``); farther when needed for the image's
     shorter side to hold ``span`` [m] (the worm's path) with 15 % to spare."""
-    from warpworm.render import focal_from_fov, look_at
-
     c = np.asarray(centre, np.float64) + np.array([rng.uniform(-0.004, 0.004), rng.uniform(-0.004, 0.004), 0.0])
     tl, az = np.radians(rng.uniform(*tilt_deg)), rng.uniform(0, 2 * np.pi)
     d = rng.uniform(0.17, 0.22)
@@ -58,10 +63,6 @@ def random_camera(rng: np.random.Generator, width: int, height: int, *, centre=(
 
 
 def _appearance(look: dict, colors, F: int):
-    from warpworm import ids
-    from warpworm.render import default_appearance
-    from warpworm.render.scene import band_appearance
-
     app = default_appearance(1)
     app.albedo = app.albedo.copy()
     app.albedo[:, ids.SEG_FLOOR] = look["floor"]
@@ -86,10 +87,6 @@ def pathtraced_band_video(frames: dict, model, cam: CameraModel, width: int, hei
     centroids of each band's visible pixels (``truth`` "raster": the rasterizer's pixel-centre segmentation through
     the same camera; "pathtracer": Mitsuba's own first hit per pixel centre, undistorted cameras only); with
     ``return_seg`` also that segmentation (F, H, W)."""
-    from warpworm.render import Renderer, make_cameras, scene_from_snapshot
-    from warpworm.render.labels import band_pixel_centroids
-    from warpworm.render.pathtrace import pixel_centre_seg, render_pathtraced
-
     pos = np.asarray(frames["positions"])[:, world]
     F = pos.shape[0]
     snap = {"positions": pos, "magnet_pos": np.asarray(frames["magnet_pos"])[:, world],
@@ -114,7 +111,5 @@ def pathtraced_band_video(frames: dict, model, cam: CameraModel, width: int, hei
         seg = Renderer(width, height, device="cpu").render(scene, cams)["seg"]
     centres, _ = band_pixel_centroids(seg)
     if sensor_values is not None:
-        from warpworm.render.sensor import apply_sensor
-
         rgb = apply_sensor(rgb, seed + np.arange(F), values=sensor_values)
     return (rgb, centres, seg) if return_seg else (rgb, centres)

@@ -26,9 +26,16 @@ from __future__ import annotations
 
 import itertools
 import time
-from dataclasses import replace
+from dataclasses import fields, replace
 
 import numpy as np
+
+from warpworm.analysis.fit_track import SIGMA_DISP, SIGMA_RATIO, candidate_params, simulate_frames, tolerance
+from warpworm.analysis.track import ratios_and_displacement
+from warpworm.physics import gaits
+from warpworm.physics.gaits import GAIT_PRESETS
+from warpworm.physics.params import VECTOR_FIELDS
+from warpworm.render.labels import band_centres
 
 PRODUCTION_RANGES = {"hinge_stiffness": (0.003, 0.01), "mu_static": (0.2, 0.4), "epm_moment": (3.0, 4.0)}
 """Production's ranges (dataset_configs/production.yaml) of the parameters a video calibrates."""
@@ -41,8 +48,6 @@ def candidate_paths(gaits=("peristaltic", "omega", "inchworm"), w_scales=(0.75, 
     """Candidate clips: every gait preset's path with its wavelength, amplitude and closest approach scaled (within
     production's ``wavelength_scale`` 0.75-1.25 and ``closest_approach_scale`` 0.95-1.3), ``cycles`` and direction
     (``backward``). Each a dict: gait, backward, wavelength, amplitude, closest_approach [m], cycles."""
-    from warpworm.physics.gaits import GAIT_PRESETS
-
     out = []
     for g, bw, ws, as_, hs, cy in itertools.product(gaits, directions, w_scales, a_scales, h_scales, cycles):
         pre = GAIT_PRESETS[g]
@@ -65,8 +70,6 @@ def design_worms(ranges: dict, corner_frac: float = 0.8) -> np.ndarray:
 def clip_params(base, clip: dict, names, values: np.ndarray):
     """``base`` WormParams for W worlds of one clip: its gait, direction and path, and ``names`` set to ``values``
     (W, p) (mu_kinetic follows mu_static)."""
-    from warpworm.analysis.fit_track import candidate_params
-
     p = replace(base, gait=clip["gait"], backward=bool(clip["backward"]), wavelength=float(clip["wavelength"]),
                 amplitude=float(clip["amplitude"]), closest_approach=float(clip["closest_approach"]))
     return candidate_params(p, names, values)
@@ -74,10 +77,6 @@ def clip_params(base, clip: dict, names, values: np.ndarray):
 
 def _merge(parts):
     """One WormParams for the concatenated worlds of several WormParams (each field per world)."""
-    from dataclasses import fields
-
-    from warpworm.physics.params import VECTOR_FIELDS
-
     first, sizes = parts[0][0], [n for _, n in parts]
     out = {}
     for f in fields(first):
@@ -101,10 +100,6 @@ def _merge(parts):
 def observables(params, num_worlds: int, times, *, device="cpu") -> tuple[np.ndarray, np.ndarray]:
     """Simulated track (W, n) of z-scored ratios and displacement seen from above at ``times``, and ``unstable``
     (W,)."""
-    from warpworm.analysis.fit_track import SIGMA_DISP, SIGMA_RATIO, simulate_frames
-    from warpworm.analysis.track import ratios_and_displacement
-    from warpworm.render.labels import band_centres
-
     fr = simulate_frames(params, num_worlds, np.asarray(times, np.float64), device=device)
     m = fr["model"]
     c = np.moveaxis(band_centres(fr["positions"], m.pattern.triangles, m.pattern.triangle_segment), 0, 1)
@@ -120,8 +115,6 @@ def clip_jacobians(clips, names, worms, base=None, *, step=0.05, chunk=512, devi
     (every world of the stencil stable and the track smooth in every parameter: the forward and backward
     differences' mismatch |f - b| / |f + b| at most ``max_nonlinearity``; ``nonlin`` (C, D) the largest mismatch).
     All clips of one length of time run as one batch per ``chunk`` worlds."""
-    from warpworm.physics import gaits
-
     base = base or gaits.preset_params("peristaltic", magnet_model="analytic")
     D, p = worms.shape
     stencil = np.concatenate([np.zeros((1, p)), step * np.eye(p), -step * np.eye(p)])  # (2p+1, p) log offsets
@@ -214,8 +207,6 @@ def plan(names, ranges: dict, *, clips=None, max_clips: int = 3, margin: float =
     """Plan clips that pin ``names`` for every design worm in ``ranges``. Returns: names, worms (D, p), clips (the
     candidates), ok (C, D), half (C, D, p) (each candidate alone), chosen (indices), worst (after each pick),
     plan_half (D, p) (the plan's predicted half-widths), tolerance (p,), worlds, wall_s."""
-    from warpworm.analysis.fit_track import tolerance
-
     t0 = time.perf_counter()
     names = list(names)
     clips = candidate_paths() if clips is None else clips

@@ -35,7 +35,20 @@ import json
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+import cv2
 import numpy as np
+
+from warpworm.data import dataset as ds
+from warpworm.data import randomize as rnd
+from warpworm.data.config import PARAM_SPECS
+from warpworm.data.sampling import sensor_values
+from warpworm.physics import crease
+from warpworm.physics.params import WormParams
+from warpworm.render import (Renderer, default_appearance, focal_from_fov, look_at, make_cameras,
+                             scene_from_snapshot)
+from warpworm.render.labels import band_centres
+from warpworm.render.scene import BAND_COLORS, band_appearance
+from warpworm.render.sensor import apply_sensor
 
 NUM_BANDS = 5
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
@@ -114,10 +127,6 @@ class Thresholds:
     def from_colors(cls, colors=None, **overrides) -> "Thresholds":
         """Thresholds for display colours (5, 3) in [0, 1] (default the paper's, ``render.scene.BAND_COLORS``);
         a colour with saturation < 0.3 is a white band. ``overrides``: any of :data:`OVERRIDABLE`."""
-        import cv2
-
-        from warpworm.render.scene import BAND_COLORS
-
         c = np.asarray(BAND_COLORS if colors is None else colors, np.float64)
         if c.shape != (NUM_BANDS, 3) or not np.all((c >= 0) & (c <= 1)):
             raise ValueError(f"band colors: got shape {c.shape}; expected (5, 3) RGB in [0, 1], tail -> head")
@@ -145,9 +154,6 @@ def parse_band_colors(text: str | None, key: str = "--band-colors"):
 def dataset_band_colors(path) -> np.ndarray:
     """The band colours (5, 3) a dataset folder was rendered with: its ``config_yaml`` attribute's
     ``render.band_colors`` (the paper's :data:`warpworm.render.scene.BAND_COLORS` when the config left it out)."""
-    from warpworm.data import dataset as ds
-    from warpworm.render.scene import BAND_COLORS
-
     try:
         reader = ds.open(path)
     except Exception as exc:  # noqa: BLE001 (any unreadable folder: one clear message)
@@ -180,8 +186,6 @@ def floor_map(v: np.ndarray, s: np.ndarray, cell: int | None = None) -> tuple[np
     :func:`floor_level` of every ``cell``-pixel cell (default a quarter of the image's shorter side) of a coarse grid
     from the window of twice its size around it, interpolated bilinearly, and never above the whole image's floor
     level plus 3 noise levels (a window the worm fills); the noise is the whole image's."""
-    import cv2
-
     H, W = v.shape
     fl0, sig = floor_level(v, s)
     cell = int(cell or max(16, min(H, W) // 4))
@@ -198,8 +202,6 @@ def floor_map(v: np.ndarray, s: np.ndarray, cell: int | None = None) -> tuple[np
 
 def band_masks(rgb: np.ndarray, thr: Thresholds) -> np.ndarray:
     """The five band masks (5, H, W) bool of one RGB uint8 image (H, W, 3) (rules in the module docstring)."""
-    import cv2
-
     hsv = cv2.cvtColor(np.ascontiguousarray(rgb, np.uint8), cv2.COLOR_RGB2HSV).astype(np.int16)
     h, s, v = hsv[..., 0], hsv[..., 1], hsv[..., 2]
     dh = np.abs(h[None] - thr.hue[:, None, None])
@@ -272,8 +274,6 @@ def _near_largest(mask: np.ndarray, reach: float) -> np.ndarray:
     """The largest 8-connected blob of ``mask`` and every other blob of 2+ pixels whose centroid lies within
     ``reach`` times the largest's size (sqrt of its area) of its centroid: a band is one patch of paint, seen in
     pieces where folds hide parts of it, while a grey magnet or noise elsewhere is not the band."""
-    import cv2
-
     n, lab, stats, cents = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
     if n <= 2:
         return lab > 0
@@ -304,8 +304,6 @@ def band_weights(rgb: np.ndarray, masks: np.ndarray) -> np.ndarray:
     such pair keeps its hard mask. Mass is conserved under blur (a symmetric blur moves no centroid of a linear
     mixture): the centroid of the weights is that of the area each band covers, a sliver smeared over three pixels
     included, where the hard masks gain or lose whole pixels at every edge."""
-    import cv2
-
     B = masks.shape[0]
     img = np.asarray(rgb, np.float32)
     cls = np.concatenate([masks, ~masks.any(axis=0)[None]])
@@ -367,8 +365,6 @@ def band_centroids(rgb: np.ndarray, thr: Thresholds) -> tuple[np.ndarray, np.nda
 def back_project(uv: np.ndarray, cam: CameraModel, height: float) -> np.ndarray:
     """World points [m] (..., 3) where the pixel rays through ``uv`` (..., 2) (distorted pixels) meet the plane
     ``height`` [m] above the floor (along its normal); NaN in, NaN out."""
-    import cv2
-
     uv = np.asarray(uv, np.float64)
     flat = uv.reshape(-1, 2)
     ok = np.isfinite(flat).all(axis=1)
@@ -399,8 +395,6 @@ def ratios_and_displacement(centres: np.ndarray, ref: int = 0) -> tuple[np.ndarr
 
 def read_frames(source, fps: float | None = None):
     """Frames of a video file or an image folder (sorted names): (list of RGB uint8 (H, W, 3), fps)."""
-    import cv2
-
     p = Path(source)
     if p.is_dir():
         files = sorted(f for f in p.iterdir() if f.suffix.lower() in IMAGE_SUFFIXES)
@@ -488,10 +482,6 @@ def default_band_height(params=None) -> float:
     """Height [m] above the floor of the band centres seen from above (:func:`warpworm.render.labels.band_centres`)
     in the rest pose of ``params`` (default WormParams) lying on its base: the plane :func:`track` back-projects
     onto."""
-    from warpworm.physics import crease
-    from warpworm.physics.params import WormParams
-    from warpworm.render.labels import band_centres
-
     p = WormParams() if params is None else params
     pat = crease.build_worm(float(np.ravel(p.a)[0]), float(np.ravel(p.b)[0]), int(p.n_units), float(np.ravel(p.l0)[0]))
     c = band_centres(pat.vertices, pat.triangles, pat.triangle_segment)
@@ -504,10 +494,6 @@ def harshest_sensor(num: int, sensor: dict | None = None) -> dict:
     config's ``randomize['sensor']`` distributions; default the randomization's own (``PARAM_SPECS``: noise 4
     levels, blur 0.8 px, brightness +12, contrast 1.15). Through :func:`warpworm.data.sampling.sensor_values`, the
     conversion a dataset uses."""
-    from warpworm.data import randomize as rnd
-    from warpworm.data.config import PARAM_SPECS
-    from warpworm.data.sampling import sensor_values
-
     if sensor is None:
         sensor = {n: rnd.parse_distribution(spec.default) for n, spec in PARAM_SPECS["sensor"].items()}
 
@@ -527,9 +513,6 @@ def render_band_video(frames: dict, model, cam: CameraModel, width: int, height:
     :func:`warpworm.analysis.gait_runs.run_gait` returns them. A dark plain floor; ``sensor_values`` (per-image
     :func:`warpworm.render.sensor.apply_sensor` values, each (F,)) add the camera's noise, blur and JPEG. With
     ``return_images``: (rgb, the renderer's clean output dict with ``seg`` and ``depth``)."""
-    from warpworm.render import Renderer, default_appearance, make_cameras, scene_from_snapshot
-    from warpworm.render.scene import band_appearance
-
     pos = np.asarray(frames["positions"])[:, world]
     F = pos.shape[0]
     snap = {"positions": pos, "magnet_pos": np.asarray(frames["magnet_pos"])[:, world],
@@ -551,8 +534,6 @@ def render_band_video(frames: dict, model, cam: CameraModel, width: int, height:
     images = Renderer(width, height, device=device).render(scene, cams)
     rgb = images["rgb"]
     if sensor_values is not None:
-        from warpworm.render.sensor import apply_sensor
-
         rgb = apply_sensor(rgb, seed + np.arange(F), values=sensor_values)
     return (rgb, images) if return_images else rgb
 
@@ -561,8 +542,6 @@ def overhead_camera(centre=(0.045, 0.0, 0.0), distance=0.25, width=320, height=2
                     tilt_deg=0.0) -> CameraModel:
     """A camera ``distance`` [m] above ``centre`` looking down (tilted ``tilt_deg`` toward -y), image +x = world +x:
     the paper's view of the bench."""
-    from warpworm.render import focal_from_fov, look_at
-
     c = np.asarray(centre, np.float64)
     tl = np.radians(tilt_deg)
     eye = c + distance * np.array([0.0, -np.sin(tl), np.cos(tl)])
