@@ -23,8 +23,8 @@ from __future__ import annotations
 
 import warp as wp
 
-from warpworm.render.lens_kernels import lens_inverse32, lens_inverse_next32
 from warpworm.kernels.common import wrow
+from warpworm.render.lens_kernels import lens_inverse32, lens_inverse_next32
 from warpworm.render.raster_math import (
     _EMPTY,
     _TRI_SCALE,
@@ -114,7 +114,9 @@ def covering_key(keys: wp.array2d(dtype=wp.int64), img: int, px: float, py: floa
 @wp.struct
 class GridRays:
     """The world ray through any point of a pinhole grid, without a division per ray: ``d(fx, fy) = origin + fx dx
-    + fy dy`` (a point at camera depth z lies at eye + z d)."""
+    + fy dy`` (a point at camera depth z lies at eye + z d). The colour samples' rays; the labels keep
+    :func:`~warpworm.render.shading.ray_frame`'s per-row form, whose rounding the raster pass's depths match bit for
+    bit."""
 
     origin: wp.vec3
     dx: wp.vec3

@@ -37,7 +37,8 @@ SIGMA_DISP = 5e-4
 PIN_REL = 0.05
 """Default relative tolerance: a parameter is pinned when its acceptable range stays within ± this."""
 TOLERANCE = {"epm_moment": 0.03}
-"""Per-parameter tolerances other than PIN_REL (the EPM moment within 3 %: the calibration's target for a magnet's strength)."""
+"""Per-parameter tolerances other than PIN_REL (the EPM moment within 3 %: the calibration's target for a magnet's
+strength)."""
 ACCEPT_DCHI2 = 3.84
 """Chi-square rise of an acceptable candidate: the 95 % quantile of chi-square with one degree of freedom."""
 PROFILE_FACTOR = 2.5

@@ -135,6 +135,21 @@ def _interp_rows(xp, fp, x):
     return f0 + (f1 - f0) * (x[None, :] - x0) / dx
 
 
+def simulated_table(test: str, hinge_stiffness: float, *, base=None, increments: int = 8, noise: float = 0.0,
+                    rng: np.random.Generator | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The table a bench test of a simulated worm gives: ``test``'s curve (the fits' rig settings,
+    :data:`FIT_SETTINGS`) at ``hinge_stiffness`` [N/rad] with every other parameter at ``base``, ``increments`` load
+    steps; every force times (1 + ``noise`` N(0, 1)) drawn from ``rng``. Returns ``displacement (increments + 1,)``
+    [m] (the first row the unloaded state, 0) and ``force`` [N], as :func:`read_curve` returns a measured table."""
+    fn = ex.compression if test == "compression" else ex.flexure
+    r = fn((hinge_stiffness,), increments=increments, base=base, **FIT_SETTINGS[test])
+    d, f = r["displacement"][:, 0].copy(), r["force"][:, 0].astype(np.float64)
+    d[0] = 0.0  # the unloaded row (measured ~1e-7 m, float32)
+    if noise:
+        f = f * (1.0 + noise * rng.standard_normal(f.shape))
+    return d.astype(np.float64), f
+
+
 def simulate_curves(test: str, hinge_stiffness, displacement, *, base=None, max_increments: int = 24,
                     **kwargs) -> dict:
     """One batch, one world per k_α: the simulated force at the measured displacements.
