@@ -295,230 +295,259 @@ GroupSums = wp.types.vector(length=8, dtype=float)
 """Per-group sample counts and ids, and albedo sums per channel (length MAX_GROUPS)."""
 
 
-@wp.kernel
-def resolve_samples(
-    # Model:
-    triangles: wp.array(dtype=wp.vec3i), tri_label: wp.array(dtype=wp.int32),
-    look: Look, lights: Lights,
-    # Data in:
-    vertices: wp.array2d(dtype=wp.vec3), texcoords: wp.array2d(dtype=wp.vec3),
-    image_world: wp.array(dtype=wp.int32),
-    cam_rot: wp.array(dtype=wp.mat33), cam_trans: wp.array(dtype=wp.vec3), cam_intr: wp.array(dtype=wp.vec4),
-    cam_dist: wp.array(dtype=wp.vec4), cam_k3: wp.array(dtype=float), cam_gain: wp.array(dtype=wp.vec3),
-    sample_intr: wp.array(dtype=wp.vec4),
-    label_key: wp.array2d(dtype=wp.int64), label_mask: wp.array2d(dtype=wp.uint8),
-    sample_key: wp.array2d(dtype=wp.int64),
-    width: int, height: int, span: int, grid_w: int, grid_h: int, margin_x: int, margin_y: int,
-    sub: int, lens: int, write_normals: int, texture_filter: int,
-    # Data out:
-    rgb: wp.array2d(dtype=wp.vec3ub), depth: wp.array2d(dtype=float), seg: wp.array2d(dtype=wp.uint8),
-    worm_mask: wp.array2d(dtype=wp.uint8), normals: wp.array2d(dtype=wp.vec3),
-):
-    """``span`` output pixels of row y of image ``img``; launched as (N, height, ceil(width / span)) (span 1 on
-    CUDA; on the CPU the whole row, so a thread's set-up, its copy of ``look`` and ``lights`` included, is paid once
-    per row).
+def make_resolve_samples(sub: int, lens: bool):
+    """The sample resolve kernel for ``sub`` x ``sub`` colour samples per pixel (>= 1), through each camera's lens
+    (``lens``) or a pinhole: both compile-time constants, so the sample loops unroll (up to ``UNROLL_SIDE`` a side)
+    and the pinhole kernel carries no lens code. Each variant is its own Warp module, compiled on first use
+    (:func:`resolve_samples_kernel`)."""
+    sub = int(sub)
+    lens = bool(lens)
+    lens_i = int(lens)
 
-    ``cam_intr`` (N,): the label grid's pinhole (fx, fy, cx, cy) [px] (``grid_w`` x ``grid_h``; with a lens, the
-    output's K shifted by the widening margins ``margin_x``, ``margin_y`` [px]); ``cam_dist`` (N,) OpenCV's
-    (k1, k2, p1, p2) and ``cam_k3`` (N,) its k3 (read only when ``lens``); ``sample_intr`` (N,) the sample grid's
-    pinhole (the one its raster pass used: ``cam_intr`` times ``sub``, centres shifted by (sub - 1) / 2);
-    ``label_key``/``label_mask`` (N, grid_h * grid_w) and ``sample_key`` (N, sub² grid_h * grid_w) the raster
-    pass's keys and worm silhouette; ``sub`` colour samples per pixel side (>= 1); ``texture_filter`` 1: a pixel
-    whose samples all see the floor (no mesh key, its footprint inside the square) takes the floor's box-filtered
-    albedo over its footprint (:func:`~warpworm.render.shading.floor_albedo_box`) and its first sample's hit for
-    its lighting, not ``sub``² of each. Outputs (N, height * width): 8-bit ``rgb``, camera ``depth`` [m] (0:
-    background), ``seg`` ids, ``worm_mask``, camera-frame ``normals`` when ``write_normals``.
-    """
-    img, y, xb = wp.tid()
-    w = image_world[img]
-    R = cam_rot[img]
-    t = cam_trans[img]
-    k = cam_intr[img]
-    Rt = wp.transpose(R)
-    eye = -(Rt * t)
-    fn = look.floor_normal[wrow(w, look.floor_normal.shape[0])]
-    fa = look.floor_axis[wrow(w, look.floor_axis.shape[0])]
-    fo = look.floor_origin[wrow(w, look.floor_origin.shape[0])]
-    fh = look.floor_half[wrow(w, look.floor_half.shape[0])]
-    bg_top = look.bg_top[wrow(w, look.bg_top.shape[0])]
-    bg_bottom = look.bg_bottom[wrow(w, look.bg_bottom.shape[0])]
-    first = int(-1)
-    if lights.shadows != 0:
-        first = lights.map_first[w]
+    @wp.kernel(name=f"resolve_samples_{sub}x{sub}{'_lens' if lens else ''}", module="unique",
+               module_options={"enable_backward": False, "max_unroll": 16 if sub <= UNROLL_SIDE else UNROLL_SIDE})
+    def resolve_samples(
+        # Model:
+        triangles: wp.array(dtype=wp.vec3i), tri_label: wp.array(dtype=wp.int32),
+        look: Look, lights: Lights,
+        # Data in:
+        vertices: wp.array2d(dtype=wp.vec3), texcoords: wp.array2d(dtype=wp.vec3),
+        image_world: wp.array(dtype=wp.int32),
+        cam_rot: wp.array(dtype=wp.mat33), cam_trans: wp.array(dtype=wp.vec3), cam_intr: wp.array(dtype=wp.vec4),
+        cam_dist: wp.array(dtype=wp.vec4), cam_k3: wp.array(dtype=float), cam_gain: wp.array(dtype=wp.vec3),
+        sample_intr: wp.array(dtype=wp.vec4),
+        label_key: wp.array2d(dtype=wp.int64), label_mask: wp.array2d(dtype=wp.uint8),
+        sample_key: wp.array2d(dtype=wp.int64),
+        width: int, height: int, span: int, grid_w: int, grid_h: int, margin_x: int, margin_y: int,
+        write_normals: int, texture_filter: int,
+        # Data out:
+        rgb: wp.array2d(dtype=wp.vec3ub), depth: wp.array2d(dtype=float), seg: wp.array2d(dtype=wp.uint8),
+        worm_mask: wp.array2d(dtype=wp.uint8), normals: wp.array2d(dtype=wp.vec3),
+    ):
+        """``span`` output pixels of row y of image ``img``; launched as (N, height, ceil(width / span)) (span 1 on
+        CUDA; on the CPU the whole row, so a thread's set-up, its copy of ``look`` and ``lights`` included, is paid once
+        per row).
 
-    fb = wp.cross(fn, fa)
-    floor_eye = wp.vec3(wp.dot(eye - fo, fa), wp.dot(eye - fo, fb), wp.dot(fn, eye))
-    kf = sample_intr[img]
-    rays = grid_rays(Rt, kf)  # the sample grid's world rays
-    fxy = k[0] / k[1]  # the lens Jacobian's aspect terms
-    fyx = k[1] / k[0]
-    fw = grid_w * sub
-    fhgt = grid_h * sub
-    inv_ss = 1.0 / float(sub * sub)
-    inv_sub = 1.0 / float(sub)  # exact for sub = 2, 4
-    transmit = look.floor_transmit[wrow(w, look.floor_transmit.shape[0])]
-    gain = cam_gain[img]
-    # the lens solution of the previous pixel of this thread's run (a warm start for the next)
-    prev_ok = bool(False)
-    prev_u = float(0.0)
-    prev_v = float(0.0)
-    prev_a = float(1.0)
-    prev_b = float(0.0)
-    prev_d = float(1.0)
-    for x in range(xb * span, wp.min(xb * span + span, width)):
-        pix = y * width + x
-        # the pinhole point the pixel centre sees, and d(pinhole px) / d(output px) for its samples
-        u0 = float(x)
-        v0 = float(y)
-        jac = wp.vec4(1.0, 0.0, 0.0, 1.0)
-        ok = bool(True)
-        if lens != 0:
-            # the output's principal point is the label grid's less the widening margins
-            xd = (float(x + margin_x) - k[2]) / k[0]
-            yd = (float(y + margin_y) - k[3]) / k[1]
-            u = float(0.0)
-            v = float(0.0)
-            a = float(1.0)
-            b = float(0.0)
-            d = float(1.0)
-            if prev_ok:  # the pixel to the left solved: start from it (along a CPU thread's row)
-                u, v, a, b, d, ok = lens_inverse_next32(xd, yd, cam_dist[img], cam_k3[img], 1.0 / k[0], prev_u,
-                                                        prev_v, prev_a, prev_b, prev_d)
-            if not ok or not prev_ok:
-                u, v, a, b, d, ok = lens_inverse32(xd, yd, cam_dist[img], cam_k3[img])
-            prev_ok = ok
-            prev_u = u
-            prev_v = v
-            prev_a = a
-            prev_b = b
-            prev_d = d
-            u0 = k[0] * u + k[2]
-            v0 = k[1] * v + k[3]
-            inv_det = 1.0 / (a * d - b * b)
-            jac = wp.vec4(d * inv_det, -b * inv_det * fxy, -b * inv_det * fyx, a * inv_det)
-        if not ok:  # no ray reaches this pixel (the host refuses such lenses; a guard, never data)
-            rgb[img, pix] = wp.vec3ub(wp.uint8(0), wp.uint8(0), wp.uint8(0))
-            depth[img, pix] = 0.0
-            seg[img, pix] = wp.uint8(SEG_BACKGROUND)
-            worm_mask[img, pix] = wp.uint8(0)
+        ``cam_intr`` (N,): the label grid's pinhole (fx, fy, cx, cy) [px] (``grid_w`` x ``grid_h``; with a lens, the
+        output's K shifted by the widening margins ``margin_x``, ``margin_y`` [px]); ``cam_dist`` (N,) OpenCV's
+        (k1, k2, p1, p2) and ``cam_k3`` (N,) its k3 (read only when ``lens``); ``sample_intr`` (N,) the sample grid's
+        pinhole (the one its raster pass used: ``cam_intr`` times ``sub``, centres shifted by (sub - 1) / 2);
+        ``label_key``/``label_mask`` (N, grid_h * grid_w) and ``sample_key`` (N, sub² grid_h * grid_w) the raster
+        pass's keys and worm silhouette; ``sub`` colour samples per pixel side (>= 1); ``texture_filter`` 1: a pixel
+        whose samples all see the floor (no mesh key, its footprint inside the square) takes the floor's box-filtered
+        albedo over its footprint (:func:`~warpworm.render.shading.floor_albedo_box`) and its first sample's hit for
+        its lighting, not ``sub``² of each. Outputs (N, height * width): 8-bit ``rgb``, camera ``depth`` [m] (0:
+        background), ``seg`` ids, ``worm_mask``, camera-frame ``normals`` when ``write_normals``.
+        """
+        img, y, xb = wp.tid()
+        w = image_world[img]
+        R = cam_rot[img]
+        t = cam_trans[img]
+        k = cam_intr[img]
+        Rt = wp.transpose(R)
+        eye = -(Rt * t)
+        fn = look.floor_normal[wrow(w, look.floor_normal.shape[0])]
+        fa = look.floor_axis[wrow(w, look.floor_axis.shape[0])]
+        fo = look.floor_origin[wrow(w, look.floor_origin.shape[0])]
+        fh = look.floor_half[wrow(w, look.floor_half.shape[0])]
+        bg_top = look.bg_top[wrow(w, look.bg_top.shape[0])]
+        bg_bottom = look.bg_bottom[wrow(w, look.bg_bottom.shape[0])]
+        first = int(-1)
+        if lights.shadows != 0:
+            first = lights.map_first[w]
+
+        fb = wp.cross(fn, fa)
+        floor_eye = wp.vec3(wp.dot(eye - fo, fa), wp.dot(eye - fo, fb), wp.dot(fn, eye))
+        kf = sample_intr[img]
+        rays = grid_rays(Rt, kf)  # the sample grid's world rays
+        fxy = k[0] / k[1]  # the lens Jacobian's aspect terms
+        fyx = k[1] / k[0]
+        fw = grid_w * sub
+        fhgt = grid_h * sub
+        inv_ss = 1.0 / float(sub * sub)
+        inv_sub = 1.0 / float(sub)  # exact for sub = 2, 4
+        transmit = look.floor_transmit[wrow(w, look.floor_transmit.shape[0])]
+        gain = cam_gain[img]
+        # the lens solution of the previous pixel of this thread's run (a warm start for the next)
+        prev_ok = bool(False)
+        prev_u = float(0.0)
+        prev_v = float(0.0)
+        prev_a = float(1.0)
+        prev_b = float(0.0)
+        prev_d = float(1.0)
+        for x in range(xb * span, wp.min(xb * span + span, width)):
+            pix = y * width + x
+            # the pinhole point the pixel centre sees, and d(pinhole px) / d(output px) for its samples
+            u0 = float(x)
+            v0 = float(y)
+            jac = wp.vec4(1.0, 0.0, 0.0, 1.0)
+            ok = bool(True)
+            if wp.static(lens):
+                # the output's principal point is the label grid's less the widening margins
+                xd = (float(x + margin_x) - k[2]) / k[0]
+                yd = (float(y + margin_y) - k[3]) / k[1]
+                u = float(0.0)
+                v = float(0.0)
+                a = float(1.0)
+                b = float(0.0)
+                d = float(1.0)
+                if prev_ok:  # the pixel to the left solved: start from it (along a CPU thread's row)
+                    u, v, a, b, d, ok = lens_inverse_next32(xd, yd, cam_dist[img], cam_k3[img], 1.0 / k[0], prev_u,
+                                                            prev_v, prev_a, prev_b, prev_d)
+                if not ok or not prev_ok:
+                    u, v, a, b, d, ok = lens_inverse32(xd, yd, cam_dist[img], cam_k3[img])
+                prev_ok = ok
+                prev_u = u
+                prev_v = v
+                prev_a = a
+                prev_b = b
+                prev_d = d
+                u0 = k[0] * u + k[2]
+                v0 = k[1] * v + k[3]
+                inv_det = 1.0 / (a * d - b * b)
+                jac = wp.vec4(d * inv_det, -b * inv_det * fxy, -b * inv_det * fyx, a * inv_det)
+            if not ok:  # no ray reaches this pixel (the host refuses such lenses; a guard, never data)
+                rgb[img, pix] = wp.vec3ub(wp.uint8(0), wp.uint8(0), wp.uint8(0))
+                depth[img, pix] = 0.0
+                seg[img, pix] = wp.uint8(SEG_BACKGROUND)
+                worm_mask[img, pix] = wp.uint8(0)
+                if write_normals != 0:
+                    normals[img, pix] = wp.vec3(0.0)
+                continue
+
+            # the background's vertical gradient follows the ray: its row in the (widened) pinhole grid
+            bg = wp.lerp(bg_top, bg_bottom, v0 / float(grid_h))
+
+            # labels: the label grid's nearest key, the surface on the exact ray (the plain pass's ops without a lens)
+            d0, dx = ray_frame(Rt, k, v0)
+            d_world = d0 + u0 * dx
+            fr = floor_row(fn, fa, fo, fh, eye, d0, dx)
+            lkey = wp.int64(0)
+            if wp.static(lens):  # between texel centres: the texels' triangle that the exact ray hits
+                lkey = covering_key(label_key, img, u0, v0, grid_w, grid_h, triangles, vertices, w, R, t, k)
+            else:
+                lkey = label_key[img, grid_key_index(u0, v0, grid_w, grid_h)]
+            mz, mlabel, n_world, mmat = mesh_surface(lkey, triangles, tri_label, vertices, texcoords, w, R, t, k, u0,
+                                                     v0, eye, d_world)
+            best_z, label, mat = nearer_floor(fr, u0, mz, mlabel, mmat)
             if write_normals != 0:
-                normals[img, pix] = wp.vec3(0.0)
-            continue
+                nrm = wp.vec3(0.0)
+                if label == SEG_FLOOR:
+                    nrm = fn
+                elif label != SEG_BACKGROUND:
+                    nrm = n_world
+                    if wp.dot(n_world, -d_world) < 0.0:
+                        nrm = -n_world
+                normals[img, pix] = R * nrm
+            if label == SEG_BACKGROUND:
+                best_z = 0.0
+            depth[img, pix] = best_z
+            out_label = label
+            if out_label > SEG_EPM:
+                out_label = SEG_FLOOR  # a distractor object (its own albedo row): static scene, the floor's id
+            seg[img, pix] = wp.uint8(out_label)
+            worm_mask[img, pix] = label_mask[img, grid_key_index(u0, v0, grid_w, grid_h)]
 
-        # the background's vertical gradient follows the ray: its row in the (widened) pinhole grid
-        bg = wp.lerp(bg_top, bg_bottom, v0 / float(grid_h))
+            # colour: sub x sub samples, grouped by the surface they land on: the first sample's surface in registers
+            # (most pixels see one surface), the next MAX_GROUPS - 1 surfaces in small vectors
+            hit0 = Hit()
+            count0 = int(0)
+            alb0 = wp.vec3(0.0)
+            gid = GroupIds()
+            gfirst = GroupIds()
+            gcount = GroupIds()
+            gr = GroupSums()
+            gg = GroupSums()
+            gb = GroupSums()
+            ng = int(0)
+            acc = wp.vec3(0.0)
+            nsub = sub
+            if texture_filter != 0 and sub > 1:
+                # a pixel wholly on the floor: the texture filtered over its footprint, the first sample lit
+                on_floor = bool(True)
+                for j in range(sub):
+                    for i in range(sub):
+                        fx, fy = sample_point(x, y, i, j, sub, inv_sub, lens_i, u0, v0, jac)
+                        if sample_key[img, grid_key_index(fx, fy, fw, fhgt)] != _EMPTY:
+                            on_floor = False
+                if on_floor:
+                    half_sub = 0.5 * float(sub - 1)
+                    fp = floor_footprint(float(sub) * u0 + half_sub, float(sub) * v0 + half_sub, jac, sub, rays, fn,
+                                         fa, fb, floor_eye, fh)
+                    if fp[2] >= 0.0:  # the whole pixel on the square (its samples lie inside the pixel's edges)
+                        fx, fy = sample_point(x, y, 0, 0, sub, inv_sub, lens_i, u0, v0, jac)
+                        nsub = 0
+                        hit0 = sample_hit(sample_key, img, fx, fy, fw, fhgt, triangles, tri_label, vertices, texcoords, w,
+                                          R, t, rays, kf, eye, fn, fa, fb, floor_eye, fh)
+                        count0 = sub * sub
+                        alb0 = floor_albedo_box_at(look, w, wp.vec3(fp[0], fp[1], 0.0), fp[2], fp[3]) * float(count0)
+            if nsub != 0:  # not a floor pixel filtered above
+                for j in range(sub):
+                    for i in range(sub):
+                        fx, fy = sample_point(x, y, i, j, sub, inv_sub, lens_i, u0, v0, jac)
+                        hit = sample_hit(sample_key, img, fx, fy, fw, fhgt, triangles, tri_label, vertices, texcoords, w, R,
+                                         t, rays, kf, eye, fn, fa, fb, floor_eye, fh)
+                        alb = surface_albedo(look, w, hit.label, hit.mat)
+                        if count0 == 0:
+                            hit0 = hit
+                            count0 = 1
+                            alb0 = alb
+                        elif hit.surface == hit0.surface:
+                            count0 = count0 + 1
+                            alb0 = alb0 + alb
+                        else:
+                            g = int(-1)
+                            for q in range(ng):
+                                if gid[q] == hit.surface:
+                                    g = q
+                            if g < 0 and ng < MAX_GROUPS - 1:
+                                g = ng
+                                gid[g] = hit.surface
+                                gfirst[g] = j * sub + i
+                                gcount[g] = 0
+                                gr[g] = 0.0
+                                gg[g] = 0.0
+                                gb[g] = 0.0
+                                ng = ng + 1
+                            if g < 0:  # every group taken (more than MAX_GROUPS surfaces): counted with the last
+                                g = ng - 1
+                            gcount[g] = gcount[g] + 1
+                            gr[g] = gr[g] + alb[0]
+                            gg[g] = gg[g] + alb[1]
+                            gb[g] = gb[g] + alb[2]
+            # each surface lit once with its samples' mean albedo, at one call site (the lighting code inlined once)
+            for g in range(ng + 1):
+                hit = hit0
+                count = count0
+                alb = alb0 * (1.0 / float(count0))
+                if g > 0:  # the first sample of each further surface, again
+                    first_sample = gfirst[g - 1]
+                    fx, fy = sample_point(x, y, first_sample % sub, first_sample / sub, sub, inv_sub, lens_i, u0,
+                                          v0, jac)
+                    hit = sample_hit(sample_key, img, fx, fy, fw, fhgt, triangles, tri_label, vertices, texcoords, w, R,
+                                     t, rays, kf, eye, fn, fa, fb, floor_eye, fh)
+                    count = gcount[g - 1]
+                    inv_n = 1.0 / float(count)
+                    alb = wp.vec3(gr[g - 1] * inv_n, gg[g - 1] * inv_n, gb[g - 1] * inv_n)
+                color = shade_sample(look, lights, w, first, hit, alb, eye, bg, transmit, gain)
+                acc = acc + color * float(count)
+            acc = acc * inv_ss
+            rgb[img, pix] = wp.vec3ub(to_srgb8(acc[0]), to_srgb8(acc[1]), to_srgb8(acc[2]))
 
-        # labels: the label grid's nearest key, the surface on the exact ray (the plain pass's ops without a lens)
-        d0, dx = ray_frame(Rt, k, v0)
-        d_world = d0 + u0 * dx
-        fr = floor_row(fn, fa, fo, fh, eye, d0, dx)
-        lkey = wp.int64(0)
-        if lens != 0:  # between texel centres: the texels' triangle that the exact ray hits
-            lkey = covering_key(label_key, img, u0, v0, grid_w, grid_h, triangles, vertices, w, R, t, k)
-        else:
-            lkey = label_key[img, grid_key_index(u0, v0, grid_w, grid_h)]
-        mz, mlabel, n_world, mmat = mesh_surface(lkey, triangles, tri_label, vertices, texcoords, w, R, t, k, u0,
-                                                 v0, eye, d_world)
-        best_z, label, mat = nearer_floor(fr, u0, mz, mlabel, mmat)
-        if write_normals != 0:
-            nrm = wp.vec3(0.0)
-            if label == SEG_FLOOR:
-                nrm = fn
-            elif label != SEG_BACKGROUND:
-                nrm = n_world
-                if wp.dot(n_world, -d_world) < 0.0:
-                    nrm = -n_world
-            normals[img, pix] = R * nrm
-        if label == SEG_BACKGROUND:
-            best_z = 0.0
-        depth[img, pix] = best_z
-        out_label = label
-        if out_label > SEG_EPM:
-            out_label = SEG_FLOOR  # a distractor object (its own albedo row): static scene, the floor's id
-        seg[img, pix] = wp.uint8(out_label)
-        worm_mask[img, pix] = label_mask[img, grid_key_index(u0, v0, grid_w, grid_h)]
+    return resolve_samples
 
-        # colour: sub x sub samples, grouped by the surface they land on: the first sample's surface in registers
-        # (most pixels see one surface), the next MAX_GROUPS - 1 surfaces in small vectors
-        hit0 = Hit()
-        count0 = int(0)
-        alb0 = wp.vec3(0.0)
-        gid = GroupIds()
-        gfirst = GroupIds()
-        gcount = GroupIds()
-        gr = GroupSums()
-        gg = GroupSums()
-        gb = GroupSums()
-        ng = int(0)
-        acc = wp.vec3(0.0)
-        nsub = sub
-        if texture_filter != 0 and sub > 1:
-            # a pixel wholly on the floor: the texture filtered over its footprint, the first sample lit
-            on_floor = bool(True)
-            for j in range(sub):
-                for i in range(sub):
-                    fx, fy = sample_point(x, y, i, j, sub, inv_sub, lens, u0, v0, jac)
-                    if sample_key[img, grid_key_index(fx, fy, fw, fhgt)] != _EMPTY:
-                        on_floor = False
-            if on_floor:
-                half_sub = 0.5 * float(sub - 1)
-                fp = floor_footprint(float(sub) * u0 + half_sub, float(sub) * v0 + half_sub, jac, sub, rays, fn,
-                                     fa, fb, floor_eye, fh)
-                if fp[2] >= 0.0:  # the whole pixel on the square (its samples lie inside the pixel's edges)
-                    fx, fy = sample_point(x, y, 0, 0, sub, inv_sub, lens, u0, v0, jac)
-                    nsub = 0
-                    hit0 = sample_hit(sample_key, img, fx, fy, fw, fhgt, triangles, tri_label, vertices, texcoords, w,
-                                      R, t, rays, kf, eye, fn, fa, fb, floor_eye, fh)
-                    count0 = sub * sub
-                    alb0 = floor_albedo_box_at(look, w, wp.vec3(fp[0], fp[1], 0.0), fp[2], fp[3]) * float(count0)
-        for j in range(nsub):
-            for i in range(nsub):
-                fx, fy = sample_point(x, y, i, j, sub, inv_sub, lens, u0, v0, jac)
-                hit = sample_hit(sample_key, img, fx, fy, fw, fhgt, triangles, tri_label, vertices, texcoords, w, R,
-                                 t, rays, kf, eye, fn, fa, fb, floor_eye, fh)
-                alb = surface_albedo(look, w, hit.label, hit.mat)
-                if count0 == 0:
-                    hit0 = hit
-                    count0 = 1
-                    alb0 = alb
-                elif hit.surface == hit0.surface:
-                    count0 = count0 + 1
-                    alb0 = alb0 + alb
-                else:
-                    g = int(-1)
-                    for q in range(ng):
-                        if gid[q] == hit.surface:
-                            g = q
-                    if g < 0 and ng < MAX_GROUPS - 1:
-                        g = ng
-                        gid[g] = hit.surface
-                        gfirst[g] = j * sub + i
-                        gcount[g] = 0
-                        gr[g] = 0.0
-                        gg[g] = 0.0
-                        gb[g] = 0.0
-                        ng = ng + 1
-                    if g < 0:  # every group taken (more than MAX_GROUPS surfaces): counted with the last
-                        g = ng - 1
-                    gcount[g] = gcount[g] + 1
-                    gr[g] = gr[g] + alb[0]
-                    gg[g] = gg[g] + alb[1]
-                    gb[g] = gb[g] + alb[2]
-        # each surface lit once with its samples' mean albedo, at one call site (the lighting code inlined once)
-        for g in range(ng + 1):
-            hit = hit0
-            count = count0
-            alb = alb0 * (1.0 / float(count0))
-            if g > 0:  # the first sample of each further surface, again
-                first_sample = gfirst[g - 1]
-                fx, fy = sample_point(x, y, first_sample % sub, first_sample / sub, sub, inv_sub, lens, u0,
-                                      v0, jac)
-                hit = sample_hit(sample_key, img, fx, fy, fw, fhgt, triangles, tri_label, vertices, texcoords, w, R,
-                                 t, rays, kf, eye, fn, fa, fb, floor_eye, fh)
-                count = gcount[g - 1]
-                inv_n = 1.0 / float(count)
-                alb = wp.vec3(gr[g - 1] * inv_n, gg[g - 1] * inv_n, gb[g - 1] * inv_n)
-            color = shade_sample(look, lights, w, first, hit, alb, eye, bg, transmit, gain)
-            acc = acc + color * float(count)
-        acc = acc * inv_ss
-        rgb[img, pix] = wp.vec3ub(to_srgb8(acc[0]), to_srgb8(acc[1]), to_srgb8(acc[2]))
+
+UNROLL_SIDE = 4
+"""Sample loops of at most this many samples a side unroll (4 x 4 = 16 inlined samples); longer ones stay loops (code
+size and compile time), as do the kernel's other loops longer than this."""
+
+_RESOLVE_SAMPLES: dict = {}
+
+
+def resolve_samples_kernel(sub: int, lens: bool):
+    """The :func:`make_resolve_samples` kernel for (``sub``, ``lens``), made once per process."""
+    key = (int(sub), bool(lens))
+    kernel = _RESOLVE_SAMPLES.get(key)
+    if kernel is None:
+        kernel = _RESOLVE_SAMPLES[key] = make_resolve_samples(*key)
+    return kernel

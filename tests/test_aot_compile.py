@@ -70,17 +70,21 @@ def kernel_modules() -> list[str]:
 def factory_modules(skip=()) -> list[str]:
     """Names of the kernel modules that building a :class:`~warpworm.sim.simulator.Simulator` for every solver in
     ``simulator.SOLVERS`` creates beyond ``skip`` (kernels made by a factory for the worm's shape, each its own
-    ``module="unique"`` module, e.g. the block-per-world tile substeps), on a one-world CPU model."""
+    ``module="unique"`` module, e.g. the block-per-world tile substeps), on a one-world CPU model, and the renderer's
+    2 x 2 lens sample resolve (a factory kernel specialized on the sample count and the lens)."""
     from warp._src.context import user_modules
 
     from warpworm.physics import gaits
     from warpworm.sim.model import Model
     from warpworm.sim.simulator import SOLVERS, Simulator
 
+    from warpworm.render.sample_kernels import resolve_samples_kernel
+
     before = set(user_modules)
     model = Model.from_params(gaits.preset_params("peristaltic"), 1, "cpu")
     for solver in SOLVERS:
         Simulator(model, solver=solver)
+    resolve_samples_kernel(2, True)  # the renderer's sample resolve, as production's images take it
     return [n for n in list(user_modules) if n not in before and n not in skip and user_modules[n].kernels]
 
 
@@ -98,7 +102,8 @@ def test_kernel_modules_are_discovered():
     from warpworm.sim.simulator import SOLVERS
 
     tiles = [s for s in SOLVERS if s.startswith("tile-")]
-    assert len(MODULES) - len(FILE_MODULES) >= len(tiles), (MODULES, SOLVERS)
+    assert len(MODULES) - len(FILE_MODULES) >= len(tiles) + 1, (MODULES, SOLVERS)
+    assert any(n.startswith("resolve_samples_2x2_lens") for n in MODULES), MODULES
 
 
 def _compile(name: str):

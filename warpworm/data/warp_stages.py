@@ -21,6 +21,7 @@ from warpworm.render.labels import KEYPOINT_NAMES, schema_labels
 from warpworm.render.motion import motion_blurred_rgb
 from warpworm.render.pathtrace import choose_pathtraced, render_pathtraced
 from warpworm.render.placement import distractor_mesh
+from warpworm.render.sample_kernels import resolve_samples_kernel
 from warpworm.render.sensor import SensorBatch, apply_sensor_batch, exposure_gains
 from warpworm.sim.model import Model
 from warpworm.sim.simulator import Simulator
@@ -70,10 +71,9 @@ class WarpStages:
                 max_workers = len(os.sched_getaffinity(0))
             except AttributeError:  # pragma: no cover - not Linux
                 max_workers = os.cpu_count() or 1
-        # the sample resolve only where the config supersamples or has a lens
-        needs_samples = cfg.render.supersample > 1 or cfg.render.distortion
-        modules = [wp.get_module(n) for n in self.kernel_modules()
-                   if needs_samples or n != "warpworm.render.sample_kernels"]
+        modules = [wp.get_module(n) for n in self.kernel_modules() if n != "warpworm.render.sample_kernels"]
+        if cfg.render.supersample > 1 or cfg.render.distortion:  # the sample resolve the config's images take
+            modules.append(resolve_samples_kernel(max(cfg.render.supersample, 1), cfg.render.distortion).module)
         wp.force_load(device=cfg.sim.device, modules=modules, max_workers=max_workers)
 
     def _pattern(self, n_units: int):
