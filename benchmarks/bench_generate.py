@@ -33,9 +33,9 @@ HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 JOB = ["production", "--num", "128", "sim.worlds=16", "output.preview=false", "--workers", "1"]
 QUICK_JOB = ["production", "--num", "32", "sim.worlds=4", "output.preview=false", "--workers", "1"]
-NOTES = ("cpu_s: user + system CPU seconds of the whole job process; sim_s/render_s/write_s: the job's stage times "
-         "(manifest summary); render_over_sim: the issue's 'render stage <= sim stage'; cpu_ratio: this tree's CPU over "
-         "the reference's in the same round (median over rounds), samples_per_cpu_gain = 1 / cpu_ratio")
+NOTES = ("cpu_s: user + system CPU seconds of the whole job process; sim_s/render_s/write_s: the job's stage "
+         "times (manifest summary); render_over_sim: the issue's 'render stage <= sim stage'; cpu_ratio: this tree's "
+         "CPU over the reference's in the same round (median over rounds), samples_per_cpu_gain = 1 / cpu_ratio")
 
 
 def run_job(python: str, job: list[str]) -> dict:

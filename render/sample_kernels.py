@@ -477,16 +477,16 @@ def make_resolve_samples(sub: int, lens: bool):
                     if fp[2] >= 0.0:  # the whole pixel on the square (its samples lie inside the pixel's edges)
                         fx, fy = sample_point(x, y, 0, 0, sub, inv_sub, lens_i, u0, v0, jac)
                         nsub = 0
-                        hit0 = sample_hit(sample_key, img, fx, fy, fw, fhgt, triangles, tri_label, vertices, texcoords, w,
-                                          R, t, rays, kf, eye, fn, fa, fb, floor_eye, fh)
+                        hit0 = sample_hit(sample_key, img, fx, fy, fw, fhgt, triangles, tri_label, vertices,
+                                          texcoords, w, R, t, rays, kf, eye, fn, fa, fb, floor_eye, fh)
                         count0 = sub * sub
                         alb0 = floor_albedo_box_at(look, w, wp.vec3(fp[0], fp[1], 0.0), fp[2], fp[3]) * float(count0)
             if nsub != 0:  # not a floor pixel filtered above
                 for j in range(sub):
                     for i in range(sub):
                         fx, fy = sample_point(x, y, i, j, sub, inv_sub, lens_i, u0, v0, jac)
-                        hit = sample_hit(sample_key, img, fx, fy, fw, fhgt, triangles, tri_label, vertices, texcoords, w, R,
-                                         t, rays, kf, eye, fn, fa, fb, floor_eye, fh)
+                        hit = sample_hit(sample_key, img, fx, fy, fw, fhgt, triangles, tri_label, vertices,
+                                         texcoords, w, R, t, rays, kf, eye, fn, fa, fb, floor_eye, fh)
                         alb = surface_albedo(look, w, hit.label, hit.mat)
                         if count0 == 0:
                             hit0 = hit
