@@ -321,7 +321,7 @@ class Renderer:
                 self._get_buffers(chunk, (gw, gh), sub, slot)
             view = (left, top, gw, gh, sub, lens)
             if sub:  # the sample resolve's module, loaded before any stream launches it
-                wp.load_module(sk.resolve_samples_kernel(sub, lens).module, device=d)
+                wp.load_module(sk.resolve_samples_kernel(sub, lens, normals, self.texture_filter).module, device=d)
 
             def stream(slot: int) -> None:
                 for start, stop in pieces[slot::T]:
@@ -414,12 +414,11 @@ class Renderer:
                               gh * sub, self.near],
                       outputs=[b["fine_key"], b["fine_mask"], self._no_tiles])
             span = self.width if d.is_cpu else 1
-            wp.launch(sk.resolve_samples_kernel(sub, lens), dim=(n, self.height, (self.width + span - 1) // span),
-                      device=d,
+            resolve = sk.resolve_samples_kernel(sub, lens, normals, self.texture_filter)
+            wp.launch(resolve, dim=(n, self.height, (self.width + span - 1) // span), device=d,
                       inputs=[s["triangles"], s["tri_label"], s["look"], lights, s["vertices"], s["texcoords"],
                               *common, b["cam_intr"], b["cam_dist"], b["cam_k3"], b["cam_gain"], b["fine_intr"],
-                              b["zkey"], b["mask"], b["fine_key"], self.width, self.height, span, gw, gh, left, top,
-                              int(normals), int(self.texture_filter)],
+                              b["zkey"], b["mask"], b["fine_key"], self.width, self.height, span, gw, gh, left, top],
                       outputs=[out["rgb"], out["depth"], out["seg"], out["worm_mask"], out_normals])
         if sensor is not None:
             if "sensor" not in b:

@@ -295,16 +295,21 @@ GroupSums = wp.types.vector(length=8, dtype=float)
 """Per-group sample counts and ids, and albedo sums per channel (length MAX_GROUPS)."""
 
 
-def make_resolve_samples(sub: int, lens: bool):
+def make_resolve_samples(sub: int, lens: bool, normals: bool = False, texture_filter: bool = True):
     """The sample resolve kernel for ``sub`` x ``sub`` colour samples per pixel (>= 1), through each camera's lens
-    (``lens``) or a pinhole: both compile-time constants, so the sample loops unroll (up to ``UNROLL_SIDE`` a side)
-    and the pinhole kernel carries no lens code. Each variant is its own Warp module, compiled on first use
+    (``lens``) or a pinhole, writing camera-frame ``normals`` or not, with the floor's ``texture_filter`` or not: all
+    compile-time constants, so the sample loops unroll (up to ``UNROLL_SIDE`` a side) and a kernel carries no code
+    for what it does not do. Each variant is its own Warp module, compiled on first use
     (:func:`resolve_samples_kernel`)."""
     sub = int(sub)
     lens = bool(lens)
     lens_i = int(lens)
+    write_normals = bool(normals)  # (``normals`` is also the output array's name inside the kernel)
+    filtered = bool(texture_filter) and sub > 1
+    name = (f"resolve_samples_{sub}x{sub}{'_lens' if lens else ''}{'_normals' if write_normals else ''}"
+            f"{'' if texture_filter else '_unfiltered'}")
 
-    @wp.kernel(name=f"resolve_samples_{sub}x{sub}{'_lens' if lens else ''}", module="unique",
+    @wp.kernel(name=name, module="unique",
                module_options={"enable_backward": False, "max_unroll": 16 if sub <= UNROLL_SIDE else UNROLL_SIDE})
     def resolve_samples(
         # Model:
@@ -319,7 +324,6 @@ def make_resolve_samples(sub: int, lens: bool):
         label_key: wp.array2d(dtype=wp.int64), label_mask: wp.array2d(dtype=wp.uint8),
         sample_key: wp.array2d(dtype=wp.int64),
         width: int, height: int, span: int, grid_w: int, grid_h: int, margin_x: int, margin_y: int,
-        write_normals: int, texture_filter: int,
         # Data out:
         rgb: wp.array2d(dtype=wp.vec3ub), depth: wp.array2d(dtype=float), seg: wp.array2d(dtype=wp.uint8),
         worm_mask: wp.array2d(dtype=wp.uint8), normals: wp.array2d(dtype=wp.vec3),
@@ -333,11 +337,12 @@ def make_resolve_samples(sub: int, lens: bool):
         (k1, k2, p1, p2) and ``cam_k3`` (N,) its k3 (read only when ``lens``); ``sample_intr`` (N,) the sample grid's
         pinhole (the one its raster pass used: ``cam_intr`` times ``sub``, centres shifted by (sub - 1) / 2);
         ``label_key``/``label_mask`` (N, grid_h * grid_w) and ``sample_key`` (N, sub² grid_h * grid_w) the raster
-        pass's keys and worm silhouette; ``sub`` colour samples per pixel side (>= 1); ``texture_filter`` 1: a pixel
+        pass's keys and worm silhouette; ``sub`` colour samples per pixel side (>= 1); with ``texture_filter``, a pixel
         whose samples all see the floor (no mesh key, its footprint inside the square) takes the floor's box-filtered
         albedo over its footprint (:func:`~warpworm.render.shading.floor_albedo_box`) and its first sample's hit for
         its lighting, not ``sub``² of each. Outputs (N, height * width): 8-bit ``rgb``, camera ``depth`` [m] (0:
-        background), ``seg`` ids, ``worm_mask``, camera-frame ``normals`` when ``write_normals``.
+        background), ``seg`` ids, ``worm_mask``, camera-frame ``normals`` when the variant writes them (else a
+        placeholder, not written).
         """
         img, y, xb = wp.tid()
         w = image_world[img]
@@ -411,7 +416,7 @@ def make_resolve_samples(sub: int, lens: bool):
                 depth[img, pix] = 0.0
                 seg[img, pix] = wp.uint8(SEG_BACKGROUND)
                 worm_mask[img, pix] = wp.uint8(0)
-                if write_normals != 0:
+                if wp.static(write_normals):
                     normals[img, pix] = wp.vec3(0.0)
                 continue
 
@@ -430,7 +435,7 @@ def make_resolve_samples(sub: int, lens: bool):
             mz, mlabel, n_world, mmat = mesh_surface(lkey, triangles, tri_label, vertices, texcoords, w, R, t, k, u0,
                                                      v0, eye, d_world)
             best_z, label, mat = nearer_floor(fr, u0, mz, mlabel, mmat)
-            if write_normals != 0:
+            if wp.static(write_normals):
                 nrm = wp.vec3(0.0)
                 if label == SEG_FLOOR:
                     nrm = fn
@@ -462,7 +467,7 @@ def make_resolve_samples(sub: int, lens: bool):
             ng = int(0)
             acc = wp.vec3(0.0)
             nsub = sub
-            if texture_filter != 0 and sub > 1:
+            if wp.static(filtered):
                 # a pixel wholly on the floor: the texture filtered over its footprint, the first sample lit
                 on_floor = bool(True)
                 for j in range(sub):
@@ -544,9 +549,9 @@ size and compile time), as do the kernel's other loops longer than this."""
 _RESOLVE_SAMPLES: dict = {}
 
 
-def resolve_samples_kernel(sub: int, lens: bool):
-    """The :func:`make_resolve_samples` kernel for (``sub``, ``lens``), made once per process."""
-    key = (int(sub), bool(lens))
+def resolve_samples_kernel(sub: int, lens: bool, normals: bool = False, texture_filter: bool = True):
+    """The :func:`make_resolve_samples` kernel for these values, made once per process."""
+    key = (int(sub), bool(lens), bool(normals), bool(texture_filter))
     kernel = _RESOLVE_SAMPLES.get(key)
     if kernel is None:
         kernel = _RESOLVE_SAMPLES[key] = make_resolve_samples(*key)
