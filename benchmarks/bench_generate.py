@@ -66,8 +66,12 @@ def run_job(python: str, job: list[str]) -> dict:
 def reference_python(commit: str, cache: Path) -> str:
     """An interpreter with ``commit`` of this repository installed (editable, no dependencies: the ones this
     environment has), made once under ``cache``."""
-    sha = subprocess.run(["git", "rev-parse", "--verify", f"{commit}^{{commit}}"], cwd=REPO, check=True,
-                         capture_output=True, text=True).stdout.strip()
+    found = subprocess.run(["git", "rev-parse", "--verify", f"{commit}^{{commit}}"], cwd=REPO, capture_output=True,
+                           text=True)
+    if found.returncode != 0:
+        raise SystemExit(f"--reference: got {commit!r}; expected a commit of the git checkout at {REPO} "
+                         f"(git: {found.stderr.strip() or 'not a repository'}); or give --reference-python")
+    sha = found.stdout.strip()
     tree = cache / sha[:12]
     python = tree / ".venv" / "bin" / "python"
     if not python.exists():
