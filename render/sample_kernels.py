@@ -21,6 +21,8 @@ grid* ``s`` times finer. An output pixel
 
 from __future__ import annotations
 
+import threading
+
 import warp as wp
 
 from warpworm.kernels.common import wrow
@@ -310,7 +312,8 @@ def make_resolve_samples(sub: int, lens: bool, normals: bool = False, texture_fi
             f"{'' if texture_filter else '_unfiltered'}")
 
     @wp.kernel(name=name, module="unique",
-               module_options={"enable_backward": False, "max_unroll": 16 if sub <= UNROLL_SIDE else UNROLL_SIDE})
+               module_options={"enable_backward": False,
+                               "max_unroll": wp.config.max_unroll if sub <= UNROLL_SIDE else UNROLL_SIDE})
     def resolve_samples(
         # Model:
         triangles: wp.array(dtype=wp.vec3i), tri_label: wp.array(dtype=wp.int32),
@@ -547,12 +550,15 @@ UNROLL_SIDE = 4
 size and compile time), as do the kernel's other loops longer than this."""
 
 _RESOLVE_SAMPLES: dict = {}
+_RESOLVE_SAMPLES_LOCK = threading.Lock()
 
 
 def resolve_samples_kernel(sub: int, lens: bool, normals: bool = False, texture_filter: bool = True):
-    """The :func:`make_resolve_samples` kernel for these values, made once per process."""
+    """The :func:`make_resolve_samples` kernel for these values, made once per process (renderers in several threads
+    share it)."""
     key = (int(sub), bool(lens), bool(normals), bool(texture_filter))
-    kernel = _RESOLVE_SAMPLES.get(key)
-    if kernel is None:
-        kernel = _RESOLVE_SAMPLES[key] = make_resolve_samples(*key)
+    with _RESOLVE_SAMPLES_LOCK:
+        kernel = _RESOLVE_SAMPLES.get(key)
+        if kernel is None:
+            kernel = _RESOLVE_SAMPLES[key] = make_resolve_samples(*key)
     return kernel
