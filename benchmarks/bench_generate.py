@@ -100,7 +100,8 @@ def alternated(trees: dict[str, str], job: list[str], rounds: int, log=print) ->
 
 
 def summarize(rows: list[dict], new: str = "this", ref: str = "reference") -> list[dict]:
-    """Per tree: medians (and the render/sim range); with a reference, the CPU ratio round by round."""
+    """Per tree: medians, the render/sim range and how many runs had render <= sim; with a reference, the CPU ratio
+    round by round (median, range)."""
     out = []
     for name in dict.fromkeys(r["tree"] for r in rows):
         mine = [r for r in rows if r["tree"] == name]
@@ -108,7 +109,8 @@ def summarize(rows: list[dict], new: str = "this", ref: str = "reference") -> li
         out.append({"tree": name, "runs": len(mine),
                     **{k: statistics.median(r[k] for r in mine) for k in ("cpu_s", "sim_s", "render_s", "write_s",
                                                                          "samples_per_cpu_s")},
-                    "render_over_sim": statistics.median(ros), "render_over_sim_max": max(ros),
+                    "render_over_sim": statistics.median(ros), "render_over_sim_min": min(ros),
+                    "render_over_sim_max": max(ros),
                     "runs_render_le_sim": sum(x <= 1.0 for x in ros)})
     by_round = {}
     for r in rows:
