@@ -15,8 +15,6 @@ replay calls.pkl --images 8 --repeats 2``, whose Warp kernels are the code valgr
 from __future__ import annotations
 
 import argparse
-import collections
-import dataclasses
 import os
 import pickle
 import shutil
@@ -25,7 +23,7 @@ import tempfile
 import time
 
 import numpy as np
-import warp as wp
+from profile_step import launch_timers  # benchmarks/: per-kernel CPU time of every launch in a block
 
 from warpworm import quiet_warp
 from warpworm.render import rasterizer
@@ -62,12 +60,9 @@ def capture(path: str, config: str, num: int, overrides: list[str]) -> int:
 def _first(call, n: int):
     """``call`` cut to its first ``n`` images (cameras and sensor values alike)."""
     settings, scene, cameras, kw = call
-    cameras = cameras.take(np.arange(n))
-    sensor = kw.get("sensor")
-    if sensor is not None:
-        kw = {**kw, "sensor": type(sensor)(**{f.name: np.asarray(getattr(sensor, f.name))[:n]
-                                              for f in dataclasses.fields(sensor)})}
-    return settings, scene, cameras, kw
+    if kw.get("sensor") is not None:
+        kw = {**kw, "sensor": kw["sensor"].take(slice(0, n))}
+    return settings, scene, cameras.take(np.arange(n)), kw
 
 
 def replay(path: str, images: int = 0, repeats: int = 3) -> tuple[dict, dict]:
@@ -77,15 +72,6 @@ def replay(path: str, images: int = 0, repeats: int = 3) -> tuple[dict, dict]:
         calls = pickle.load(f)
     if images:
         calls = [_first(calls[0], images)]
-    spent = collections.defaultdict(float)
-    launch = wp.launch
-
-    def timed(kernel, *args, **kw):
-        t = time.process_time()
-        result = launch(kernel, *args, **kw)
-        spent[getattr(kernel, "key", "?")] += time.process_time() - t
-        return result
-
     renderers = [rasterizer.Renderer(**settings) for settings, *_ in calls]
 
     def render_all():
@@ -94,17 +80,13 @@ def replay(path: str, images: int = 0, repeats: int = 3) -> tuple[dict, dict]:
     outputs = render_all()  # kernel load
     n = sum(o["rgb"].shape[0] for o in outputs)
     best = {}
-    wp.launch = timed
-    try:
-        for _ in range(repeats):
-            spent.clear()
+    for _ in range(repeats):
+        with launch_timers() as spent:  # {kernel: [wall s, CPU s, launches]}
             t = time.process_time()
             outputs = render_all()
             total = time.process_time() - t
-            for k, v in [("render", total), *spent.items()]:
-                best[k] = min(best.get(k, float("inf")), v * 1e3 / n)
-    finally:
-        wp.launch = launch
+        for k, v in [("render", total), *((k, a[1]) for k, a in spent.items())]:
+            best[k] = min(best.get(k, float("inf")), v * 1e3 / n)
     arrays = {k: np.concatenate([o[k] for o in outputs]) for k in outputs[0] if isinstance(outputs[0][k], np.ndarray)}
     return best, arrays
 

@@ -319,9 +319,11 @@ class Renderer:
             pieces = [(start, min(N, start + chunk)) for start in range(0, N, chunk)]
             for slot in range(T):  # allocate every stream's buffers before any thread starts
                 self._get_buffers(chunk, (gw, gh), sub, slot)
-            view = (left, top, gw, gh, sub, lens)
-            if sub:  # the sample resolve's module, loaded before any stream launches it
-                wp.load_module(sk.resolve_samples_kernel(sub, lens, normals, self.texture_filter).module, device=d)
+            # the sample resolve this batch takes (None: the plain pixel-centre path), loaded before any stream
+            resolve = sk.resolve_samples_kernel(sub, lens, normals, self.texture_filter) if sub else None
+            if resolve is not None:
+                wp.load_module(resolve.module, device=d)
+            view = (left, top, gw, gh, sub, lens, resolve)
 
             def stream(slot: int) -> None:
                 for start, stop in pieces[slot::T]:
@@ -350,7 +352,7 @@ class Renderer:
                       slot: int, res: dict, sensor: SensorBatch | None) -> None:
         """Images ``start:stop`` into the outputs ``res`` (device arrays (N, H*W)): camera uploads, shadow maps,
         raster pass(es), resolve, sensor."""
-        left, top, gw, gh, sub, lens = view
+        left, top, gw, gh, sub, lens, resolve = view
         n = stop - start
         b = self._get_buffers(chunk, (gw, gh), sub, slot)
         K = cameras.K[start:stop]
@@ -414,7 +416,6 @@ class Renderer:
                               gh * sub, self.near],
                       outputs=[b["fine_key"], b["fine_mask"], self._no_tiles])
             span = self.width if d.is_cpu else 1
-            resolve = sk.resolve_samples_kernel(sub, lens, normals, self.texture_filter)
             wp.launch(resolve, dim=(n, self.height, (self.width + span - 1) // span), device=d,
                       inputs=[s["triangles"], s["tri_label"], s["look"], lights, s["vertices"], s["texcoords"],
                               *common, b["cam_intr"], b["cam_dist"], b["cam_k3"], b["cam_gain"], b["fine_intr"],

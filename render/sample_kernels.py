@@ -206,14 +206,14 @@ possible with more than 8 samples per pixel) is counted with the last group."""
 
 
 @wp.func
-def sample_point(x: int, y: int, i: int, j: int, sub: int, inv_sub: float, lens: int, u0: float, v0: float,
+def sample_point(x: int, y: int, i: int, j: int, sub: int, inv_sub: float, lens: bool, u0: float, v0: float,
                  jac: wp.vec4):
     """Sample (i, j) of the ``sub`` x ``sub`` samples of output pixel (x, y) in the sample grid's coordinates [texels]:
     a regular grid over the pixel's square, through the lens map's Jacobian ``jac`` about pinhole point (u0, v0);
     ``inv_sub`` = 1 / ``sub``."""
     fx = float(0.0)
     fy = float(0.0)
-    if lens != 0:
+    if lens:
         half_sub = 0.5 * float(sub - 1)
         ox = (float(i) + 0.5) * inv_sub - 0.5
         oy = (float(j) + 0.5) * inv_sub - 0.5
@@ -305,7 +305,6 @@ def make_resolve_samples(sub: int, lens: bool, normals: bool = False, texture_fi
     (:func:`resolve_samples_kernel`)."""
     sub = int(sub)
     lens = bool(lens)
-    lens_i = int(lens)
     write_normals = bool(normals)  # (``normals`` is also the output array's name inside the kernel)
     filtered = bool(texture_filter) and sub > 1
     name = (f"resolve_samples_{sub}x{sub}{'_lens' if lens else ''}{'_normals' if write_normals else ''}"
@@ -475,7 +474,7 @@ def make_resolve_samples(sub: int, lens: bool, normals: bool = False, texture_fi
                 on_floor = bool(True)
                 for j in range(sub):
                     for i in range(sub):
-                        fx, fy = sample_point(x, y, i, j, sub, inv_sub, lens_i, u0, v0, jac)
+                        fx, fy = sample_point(x, y, i, j, sub, inv_sub, lens, u0, v0, jac)
                         if sample_key[img, grid_key_index(fx, fy, fw, fhgt)] != _EMPTY:
                             on_floor = False
                 if on_floor:
@@ -483,7 +482,7 @@ def make_resolve_samples(sub: int, lens: bool, normals: bool = False, texture_fi
                     fp = floor_footprint(float(sub) * u0 + half_sub, float(sub) * v0 + half_sub, jac, sub, rays, fn,
                                          fa, fb, floor_eye, fh)
                     if fp[2] >= 0.0:  # the whole pixel on the square (its samples lie inside the pixel's edges)
-                        fx, fy = sample_point(x, y, 0, 0, sub, inv_sub, lens_i, u0, v0, jac)
+                        fx, fy = sample_point(x, y, 0, 0, sub, inv_sub, lens, u0, v0, jac)
                         nsub = 0
                         hit0 = sample_hit(sample_key, img, fx, fy, fw, fhgt, triangles, tri_label, vertices,
                                           texcoords, w, R, t, rays, kf, eye, fn, fa, fb, floor_eye, fh)
@@ -492,7 +491,7 @@ def make_resolve_samples(sub: int, lens: bool, normals: bool = False, texture_fi
             if nsub != 0:  # not a floor pixel filtered above
                 for j in range(sub):
                     for i in range(sub):
-                        fx, fy = sample_point(x, y, i, j, sub, inv_sub, lens_i, u0, v0, jac)
+                        fx, fy = sample_point(x, y, i, j, sub, inv_sub, lens, u0, v0, jac)
                         hit = sample_hit(sample_key, img, fx, fy, fw, fhgt, triangles, tri_label, vertices,
                                          texcoords, w, R, t, rays, kf, eye, fn, fa, fb, floor_eye, fh)
                         alb = surface_albedo(look, w, hit.label, hit.mat)
@@ -530,7 +529,7 @@ def make_resolve_samples(sub: int, lens: bool, normals: bool = False, texture_fi
                 alb = alb0 * (1.0 / float(count0))
                 if g > 0:  # the first sample of each further surface, again
                     first_sample = gfirst[g - 1]
-                    fx, fy = sample_point(x, y, first_sample % sub, first_sample / sub, sub, inv_sub, lens_i, u0,
+                    fx, fy = sample_point(x, y, first_sample % sub, first_sample / sub, sub, inv_sub, lens, u0,
                                           v0, jac)
                     hit = sample_hit(sample_key, img, fx, fy, fw, fhgt, triangles, tri_label, vertices, texcoords, w, R,
                                      t, rays, kf, eye, fn, fa, fb, floor_eye, fh)

@@ -258,4 +258,3 @@ def visibility(L: Lights, first: int, light: int, p: wp.vec3, n: wp.vec3, on_flo
         else:
             out = light_visibility(L, first + light, p, n)
     return out
-

@@ -75,10 +75,9 @@ def factory_modules(skip=()) -> list[str]:
     from warp._src.context import user_modules
 
     from warpworm.physics import gaits
+    from warpworm.render.sample_kernels import resolve_samples_kernel
     from warpworm.sim.model import Model
     from warpworm.sim.simulator import SOLVERS, Simulator
-
-    from warpworm.render.sample_kernels import resolve_samples_kernel
 
     before = set(user_modules)
     model = Model.from_params(gaits.preset_params("peristaltic"), 1, "cpu")

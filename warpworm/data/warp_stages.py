@@ -71,8 +71,8 @@ class WarpStages:
                 max_workers = len(os.sched_getaffinity(0))
             except AttributeError:  # pragma: no cover - not Linux
                 max_workers = os.cpu_count() or 1
-        modules = [wp.get_module(n) for n in self.kernel_modules() if n != "warpworm.render.sample_kernels"]
-        if cfg.render.supersample > 1 or cfg.render.distortion:  # the sample resolve the config's images take
+        modules = [m for m in map(wp.get_module, self.kernel_modules()) if m.kernels]  # (functions only: nothing)
+        if cfg.render.supersample > 1 or cfg.render.distortion:  # the factory-made sample resolve the images take
             modules.append(resolve_samples_kernel(max(cfg.render.supersample, 1), cfg.render.distortion,
                                                   texture_filter=cfg.render.texture_filter).module)
         wp.force_load(device=cfg.sim.device, modules=modules, max_workers=max_workers)
