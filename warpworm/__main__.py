@@ -1,5 +1,3 @@
-import sys
+from warpworm.cli import run
 
-from warpworm.cli import main
-
-sys.exit(main())
+run()

@@ -20,6 +20,7 @@ node of a two-node cluster mid-shard).
 
 from __future__ import annotations
 
+import gc
 import multiprocessing as mp
 import os
 import queue as queue_mod
@@ -69,6 +70,7 @@ def _init_worker(q, parent_pid: int, stages):
     preload = getattr(_stages, "preload", None)
     if preload is not None:  # heavy imports (Warp, the simulator, the renderer) before the first shard
         preload()
+    gc.freeze()  # what the imports made lives until exit: collections, the worker's last one included, skip it
 
 
 def _report(n: int):
