@@ -58,3 +58,5 @@ WORLD_EXPLODED = 1
 """A bar strained past its limit, a vertex too fast, or a non-finite value: the world is frozen."""
 WORLD_CRUMPLED = 2
 """A crease folded through its NoFoldThrough range by more than the tolerance: the sheet crumpled; frozen."""
+WORLD_RETIRED = 3
+"""Taken out of the run by the host (``Simulator.retire``: every frame it is wanted for is taken): frozen, stable."""

@@ -180,7 +180,8 @@ def frame_steps(phases, period, dt: float) -> np.ndarray:
 
 def run_at_phases(sim, state, params, num_worlds: int, phases, keys) -> list[dict]:
     """``sim.run`` for frames given in cycles of each world's EPM period (``sim.frame_unit: cycle``): one snapshot
-    per distinct step over the worlds, each world keeping its own steps. Returns F dicts of (W, ...) arrays like
+    per distinct step over the worlds, each world keeping its own steps and retired after its last
+    (:meth:`~warpworm.sim.simulator.Simulator.retire`). Returns F dicts of (W, ...) arrays like
     ``sim.run`` plus ``frame_time`` (W,) [s] and ``clock``."""
     W = num_worlds
     steps = frame_steps(phases, per_world(params.cycle_period, W), sim.dt)  # (W, F)
@@ -189,6 +190,7 @@ def run_at_phases(sim, state, params, num_worlds: int, phases, keys) -> list[dic
     for n in np.unique(steps):
         snap = sim.run(state, [(int(n) - done) * sim.dt], keys=keys)[0]
         done = int(n)
+        sim.retire(state, steps[:, -1] == n)  # its last frame taken: a world is not stepped further
         for f in range(steps.shape[1]):
             hit = steps[:, f] == n
             if not hit.any():

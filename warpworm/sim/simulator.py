@@ -23,7 +23,7 @@ import math
 import numpy as np
 import warp as wp
 
-from warpworm.ids import WORLD_CRUMPLED
+from warpworm.ids import WORLD_CRUMPLED, WORLD_EXPLODED, WORLD_OK, WORLD_RETIRED
 from warpworm.kernels import magnet_pose
 from warpworm.physics.gaits import DEFAULT_DT, DEFAULT_SUBSTEPS
 from warpworm.physics.magnets import launch_world_wrenches, pair_wrench_scratch
@@ -278,6 +278,16 @@ class Simulator:
             self._one_step(state, control, moment)
         return state
 
+    def retire(self, state: State, worlds) -> None:
+        """Stop stepping the worlds where ``worlds`` ((W,) bool) is true: the substeps skip them from now on, as they
+        skip an unstable world, and their state stays as it is (status ``WORLD_RETIRED``; an unstable world keeps
+        its flag). Worlds are independent, so the others' trajectories are unchanged, bit for bit; a batch whose
+        worlds want frames at different times stops paying for each world after its last one."""
+        flags = state.unstable.numpy()
+        retired = np.asarray(worlds, dtype=bool).reshape(-1) & (flags == WORLD_OK)
+        if retired.any():
+            state.unstable.assign(np.where(retired, WORLD_RETIRED, flags).astype(np.int32))
+
     def settle(self, state: State, duration: float = 0.3, *, reset_time: bool = True) -> State:
         """Let every world settle under gravity with the EPM absent (parked far away) for ``duration`` [s].
 
@@ -333,8 +343,9 @@ class Simulator:
         ``magnet_rot (W, 4, 3, 3)`` (magnet -> world; slots EPM, tail, centre, head); ``magnet_force``,
         ``magnet_torque (W, 4, 3)`` [N, N·m] (net magnetic wrench on each magnet at these poses, the EPM's too); ``crease_angle (W, H)`` [rad]; ``bar_strain (W, E)``;
         ``anchor_force (W, A, 3)`` [N]: the force each anchor applies, the pull of the worm on it (force plate);
-        ``contact (W, V)`` bool; ``unstable (W,)`` bool (exploded or crumpled); ``crumpled (W,)`` bool (a crease
-        folded through its range by more than ``fold_tolerance``); ``time (W,)`` [s].
+        ``contact (W, V)`` bool; ``unstable (W,)`` bool (exploded or crumpled; a world :meth:`retire` stopped is
+        not); ``crumpled (W,)`` bool (a crease folded through its range by more than ``fold_tolerance``); ``time
+        (W,)`` [s].
         """
         m = self.model
         control = control or self.control
@@ -354,6 +365,7 @@ class Simulator:
             anchor_force = ak[..., None] * (x[:, av] - control.anchor_target.numpy())
         else:
             anchor_force = np.zeros((m.num_worlds, 0, 3), np.float32)
+        status = state.unstable.numpy()
         return {
             "positions": x,
             "velocities": state.velocities.numpy().copy(),
@@ -365,8 +377,8 @@ class Simulator:
             "bar_strain": state.bar_strain.numpy().copy(),
             "anchor_force": anchor_force.astype(np.float32),
             "contact": state.contact.numpy().astype(bool),
-            "unstable": state.unstable.numpy().astype(bool),
-            "crumpled": state.unstable.numpy() == WORLD_CRUMPLED,
+            "unstable": (status == WORLD_EXPLODED) | (status == WORLD_CRUMPLED),
+            "crumpled": status == WORLD_CRUMPLED,
             "time": (state.step_count.numpy().astype(np.float64) * self.dt_sub),
         }
 
