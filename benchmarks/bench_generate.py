@@ -34,8 +34,11 @@ REPO = HERE.parent
 JOB = ["production", "--num", "128", "sim.worlds=16", "output.preview=false", "--workers", "1"]
 QUICK_JOB = ["production", "--num", "32", "sim.worlds=4", "output.preview=false", "--workers", "1"]
 NOTES = ("cpu_s: user + system CPU seconds of the whole job process; sim_s/render_s/write_s: the job's stage "
-         "times (manifest summary); render_over_sim: the issue's 'render stage <= sim stage'; cpu_ratio: this tree's "
-         "CPU over the reference's in the same round (median over rounds), samples_per_cpu_gain = 1 / cpu_ratio")
+         "times (manifest summary); rest_s: cpu_s less the three stages (start-up, sampling, exit, the writer "
+         "thread's work beyond the wait); render_over_sim: the issue's 'render stage <= sim stage'; cpu_ratio: this "
+         "tree's CPU over the reference's in the same round (median over rounds), samples_per_cpu_gain = 1 / "
+         "cpu_ratio; gain_if_render_free: the reference's CPU over this tree's less its render stage, the ceiling "
+         "the rest of the job sets")
 
 
 def run_job(python: str, job: list[str]) -> dict:
@@ -59,7 +62,8 @@ def run_job(python: str, job: list[str]) -> dict:
     samples = summary["new_samples"]
     cpu = usage.ru_utime + usage.ru_stime
     return {"cpu_s": cpu, "wall_s": wall, "sim_s": summary["sim_s"], "render_s": summary["render_s"],
-            "write_s": summary["write_s"], "render_over_sim": summary["render_s"] / summary["sim_s"],
+            "write_s": summary["write_s"], "rest_s": cpu - summary["sim_s"] - summary["render_s"] - summary["write_s"],
+            "render_over_sim": summary["render_s"] / summary["sim_s"],
             "samples": samples, "samples_per_cpu_s": samples / cpu}
 
 
@@ -108,18 +112,21 @@ def summarize(rows: list[dict], new: str = "this", ref: str = "reference") -> li
         ros = [r["render_over_sim"] for r in mine]
         out.append({"tree": name, "runs": len(mine),
                     **{k: statistics.median(r[k] for r in mine) for k in ("cpu_s", "sim_s", "render_s", "write_s",
-                                                                         "samples_per_cpu_s")},
+                                                                         "rest_s", "samples_per_cpu_s")},
                     "render_over_sim": statistics.median(ros), "render_over_sim_min": min(ros),
                     "render_over_sim_max": max(ros),
                     "runs_render_le_sim": sum(x <= 1.0 for x in ros)})
     by_round = {}
     for r in rows:
-        by_round.setdefault(r["round"], {})[r["tree"]] = r["cpu_s"]
-    ratios = [v[new] / v[ref] for v in by_round.values() if new in v and ref in v]
-    if ratios:
+        by_round.setdefault(r["round"], {})[r["tree"]] = r
+    pairs = [(v[new], v[ref]) for v in by_round.values() if new in v and ref in v]
+    if pairs:
+        ratios = [a["cpu_s"] / b["cpu_s"] for a, b in pairs]
         out.append({"tree": f"{new} / {ref}", "runs": len(ratios), "cpu_ratio": statistics.median(ratios),
                     "cpu_ratio_min": min(ratios), "cpu_ratio_max": max(ratios),
-                    "samples_per_cpu_gain": 1.0 / statistics.median(ratios)})
+                    "samples_per_cpu_gain": 1.0 / statistics.median(ratios),
+                    "gain_if_render_free": statistics.median(b["cpu_s"] / (a["cpu_s"] - a["render_s"])
+                                                             for a, b in pairs)})
     return out
 
 
