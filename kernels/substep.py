@@ -81,7 +81,7 @@ class BarHingeState:
     bar_strain: wp.array2d(dtype=float)  # (W, E)
     crease_angle: wp.array2d(dtype=float)  # (W, H) [rad] every hinge's fold angle, unwrapped
     contact: wp.array2d(dtype=wp.int32)  # (W, V) CONTACT_*
-    unstable: wp.array(dtype=wp.int32)  # (W,) 0, 1 exploded, 2 crumpled
+    unstable: wp.array(dtype=wp.int32)  # (W,) 0, 1 exploded, 2 crumpled, 3 retired (all but 0: skipped)
     step_count: wp.array(dtype=wp.int32)  # (W,) substeps since t = 0
 
 

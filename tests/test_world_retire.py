@@ -8,6 +8,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+import pytest
 
 from warpworm import quiet_warp
 from warpworm.data.warp_stages import frame_steps, run_at_phases
@@ -80,3 +81,10 @@ def test_frames_at_phases_equal_those_of_a_run_that_steps_every_world_to_the_end
     assert len(set(last.tolist())) == 3
     np.testing.assert_array_equal(stopped, last * sim.substeps)  # step_count counts substeps
     assert (ref.step_count.numpy() == last.max() * sim.substeps).all()
+
+
+def test_a_mask_of_the_wrong_length_is_refused():
+    sim, state = _sim(2)
+    with pytest.raises(ValueError, match=r"retire: worlds has shape \(3,\); expected one bool per world, \(2,\)"):
+        sim.retire(state, [True, False, True])
+    assert (state.unstable.numpy() == 0).all()

@@ -134,7 +134,7 @@ def main(argv: list[str] | None = None, *, freeze_imports: bool = False) -> int:
 def run() -> None:
     """The ``warpworm`` program (its console script and ``python -m warpworm``): :func:`main` with the imports frozen,
     then the interpreter's exit without a final walk over the objects alive at that point (Warp's and our
-    modules': ~0.5 CPU-s per process; docs/render.md, "Start-up and exit")."""
+    modules': ~0.5 CPU-s per process; docs/render.md, "The rest of the job")."""
     status = main(freeze_imports=True)
     gc.freeze()
     sys.exit(status)

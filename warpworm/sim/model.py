@@ -78,8 +78,8 @@ class State:
     contact: wp.array
     """1 where a vertex touched the floor in the last substep, shape (W, V), int32."""
     unstable: wp.array
-    """Non-zero for a world flagged unstable (frozen from then on): 1 exploded (strain, speed, non-finite), 2 crumpled
-    (a crease folded through its range), shape (W,), int32."""
+    """Non-zero for a world the substeps skip (frozen from then on): 1 exploded (strain, speed, non-finite), 2 crumpled
+    (a crease folded through its range), 3 retired by the host (``Simulator.retire``; stable), shape (W,), int32."""
     step_count: wp.array
     """Substeps taken by each world since t = 0, shape (W,), int32 (time = step_count · dt_sub, exact)."""
     floor_force: wp.array

@@ -284,7 +284,10 @@ class Simulator:
         its flag). Worlds are independent, so the others' trajectories are unchanged, bit for bit; a batch whose
         worlds want frames at different times stops paying for each world after its last one."""
         flags = state.unstable.numpy()
-        retired = np.asarray(worlds, dtype=bool).reshape(-1) & (flags == WORLD_OK)
+        mask = np.asarray(worlds, dtype=bool)
+        if mask.shape != flags.shape:
+            raise ValueError(f"retire: worlds has shape {mask.shape}; expected one bool per world, {flags.shape}")
+        retired = mask & (flags == WORLD_OK)
         if retired.any():
             state.unstable.assign(np.where(retired, WORLD_RETIRED, flags).astype(np.int32))
 
