@@ -36,8 +36,6 @@ from warpworm.render.raster_math import (
     _DEPTH_SCALE,
     _TRI_SCALE,
     SEG_BACKGROUND,
-    SEG_EPM,
-    SEG_FLOOR,
     SEG_WORM_FIRST,
     SEG_WORM_LAST,
     covers,
@@ -46,6 +44,7 @@ from warpworm.render.raster_math import (
     is_top_left,
     pixel_box,
     project,
+    seg_id,
     to_srgb8,
 )
 from warpworm.render.shading import (
@@ -185,15 +184,14 @@ raster_depth = make_raster(True)
 """Z-buffer one triangle into one shadow map: the nearest depth [m] per texel and per block of texels."""
 
 
-def make_resolve_shade(plain: bool, shade: bool = True):
+def make_resolve_shade(plain: bool):
     """The resolve/shade kernel: ``plain`` compiles the default look's path only (one lit lamp, no shadows, Lambert
     paper, matte opaque floor; world values loaded once per thread, the same bits as the general kernel in a third of
-    its CPU time); ``shade=False`` (:data:`resolve_labels`) writes depth, segmentation and normals only. The general
-    kernel shades every option (shadow maps, any number of lights, paper BSDF, glossy and clear plates); see
-    docs/render.md, "The plain path".
+    its CPU time). The general kernel shades every option (shadow maps, any number of lights, paper BSDF, glossy and
+    clear plates); see docs/render.md, "The plain path".
     """
 
-    @wp.kernel(name="resolve_labels" if not shade else ("resolve_shade_plain" if plain else "resolve_shade"))
+    @wp.kernel(name="resolve_shade_plain" if plain else "resolve_shade")
     def resolve_shade(
         # Model:
         triangles: wp.array(dtype=wp.vec3i), tri_label: wp.array(dtype=wp.int32),
@@ -248,16 +246,7 @@ def make_resolve_shade(plain: bool, shade: bool = True):
             mz, mlabel, n_world, mmat = mesh_surface(zkey[img, row + x], triangles, tri_label, vertices, texcoords,
                                                      w, R, t, k, px, py, eye, d_world)
             best_z, label, mat = nearer_floor(fr, px, mz, mlabel, mmat)
-            color = bg
-            nrm = wp.vec3(0.0)
-            if wp.static(not shade):
-                if label == SEG_FLOOR:
-                    nrm = pw.fn
-                elif label != SEG_BACKGROUND:
-                    nrm = n_world
-                    if wp.dot(n_world, -d_world) < 0.0:
-                        nrm = -n_world
-            elif wp.static(plain):
+            if wp.static(plain):
                 color, nrm = shade_hit_plain(look, pw, wa, ws, label, best_z, mat, n_world, eye, d_world, bg)
             else:
                 color, nrm = shade_hit(look, lights, w, first, label, best_z, mat, n_world, eye, d_world, bg)
@@ -272,13 +261,10 @@ def make_resolve_shade(plain: bool, shade: bool = True):
                     normals[img, row + x] = wp.vec3(0.0)
                 else:
                     normals[img, row + x] = R * nrm
-            if wp.static(shade):
-                color = wp.cw_mul(color, gain)
-                rgb[img, row + x] = wp.vec3ub(to_srgb8(color[0]), to_srgb8(color[1]), to_srgb8(color[2]))
+            color = wp.cw_mul(color, gain)
+            rgb[img, row + x] = wp.vec3ub(to_srgb8(color[0]), to_srgb8(color[1]), to_srgb8(color[2]))
             depth[img, row + x] = best_z
-            if label > SEG_EPM:
-                label = SEG_FLOOR  # a distractor object (its own albedo row): static scene, the floor's id
-            seg[img, row + x] = wp.uint8(label)
+            seg[img, row + x] = wp.uint8(seg_id(label))
 
     return resolve_shade
 
@@ -287,5 +273,3 @@ resolve_shade = make_resolve_shade(False)
 """Resolve the nearest surface of every pixel and shade it, every option (:func:`make_resolve_shade`)."""
 resolve_shade_plain = make_resolve_shade(True)
 """The same for batches without any per-pixel shading option: the default look's path, bit for bit."""
-resolve_labels = make_resolve_shade(True, shade=False)
-"""Depth, segmentation and normals only (the same labels as :data:`resolve_shade`, without shading or shadow maps)."""

@@ -35,6 +35,16 @@ _EMPTY = wp.constant(wp.int64(EMPTY_KEY))
 
 
 @wp.func
+def seg_id(label: int) -> int:
+    """The segmentation id a pixel on surface ``label`` gets: its own, but a distractor object's (its own albedo row,
+    above SEG_EPM) is the floor's (static scene)."""
+    out = label
+    if label > SEG_EPM:
+        out = int(SEG_FLOOR)
+    return out
+
+
+@wp.func
 def edge_fn(ax: float, ay: float, bx: float, by: float, px: float, py: float) -> float:
     """Edge function of directed edge a->b at p, positive on the interior side of a (y down) positive-area triangle."""
     return (bx - ax) * (py - ay) - (by - ay) * (px - ax)

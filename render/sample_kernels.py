@@ -31,11 +31,11 @@ from warpworm.render.raster_math import (
     _EMPTY,
     _TRI_SCALE,
     SEG_BACKGROUND,
-    SEG_EPM,
     SEG_FLOOR,
     depth_plane,
     edge_fn,
     project,
+    seg_id,
     to_srgb8,
 )
 from warpworm.render.shading import (
@@ -45,6 +45,7 @@ from warpworm.render.shading import (
     mesh_surface,
     nearer_floor,
     ray_frame,
+    seen_normal,
     shade_surface,
     surface_albedo,
 )
@@ -308,7 +309,7 @@ def make_resolve_samples(sub: int, lens: bool, normals: bool = False, texture_fi
     write_normals = bool(normals)  # (``normals`` is also the output array's name inside the kernel)
     filtered = bool(texture_filter) and sub > 1
     name = (f"resolve_samples_{sub}x{sub}{'_lens' if lens else ''}{'_normals' if write_normals else ''}"
-            f"{'' if texture_filter else '_unfiltered'}")
+            f"{'_unfiltered' if sub > 1 and not filtered else ''}")
 
     @wp.kernel(name=name, module="unique",
                module_options={"enable_backward": False,
@@ -438,21 +439,11 @@ def make_resolve_samples(sub: int, lens: bool, normals: bool = False, texture_fi
                                                      v0, eye, d_world)
             best_z, label, mat = nearer_floor(fr, u0, mz, mlabel, mmat)
             if wp.static(write_normals):
-                nrm = wp.vec3(0.0)
-                if label == SEG_FLOOR:
-                    nrm = fn
-                elif label != SEG_BACKGROUND:
-                    nrm = n_world
-                    if wp.dot(n_world, -d_world) < 0.0:
-                        nrm = -n_world
-                normals[img, pix] = R * nrm
+                normals[img, pix] = R * seen_normal(label, fn, n_world, d_world)
             if label == SEG_BACKGROUND:
                 best_z = 0.0
             depth[img, pix] = best_z
-            out_label = label
-            if out_label > SEG_EPM:
-                out_label = SEG_FLOOR  # a distractor object (its own albedo row): static scene, the floor's id
-            seg[img, pix] = wp.uint8(out_label)
+            seg[img, pix] = wp.uint8(seg_id(label))
             worm_mask[img, pix] = label_mask[img, grid_key_index(u0, v0, grid_w, grid_h)]
 
             # colour: sub x sub samples, grouped by the surface they land on: the first sample's surface in registers
@@ -555,7 +546,7 @@ _RESOLVE_SAMPLES_LOCK = threading.Lock()
 def resolve_samples_kernel(sub: int, lens: bool, normals: bool = False, texture_filter: bool = True):
     """The :func:`make_resolve_samples` kernel for these values, made once per process (renderers in several threads
     share it)."""
-    key = (int(sub), bool(lens), bool(normals), bool(texture_filter))
+    key = (int(sub), bool(lens), bool(normals), bool(texture_filter) and int(sub) > 1)  # one sample: no filter
     with _RESOLVE_SAMPLES_LOCK:
         kernel = _RESOLVE_SAMPLES.get(key)
         if kernel is None:

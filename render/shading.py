@@ -420,6 +420,21 @@ def surface_albedo(look: Look, w: int, label: int, mat: wp.vec3) -> wp.vec3:
     return albedo
 
 
+@wp.func
+def seen_normal(label: int, floor_n: wp.vec3, n_world: wp.vec3, d_world: wp.vec3) -> wp.vec3:
+    """World normal of surface ``label`` on the side a ray along ``d_world`` sees: the floor's ``floor_n``, a mesh's
+    ``n_world`` (unnormalized) turned toward the camera (the sheet is double-sided: the side the camera sees is lit),
+    0 for the background."""
+    nrm = wp.vec3(0.0)
+    if label == SEG_FLOOR:
+        nrm = floor_n
+    elif label != SEG_BACKGROUND:
+        nrm = n_world
+        if wp.dot(n_world, -d_world) < 0.0:
+            nrm = -n_world
+    return nrm
+
+
 @wp.func(inline=True)
 def shade_surface(look: Look, L: Lights, w: int, first: int, label: int, albedo: wp.vec3, z: float,
                   n_world: wp.vec3, eye: wp.vec3, d_world: wp.vec3, bg: wp.vec3):
@@ -427,14 +442,10 @@ def shade_surface(look: Look, L: Lights, w: int, first: int, label: int, albedo:
     camera depth ``z`` along ``d_world`` (mesh normal ``n_world``, unnormalized). Linear in ``albedo`` (plus
     highlights and sheen), so a pixel's samples on one surface may share it with their mean albedo."""
     color = bg
-    nrm = wp.vec3(0.0)
+    nrm = seen_normal(label, look.floor_normal[wrow(w, look.floor_normal.shape[0])], n_world, d_world)
     if label == SEG_FLOOR:
-        nrm = look.floor_normal[wrow(w, look.floor_normal.shape[0])]
         color = floor_lit(look, L, w, first, albedo, eye + z * d_world, -d_world)
     elif label != SEG_BACKGROUND:
-        nrm = n_world
-        if wp.dot(n_world, -d_world) < 0.0:
-            nrm = -n_world  # double-sided sheet: light the side the camera sees
         pb = look.paper_bsdf[wrow(w, look.paper_bsdf.shape[0])]
         if label <= SEG_WORM_LAST and (pb[0] > 0.0 or pb[1] > 0.0 or pb[3] > 0.0):
             color = paper_surface(albedo, eye + z * d_world, nrm, -d_world, L, w, first, pb)
@@ -501,9 +512,8 @@ def shade_hit_plain(look: Look, pw: PlainWorld, wa: int, ws: int, label: int, z:
     """:func:`shade_hit` for the plain path: world ``pw`` (its albedo row ``wa``, specular row ``ws``) under one lamp,
     no shadows, Lambert paper, a matte opaque floor."""
     color = bg
-    nrm = wp.vec3(0.0)
+    nrm = seen_normal(label, pw.fn, n_world, d_world)
     if label == SEG_FLOOR:
-        nrm = pw.fn
         p = eye + z * d_world
         to_lamp = pw.lp - p
         inv_r2 = 1.0 / wp.max(wp.dot(to_lamp, to_lamp), 1.0e-6)
@@ -512,9 +522,6 @@ def shade_hit_plain(look: Look, pw: PlainWorld, wa: int, ws: int, label: int, z:
                               pw.off_v)
         color = wp.cw_mul(albedo, pw.floor_irr + pw.lpw * (ndp * inv_r2))
     elif label != SEG_BACKGROUND:
-        nrm = n_world
-        if wp.dot(n_world, -d_world) < 0.0:
-            nrm = -n_world  # double-sided sheet: light the side the camera sees
         base = textured_albedo(look.albedo[wa, label], label, mat, pw.pt, look.noise, pw.off_u, pw.off_v)
         color = light_surface_plain(base, look.specular[ws, label], eye + z * d_world, nrm, -d_world, pw.amb, pw.sd,
                                     pw.sc, pw.lp, pw.lpw)

@@ -9,14 +9,14 @@ from warpworm.data import dataset, export_bop
 from warpworm import ids
 from warpworm.sim import model
 from warpworm.kernels import common, magnet_wrench
-from warpworm.render import raster_kernels, scene
+from warpworm.render import raster_math, scene
 
 
 def test_segmentation_ids_are_one_table():
     assert scene.LABEL_NAMES == ids.SEGMENTATION_NAMES
     assert len(ids.SEGMENTATION_NAMES) == ids.NUM_SEGMENTATION_IDS
-    assert raster_kernels.SEG_EPM == ids.SEG_EPM == ids.NUM_SEGMENTATION_IDS - 1
-    assert raster_kernels.SEG_WORM_LAST - raster_kernels.SEG_WORM_FIRST + 1 == crease.NUM_SEGMENTS
+    assert raster_math.SEG_EPM == ids.SEG_EPM == ids.NUM_SEGMENTATION_IDS - 1
+    assert raster_math.SEG_WORM_LAST - raster_math.SEG_WORM_FIRST + 1 == crease.NUM_SEGMENTS
     assert dataset.SEGMENTATION_IDS is ids.SEGMENTATION_IDS
     assert export_bop.OBJECTS[1][1] == tuple(range(ids.SEG_WORM_FIRST, ids.SEG_WORM_LAST + 1))
     assert [v[1][0] for k, v in sorted(export_bop.OBJECTS.items())][1:] == [*ids.SEG_IPMS, ids.SEG_EPM]

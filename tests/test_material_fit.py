@@ -108,3 +108,8 @@ def test_log_half_width_covers_95_percent_of_linear_fits():
     assert mf.log_half_width(np.zeros(8), np.zeros(8)) == float("inf")  # a flat curve pins nothing
     dof = np.arange(1, 200)
     np.testing.assert_allclose([mf.t_975(int(d)) for d in dof], stats.t.ppf(0.975, dof), rtol=3e-3)
+
+
+def test_a_noisy_table_without_a_generator_is_refused():
+    with pytest.raises(ValueError, match="simulated_table: noise 0.02 needs rng"):
+        mf.simulated_table("compression", K_PLANTED, noise=0.02)

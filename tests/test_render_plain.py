@@ -8,7 +8,7 @@ import dataclasses
 
 import numpy as np
 
-from warpworm import quiet_warp
+from warpworm import ids, quiet_warp
 from warpworm.data.config import load_config
 from warpworm.data.sampling import sample_appearance
 from warpworm.render import Renderer, build_scene, sample_cameras
@@ -41,7 +41,7 @@ def test_plain_path_only_without_shading_options():
     paper = app.paper_bsdf.copy()
     paper[2, 3] = 0.3  # one world's ground ambient
     spec = app.specular.copy()
-    spec[0, rk.SEG_FLOOR, 0] = 0.2  # one glossy plate
+    spec[0, ids.SEG_FLOOR, 0] = 0.2  # one glossy plate
     for other in (pad, dark, dataclasses.replace(app, paper_bsdf=paper), dataclasses.replace(app, specular=spec),
                   dataclasses.replace(app, floor_transmit=np.where(np.arange(3) == 1, 0.4, 0.0))):
         assert not plain_look(other)

@@ -96,14 +96,8 @@ def build_parser(commands: list[str] | None = None) -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: list[str] | None = None, *, freeze_imports: bool = False) -> int:
-    """Run the command ``argv`` names (default: the process's arguments) and return its exit status.
-
-    ``freeze_imports``: once the command's module is imported (Warp, its builtins, our kernels: objects that live
-    until exit), move every object into the collector's permanent generation so that later collections and the
-    interpreter's final one do not walk them again (:func:`run`, the program, sets it; a process that calls
-    ``main`` many times, a test session, does not, so nothing it drops is kept).
-    """
+def main(argv: list[str] | None = None) -> int:
+    """Run the command ``argv`` names (default: the process's arguments) and return its exit status."""
     # Warp's banner and module-load lines go to stdout; keep stdout for results (e.g. `--json`).
     # Set before any command module imports (and so initialises) Warp.
     from warpworm import quiet_warp
@@ -113,8 +107,6 @@ def main(argv: list[str] | None = None, *, freeze_imports: bool = False) -> int:
     named = next((a for a in argv if not a.startswith("-")), None)  # the top-level parser has no valued options
     parser = build_parser([named] if named in COMMANDS else None)
     args = parser.parse_args(argv)
-    if freeze_imports:
-        gc.freeze()
     if not getattr(args, "_main", None):
         parser.print_help()
         return 2
@@ -132,10 +124,11 @@ def main(argv: list[str] | None = None, *, freeze_imports: bool = False) -> int:
 
 
 def run() -> None:
-    """The ``warpworm`` program (its console script and ``python -m warpworm``): :func:`main` with the imports frozen,
-    then the interpreter's exit without a final walk over the objects alive at that point (Warp's and our
-    modules': ~0.5 CPU-s per process; docs/render.md, "The rest of the job")."""
-    status = main(freeze_imports=True)
+    """The ``warpworm`` program (its console script and ``python -m warpworm``): :func:`main`, then an exit whose final
+    garbage collection does not walk the objects alive at that point (``gc.freeze``: Warp's builtins and our kernel
+    modules, ~0.5 CPU-s per process; docs/render.md, "The rest of the job"). Only the program's exit: a process that
+    calls ``main`` many times (a test session) keeps collecting what it drops."""
+    status = main()
     gc.freeze()
     sys.exit(status)
 

@@ -141,6 +141,8 @@ def simulated_table(test: str, hinge_stiffness: float, *, base=None, increments:
     :data:`FIT_SETTINGS`) at ``hinge_stiffness`` [N/rad] with every other parameter at ``base``, ``increments`` load
     steps; every force times (1 + ``noise`` N(0, 1)) drawn from ``rng``. Returns ``displacement (increments + 1,)``
     [m] (the first row the unloaded state, 0) and ``force`` [N], as :func:`read_curve` returns a measured table."""
+    if noise and rng is None:
+        raise ValueError(f"simulated_table: noise {noise} needs rng, the generator its draws come from; got None")
     fn = ex.compression if test == "compression" else ex.flexure
     r = fn((hinge_stiffness,), increments=increments, base=base, **FIT_SETTINGS[test])
     d, f = r["displacement"][:, 0].copy(), r["force"][:, 0].astype(np.float64)

@@ -283,10 +283,13 @@ class Simulator:
         skip an unstable world, and their state stays as it is (status ``WORLD_RETIRED``; an unstable world keeps
         its flag). Worlds are independent, so the others' trajectories are unchanged, bit for bit; a batch whose
         worlds want frames at different times stops paying for each world after its last one."""
-        flags = state.unstable.numpy()
         mask = np.asarray(worlds, dtype=bool)
-        if mask.shape != flags.shape:
-            raise ValueError(f"retire: worlds has shape {mask.shape}; expected one bool per world, {flags.shape}")
+        if mask.shape != state.unstable.shape:
+            raise ValueError(f"retire: worlds has shape {mask.shape}; expected one bool per world, "
+                             f"{state.unstable.shape}")
+        if not mask.any():  # (called once per frame step: no device read when no world finishes there)
+            return
+        flags = state.unstable.numpy()
         retired = mask & (flags == WORLD_OK)
         if retired.any():
             state.unstable.assign(np.where(retired, WORLD_RETIRED, flags).astype(np.int32))
