@@ -269,24 +269,30 @@ def headline(device=None, quick: bool = False) -> dict:
             "rate": N / t, "unit": "images/s", "time_base": "wall",
             "note": f"{size}x{size} px, {C} cameras per world, host copies included"}
 
-if __name__ == "__main__":
+def main(argv=None) -> int:
+    import argparse
+    import json
     import sys
+    from pathlib import Path
 
-    quick = "--quick" in sys.argv
-    if "--production" in sys.argv:
-        rows = production_rows()
-    elif "--plain" in sys.argv:
-        rows = plain_rows()
-    else:
-        rows = run(quick=quick)
-    cols = list(rows[0])
-    print("  ".join(f"{c:>13}" for c in cols))
-    for r in rows:
-        print("  ".join(f"{r[c]:>13.4g}" if isinstance(r[c], float) else f"{r[c]:>13}" for c in cols))
-    if "--json" in sys.argv:
-        import json
-        from pathlib import Path
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    which = parser.add_mutually_exclusive_group()
+    which.add_argument("--production", action="store_true", help="CPU ms per 256² image of production's option sets")
+    which.add_argument("--plain", action="store_true", help="the plain path against the general kernel")
+    parser.add_argument("--quick", action="store_true", help="fewer sizes and worlds")
+    parser.add_argument("--json", metavar="FILE", help="write the rows here")
+    args = parser.parse_args(argv)
+    rows = production_rows() if args.production else plain_rows() if args.plain else run(quick=args.quick)
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from run import table  # the runner's table: the raster rows and the option rows have different columns
 
-        out = Path(sys.argv[sys.argv.index("--json") + 1])
+    print(table(rows))
+    if args.json:
+        out = Path(args.json)
         out.parent.mkdir(parents=True, exist_ok=True)
         out.write_text(json.dumps(rows, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
