@@ -91,13 +91,32 @@ def lens_inverse32(xd: float, yd: float, dist: wp.vec4, k3: float):
 
 @wp.func
 def lens_inverse_next32(xd: float, yd: float, dist: wp.vec4, k3: float, step: float, u: float, v: float, a: float,
-                        b: float, d: float):
+                        b: float, d: float, inv_det: float):
     """:func:`lens_inverse32` of the point ``step`` to the right of one already solved, (u, v) with the forward
-    Jacobian (a, b, d) there (a pixel's neighbour along its row): the guess (u, v) + J⁻¹ (step, 0) is within
-    ~(step)² of the root, and one Newton step reaches float32 rounding, as four from the radial guess do
-    (tests/test_render_distortion.py::test_warm_lens_inverse_matches_opencv)."""
-    inv_det = 1.0 / (a * d - b * b)
-    return lens_newton32(xd, yd, dist, k3, u + d * step * inv_det, v - b * step * inv_det, 1)
+    Jacobian (a, b, d) near it and ``inv_det`` = 1 / (a d - b²) (a pixel's neighbour along its row): the guess
+    (u, v) + J⁻¹ (step, 0) is within ~(step)² of the root, and one Newton step from it reaches float32 rounding, as
+    four from the radial guess do (tests/test_render_distortion.py::test_warm_lens_inverse_matches_opencv). One
+    evaluation of the map: returns (u, v, a, b, d, inv_det, ok) with the guess's Jacobian (~(step)² from the root's,
+    which the samples' offsets and the next guess do not feel); ``ok``: the guess was close (residual under 1e-4 of
+    the radius) on an unfolded map, else the caller solves cold."""
+    gu = u + d * step * inv_det
+    gv = v - b * step * inv_det
+    k1 = dist[0]
+    k2 = dist[1]
+    p1 = dist[2]
+    p2 = dist[3]
+    r2 = gu * gu + gv * gv
+    radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    drad = 2.0 * (k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2))
+    ex = gu * radial + 2.0 * p1 * gu * gv + p2 * (r2 + 2.0 * gu * gu) - xd
+    ey = gv * radial + p1 * (r2 + 2.0 * gv * gv) + 2.0 * p2 * gu * gv - yd
+    ga = radial + gu * gu * drad + 2.0 * p1 * gv + 6.0 * p2 * gu
+    gb = gu * gv * drad + 2.0 * p1 * gu + 2.0 * p2 * gv
+    gd = radial + gv * gv * drad + 6.0 * p1 * gv + 2.0 * p2 * gu
+    det = ga * gd - gb * gb
+    ok = ex * ex + ey * ey <= 1.0e-8 * (1.0 + xd * xd + yd * yd) and ga > 0.0 and det > 0.0
+    inv = 1.0 / det
+    return gu - (gd * ex - gb * ey) * inv, gv - (ga * ey - gb * ex) * inv, ga, gb, gd, inv, ok
 
 
 @wp.func

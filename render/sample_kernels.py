@@ -383,6 +383,9 @@ def make_resolve_samples(sub: int, lens: bool, normals: bool = False, texture_fi
         prev_a = float(1.0)
         prev_b = float(0.0)
         prev_d = float(1.0)
+        prev_inv_det = float(1.0)
+        inv_fx = 1.0 / k[0]
+        inv_fy = 1.0 / k[1]
         for x in range(xb * span, wp.min(xb * span + span, width)):
             pix = y * width + x
             # the pinhole point the pixel centre sees, and d(pinhole px) / d(output px) for its samples
@@ -392,27 +395,30 @@ def make_resolve_samples(sub: int, lens: bool, normals: bool = False, texture_fi
             ok = bool(True)
             if wp.static(lens):
                 # the output's principal point is the label grid's less the widening margins
-                xd = (float(x + margin_x) - k[2]) / k[0]
-                yd = (float(y + margin_y) - k[3]) / k[1]
+                xd = (float(x + margin_x) - k[2]) * inv_fx
+                yd = (float(y + margin_y) - k[3]) * inv_fy
                 u = float(0.0)
                 v = float(0.0)
                 a = float(1.0)
                 b = float(0.0)
                 d = float(1.0)
+                inv_det = float(1.0)
                 if prev_ok:  # the pixel to the left solved: start from it (along a CPU thread's row)
-                    u, v, a, b, d, ok = lens_inverse_next32(xd, yd, cam_dist[img], cam_k3[img], 1.0 / k[0], prev_u,
-                                                            prev_v, prev_a, prev_b, prev_d)
+                    u, v, a, b, d, inv_det, ok = lens_inverse_next32(xd, yd, cam_dist[img], cam_k3[img], inv_fx,
+                                                                     prev_u, prev_v, prev_a, prev_b, prev_d,
+                                                                     prev_inv_det)
                 if not ok or not prev_ok:
                     u, v, a, b, d, ok = lens_inverse32(xd, yd, cam_dist[img], cam_k3[img])
+                    inv_det = 1.0 / (a * d - b * b)
                 prev_ok = ok
                 prev_u = u
                 prev_v = v
                 prev_a = a
                 prev_b = b
                 prev_d = d
+                prev_inv_det = inv_det
                 u0 = k[0] * u + k[2]
                 v0 = k[1] * v + k[3]
-                inv_det = 1.0 / (a * d - b * b)
                 jac = wp.vec4(d * inv_det, -b * inv_det * fxy, -b * inv_det * fyx, a * inv_det)
             if not ok:  # no ray reaches this pixel (the host refuses such lenses; a guard, never data)
                 rgb[img, pix] = wp.vec3ub(wp.uint8(0), wp.uint8(0), wp.uint8(0))

@@ -196,14 +196,16 @@ def test_warm_lens_inverse_matches_opencv(dist):
         a = float(1.0)
         b = float(0.0)
         d = float(1.0)
+        inv_det = float(1.0)
         ok = bool(False)
         for x in range(256):
             xd = (float(x) - c) / f
             yd = (float(y) - c) / f
             if warm != 0 and ok:
-                u, v, a, b, d, ok = lens_inverse_next32(xd, yd, dist, k3, 1.0 / f, u, v, a, b, d)
+                u, v, a, b, d, inv_det, ok = lens_inverse_next32(xd, yd, dist, k3, 1.0 / f, u, v, a, b, d, inv_det)
             else:
                 u, v, a, b, d, ok = lens_inverse32(xd, yd, dist, k3)
+                inv_det = 1.0 / (a * d - b * b)
             out[y, x] = wp.vec2(u, v)
 
     K = np.array([[f, 0.0, c], [0.0, f, c], [0.0, 0.0, 1.0]])
