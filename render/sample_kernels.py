@@ -40,8 +40,10 @@ from warpworm.render.raster_math import (
 )
 from warpworm.render.shading import (
     Look,
-    floor_albedo_box_at,
+    floor_albedo_box,
+    floor_lit_from,
     floor_row,
+    floor_shade,
     mesh_surface,
     nearer_floor,
     ray_frame,
@@ -289,8 +291,14 @@ def shade_sample(look: Look, lights: Lights, w: int, first: int, hit: Hit, albed
             color = c
         else:
             color = wp.lerp(color, c, transmit)
-    color = wp.cw_mul(color, gain)
-    return wp.vec3(wp.clamp(color[0], 0.0, 1.0), wp.clamp(color[1], 0.0, 1.0), wp.clamp(color[2], 0.0, 1.0))
+    return exposed(color, gain)
+
+
+@wp.func
+def exposed(color: wp.vec3, gain: wp.vec3) -> wp.vec3:
+    """Linear ``color`` times the camera's ``gain``, clipped to the display's [0, 1]."""
+    c = wp.cw_mul(color, gain)
+    return wp.vec3(wp.clamp(c[0], 0.0, 1.0), wp.clamp(c[1], 0.0, 1.0), wp.clamp(c[2], 0.0, 1.0))
 
 
 GroupIds = wp.types.vector(length=8, dtype=wp.int32)
@@ -363,6 +371,7 @@ def make_resolve_samples(sub: int, lens: bool, normals: bool = False, texture_fi
         first = int(-1)
         if lights.shadows != 0:
             first = lights.map_first[w]
+        fshade = floor_shade(look, lights, w)  # the floor's lighting values, in registers for the row
 
         fb = wp.cross(fn, fa)
         floor_eye = wp.vec3(wp.dot(eye - fo, fa), wp.dot(eye - fo, fb), wp.dot(fn, eye))
@@ -484,7 +493,9 @@ def make_resolve_samples(sub: int, lens: bool, normals: bool = False, texture_fi
                         hit0 = sample_hit(sample_key, img, fx, fy, fw, fhgt, triangles, tri_label, vertices,
                                           texcoords, w, R, t, rays, kf, eye, fn, fa, fb, floor_eye, fh)
                         count0 = sub * sub
-                        alb0 = floor_albedo_box_at(look, w, wp.vec3(fp[0], fp[1], 0.0), fp[2], fp[3]) * float(count0)
+                        alb0 = floor_albedo_box(fshade.base, wp.vec3(fp[0], fp[1], 0.0), fp[2], fp[3], fshade.inv_tile,
+                                                fshade.ft, fshade.fc2, look.noise, fshade.off_u,
+                                                fshade.off_v) * float(count0)
             if nsub != 0:  # not a floor pixel filtered above
                 for j in range(sub):
                     for i in range(sub):
@@ -519,6 +530,11 @@ def make_resolve_samples(sub: int, lens: bool, normals: bool = False, texture_fi
                             gr[g] = gr[g] + alb[0]
                             gg[g] = gg[g] + alb[1]
                             gb[g] = gb[g] + alb[2]
+            if nsub == 0:  # a filtered floor pixel: one surface, nothing under it (no key), lit from the row's values
+                lit = floor_lit_from(fshade, lights, first, alb0 * (1.0 / float(count0)), eye + hit0.z * hit0.d,
+                                     -hit0.d)
+                acc = acc + exposed(lit, gain) * float(count0)
+                ng = -1  # (no surface left for the loop below)
             # each surface lit once with its samples' mean albedo, at one call site (the lighting code inlined once)
             for g in range(ng + 1):
                 hit = hit0

@@ -54,10 +54,18 @@ def sun_light(L: Lights, w: int, first: int, p: wp.vec3, n: wp.vec3, v: wp.vec3,
     """World ``w``'s ambient plus its directional sun, Lambert and shadowed, at ``p`` (normal ``n``; ``on_floor``: on
     the floor plane): (irradiance, the sun's Blinn-Phong highlight seen along unit ``v`` when ``shiny``, strength and
     exponent ``spec``)."""
-    sd = L.sun_dir[wrow(w, L.sun_dir.shape[0])]
-    sc = L.sun_color[wrow(w, L.sun_color.shape[0])]
+    irr, highlight = sun_light_from(L.ambient[wrow(w, L.ambient.shape[0])], L.sun_dir[wrow(w, L.sun_dir.shape[0])],
+                                    L.sun_color[wrow(w, L.sun_color.shape[0])], L, first, p, n, v, spec, shiny,
+                                    on_floor)
+    return irr, highlight
+
+
+@wp.func(inline=True)
+def sun_light_from(ambient: wp.vec3, sd: wp.vec3, sc: wp.vec3, L: Lights, first: int, p: wp.vec3, n: wp.vec3,
+                   v: wp.vec3, spec: wp.vec2, shiny: bool, on_floor: bool):
+    """:func:`sun_light` from the world's ``ambient``, sun direction ``sd`` and colour ``sc``, already loaded."""
     ndl = wp.max(wp.dot(n, sd), 0.0)
-    irr = L.ambient[wrow(w, L.ambient.shape[0])]
+    irr = ambient
     highlight = wp.vec3(0.0)
     if ndl > 0.0:
         vis = visibility(L, first, 0, p, n, on_floor)
@@ -334,15 +342,6 @@ def floor_albedo_box(base: wp.vec3, mat: wp.vec3, wu: float, wv: float, inv_tile
 
 
 @wp.func(inline=True)
-def floor_albedo_box_at(look: Look, w: int, mat: wp.vec3, wu: float, wv: float) -> wp.vec3:
-    """World ``w``'s floor albedo averaged over a ``wu`` x ``wv`` [m] box about ``mat`` (:func:`floor_albedo_box`)."""
-    ft = look.floor_tex[wrow(w, look.floor_tex.shape[0])]
-    off = noise_offset(look, w)
-    return floor_albedo_box(look.albedo[wrow(w, look.albedo.shape[0]), SEG_FLOOR], mat, wu, wv, 1.0 / ft[0], ft,
-                            look.floor_color2[wrow(w, look.floor_color2.shape[0])], look.noise, off[0], off[1])
-
-
-@wp.func(inline=True)
 def floor_albedo_at(look: Look, w: int, mat: wp.vec3) -> wp.vec3:
     """World ``w``'s floor albedo (checker + grain, :func:`floor_albedo`) at floor coordinates ``mat`` [m]."""
     ft = look.floor_tex[wrow(w, look.floor_tex.shape[0])]
@@ -351,19 +350,61 @@ def floor_albedo_at(look: Look, w: int, mat: wp.vec3) -> wp.vec3:
                         look.floor_color2[wrow(w, look.floor_color2.shape[0])], look.noise, off[0], off[1])
 
 
+@wp.struct
+class FloorShade:
+    """World values the floor's albedo and lighting read at every floor point (:func:`floor_lit_from`), gathered
+    once (:func:`floor_shade`): a resolve thread loads them before its pixel loop, where each store to an 8-bit
+    output would make the compiler load them again for the next pixel. ``fn``: unit floor normal; ``spec``: the
+    floor's (strength, exponent); ``ambient``, ``sun_dir``, ``sun_color``: the world's; ``wl``: its row of the
+    point-light arrays; the checker and grain of
+    :func:`floor_albedo`: ``base`` albedo, ``ft`` (``Look.floor_tex``), ``inv_tile`` [1/m], ``fc2``, noise offset
+    (``off_u``, ``off_v``) [texels]."""
+
+    fn: wp.vec3
+    spec: wp.vec2
+    ambient: wp.vec3
+    sun_dir: wp.vec3
+    sun_color: wp.vec3
+    wl: int
+    base: wp.vec3
+    ft: wp.vec4
+    inv_tile: float
+    fc2: wp.vec3
+    off_u: float
+    off_v: float
+
+
 @wp.func(inline=True)
-def floor_lit(look: Look, L: Lights, w: int, first: int, albedo: wp.vec3, p: wp.vec3, to_eye: wp.vec3) -> wp.vec3:
-    """The floor of albedo ``albedo`` at ``p``: ambient + sun + every point light, and, for a glossy plate (floor
-    specular strength > 0), their Blinn-Phong highlights seen along ``to_eye``, shadowed like the diffuse term (one
-    lookup per light serves both). Linear in ``albedo`` plus the highlights."""
-    fn = look.floor_normal[wrow(w, look.floor_normal.shape[0])]
-    spec = look.specular[wrow(w, look.specular.shape[0]), SEG_FLOOR]
+def floor_shade(look: Look, L: Lights, w: int) -> FloorShade:
+    """World ``w``'s :class:`FloorShade`."""
+    fs = FloorShade()
+    fs.fn = look.floor_normal[wrow(w, look.floor_normal.shape[0])]
+    fs.spec = look.specular[wrow(w, look.specular.shape[0]), SEG_FLOOR]
+    fs.ambient = L.ambient[wrow(w, L.ambient.shape[0])]
+    fs.sun_dir = L.sun_dir[wrow(w, L.sun_dir.shape[0])]
+    fs.sun_color = L.sun_color[wrow(w, L.sun_color.shape[0])]
+    fs.wl = wrow(w, L.pos.shape[0])
+    fs.base = look.albedo[wrow(w, look.albedo.shape[0]), SEG_FLOOR]
+    fs.ft = look.floor_tex[wrow(w, look.floor_tex.shape[0])]
+    fs.inv_tile = 1.0 / fs.ft[0]
+    fs.fc2 = look.floor_color2[wrow(w, look.floor_color2.shape[0])]
+    off = noise_offset(look, w)
+    fs.off_u = off[0]
+    fs.off_v = off[1]
+    return fs
+
+
+@wp.func(inline=True)
+def floor_lit_from(fs: FloorShade, L: Lights, first: int, albedo: wp.vec3, p: wp.vec3, to_eye: wp.vec3) -> wp.vec3:
+    """:func:`floor_lit` from the world's gathered values ``fs`` (:func:`floor_shade`)."""
+    fn = fs.fn
+    spec = fs.spec
     glossy = spec[0] > 0.0  # a glossy plate (render.plate_materials)
     v = wp.vec3(0.0)
     if glossy:
         v = wp.normalize(to_eye)
-    irr, highlights = sun_light(L, w, first, p, fn, v, spec, glossy, True)
-    wl = wrow(w, L.pos.shape[0])
+    irr, highlights = sun_light_from(fs.ambient, fs.sun_dir, fs.sun_color, L, first, p, fn, v, spec, glossy, True)
+    wl = fs.wl
     for i in range(L.pos.shape[1]):
         if is_dark(L, wl, i):
             continue
@@ -378,6 +419,14 @@ def floor_lit(look: Look, L: Lights, w: int, first: int, albedo: wp.vec3, p: wp.
                 hl = wp.max(wp.dot(fn, wp.normalize(ldir + v)), 0.0)
                 highlights = highlights + L.power[wl, i] * inv_r2 * (spec[0] * spec_power(hl, spec[1]) * vis)
     return wp.cw_mul(albedo, irr) + highlights
+
+
+@wp.func(inline=True)
+def floor_lit(look: Look, L: Lights, w: int, first: int, albedo: wp.vec3, p: wp.vec3, to_eye: wp.vec3) -> wp.vec3:
+    """The floor of albedo ``albedo`` at ``p``: ambient + sun + every point light, and, for a glossy plate (floor
+    specular strength > 0), their Blinn-Phong highlights seen along ``to_eye``, shadowed like the diffuse term (one
+    lookup per light serves both). Linear in ``albedo`` plus the highlights."""
+    return floor_lit_from(floor_shade(look, L, w), L, first, albedo, p, to_eye)
 
 
 @wp.func(inline=True)
