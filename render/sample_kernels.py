@@ -395,6 +395,11 @@ def make_resolve_samples(sub: int, lens: bool, normals: bool = False, texture_fi
         prev_inv_det = float(1.0)
         inv_fx = 1.0 / k[0]
         inv_fy = 1.0 / k[1]
+        dist = wp.vec4(0.0)
+        k3 = float(0.0)
+        if wp.static(lens):
+            dist = cam_dist[img]
+            k3 = cam_k3[img]
         for x in range(xb * span, wp.min(xb * span + span, width)):
             pix = y * width + x
             # the pinhole point the pixel centre sees, and d(pinhole px) / d(output px) for its samples
@@ -413,11 +418,10 @@ def make_resolve_samples(sub: int, lens: bool, normals: bool = False, texture_fi
                 d = float(1.0)
                 inv_det = float(1.0)
                 if prev_ok:  # the pixel to the left solved: start from it (along a CPU thread's row)
-                    u, v, a, b, d, inv_det, ok = lens_inverse_next32(xd, yd, cam_dist[img], cam_k3[img], inv_fx,
-                                                                     prev_u, prev_v, prev_a, prev_b, prev_d,
-                                                                     prev_inv_det)
+                    u, v, a, b, d, inv_det, ok = lens_inverse_next32(xd, yd, dist, k3, inv_fx, prev_u, prev_v, prev_a,
+                                                                     prev_b, prev_d, prev_inv_det)
                 if not ok or not prev_ok:
-                    u, v, a, b, d, ok = lens_inverse32(xd, yd, cam_dist[img], cam_k3[img])
+                    u, v, a, b, d, ok = lens_inverse32(xd, yd, dist, k3)
                     inv_det = 1.0 / (a * d - b * b)
                 prev_ok = ok
                 prev_u = u
