@@ -9,7 +9,9 @@ scene, the cameras, the sensor values: host arrays only).
 again after one untimed render (kernel load): the best process-CPU time per image of the whole ``render`` and of each
 kernel's launches, and optionally the outputs (to check that two trees give the same bytes). Instruction counts, which
 a busy machine does not change: ``valgrind --tool=cachegrind --cache-sim=no <python> benchmarks/job_render_replay.py
-replay calls.pkl --images 8 --repeats 2``, whose Warp kernels are the code valgrind lists without a symbol (``???``).
+replay calls.pkl --images 8 --repeats 2``, whose Warp kernels are the code valgrind lists without a symbol (``???``);
+check that it printed its timing line: valgrind stops at AVX instructions it does not decode (``vex amd64->IR:
+unhandled instruction bytes``) in kernels from Warp's cache, and a run that ended there still prints totals.
 """
 
 from __future__ import annotations
