@@ -356,9 +356,8 @@ class FloorShade:
     once (:func:`floor_shade`): a resolve thread loads them before its pixel loop, where each store to an 8-bit
     output would make the compiler load them again for the next pixel. ``fn``: unit floor normal; ``spec``: the
     floor's (strength, exponent); ``ambient``, ``sun_dir``, ``sun_color``: the world's; ``wl``: its row of the
-    point-light arrays; the checker and grain of
-    :func:`floor_albedo`: ``base`` albedo, ``ft`` (``Look.floor_tex``), ``inv_tile`` [1/m], ``fc2``, noise offset
-    (``off_u``, ``off_v``) [texels]."""
+    point-light arrays; the checker and grain of :func:`floor_albedo`: ``base`` albedo, ``ft``
+    (``Look.floor_tex``), ``inv_tile`` [1/m], ``fc2``, noise offset (``off_u``, ``off_v``) [texels]."""
 
     fn: wp.vec3
     spec: wp.vec2
