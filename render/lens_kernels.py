@@ -45,15 +45,31 @@ def lens_inverse(xd: wp.float64, yd: wp.float64, k1: wp.float64, k2: wp.float64,
 
 
 @wp.func
+def lens_map32(u: float, v: float, xd: float, yd: float, dist: wp.vec4, k3: float):
+    """OpenCV's lens map (``dist`` = (k1, k2, p1, p2), ``k3``) at the undistorted normalized point (u, v) in float32:
+    the residual (ex, ey) against the distorted point (xd, yd) and the map's symmetric Jacobian (a, b, d) =
+    (dxd/du, dxd/dv = dyd/du, dyd/dv) there."""
+    k1 = dist[0]
+    k2 = dist[1]
+    p1 = dist[2]
+    p2 = dist[3]
+    r2 = u * u + v * v
+    radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    drad = 2.0 * (k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2))
+    ex = u * radial + 2.0 * p1 * u * v + p2 * (r2 + 2.0 * u * u) - xd
+    ey = v * radial + p1 * (r2 + 2.0 * v * v) + 2.0 * p2 * u * v - yd
+    a = radial + u * u * drad + 2.0 * p1 * v + 6.0 * p2 * u
+    b = u * v * drad + 2.0 * p1 * u + 2.0 * p2 * v
+    d = radial + v * v * drad + 6.0 * p1 * v + 2.0 * p2 * u
+    return ex, ey, a, b, d
+
+
+@wp.func
 def lens_newton32(xd: float, yd: float, dist: wp.vec4, k3: float, u0: float, v0: float, steps: int):
     """Newton's method for the undistorted normalized point (u, v) whose image through OpenCV's lens ``dist`` =
     (k1, k2, p1, p2) and ``k3`` is (xd, yd), from the guess (u0, v0): ``steps`` updates, then a round that measures
     the residual and the forward map's Jacobian (a, b, d) at the solution; ``ok`` False where no ray reaches the
     point (residual above 1e-5 of the radius, or the map folded: a <= 0 or a d - b² <= 0)."""
-    k1 = dist[0]
-    k2 = dist[1]
-    p1 = dist[2]
-    p2 = dist[3]
     r2d = xd * xd + yd * yd
     u = u0
     v = v0
@@ -63,14 +79,7 @@ def lens_newton32(xd: float, yd: float, dist: wp.vec4, k3: float, u0: float, v0:
     ex = float(0.0)
     ey = float(0.0)
     for it in range(steps + 1):
-        r2 = u * u + v * v
-        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-        drad = 2.0 * (k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2))
-        ex = u * radial + 2.0 * p1 * u * v + p2 * (r2 + 2.0 * u * u) - xd
-        ey = v * radial + p1 * (r2 + 2.0 * v * v) + 2.0 * p2 * u * v - yd
-        a = radial + u * u * drad + 2.0 * p1 * v + 6.0 * p2 * u
-        b = u * v * drad + 2.0 * p1 * u + 2.0 * p2 * v
-        d = radial + v * v * drad + 6.0 * p1 * v + 2.0 * p2 * u
+        ex, ey, a, b, d = lens_map32(u, v, xd, yd, dist, k3)
         if it < steps:  # the last round only measures the residual and the Jacobian at the solution
             det = a * d - b * b
             u = u - (d * ex - b * ey) / det
@@ -101,18 +110,7 @@ def lens_inverse_next32(xd: float, yd: float, dist: wp.vec4, k3: float, step: fl
     the radius) on an unfolded map, else the caller solves cold."""
     gu = u + d * step * inv_det
     gv = v - b * step * inv_det
-    k1 = dist[0]
-    k2 = dist[1]
-    p1 = dist[2]
-    p2 = dist[3]
-    r2 = gu * gu + gv * gv
-    radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-    drad = 2.0 * (k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2))
-    ex = gu * radial + 2.0 * p1 * gu * gv + p2 * (r2 + 2.0 * gu * gu) - xd
-    ey = gv * radial + p1 * (r2 + 2.0 * gv * gv) + 2.0 * p2 * gu * gv - yd
-    ga = radial + gu * gu * drad + 2.0 * p1 * gv + 6.0 * p2 * gu
-    gb = gu * gv * drad + 2.0 * p1 * gu + 2.0 * p2 * gv
-    gd = radial + gv * gv * drad + 6.0 * p1 * gv + 2.0 * p2 * gu
+    ex, ey, ga, gb, gd = lens_map32(gu, gv, xd, yd, dist, k3)
     det = ga * gd - gb * gb
     ok = ex * ex + ey * ey <= 1.0e-8 * (1.0 + xd * xd + yd * yd) and ga > 0.0 and det > 0.0
     inv = 1.0 / det

@@ -385,14 +385,15 @@ def make_resolve_samples(sub: int, lens: bool, normals: bool = False, texture_fi
         inv_sub = 1.0 / float(sub)  # exact for sub = 2, 4
         transmit = look.floor_transmit[wrow(w, look.floor_transmit.shape[0])]
         gain = cam_gain[img]
-        # the lens solution of the previous pixel of this thread's run (a warm start for the next)
-        prev_ok = bool(False)
-        prev_u = float(0.0)
-        prev_v = float(0.0)
-        prev_a = float(1.0)
-        prev_b = float(0.0)
-        prev_d = float(1.0)
-        prev_inv_det = float(1.0)
+        # the lens solution of the pixel last solved on this thread's run, the next one's warm start: the undistorted
+        # point (u, v), the lens map's Jacobian (a, b, d) and 1 / (a d - b²) there
+        lens_ok = bool(False)
+        u = float(0.0)
+        v = float(0.0)
+        a = float(1.0)
+        b = float(0.0)
+        d = float(1.0)
+        inv_det = float(1.0)
         inv_fx = 1.0 / k[0]
         inv_fy = 1.0 / k[1]
         dist = wp.vec4(0.0)
@@ -411,25 +412,13 @@ def make_resolve_samples(sub: int, lens: bool, normals: bool = False, texture_fi
                 # the output's principal point is the label grid's less the widening margins
                 xd = (float(x + margin_x) - k[2]) * inv_fx
                 yd = (float(y + margin_y) - k[3]) * inv_fy
-                u = float(0.0)
-                v = float(0.0)
-                a = float(1.0)
-                b = float(0.0)
-                d = float(1.0)
-                inv_det = float(1.0)
-                if prev_ok:  # the pixel to the left solved: start from it (along a CPU thread's row)
-                    u, v, a, b, d, inv_det, ok = lens_inverse_next32(xd, yd, dist, k3, inv_fx, prev_u, prev_v, prev_a,
-                                                                     prev_b, prev_d, prev_inv_det)
-                if not ok or not prev_ok:
-                    u, v, a, b, d, ok = lens_inverse32(xd, yd, dist, k3)
+                if lens_ok:  # the pixel to the left solved: start from it (along a CPU thread's row)
+                    u, v, a, b, d, inv_det, lens_ok = lens_inverse_next32(xd, yd, dist, k3, inv_fx, u, v, a, b, d,
+                                                                          inv_det)
+                if not lens_ok:  # the run's first pixel, or a warm start that failed: solved cold
+                    u, v, a, b, d, lens_ok = lens_inverse32(xd, yd, dist, k3)
                     inv_det = 1.0 / (a * d - b * b)
-                prev_ok = ok
-                prev_u = u
-                prev_v = v
-                prev_a = a
-                prev_b = b
-                prev_d = d
-                prev_inv_det = inv_det
+                ok = lens_ok
                 u0 = k[0] * u + k[2]
                 v0 = k[1] * v + k[3]
                 jac = wp.vec4(d * inv_det, -b * inv_det * fxy, -b * inv_det * fyx, a * inv_det)

@@ -514,43 +514,27 @@ def shade_hit(look: Look, L: Lights, w: int, first: int, label: int, z: float, m
 
 @wp.struct
 class PlainWorld:
-    """One world's values the plain path (:func:`make_resolve_shade`) loads once per thread: its lights (ambient,
-    sun, the one lamp), floor (checker ``ft``, ``inv_tile`` = 1 / tile [m], second colour ``fc2``, ``floor_irr``:
-    the ambient + sun irradiance of its constant normal ``fn``), paper texture ``pt`` and noise offset [texels]."""
+    """One world's values the plain path (:func:`make_resolve_shade`) loads once per thread: the floor's and the
+    sun's (``fs``, :class:`FloorShade`), the one lamp (position ``lp``, power ``lpw``), ``floor_irr``: the ambient +
+    sun irradiance of the floor's constant normal, and the paper texture ``pt``."""
 
-    amb: wp.vec3
-    sd: wp.vec3
-    sc: wp.vec3
+    fs: FloorShade
     lp: wp.vec3
     lpw: wp.vec3
-    fn: wp.vec3
-    ft: wp.vec4
-    inv_tile: float
-    fc2: wp.vec3
     floor_irr: wp.vec3
     pt: wp.vec2
-    off_u: float
-    off_v: float
 
 
 @wp.func
 def plain_world(look: Look, L: Lights, w: int) -> PlainWorld:
     """World ``w``'s :class:`PlainWorld` (one lamp: light 0)."""
     pw = PlainWorld()
-    pw.amb = L.ambient[wrow(w, L.ambient.shape[0])]
-    pw.sd = L.sun_dir[wrow(w, L.sun_dir.shape[0])]
-    pw.sc = L.sun_color[wrow(w, L.sun_color.shape[0])]
-    pw.lp = L.pos[wrow(w, L.pos.shape[0]), 0]
-    pw.lpw = L.power[wrow(w, L.power.shape[0]), 0]
-    pw.fn = look.floor_normal[wrow(w, look.floor_normal.shape[0])]
-    pw.ft = look.floor_tex[wrow(w, look.floor_tex.shape[0])]
-    pw.inv_tile = 1.0 / pw.ft[0]
-    pw.fc2 = look.floor_color2[wrow(w, look.floor_color2.shape[0])]
-    pw.floor_irr = pw.amb + pw.sc * wp.max(wp.dot(pw.fn, pw.sd), 0.0)
+    fs = floor_shade(look, L, w)
+    pw.fs = fs
+    pw.lp = L.pos[fs.wl, 0]
+    pw.lpw = L.power[fs.wl, 0]
+    pw.floor_irr = fs.ambient + fs.sun_color * wp.max(wp.dot(fs.fn, fs.sun_dir), 0.0)
     pw.pt = look.paper_tex[wrow(w, look.paper_tex.shape[0])]
-    off = noise_offset(look, w)
-    pw.off_u = off[0]
-    pw.off_v = off[1]
     return pw
 
 
@@ -559,18 +543,18 @@ def shade_hit_plain(look: Look, pw: PlainWorld, wa: int, ws: int, label: int, z:
                     n_world: wp.vec3, eye: wp.vec3, d_world: wp.vec3, bg: wp.vec3):
     """:func:`shade_hit` for the plain path: world ``pw`` (its albedo row ``wa``, specular row ``ws``) under one lamp,
     no shadows, Lambert paper, a matte opaque floor."""
+    fs = pw.fs
     color = bg
-    nrm = seen_normal(label, pw.fn, n_world, d_world)
+    nrm = seen_normal(label, fs.fn, n_world, d_world)
     if label == SEG_FLOOR:
         p = eye + z * d_world
         to_lamp = pw.lp - p
         inv_r2 = 1.0 / wp.max(wp.dot(to_lamp, to_lamp), 1.0e-6)
-        ndp = wp.max(wp.dot(pw.fn, to_lamp), 0.0) * wp.sqrt(inv_r2)
-        albedo = floor_albedo(look.albedo[wa, SEG_FLOOR], mat, pw.inv_tile, pw.ft, pw.fc2, look.noise, pw.off_u,
-                              pw.off_v)
+        ndp = wp.max(wp.dot(fs.fn, to_lamp), 0.0) * wp.sqrt(inv_r2)
+        albedo = floor_albedo(fs.base, mat, fs.inv_tile, fs.ft, fs.fc2, look.noise, fs.off_u, fs.off_v)
         color = wp.cw_mul(albedo, pw.floor_irr + pw.lpw * (ndp * inv_r2))
     elif label != SEG_BACKGROUND:
-        base = textured_albedo(look.albedo[wa, label], label, mat, pw.pt, look.noise, pw.off_u, pw.off_v)
-        color = light_surface_plain(base, look.specular[ws, label], eye + z * d_world, nrm, -d_world, pw.amb, pw.sd,
-                                    pw.sc, pw.lp, pw.lpw)
+        base = textured_albedo(look.albedo[wa, label], label, mat, pw.pt, look.noise, fs.off_u, fs.off_v)
+        color = light_surface_plain(base, look.specular[ws, label], eye + z * d_world, nrm, -d_world, fs.ambient,
+                                    fs.sun_dir, fs.sun_color, pw.lp, pw.lpw)
     return color, nrm

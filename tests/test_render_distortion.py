@@ -201,9 +201,9 @@ def test_warm_lens_inverse_matches_opencv(dist):
         for x in range(256):
             xd = (float(x) - c) / f
             yd = (float(y) - c) / f
-            if warm != 0 and ok:
+            if warm != 0 and ok:  # as the resolve: warm from the left neighbour, cold where that fails
                 u, v, a, b, d, inv_det, ok = lens_inverse_next32(xd, yd, dist, k3, 1.0 / f, u, v, a, b, d, inv_det)
-            else:
+            if warm == 0 or not ok:
                 u, v, a, b, d, ok = lens_inverse32(xd, yd, dist, k3)
                 inv_det = 1.0 / (a * d - b * b)
             out[y, x] = wp.vec2(u, v)

@@ -23,8 +23,8 @@ import math
 import numpy as np
 import warp as wp
 
-from warpworm.ids import WORLD_CRUMPLED, WORLD_EXPLODED, WORLD_OK, WORLD_RETIRED
-from warpworm.kernels import magnet_pose
+from warpworm.ids import WORLD_CRUMPLED, WORLD_EXPLODED
+from warpworm.kernels import magnet_pose, world_status
 from warpworm.physics.gaits import DEFAULT_DT, DEFAULT_SUBSTEPS
 from warpworm.physics.magnets import launch_world_wrenches, pair_wrench_scratch
 from warpworm.sim import capture_gate
@@ -287,12 +287,11 @@ class Simulator:
         if mask.shape != state.unstable.shape:
             raise ValueError(f"retire: worlds has shape {mask.shape}; expected one bool per world, "
                              f"{state.unstable.shape}")
-        if not mask.any():  # (called once per frame step: no device read when no world finishes there)
+        if not mask.any():  # (called once per frame step: nothing to launch when no world finishes there)
             return
-        flags = state.unstable.numpy()
-        retired = mask & (flags == WORLD_OK)
-        if retired.any():
-            state.unstable.assign(np.where(retired, WORLD_RETIRED, flags).astype(np.int32))
+        wp.launch(world_status.retire_worlds, dim=mask.shape[0], device=self.model.device,
+                  inputs=[wp.array(mask.astype(np.int32), dtype=wp.int32, device=self.model.device)],
+                  outputs=[state.unstable])
 
     def settle(self, state: State, duration: float = 0.3, *, reset_time: bool = True) -> State:
         """Let every world settle under gravity with the EPM absent (parked far away) for ``duration`` [s].
