@@ -11,6 +11,11 @@ stage times (sim, render, write) are the job's summary in the dataset's ``manife
 A B B A A B ... after one untimed warm-up run of each tree (Warp's kernel cache), so a slow spell of a shared machine
 falls on both trees; the ratio is taken round by round and its median quoted.
 
+``--sizes N1 N2`` runs the job at two sample counts (``--num``) in each round and adds the marginal cost: CPU per
+sample between the two sizes, (cpu(N2) - cpu(N1)) / (N2 - N1), and its gain against the reference, the samples per
+CPU-second a long job approaches once the process start-up (imports, kernel loading: ~1.7 s whatever the size) is
+paid.
+
 ``--reference COMMIT`` checks the commit out into a worktree with its own virtualenv (system site-packages, the
 package installed editable without dependencies) under ``--cache`` the first time; ``--reference-python PATH`` uses
 an interpreter that already has the reference installed.
@@ -38,7 +43,9 @@ NOTES = ("cpu_s: user + system CPU seconds of the whole job process; sim_s/rende
          "thread's work beyond the wait); render_over_sim: the issue's 'render stage <= sim stage'; cpu_ratio: this "
          "tree's CPU over the reference's in the same round (median over rounds), samples_per_cpu_gain = 1 / "
          "cpu_ratio; gain_if_render_free: the reference's CPU over this tree's less its render stage, the ceiling "
-         "the rest of the job sets")
+         "the rest of the job sets; with --sizes, '(N)' rows are the job at N samples and 'per sample' rows the CPU "
+         "seconds per sample between the two sizes (the start-up cancels), their gain the reference's over this "
+         "tree's")
 
 
 def run_job(python: str, job: list[str]) -> dict:
@@ -88,24 +95,67 @@ def reference_python(commit: str, cache: Path) -> str:
     return str(python)
 
 
-def alternated(trees: dict[str, str], job: list[str], rounds: int, log=print) -> list[dict]:
-    """Rows of ``rounds`` rounds of every tree (name -> its Python), A B / B A alternately, after a warm-up each."""
+def with_num(job: list[str], num: int) -> list[str]:
+    """``job`` with its sample count (``--num``) set to ``num``."""
+    if "--num" in job:
+        i = job.index("--num")
+        return [*job[:i + 1], str(num), *job[i + 2:]]
+    return [*job, "--num", str(num)]
+
+
+def alternated(trees: dict[str, str], job: list[str], rounds: int, log=print, sizes: list[int] | None = None
+               ) -> list[dict]:
+    """Rows of ``rounds`` rounds of every tree (name -> its Python), A B / B A alternately, after a warm-up each; with
+    ``sizes``, each tree runs the job at each sample count in each round."""
     names = list(trees)
+    jobs = [with_num(job, n) for n in sizes] if sizes else [job]
     for name in names:
-        run_job(trees[name], job)  # warm-up: Warp's kernel cache, the page cache
+        run_job(trees[name], jobs[0])  # warm-up: Warp's kernel cache, the page cache
     rows = []
     for r in range(rounds):
         for name in (names if r % 2 == 0 else names[::-1]):
-            row = {"tree": name, "round": r, **run_job(trees[name], job)}
-            log(f"  round {r} {name}: cpu {row['cpu_s']:.2f} s, sim {row['sim_s']:.2f} s, render "
-                f"{row['render_s']:.2f} s, write {row['write_s']:.2f} s")
-            rows.append(row)
+            for j in (jobs if r % 2 == 0 else jobs[::-1]):
+                row = {"tree": name, "round": r, **run_job(trees[name], j)}
+                log(f"  round {r} {name} ({row['samples']} samples): cpu {row['cpu_s']:.2f} s, sim "
+                    f"{row['sim_s']:.2f} s, render {row['render_s']:.2f} s, write {row['write_s']:.2f} s")
+                rows.append(row)
     return rows
 
 
+def marginal(rows: list[dict], new: str = "this", ref: str = "reference") -> list[dict]:
+    """Per tree, the CPU seconds per sample between the smallest and the largest job of each round (median, range);
+    with a reference, the gain of that marginal cost round by round."""
+    per = {}
+    for r in rows:
+        per.setdefault((r["tree"], r["round"]), []).append(r)
+    cost = {}
+    for (tree, rnd), rs in per.items():
+        small, large = min(rs, key=lambda x: x["samples"]), max(rs, key=lambda x: x["samples"])
+        if large["samples"] > small["samples"]:
+            cost[(tree, rnd)] = (large["cpu_s"] - small["cpu_s"]) / (large["samples"] - small["samples"])
+    out = []
+    for tree in dict.fromkeys(t for t, _ in cost):
+        c = [v for (t, _), v in cost.items() if t == tree]
+        out.append({"tree": f"{tree}, per sample", "runs": len(c), "cpu_s_per_sample": statistics.median(c),
+                    "cpu_s_per_sample_min": min(c), "cpu_s_per_sample_max": max(c)})
+    gains = [cost[(ref, rnd)] / cost[(new, rnd)] for (t, rnd) in cost if t == new and (ref, rnd) in cost]
+    if gains:
+        out.append({"tree": f"{new} / {ref}, per sample", "runs": len(gains),
+                    "samples_per_cpu_gain": statistics.median(gains), "gain_min": min(gains),
+                    "gain_max": max(gains)})
+    return out
+
+
 def summarize(rows: list[dict], new: str = "this", ref: str = "reference") -> list[dict]:
-    """Per tree: medians, the render/sim range and how many runs had render <= sim; with a reference, the CPU ratio
-    round by round (median, range)."""
+    """Per tree and job size: medians, the render/sim range and how many runs had render <= sim; with a reference,
+    the CPU ratio round by round (median, range); with several sizes, the :func:`marginal` rows."""
+    sizes = sorted({r["samples"] for r in rows})
+    if len(sizes) > 1:
+        out = []
+        for n in sizes:
+            out += [{**x, "tree": f"{x['tree']} ({n})"} for x in summarize([r for r in rows if r["samples"] == n],
+                                                                           new, ref)]
+        return out + marginal(rows, new, ref)
     out = []
     for name in dict.fromkeys(r["tree"] for r in rows):
         mine = [r for r in rows if r["tree"] == name]
@@ -145,19 +195,25 @@ def main(argv=None) -> int:
                         help="where --reference's worktrees and virtualenvs live (default ~/.cache/warpworm-bench)")
     parser.add_argument("--rounds", type=int, default=4, help="timed runs of each tree (default 4)")
     parser.add_argument("--quick", action="store_true", help="a 32-sample job at 4 worlds")
+    parser.add_argument("--sizes", type=int, nargs=2, metavar="N",
+                        help="two sample counts: run the job at both in each round and report the per-sample cost")
     parser.add_argument("--json", metavar="FILE", help="write the rows and the summary here")
     parser.add_argument("job", nargs="*", help=f"generate's arguments (default: {' '.join(JOB)})")
     args = parser.parse_args(argv)
     if args.rounds < 1:
         parser.error(f"--rounds: got {args.rounds}; expected an integer >= 1")
     job = args.job or (QUICK_JOB if args.quick else JOB)
+    if args.sizes and (min(args.sizes) < 1 or args.sizes[0] == args.sizes[1]):
+        parser.error(f"--sizes: got {args.sizes}; expected two different sample counts >= 1")
     trees = {"this": sys.executable}
     if args.reference:
         trees["reference"] = reference_python(args.reference, Path(args.cache))
     elif args.reference_python:
         trees["reference"] = args.reference_python
-    print(f"warpworm generate {' '.join(job)}: {args.rounds} rounds of {', '.join(trees)}")
-    rows = alternated(trees, job, args.rounds)
+    sizes = sorted(args.sizes) if args.sizes else None
+    print(f"warpworm generate {' '.join(job)}: {args.rounds} rounds of {', '.join(trees)}"
+          + (f", --num {sizes[0]} and {sizes[1]}" if sizes else ""))
+    rows = alternated(trees, job, args.rounds, sizes=sizes)
     summary = summarize(rows)
     sys.path.insert(0, str(HERE))
     from run import table  # the runner's table format
@@ -165,7 +221,7 @@ def main(argv=None) -> int:
     print(table(summary))
     print(NOTES)
     if args.json:
-        Path(args.json).write_text(json.dumps({"job": job, "reference": args.reference or args.reference_python,
+        Path(args.json).write_text(json.dumps({"job": job, "reference": args.reference or args.reference_python, "sizes": sizes,
                                                "rows": rows, "summary": summary, "notes": NOTES}, indent=1))
         print(f"wrote {args.json}")
     return 0
