@@ -17,6 +17,9 @@ magpylib rows run ``getFT`` for the same 12 pair wrenches per world (meshing 100
 agreement) for small W only; ``magpylib_est`` rows extrapolate that per-world cost linearly to larger W and are
 labelled as estimates.
 
+A ``warpworm, IPM poses NaN`` row per model (W = 16) times the call on an exploded world's poses: NaN wrenches
+at once (before, the quadrature ran on NaN: ~13 ms a world).
+
 A before/after comparison runs this file on each of two checkouts (docs/magnets.md keeps the measured ones).
 """
 
@@ -291,13 +294,20 @@ def run(quick: bool = False) -> list[dict]:
                     row["field_evals_per_s"] = _analytic_evals_per_world(
                         pos, rot, magnets, mg.DEFAULT_QUAD_ORDER, mg.DEFAULT_MAX_PANELS) * W / t
                 rows.append(row)
+            if W == 16:  # an exploded world's NaN poses (the simulator no longer steps it, a snapshot still asks)
+                nan_pos = pos.astype(np.float32)
+                nan_pos[:, 1:] = np.nan
+                t = _time(_launcher(model_arr, {**arrays, "pos": wp.array(nan_pos, dtype=wp.vec3, device=device)},
+                                    device, False), repeats)
+                rows.append({"impl": "warpworm, IPM poses NaN", "model": model, "epm": False, "W": W,
+                             "ms_per_call": 1e3 * t, "us_per_world": 1e6 * t / W})
     # the point-dipole reference once more, after (the faster of the two measurements: conservative on a shared
     # machine); vs_nbody was measured against an inverse-square launch interleaved with each row's repeats
     for ref, again in zip(rows[:2], _nbody_rows(device)):
         if again["pairs_per_s"] > ref["pairs_per_s"]:
             ref.update(again)
     for row in rows[2:]:
-        if row["model"] == "dipoles":
+        if "pairs_per_s" in row and row["model"] == "dipoles":
             row["vs_dipole_nbody"] = row["pairs_per_s"] / rows[1]["pairs_per_s"]
     # magpylib: the same 12 pair wrenches per world, measured at small W
     try:

@@ -136,6 +136,7 @@ def world_pair_wrench_kernel(
     # Data in:
     pos: wp.array2d(dtype=wp.vec3),
     rot: wp.array2d(dtype=wp.quat),
+    stopped: wp.array(dtype=wp.int32),
     # Data out:
     pair_force: wp.array3d(dtype=wp.vec3),
     pair_torque: wp.array3d(dtype=wp.vec3),
@@ -148,8 +149,13 @@ def world_pair_wrench_kernel(
     the reaction, F_a = −F_b and τ_a = −τ_b − (c_b − c_a) × F_b (the pair's momentum and angular momentum conserved,
     as the exact wrenches do). Half the pair evaluations of summing each magnet's wrench over its sources; the two
     orders of a pair agree to the quadrature's ~1e-6 (``tests/test_magnets_far_pair.py``). A magnet with zero moment
-    is absent: its pairs are zero. Model arrays are read as ``a[wrow(world, a.shape[0])]``."""
+    is absent: its pairs are zero. Model arrays are read as ``a[wrow(world, a.shape[0])]``. ``stopped`` (W,) or
+    empty: a world whose entry is non-zero (a simulator's status: exploded, crumpled, retired) is skipped, its pairs'
+    wrenches left as they were."""
     world, p = wp.tid()
+    if stopped.shape[0] > 0:
+        if stopped[world] != 0:
+            return
     ab = pair_members(p, pos.shape[1])
     a = ab[0]
     b = ab[1]
@@ -160,7 +166,15 @@ def world_pair_wrench_kernel(
     t = wp.vec3(0.0)
     f_a = wp.vec3(0.0)
     t_a = wp.vec3(0.0)
-    if wp.length_sq(m_a) > 0.0 and wp.length_sq(m_b) > 0.0:
+    finite = wp.isfinite(pos[world, a]) and wp.isfinite(pos[world, b]) and wp.isfinite(rot[world, a]) and wp.isfinite(
+        rot[world, b])
+    if not finite:  # an exploded world's poses: NaN out at once (the quadrature on NaN poses took ~13 ms a world
+        # against ~10 us: benchmarks/bench_magnets.py, 'IPM poses NaN')
+        f = wp.vec3(wp.nan)
+        t = wp.vec3(wp.nan)
+        f_a = f
+        t_a = t
+    elif wp.length_sq(m_a) > 0.0 and wp.length_sq(m_b) > 0.0:
         row = wrow(world, shape.shape[0])
         srow = wrow(world, size.shape[0])
         f, t = pair_wrench(

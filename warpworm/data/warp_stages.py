@@ -182,7 +182,11 @@ def run_at_phases(sim, state, params, num_worlds: int, phases, keys) -> list[dic
     """``sim.run`` for frames given in cycles of each world's EPM period (``sim.frame_unit: cycle``): one snapshot
     per distinct step over the worlds, each world keeping its own steps and retired after its last
     (:meth:`~warpworm.sim.simulator.Simulator.retire`). Returns F dicts of (W, ...) arrays like
-    ``sim.run`` plus ``frame_time`` (W,) [s] and ``clock``."""
+    ``sim.run`` plus ``frame_time`` (W,) [s] and ``clock``.
+
+    With ``unstable`` among ``keys``, the run stops once every world with frames left has gone unstable (exploded
+    or crumpled: the substeps no longer move it, and its trajectory is redrawn): its frames left are its state at
+    that step, flagged unstable, and the steps up to the last frame are not spent."""
     W = num_worlds
     steps = frame_steps(phases, per_world(params.cycle_period, W), sim.dt)  # (W, F)
     frames = [None] * steps.shape[1]
@@ -191,14 +195,18 @@ def run_at_phases(sim, state, params, num_worlds: int, phases, keys) -> list[dic
         snap = sim.run(state, [(int(n) - done) * sim.dt], keys=keys)[0]
         done = int(n)
         sim.retire(state, steps[:, -1] == n)  # its last frame taken: a world is not stepped further
+        left = steps[:, -1] > n
+        stop = "unstable" in snap and not (left & ~np.asarray(snap["unstable"], bool)).any()
         for f in range(steps.shape[1]):
-            hit = steps[:, f] == n
+            hit = (steps[:, f] >= n) if stop else (steps[:, f] == n)
             if not hit.any():
                 continue
             if frames[f] is None:
                 frames[f] = {k: np.zeros_like(np.asarray(v)) for k, v in snap.items() if k != "clock"}
             for k, fr in frames[f].items():
                 fr[hit] = np.asarray(snap[k])[hit]
+        if stop:
+            break
     for f, fr in enumerate(frames):
         fr["frame_time"] = (steps[:, f] * sim.dt).astype(np.float32)
         fr["clock"] = float(steps[:, f].max() * sim.dt)

@@ -193,6 +193,7 @@ def launch_world_wrenches(
     epm_wrench: bool = True,
     far_field: bool = True,
     pair_scratch: tuple[wp.array, wp.array] | None = None,
+    stopped: wp.array | None = None,
 ) -> None:
     """Net magnetic force and torque on every magnet of every world from all the other magnets of its world.
 
@@ -229,6 +230,9 @@ def launch_world_wrenches(
         pair_scratch: the pairs' wrenches between the two launches, from :func:`pair_wrench_scratch` for these W
             and M (a caller that steps repeatedly, e.g. the simulator, owns one); ``None`` allocates one for this
             call.
+        stopped: int32, shape (W,), or ``None``: worlds whose entry is non-zero are skipped and keep the wrenches
+            they had (a caller's own ``pair_scratch`` keeps their pairs'): the simulator passes its world status, so
+            a world it no longer steps (exploded, crumpled, retired) costs no pair evaluation.
 
     Magnets must not overlap. Cost per world ('dipoles') ~ Σ over unordered pairs of N_a · N_b point-dipole pairs
     (paper's worm at 64/cm³: 256·12·3 + 12·12·3 = 9,648 pair interactions, with or without the EPM's wrench).
@@ -242,7 +246,7 @@ def launch_world_wrenches(
             world_pair_wrench_kernel,
             dim=(W, M * (M - 1) // 2),
             inputs=[_model_array(model, device), shape, size, moment, density, gl_x, gl_w, int(max_panels),
-                    int(bool(far_field)), pos, rot],
+                    int(bool(far_field)), pos, rot, stopped],
             outputs=[pair_force, pair_torque],
             device=device,
         )

@@ -36,12 +36,13 @@ from warpworm.transforms import quat_wxyz_to_matrix, quat_xyzw_to_wxyz
 
 def model_wrenches(model: Model, state: State, moment: wp.array, *, epm_wrench: bool = True,
                    force_out: wp.array | None = None, torque_out: wp.array | None = None,
-                   pair_scratch: tuple[wp.array, wp.array] | None = None) -> None:
+                   pair_scratch: tuple[wp.array, wp.array] | None = None, skip_stopped: bool = False) -> None:
     """:func:`warpworm.physics.magnets.launch_world_wrenches` on a model's magnets in a state (the simulator's one
     call of the magnet API): net force and torque on every magnet of every world, into ``state.magnet_force`` /
     ``magnet_torque`` unless other outputs are given. ``epm_wrench=False`` leaves the EPM's own wrench (slot 0) zero
     and spends nothing on it: the dynamics needs only the IPMs'. ``pair_scratch``: the caller's
-    (:func:`warpworm.physics.magnets.pair_wrench_scratch`), else one per call."""
+    (:func:`warpworm.physics.magnets.pair_wrench_scratch`), else one per call. ``skip_stopped``: the worlds whose
+    status (``state.unstable``) is non-zero keep the wrenches they had (the substeps no longer move them)."""
     launch_world_wrenches(
         model.magnet_model,
         model.magnet_shape,
@@ -55,6 +56,7 @@ def model_wrenches(model: Model, state: State, moment: wp.array, *, epm_wrench: 
         model.device,
         epm_wrench=epm_wrench,
         pair_scratch=pair_scratch,
+        stopped=state.unstable if skip_stopped else None,
     )
 
 
@@ -215,7 +217,7 @@ class Simulator:
     def _wrench(self, state: State, control: Control, moment: wp.array) -> None:
         m = self.model
         self._magnet_poses(state, control)
-        model_wrenches(m, state, moment, epm_wrench=False, pair_scratch=self._pair_scratch)
+        model_wrenches(m, state, moment, epm_wrench=False, pair_scratch=self._pair_scratch, skip_stopped=True)
         state.external_force.zero_()
         wp.launch(magnet_pose.distribute_wrench, dim=(m.num_worlds, 3),
                   inputs=[m.mount_vertices, state.positions, state.magnet_pos, state.magnet_force,
