@@ -221,8 +221,9 @@ def main(argv=None) -> int:
     print(table(summary))
     print(NOTES)
     if args.json:
-        Path(args.json).write_text(json.dumps({"job": job, "reference": args.reference or args.reference_python, "sizes": sizes,
-                                               "rows": rows, "summary": summary, "notes": NOTES}, indent=1))
+        record = {"job": job, "reference": args.reference or args.reference_python, "sizes": sizes, "rows": rows,
+                  "summary": summary, "notes": NOTES}
+        Path(args.json).write_text(json.dumps(record, indent=1))
         print(f"wrote {args.json}")
     return 0
 
