@@ -168,7 +168,7 @@ def world_pair_wrench_kernel(
     t_a = wp.vec3(0.0)
     finite = wp.isfinite(pos[world, a]) and wp.isfinite(pos[world, b]) and wp.isfinite(rot[world, a]) and wp.isfinite(
         rot[world, b])
-    if not finite:  # an exploded world's poses: NaN out at once (the quadrature on NaN poses took ~13 ms a world
+    if not finite:  # an exploded world's poses: NaN out at once (the quadrature on NaN poses took ~14 ms a world
         # against ~10 us: benchmarks/bench_magnets.py, 'IPM poses NaN')
         f = wp.vec3(wp.nan)
         t = wp.vec3(wp.nan)

@@ -454,18 +454,12 @@ def make_resolve_samples(sub: int, lens: bool, normals: bool = False, texture_fi
             seg[img, pix] = wp.uint8(seg_id(label))
             worm_mask[img, pix] = label_mask[img, grid_key_index(u0, v0, grid_w, grid_h)]
 
-            # colour: sub x sub samples, grouped by the surface they land on: the first sample's surface in registers
-            # (most pixels see one surface), the next MAX_GROUPS - 1 surfaces in small vectors
+            # colour: a filtered floor pixel lit once; any other, sub x sub samples grouped by the surface they land
+            # on: the first sample's surface in registers (most pixels see one surface), the next MAX_GROUPS - 1
+            # surfaces in small vectors, made only on that path (their zeroing is not paid per floor pixel)
             hit0 = Hit()
             count0 = int(0)
             alb0 = wp.vec3(0.0)
-            gid = GroupIds()
-            gfirst = GroupIds()
-            gcount = GroupIds()
-            gr = GroupSums()
-            gg = GroupSums()
-            gb = GroupSums()
-            ng = int(0)
             acc = wp.vec3(0.0)
             nsub = sub
             if wp.static(filtered):
@@ -489,7 +483,18 @@ def make_resolve_samples(sub: int, lens: bool, normals: bool = False, texture_fi
                         alb0 = floor_albedo_box(fshade.base, wp.vec3(fp[0], fp[1], 0.0), fp[2], fp[3], fshade.inv_tile,
                                                 fshade.ft, fshade.fc2, look.noise, fshade.off_u,
                                                 fshade.off_v) * float(count0)
-            if nsub != 0:  # not a floor pixel filtered above
+            if nsub == 0:  # a filtered floor pixel: one surface, nothing under it (no key), lit from the row's values
+                lit = floor_lit_from(fshade, lights, first, alb0 * (1.0 / float(count0)), eye + hit0.z * hit0.d,
+                                     -hit0.d)
+                acc = acc + exposed(lit, gain) * float(count0)
+            else:  # not a floor pixel filtered above: its samples grouped by surface
+                gid = GroupIds()
+                gfirst = GroupIds()
+                gcount = GroupIds()
+                gr = GroupSums()
+                gg = GroupSums()
+                gb = GroupSums()
+                ng = int(0)
                 for j in range(sub):
                     for i in range(sub):
                         fx, fy = sample_point(x, y, i, j, sub, inv_sub, lens, u0, v0, jac)
@@ -523,27 +528,22 @@ def make_resolve_samples(sub: int, lens: bool, normals: bool = False, texture_fi
                             gr[g] = gr[g] + alb[0]
                             gg[g] = gg[g] + alb[1]
                             gb[g] = gb[g] + alb[2]
-            if nsub == 0:  # a filtered floor pixel: one surface, nothing under it (no key), lit from the row's values
-                lit = floor_lit_from(fshade, lights, first, alb0 * (1.0 / float(count0)), eye + hit0.z * hit0.d,
-                                     -hit0.d)
-                acc = acc + exposed(lit, gain) * float(count0)
-                ng = -1  # (no surface left for the loop below)
-            # each surface lit once with its samples' mean albedo, at one call site (the lighting code inlined once)
-            for g in range(ng + 1):
-                hit = hit0
-                count = count0
-                alb = alb0 * (1.0 / float(count0))
-                if g > 0:  # the first sample of each further surface, again
-                    first_sample = gfirst[g - 1]
-                    fx, fy = sample_point(x, y, first_sample % sub, first_sample / sub, sub, inv_sub, lens, u0,
-                                          v0, jac)
-                    hit = sample_hit(sample_key, img, fx, fy, fw, fhgt, triangles, tri_label, vertices, texcoords, w, R,
-                                     t, rays, kf, eye, fn, fa, fb, floor_eye, fh)
-                    count = gcount[g - 1]
-                    inv_n = 1.0 / float(count)
-                    alb = wp.vec3(gr[g - 1] * inv_n, gg[g - 1] * inv_n, gb[g - 1] * inv_n)
-                color = shade_sample(look, lights, w, first, hit, alb, eye, bg, transmit, gain)
-                acc = acc + color * float(count)
+                # each surface lit once with its samples' mean albedo, at one call site (the lighting code inlined once)
+                for g in range(ng + 1):
+                    hit = hit0
+                    count = count0
+                    alb = alb0 * (1.0 / float(count0))
+                    if g > 0:  # the first sample of each further surface, again
+                        first_sample = gfirst[g - 1]
+                        fx, fy = sample_point(x, y, first_sample % sub, first_sample / sub, sub, inv_sub, lens, u0,
+                                              v0, jac)
+                        hit = sample_hit(sample_key, img, fx, fy, fw, fhgt, triangles, tri_label, vertices, texcoords,
+                                         w, R, t, rays, kf, eye, fn, fa, fb, floor_eye, fh)
+                        count = gcount[g - 1]
+                        inv_n = 1.0 / float(count)
+                        alb = wp.vec3(gr[g - 1] * inv_n, gg[g - 1] * inv_n, gb[g - 1] * inv_n)
+                    color = shade_sample(look, lights, w, first, hit, alb, eye, bg, transmit, gain)
+                    acc = acc + color * float(count)
             acc = acc * inv_ss
             rgb[img, pix] = wp.vec3ub(to_srgb8(acc[0]), to_srgb8(acc[1]), to_srgb8(acc[2]))
 
