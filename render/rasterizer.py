@@ -49,6 +49,18 @@ def _vec_array(a, dtype, device):
     return wp.array(np.ascontiguousarray(a, dtype=np.float32), dtype=dtype, device=device)
 
 
+def lit_first(pos, power, size) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Point lights ``pos`` (Wa, L, 3), ``power`` (Wa, L, 3), ``size`` (Wa, L) with each row's lit lights first, in
+    their order, and the slots dark in every row dropped (one kept): the kernels skip a dark light (zero power as
+    float32, :func:`~warpworm.render.shadow_kernels.is_dark`) and sum the others in this order, so the images are the
+    same, while the light loops and the shadow maps (:func:`shadow_cameras`) pay only for lit lights."""
+    pos, power, size = np.asarray(pos), np.asarray(power), np.asarray(size)
+    lit = np.any(power.astype(np.float32) != 0, axis=-1)  # (Wa, L)
+    order = np.argsort(~lit, axis=1, kind="stable")[:, :max(1, int(lit.sum(axis=1).max(initial=0)))]
+    return (np.take_along_axis(pos, order[..., None], axis=1), np.take_along_axis(power, order[..., None], axis=1),
+            np.take_along_axis(size, order, axis=1))
+
+
 def bake_noise(size: int = 128, seed: int = 20240611) -> np.ndarray:
     """Tileable fractal value noise in [0, 1], shape (size, size) float32.
 
@@ -159,11 +171,11 @@ class Renderer:
         look.noise = self._noise
         look.floor_transmit = wp.array(np.asarray(a.floor_transmit, dtype=np.float32), dtype=float, device=d)
         look.paper_bsdf = _vec_array(a.paper_bsdf, wp.vec4, d)
+        pos, power, size = lit_first(a.light_pos, a.light_power, a.light_size)
         light_arrays = {
             "ambient": _vec_array(a.ambient, wp.vec3, d), "sun_dir": _vec_array(a.sun_dir, wp.vec3, d),
-            "sun_color": _vec_array(a.sun_color, wp.vec3, d), "pos": _vec_array(a.light_pos, wp.vec3, d),
-            "power": _vec_array(a.light_power, wp.vec3, d),
-            "size": wp.array(np.asarray(a.light_size, dtype=np.float32), dtype=float, device=d),
+            "sun_color": _vec_array(a.sun_color, wp.vec3, d), "pos": _vec_array(pos, wp.vec3, d),
+            "power": _vec_array(power, wp.vec3, d), "size": wp.array(size.astype(np.float32), dtype=float, device=d),
         }
         return {
             "triangles": wp.array(np.ascontiguousarray(scene.triangles, dtype=np.int32), dtype=wp.vec3i, device=d),
@@ -242,7 +254,7 @@ class Renderer:
         cams = shadow_cameras(scene, worlds, S)
         M = len(cams["world"])
         first = np.full(scene.num_worlds, -1, np.int32)
-        first[worlds] = np.arange(len(worlds), dtype=np.int32) * (M // len(worlds))
+        first[worlds] = cams["first"]
         buf = self._map_buffers(M, slot)
         buf["depth"].fill_(shk.NO_CASTER)
         buf["tile_min"].fill_(shk.NO_CASTER)
@@ -429,14 +441,15 @@ class Renderer:
 
 
 def shadow_cameras(scene: SceneBatch, worlds: np.ndarray, side: int) -> dict:
-    """Pinhole cameras of the shadow maps of ``worlds`` (M = len(worlds) * (1 + L) maps, world-major: the sun, then
-    point light 0..L-1), each looking from its light at the centre of the world's meshes above the floor plane and
-    just covering their bounding sphere (radius r). The directional sun is a point light ``max(100 r, 1 m)`` away along ``sun_dir`` (its
-    rays then within r / 100 rad of parallel), of radius ``sun_size`` (angular, rad) times that distance.
+    """Pinhole cameras of the shadow maps of ``worlds``: world-major, each world's sun, then its lit point lights in
+    :func:`lit_first` order (the dark ones, which no kernel looks up, get none), each looking from its light at the
+    centre of the world's meshes above the floor plane and just covering their bounding sphere (radius r). The
+    directional sun is a point light ``max(100 r, 1 m)`` away along ``sun_dir`` (its rays then within r / 100 rad of
+    parallel), of radius ``sun_size`` (angular, rad) times that distance.
 
-    Returns dict: ``world`` (M,), ``R`` (M, 3, 3), ``t`` (M, 3), ``intr`` (M, 4) = (fx, fy, cx, cy) [px], ``size``
-    (M,) light radius [m]. A light inside the sphere gets a 160 degree field of view (its map sees what it can); a
-    dark point light (zero power) gets zero intrinsics (its map stays empty and is never read).
+    Returns dict over the M maps: ``world`` (M,), ``R`` (M, 3, 3), ``t`` (M, 3), ``intr`` (M, 4) = (fx, fy, cx, cy)
+    [px], ``size`` (M,) light radius [m]; and ``first`` (len(worlds),): each world's sun map (its point light i is
+    map ``first + 1 + i``). A light inside the sphere gets a 160 degree field of view (its map sees what it can).
     """
     from warpworm.render.camera import look_at
 
@@ -450,13 +463,14 @@ def shadow_cameras(scene: SceneBatch, worlds: np.ndarray, side: int) -> dict:
     lo, hi = (v + big).min(axis=1), (v - big).max(axis=1)
     centre = 0.5 * (lo + hi)
     radius = np.maximum(np.where(above, np.linalg.norm(v - centre[:, None], axis=2), 0.0).max(axis=1), 1e-4)
-    L = a.light_pos.shape[1]
+    light_pos, light_power, light_size = lit_first(a.light_pos, a.light_power, a.light_size)
+    L = light_pos.shape[1]
     sun_d = np.maximum(100.0 * radius, 1.0)
     sun = a.sun_dir[worlds % a.sun_dir.shape[0]]
-    eye = np.concatenate([(centre + sun * sun_d[:, None])[:, None], a.light_pos[worlds % a.light_pos.shape[0]]],
+    eye = np.concatenate([(centre + sun * sun_d[:, None])[:, None], light_pos[worlds % light_pos.shape[0]]],
                          axis=1)  # (n, 1 + L, 3)
     size = np.concatenate([(np.tan(a.sun_size[worlds % a.sun_size.shape[0]]) * sun_d)[:, None],
-                           a.light_size[worlds % a.light_size.shape[0]]], axis=1)
+                           light_size[worlds % light_size.shape[0]]], axis=1)
     tgt = np.broadcast_to(centre[:, None], eye.shape)
     dist = np.linalg.norm(eye - tgt, axis=2)
     half = np.where(dist > radius[:, None] * 1.01, np.arcsin(np.minimum(radius[:, None] / np.maximum(dist, 1e-9),
@@ -464,12 +478,14 @@ def shadow_cameras(scene: SceneBatch, worlds: np.ndarray, side: int) -> dict:
     R, t = look_at(eye.reshape(-1, 3), tgt.reshape(-1, 3))
     f = 0.5 * side / np.tan(half.reshape(-1))
     c = np.full_like(f, (side - 1) / 2)
-    # a dark light (zero power: a pad) gets a null camera: every triangle projects to a point and is skipped
-    dark = np.concatenate([np.zeros((len(worlds), 1), bool),
-                           np.all(a.light_power[worlds % a.light_power.shape[0]] == 0, axis=2)], axis=1).reshape(-1)
-    f, c = np.where(dark, 0.0, f), np.where(dark, 0.0, c)
-    return {"world": np.repeat(worlds, 1 + L), "R": R, "t": t, "intr": np.stack([f, f, c, c], axis=1),
-            "size": size.reshape(-1)}
+    # a map for the sun and each lit light (lit first: a world's dark slots are its last)
+    lit = np.concatenate([np.ones((len(worlds), 1), bool),
+                          np.any(light_power[worlds % light_power.shape[0]].astype(np.float32) != 0, axis=2)], axis=1)
+    keep = lit.reshape(-1)
+    count = lit.sum(axis=1)
+    return {"world": np.repeat(worlds, 1 + L)[keep], "R": R[keep], "t": t[keep],
+            "intr": np.stack([f, f, c, c], axis=1)[keep], "size": size.reshape(-1)[keep],
+            "first": (np.cumsum(count) - count).astype(np.int32)}
 
 
 def floor_projection(R, t, intr, floor_normal) -> np.ndarray:

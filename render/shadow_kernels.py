@@ -18,8 +18,8 @@ class Lights:
     pads a world with fewer lights), radius [m]. ``sun_dir`` (unit, toward the light), ``sun_color`` (irradiance),
     ``ambient``: per world. Shadow map ``m`` is a depth image ``map_depth`` (M, side²) [m] of the nearest caster per
     texel (1e30: none; side ``map_side``) seen by a pinhole ``map_rot``/``map_trans``/``map_intr`` at the light;
-    world ``w``'s maps are ``map_first[w]`` (the sun) and ``map_first[w] + 1 + i`` (point light i);
-    ``map_first[w] < 0``: none (lit). ``map_light_size``: the light's radius [m] as placed for the map (it sets the
+    world ``w``'s maps are ``map_first[w]`` (the sun) and ``map_first[w] + 1 + i`` (lit point light i: the lights
+    come lit first, and a dark one has no map); ``map_first[w] < 0``: none (lit). ``map_light_size``: the light's radius [m] as placed for the map (it sets the
     penumbra). ``map_pair_min`` (M, map_tiles²): the nearest depth [m] of the 2 x 2 ``SHADOW_TILE``² blocks of
     texels from each block on (clamped at the map's edge), ``map_reach`` the nearest within ``SHADOW_REACH`` blocks
     of each (:func:`~warpworm.render.raster_kernels.raster_depth`,
