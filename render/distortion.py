@@ -71,11 +71,13 @@ def undistort_maps(K: np.ndarray, dist: np.ndarray, width: int, height: int, dev
     return out.numpy().reshape(N, height, width, 2)
 
 
-def lens_margins(cameras, device=None) -> tuple[int, int, int, int]:
+def lens_margins(cameras, device=None, *, per_camera: bool = False):
     """The widening a lens needs: (left, top, grid width, grid height) [px] of a pinhole image with the cameras' K
     shifted by (left, top) that holds the ray of every distorted pixel centre of ``cameras`` (``dist`` (N, 5)), with
-    a pixel to spare. The lens map is one-to-one over the image (:func:`lens_covers_image`), so the extreme rays
-    are those of the image's border: only its 2 (W + H) pixel centres are undistorted (float64, the Warp kernel
+    a pixel to spare: one for all the cameras, or with ``per_camera`` each camera's own (four (N,) int arrays; what
+    a camera's image may depend on, so that it does not change with the batch it is rendered in). The lens map is
+    one-to-one over the image (:func:`lens_covers_image`), so the extreme rays are those of the image's border: only
+    its 2 (W + H) pixel centres are undistorted (float64, the Warp kernel
     :func:`warpworm.render.lens_kernels.border_rays` on ``device``, default the CPU). ValueError when a lens folds
     back inside its image (no ray reaches some pixels)."""
     H, W = int(cameras.height), int(cameras.width)
@@ -100,8 +102,14 @@ def lens_margins(cameras, device=None) -> tuple[int, int, int, int]:
                          f"{tuple(np.round(dist[i], 5).tolist())} folds back inside its {W}x{H} image (fx "
                          f"{K[i, 0, 0]:.1f} px): some pixels see no ray; expected a lens whose radial map "
                          "rises past the image corners (draw_distortion with K redraws such lenses)")
-    lo = np.floor(m.min(axis=(0, 1))) - 1
-    hi = np.ceil(m.max(axis=(0, 1))) + 1
+    lo = np.floor(m.min(axis=1)) - 1  # (N, 2)
+    hi = np.ceil(m.max(axis=1)) + 1
+    left, top = np.maximum(0, -lo[:, 0]).astype(int), np.maximum(0, -lo[:, 1]).astype(int)
+    gw = W + left + np.maximum(0, hi[:, 0] - (W - 1)).astype(int)
+    gh = H + top + np.maximum(0, hi[:, 1] - (H - 1)).astype(int)
+    if per_camera:
+        return left, top, gw, gh
+    lo, hi = lo.min(axis=0), hi.max(axis=0)  # the batch's: the same as over every camera's border at once
     left, top = int(max(0, -lo[0])), int(max(0, -lo[1]))
     return left, top, W + left + int(max(0, hi[0] - (W - 1))), H + top + int(max(0, hi[1] - (H - 1)))
 

@@ -49,13 +49,19 @@ def _vec_array(a, dtype, device):
     return wp.array(np.ascontiguousarray(a, dtype=np.float32), dtype=dtype, device=device)
 
 
+def lit_lights(power) -> np.ndarray:
+    """Which point lights of ``power`` (..., L, 3) are lit: non-zero as the kernels read it (float32,
+    :func:`~warpworm.render.shadow_kernels.is_dark`), shape (..., L)."""
+    return np.any(np.asarray(power).astype(np.float32) != 0, axis=-1)
+
+
 def lit_first(pos, power, size) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Point lights ``pos`` (Wa, L, 3), ``power`` (Wa, L, 3), ``size`` (Wa, L) with each row's lit lights first, in
     their order, and the slots dark in every row dropped (one kept): the kernels skip a dark light (zero power as
     float32, :func:`~warpworm.render.shadow_kernels.is_dark`) and sum the others in this order, so the images are the
     same, while the light loops and the shadow maps (:func:`shadow_cameras`) pay only for lit lights."""
     pos, power, size = np.asarray(pos), np.asarray(power), np.asarray(size)
-    lit = np.any(power.astype(np.float32) != 0, axis=-1)  # (Wa, L)
+    lit = lit_lights(power)  # (Wa, L)
     order = np.argsort(~lit, axis=1, kind="stable")[:, :max(1, int(lit.sum(axis=1).max(initial=0)))]
     return (np.take_along_axis(pos, order[..., None], axis=1), np.take_along_axis(power, order[..., None], axis=1),
             np.take_along_axis(size, order, axis=1))
@@ -204,6 +210,7 @@ class Renderer:
                 "cam_rot": wp.empty(n, dtype=wp.mat33, device=d),
                 "cam_trans": wp.empty(n, dtype=wp.vec3, device=d),
                 "cam_intr": wp.empty(n, dtype=wp.vec4, device=d),
+                "cam_margin": wp.empty(n, dtype=wp.vec3i, device=d),
                 "fine_intr": wp.empty(n, dtype=wp.vec4, device=d),
                 "cam_dist": wp.zeros(n, dtype=wp.vec4, device=d),
                 "cam_k3": wp.zeros(n, dtype=float, device=d),
@@ -313,7 +320,13 @@ class Renderer:
             raise ValueError("sensor: a JPEG round trip (jpeg_quality 1..99) runs on the host; expected out='host' "
                              "or jpeg_quality 0")
         lens = cameras.dist is not None and bool(np.any(np.asarray(cameras.dist) != 0))
-        left, top, gw, gh = lens_margins(cameras, self.device) if lens and N else (0, 0, W, H)
+        # each camera's own widening (its image must not depend on the batch it is in), the grids sized for the widest
+        margins = np.zeros((N, 3), np.int32)  # (left, top, grid height) per camera [px]
+        margins[:, 2] = H
+        if lens and N:
+            left, top, gws, ghs = lens_margins(cameras, self.device, per_camera=True)
+            margins = np.stack([left, top, ghs], axis=1).astype(np.int32)
+        gw, gh = (int(gws.max()), int(ghs.max())) if lens and N else (W, H)
         sub = self.supersample if (self.supersample > 1 or lens) else 0  # 0: the plain pixel-centre path
         d = self.device
         res = {"rgb": wp.empty((N, H * W), dtype=wp.vec3ub, device=d),
@@ -335,7 +348,7 @@ class Renderer:
             resolve = sk.resolve_samples_kernel(sub, lens, normals, self.texture_filter) if sub else None
             if resolve is not None:
                 wp.load_module(resolve.module, device=d)
-            view = (left, top, gw, gh, sub, lens, resolve)
+            view = (margins, gw, gh, sub, lens, resolve)
 
             def stream(slot: int) -> None:
                 for start, stop in pieces[slot::T]:
@@ -364,12 +377,14 @@ class Renderer:
                       slot: int, res: dict, sensor: SensorBatch | None) -> None:
         """Images ``start:stop`` into the outputs ``res`` (device arrays (N, H*W)): camera uploads, shadow maps,
         raster pass(es), resolve, sensor."""
-        left, top, gw, gh, sub, lens, resolve = view
+        margins, gw, gh, sub, lens, resolve = view
         n = stop - start
         b = self._get_buffers(chunk, (gw, gh), sub, slot)
         K = cameras.K[start:stop]
+        margin = np.zeros((chunk, 3), np.int32)
+        margin[:n] = margins[start:stop]
         intr = np.zeros((chunk, 4), np.float32)
-        intr[:n] = np.stack([K[:, 0, 0], K[:, 1, 1], K[:, 0, 2] + left, K[:, 1, 2] + top], axis=1)
+        intr[:n] = np.stack([K[:, 0, 0], K[:, 1, 1], K[:, 0, 2] + margin[:n, 0], K[:, 1, 2] + margin[:n, 1]], axis=1)
         rot = np.zeros((chunk, 3, 3), np.float32)
         rot[:n] = cameras.R[start:stop]
         trans = np.zeros((chunk, 3), np.float32)
@@ -380,6 +395,7 @@ class Renderer:
         if cameras.gain is not None:
             gain[:n] = cameras.gain[start:stop]
         b["cam_intr"].assign(intr)
+        b["cam_margin"].assign(margin)
         b["cam_gain"].assign(gain)
         b["cam_rot"].assign(rot)
         b["cam_trans"].assign(trans)
@@ -431,7 +447,8 @@ class Renderer:
             wp.launch(resolve, dim=(n, self.height, (self.width + span - 1) // span), device=d,
                       inputs=[s["triangles"], s["tri_label"], s["look"], lights, s["vertices"], s["texcoords"],
                               *common, b["cam_intr"], b["cam_dist"], b["cam_k3"], b["cam_gain"], b["fine_intr"],
-                              b["zkey"], b["mask"], b["fine_key"], self.width, self.height, span, gw, gh, left, top],
+                              b["zkey"], b["mask"], b["fine_key"], self.width, self.height, span, gw, gh,
+                              b["cam_margin"]],
                       outputs=[out["rgb"], out["depth"], out["seg"], out["worm_mask"], out_normals])
         if sensor is not None:
             if "sensor" not in b:
@@ -479,8 +496,8 @@ def shadow_cameras(scene: SceneBatch, worlds: np.ndarray, side: int) -> dict:
     f = 0.5 * side / np.tan(half.reshape(-1))
     c = np.full_like(f, (side - 1) / 2)
     # a map for the sun and each lit light (lit first: a world's dark slots are its last)
-    lit = np.concatenate([np.ones((len(worlds), 1), bool),
-                          np.any(light_power[worlds % light_power.shape[0]].astype(np.float32) != 0, axis=2)], axis=1)
+    lit = np.concatenate([np.ones((len(worlds), 1), bool), lit_lights(light_power[worlds % light_power.shape[0]])],
+                         axis=1)
     keep = lit.reshape(-1)
     count = lit.sum(axis=1)
     return {"world": np.repeat(worlds, 1 + L)[keep], "R": R[keep], "t": t[keep],

@@ -334,7 +334,7 @@ def make_resolve_samples(sub: int, lens: bool, normals: bool = False, texture_fi
         sample_intr: wp.array(dtype=wp.vec4),
         label_key: wp.array2d(dtype=wp.int64), label_mask: wp.array2d(dtype=wp.uint8),
         sample_key: wp.array2d(dtype=wp.int64),
-        width: int, height: int, span: int, grid_w: int, grid_h: int, margin_x: int, margin_y: int,
+        width: int, height: int, span: int, grid_w: int, grid_h: int, cam_margin: wp.array(dtype=wp.vec3i),
         # Data out:
         rgb: wp.array2d(dtype=wp.vec3ub), depth: wp.array2d(dtype=float), seg: wp.array2d(dtype=wp.uint8),
         worm_mask: wp.array2d(dtype=wp.uint8), normals: wp.array2d(dtype=wp.vec3),
@@ -343,8 +343,9 @@ def make_resolve_samples(sub: int, lens: bool, normals: bool = False, texture_fi
         CUDA; on the CPU the whole row, so a thread's set-up, its copy of ``look`` and ``lights`` included, is paid once
         per row).
 
-        ``cam_intr`` (N,): the label grid's pinhole (fx, fy, cx, cy) [px] (``grid_w`` x ``grid_h``; with a lens, the
-        output's K shifted by the widening margins ``margin_x``, ``margin_y`` [px]); ``cam_dist`` (N,) OpenCV's
+        ``cam_intr`` (N,): the label grid's pinhole (fx, fy, cx, cy) [px] (stored ``grid_w`` x ``grid_h``, the
+        batch's widest; with a lens, the output's K shifted by the image's own widening ``cam_margin`` (N,) = (left,
+        top, its grid's height) [px], so that an image does not depend on its batch); ``cam_dist`` (N,) OpenCV's
         (k1, k2, p1, p2) and ``cam_k3`` (N,) its k3 (read only when ``lens``); ``sample_intr`` (N,) the sample grid's
         pinhole (the one its raster pass used: ``cam_intr`` times ``sub``, centres shifted by (sub - 1) / 2);
         ``label_key``/``label_mask`` (N, grid_h * grid_w) and ``sample_key`` (N, sub² grid_h * grid_w) the raster
@@ -385,6 +386,7 @@ def make_resolve_samples(sub: int, lens: bool, normals: bool = False, texture_fi
         inv_sub = 1.0 / float(sub)  # exact for sub = 2, 4
         transmit = look.floor_transmit[wrow(w, look.floor_transmit.shape[0])]
         gain = cam_gain[img]
+        margin = cam_margin[img]
         # the lens solution of the pixel last solved on this thread's run, the next one's warm start: the undistorted
         # point (u, v), the lens map's Jacobian (a, b, d) and 1 / (a d - b²) there
         lens_ok = bool(False)
@@ -410,8 +412,8 @@ def make_resolve_samples(sub: int, lens: bool, normals: bool = False, texture_fi
             ok = bool(True)
             if wp.static(lens):
                 # the output's principal point is the label grid's less the widening margins
-                xd = (float(x + margin_x) - k[2]) * inv_fx
-                yd = (float(y + margin_y) - k[3]) * inv_fy
+                xd = (float(x + margin[0]) - k[2]) * inv_fx
+                yd = (float(y + margin[1]) - k[3]) * inv_fy
                 if lens_ok:  # the pixel to the left solved: start from it (along a CPU thread's row)
                     u, v, a, b, d, inv_det, lens_ok = lens_inverse_next32(xd, yd, dist, k3, inv_fx, u, v, a, b, d,
                                                                           inv_det)
@@ -432,7 +434,7 @@ def make_resolve_samples(sub: int, lens: bool, normals: bool = False, texture_fi
                 continue
 
             # the background's vertical gradient follows the ray: its row in the (widened) pinhole grid
-            bg = wp.lerp(bg_top, bg_bottom, v0 / float(grid_h))
+            bg = wp.lerp(bg_top, bg_bottom, v0 / float(margin[2]))
 
             # labels: the label grid's nearest key, the surface on the exact ray (the plain pass's ops without a lens)
             d0, dx = ray_frame(Rt, k, v0)
