@@ -246,10 +246,12 @@ def _distorted(scene: SceneBatch, cameras: Cameras, spp: int, seeds: np.ndarray)
     image with the same K widened by margins that hold the ray of every distorted pixel centre, warped bilinearly
     (``cv2.remap``) by :func:`warpworm.render.distortion.undistort_maps`. Linear (N, H, W, 3) float32."""
     N, H, W = len(cameras), int(cameras.height), int(cameras.width)
-    view, mx, my = widened_pinhole(cameras)
-    pin = _trace(scene, view, spp, seeds)
-    return np.stack([cv2.remap(pin[i], mx[i], my[i], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-                     for i in range(N)]).reshape(N, H, W, 3)
+    out = []
+    for i in range(N):  # each camera widened by its own lens: an image must not depend on the others of its call
+        view, mx, my = widened_pinhole(cameras.take(np.array([i])))
+        pin = _trace(scene, view, spp, seeds[i:i + 1])
+        out.append(cv2.remap(pin[0], mx[0], my[0], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE))
+    return np.stack(out).reshape(N, H, W, 3)
 
 
 def pixel_centre_seg(scene: SceneBatch, cameras: Cameras) -> np.ndarray:

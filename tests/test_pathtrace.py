@@ -171,3 +171,18 @@ def test_dataset_mixes_the_engines_per_sample(tmp_path):
     for i in idx:
         assert np.array_equal(ra[i], rb[i]) == (eng[i] == 0), i
     assert verify_dataset(tmp_path / "m")[0] == []
+
+
+def test_a_lens_image_does_not_depend_on_the_other_cameras_of_its_call():
+    """Two cameras with different lenses (so different widenings): each path-traced alone and both together, the
+    same pixels (each is traced in a pinhole image widened by its own lens's margins, with its own seed)."""
+    import dataclasses
+
+    scene, st = _red_worm_blue_floor()
+    cams = sample_cameras(51 + np.arange(2), st["positions"], width=W_IMG, height=H_IMG, world_index=np.arange(2),
+                          aspect_jitter=0.0, distance=(0.09, 0.1), min_in_frame=0.5)
+    lens = dataclasses.replace(cams, dist=np.array([[-0.5, 0.2, 0.004, -0.004, 0.0], [-0.1, 0.02, 0.0, 0.0, 0.0]]))
+    together = pt.render_pathtraced(scene, lens, spp=2, seeds=np.array([7, 8]), linear=True)
+    for i in range(2):
+        alone = pt.render_pathtraced(scene, lens.take(np.array([i])), spp=2, seeds=np.array([7 + i]), linear=True)
+        np.testing.assert_array_equal(together[i], alone[0])
