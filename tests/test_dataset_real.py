@@ -4,6 +4,7 @@ import json
 
 import cv2
 import numpy as np
+import pytest
 
 from warpworm.data import dataset as ds
 from warpworm.data.config import load_config
@@ -46,11 +47,13 @@ def test_default_config_end_to_end_with_real_stages(tmp_path):
     assert np.allclose(d["camera/R"][0], d["camera/R"][1])
 
 
-def test_real_samples_do_not_depend_on_shard_size_or_batch_size(tmp_path):
+@pytest.mark.parametrize("look", [[], ["render.distortion=true", "render.supersample=2"]], ids=["pinhole", "lens"])
+def test_real_samples_do_not_depend_on_shard_size_or_batch_size(tmp_path, look):
     """One seed fixes every sample through the real simulator and renderer: 1 world per batch and shards of 4 give
-    bit-identical arrays to 4 worlds per batch and one shard of 8 (each world is solved independently)."""
+    bit-identical arrays to 4 worlds per batch and one shard of 8 (each world is solved independently); through a
+    lens too (each camera's grids widened by its own lens, not by the other cameras of its render call)."""
     common = ["sim.settle_time=0.02", "sim.frame_times=[0.02, 0.04]", "render.width=48", "render.height=32",
-              "output.preview=false", "randomize.worm.magnet_model={choice: [analytic, dipoles]}"]
+              "output.preview=false", "randomize.worm.magnet_model={choice: [analytic, dipoles]}", *look]
     # seed 3 draws [analytic, analytic, dipoles, dipoles] for the 4 trajectories: batches split by magnet model
     a = load_config("default", common + ["sim.worlds=1", "shard_size=4"], num_samples=8, seed=3)
     b = load_config("default", common + ["sim.worlds=4", "shard_size=8"], num_samples=8, seed=3)
