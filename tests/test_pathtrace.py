@@ -175,7 +175,9 @@ def test_dataset_mixes_the_engines_per_sample(tmp_path):
 
 def test_a_lens_image_does_not_depend_on_the_other_cameras_of_its_call():
     """Two cameras with different lenses (so different widenings): each path-traced alone and both together, the
-    same pixels (each is traced in a pinhole image widened by its own lens's margins, with its own seed)."""
+    same pixels (each is traced in a pinhole image widened by its own lens's margins, with its own seed). Up to
+    Mitsuba's own repeatability: the same camera rendered twice differs by at most 1.2e-7 in a few values (its
+    threads' sums); the code that widened every image for the call's widest lens differed by up to 0.91 (mean 0.09)."""
     import dataclasses
 
     scene, st = _red_worm_blue_floor()
@@ -185,4 +187,4 @@ def test_a_lens_image_does_not_depend_on_the_other_cameras_of_its_call():
     together = pt.render_pathtraced(scene, lens, spp=2, seeds=np.array([7, 8]), linear=True)
     for i in range(2):
         alone = pt.render_pathtraced(scene, lens.take(np.array([i])), spp=2, seeds=np.array([7 + i]), linear=True)
-        np.testing.assert_array_equal(together[i], alone[0])
+        np.testing.assert_allclose(together[i], alone[0], rtol=0.0, atol=1e-5)
