@@ -118,6 +118,27 @@ def lens_inverse_next32(xd: float, yd: float, dist: wp.vec4, k3: float, step: fl
 
 
 @wp.func
+def lens_inverse_row32(xd: float, yd: float, dist: wp.vec4, k3: float, step: float, u: float, v: float, a: float,
+                       b: float, d: float, inv_det: float, ok: bool):
+    """The next point along a row, ``step`` to the right of the last: warm from the last solution
+    (:func:`lens_inverse_next32`) where it solved (``ok``), cold (:func:`lens_inverse32`) where it did not or the warm
+    guess failed. Returns (u, v, a, b, d, inv_det, ok), the state the next point starts from."""
+    su = u
+    sv = v
+    sa = a
+    sb = b
+    sd = d
+    s_inv = inv_det
+    solved = ok
+    if solved:
+        su, sv, sa, sb, sd, s_inv, solved = lens_inverse_next32(xd, yd, dist, k3, step, su, sv, sa, sb, sd, s_inv)
+    if not solved:
+        su, sv, sa, sb, sd, solved = lens_inverse32(xd, yd, dist, k3)
+        s_inv = 1.0 / (sa * sd - sb * sb)
+    return su, sv, sa, sb, sd, s_inv, solved
+
+
+@wp.func
 def pinhole_pixel(k: wp.vec4d, dist: wp.array2d(dtype=wp.float64), img: int, x: wp.float64, y: wp.float64,
                   iterations: int) -> wp.vec2d:
     """The pinhole pixel (intrinsics ``k`` = (fx, fy, cx, cy)) whose ray distorted pixel point (x, y) of image ``img``

@@ -321,12 +321,12 @@ class Renderer:
                              "or jpeg_quality 0")
         lens = cameras.dist is not None and bool(np.any(np.asarray(cameras.dist) != 0))
         # each camera's own widening (its image must not depend on the batch it is in), the grids sized for the widest
-        margins = np.zeros((N, 3), np.int32)  # (left, top, grid height) per camera [px]
-        margins[:, 2] = H
         if lens and N:
             left, top, gws, ghs = lens_margins(cameras, self.device, per_camera=True)
-            margins = np.stack([left, top, ghs], axis=1).astype(np.int32)
-        gw, gh = (int(gws.max()), int(ghs.max())) if lens and N else (W, H)
+        else:
+            left, top, gws, ghs = np.zeros(N, int), np.zeros(N, int), np.full(N, W), np.full(N, H)
+        margins = np.stack([left, top, ghs], axis=1).astype(np.int32)  # (left, top, grid height) per camera [px]
+        gw, gh = int(gws.max(initial=W)), int(ghs.max(initial=H))
         sub = self.supersample if (self.supersample > 1 or lens) else 0  # 0: the plain pixel-centre path
         d = self.device
         res = {"rgb": wp.empty((N, H * W), dtype=wp.vec3ub, device=d),

@@ -6,7 +6,7 @@ It reads two z-buffers that :func:`~warpworm.render.raster_kernels.raster_triang
 grid* ``s`` times finer. An output pixel
 
 - finds the pinhole point it sees: itself, or through the lens the undistorted direction of its distorted centre
-  (:func:`~warpworm.render.lens_kernels.lens_inverse32`), with the lens map's Jacobian for the samples;
+  (:func:`~warpworm.render.lens_kernels.lens_inverse_row32`), with the lens map's Jacobian for the samples;
 - takes its labels (depth, segmentation, normal) from the label grid: without a lens its own texel's key (the plain
   pass's labels bit for bit); through a lens, of the four texels around its ray, the nearest triangle that the ray
   hits (:func:`covering_key`), its depth on the exact ray; the worm mask from the nearest texel;
@@ -26,7 +26,7 @@ import threading
 import warp as wp
 
 from warpworm.kernels.common import wrow
-from warpworm.render.lens_kernels import lens_inverse32, lens_inverse_next32
+from warpworm.render.lens_kernels import lens_inverse_row32
 from warpworm.render.raster_math import (
     _EMPTY,
     _TRI_SCALE,
@@ -363,7 +363,6 @@ def make_resolve_samples(sub: int, lens: bool, normals: bool = False, texture_fi
         k = cam_intr[img]
         Rt = wp.transpose(R)
         eye = -(Rt * t)
-        fn = look.floor_normal[wrow(w, look.floor_normal.shape[0])]
         fa = look.floor_axis[wrow(w, look.floor_axis.shape[0])]
         fo = look.floor_origin[wrow(w, look.floor_origin.shape[0])]
         fh = look.floor_half[wrow(w, look.floor_half.shape[0])]
@@ -373,6 +372,7 @@ def make_resolve_samples(sub: int, lens: bool, normals: bool = False, texture_fi
         if lights.shadows != 0:
             first = lights.map_first[w]
         fshade = floor_shade(look, lights, w)  # the floor's lighting values, in registers for the row
+        fn = fshade.fn
 
         fb = wp.cross(fn, fa)
         floor_eye = wp.vec3(wp.dot(eye - fo, fa), wp.dot(eye - fo, fb), wp.dot(fn, eye))
@@ -414,12 +414,9 @@ def make_resolve_samples(sub: int, lens: bool, normals: bool = False, texture_fi
                 # the output's principal point is the label grid's less the widening margins
                 xd = (float(x + margin[0]) - k[2]) * inv_fx
                 yd = (float(y + margin[1]) - k[3]) * inv_fy
-                if lens_ok:  # the pixel to the left solved: start from it (along a CPU thread's row)
-                    u, v, a, b, d, inv_det, lens_ok = lens_inverse_next32(xd, yd, dist, k3, inv_fx, u, v, a, b, d,
-                                                                          inv_det)
-                if not lens_ok:  # the run's first pixel, or a warm start that failed: solved cold
-                    u, v, a, b, d, lens_ok = lens_inverse32(xd, yd, dist, k3)
-                    inv_det = 1.0 / (a * d - b * b)
+                # warm from the pixel to the left along a CPU thread's row; the run's first pixel solved cold
+                u, v, a, b, d, inv_det, lens_ok = lens_inverse_row32(xd, yd, dist, k3, inv_fx, u, v, a, b, d, inv_det,
+                                                                     lens_ok)
                 ok = lens_ok
                 u0 = k[0] * u + k[2]
                 v0 = k[1] * v + k[3]

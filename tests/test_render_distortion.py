@@ -179,12 +179,12 @@ def test_lens_draws_cover_their_images():
 
 @pytest.mark.parametrize("dist", [(-0.25, 0.08, 0.002, -0.002, 0.0), (0.15, -0.05, -0.003, 0.001, 0.01)])
 def test_warm_lens_inverse_matches_opencv(dist):
-    # the resolve solves each pixel's lens inverse from its left neighbour's solution with one Newton step
-    # (render.lens_kernels.lens_inverse_next32), the first of a row cold (lens_inverse32): against OpenCV's
-    # iterated float64 inverse over a 256² image, float32 rounding (~4e-5 px), as the cold solve alone
+    # the resolve solves each pixel's lens inverse from its left neighbour's solution with one Newton step, the first
+    # of a row and any failed warm start cold (render.lens_kernels.lens_inverse_row32, the resolve's own call):
+    # against OpenCV's iterated float64 inverse over a 256² image, float32 rounding (~4e-5 px), as the cold solve alone
     import warp as wp
 
-    from warpworm.render.lens_kernels import lens_inverse32, lens_inverse_next32
+    from warpworm.render.lens_kernels import lens_inverse_row32
 
     f, c, n = 200.0, 127.5, 256
 
@@ -201,11 +201,8 @@ def test_warm_lens_inverse_matches_opencv(dist):
         for x in range(256):
             xd = (float(x) - c) / f
             yd = (float(y) - c) / f
-            if warm != 0 and ok:  # as the resolve: warm from the left neighbour, cold where that fails
-                u, v, a, b, d, inv_det, ok = lens_inverse_next32(xd, yd, dist, k3, 1.0 / f, u, v, a, b, d, inv_det)
-            if warm == 0 or not ok:
-                u, v, a, b, d, ok = lens_inverse32(xd, yd, dist, k3)
-                inv_det = 1.0 / (a * d - b * b)
+            u, v, a, b, d, inv_det, ok = lens_inverse_row32(xd, yd, dist, k3, 1.0 / f, u, v, a, b, d, inv_det,
+                                                            ok and warm != 0)  # warm 0: every point cold
             out[y, x] = wp.vec2(u, v)
 
     K = np.array([[f, 0.0, c], [0.0, f, c], [0.0, 0.0, 1.0]])

@@ -7,26 +7,22 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+from test_world_retire import KEYS, _sim
 
 from warpworm import quiet_warp
 from warpworm.data.warp_stages import frame_steps, run_at_phases
 from warpworm.ids import WORLD_CRUMPLED, WORLD_EXPLODED
 from warpworm.physics import gaits
 from warpworm.physics.magnets import pair_wrench_scratch
-from warpworm.sim.model import Model
-from warpworm.sim.simulator import Simulator, model_wrenches
+from warpworm.sim.simulator import model_wrenches
 
 quiet_warp()
 
-KEYS = ("positions", "magnet_pos", "magnet_rot", "crease_angle", "bar_strain", "unstable")
 
-
-def _sim(worlds: int, params=None):
-    p = params or replace(gaits.preset_params("peristaltic"), hinge_stiffness=np.linspace(0.004, 0.006, worlds))
-    sim = Simulator(Model.from_params(p, worlds, "cpu"), dt=gaits.DEFAULT_DT, substeps=gaits.DEFAULT_SUBSTEPS)
-    state = sim.initial_state()
-    sim.settle(state, 0.02)
-    sim.step(state, 2)  # the EPM on its path: every pair's wrench non-zero
+def _on_path(worlds: int):
+    """A settled omega worm (:func:`test_world_retire._sim`) two steps into its gait: every pair's wrench non-zero."""
+    sim, state = _sim(worlds)
+    sim.step(state, 2)
     return sim, state
 
 
@@ -43,7 +39,7 @@ def _move_ipms(state, by: float):
 
 
 def test_a_stopped_world_keeps_its_wrench_and_the_others_are_recomputed():
-    sim, state = _sim(2)
+    sim, state = _on_path(2)
     scratch = pair_wrench_scratch(2, 4, "cpu")
     f0, t0 = _wrenches(sim, state, scratch, skip=True)  # both running: both evaluated
     _move_ipms(state, 1e-3)
@@ -60,7 +56,7 @@ def test_a_stopped_world_keeps_its_wrench_and_the_others_are_recomputed():
 
 
 def test_nan_poses_give_nan_wrenches_and_leave_the_other_worlds_alone():
-    sim, state = _sim(2)
+    sim, state = _on_path(2)
     finite_f, finite_t = _wrenches(sim, state, pair_wrench_scratch(2, 4, "cpu"), skip=False)
     pos = state.magnet_pos.numpy()
     pos[1, 2] = np.nan  # world 1's centre IPM, as an exploded world's
