@@ -49,7 +49,7 @@ def _child(path: str, images: int, repeats: int, out: str) -> None:
 
 
 def _entry_offset(obj_file: str, name: str) -> int:
-    """Offset of ``<name>_cpu_forward`` in the object file's code."""
+    """Offset of ``<name>_cpu_forward`` in the object file's code section."""
     for line in subprocess.run(["nm", obj_file], capture_output=True, text=True, check=True).stdout.splitlines():
         parts = line.split()
         if len(parts) == 3 and parts[2] == f"{name}_cpu_forward":
@@ -57,9 +57,21 @@ def _entry_offset(obj_file: str, name: str) -> int:
     raise RuntimeError(f"{name}_cpu_forward not found in {obj_file}")
 
 
+def _text_size(obj_file: str) -> int:
+    """Bytes of the object file's code section (``.text``, or ``.ltext`` where LLVM used the large code model): the
+    kernel's code, loaded in one piece (the bound that keeps another module's code, loaded next to it, out of the
+    count)."""
+    sizes = [int(parts[2], 16) for parts in (line.split() for line in subprocess.run(
+        ["objdump", "-h", obj_file], capture_output=True, text=True, check=True).stdout.splitlines())
+        if len(parts) > 2 and parts[1] in (".text", ".ltext")]
+    if not sizes or max(sizes) == 0:
+        raise RuntimeError(f"no code section in {obj_file}")
+    return max(sizes)
+
+
 def _report(name: str, address: int, obj_file: str, ips: list[int], top: int, asm: bool) -> None:
     base = address - _entry_offset(obj_file, name)
-    size = os.path.getsize(obj_file)
+    size = _text_size(obj_file)
     hits = collections.Counter(ip - base for ip in ips if 0 <= ip - base < size)
     n = sum(hits.values())
     print(f"\n{name}: {n} of {len(ips)} samples ({100 * n / max(len(ips), 1):.1f} % of the process)")
