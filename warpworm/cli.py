@@ -14,6 +14,7 @@ import importlib
 import importlib.util
 import os
 import sys
+from collections.abc import Callable
 
 # subcommand name -> module under warpworm.commands
 COMMANDS = {
@@ -96,7 +97,7 @@ def build_parser(commands: list[str] | None = None) -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: list[str] | None = None, *, parsed=None) -> int:
+def main(argv: list[str] | None = None, *, parsed: Callable[[], None] | None = None) -> int:
     """Run the command ``argv`` names (default: the process's arguments) and return its exit status. ``parsed``: called
     once the command's module is imported and its arguments parsed, before the command runs."""
     # Warp's banner and module-load lines go to stdout; keep stdout for results (e.g. `--json`).
