@@ -11,7 +11,8 @@ kernel's launches, and optionally the outputs (to check that two trees give the 
 a busy machine does not change: ``valgrind --tool=cachegrind --cache-sim=no <python> benchmarks/job_render_replay.py
 replay calls.pkl --images 8 --repeats 2``, whose Warp kernels are the code valgrind lists without a symbol (``???``);
 check that it printed its timing line: valgrind stops at AVX instructions it does not decode (``vex amd64->IR:
-unhandled instruction bytes``) in kernels from Warp's cache, and a run that ended there still prints totals.
+unhandled instruction bytes``) in kernels from Warp's cache, and a run that ended there still prints totals. Timer
+samples mapped onto a kernel's code work where valgrind does not: ``benchmarks/kernel_samples.py calls.pkl``.
 """
 
 from __future__ import annotations
