@@ -77,22 +77,21 @@ def _report(name: str, address: int, obj_file: str, ips: list[int], top: int, as
     print(f"\n{name}: {n} of {len(ips)} samples ({100 * n / max(len(ips), 1):.1f} % of the process)")
     if not n:
         return
-    for width in (64, 1024):
-        spans = collections.Counter()
+    def stretches(width: int) -> collections.Counter:
+        out = collections.Counter()
         for off, k in hits.items():
-            spans[off // width * width] += k
-        best = spans.most_common(top if width == 64 else 3)
+            out[off // width * width] += k
+        return out
+
+    hot = stretches(64).most_common(top)
+    for width, best in ((64, hot), (1024, stretches(1024).most_common(3))):
         print(f"  hottest {width}-byte stretches: " + ", ".join(f"{off:#x} {100 * k / n:.1f} %" for off, k in best))
     if asm:
-        lines = subprocess.run(["objdump", "-d", "--no-show-raw-insn", obj_file], capture_output=True, text=True,
-                               check=True).stdout.splitlines()
-        spans = collections.Counter()
-        for off, k in hits.items():
-            spans[off // 64 * 64] += k
-        hot = {off for off, _ in spans.most_common(top)}
-        for line in lines:
+        starts = {off for off, _ in hot}
+        for line in subprocess.run(["objdump", "-d", "--no-show-raw-insn", obj_file], capture_output=True, text=True,
+                                   check=True).stdout.splitlines():
             m = re.match(r"\s*([0-9a-f]+):\s*(.*)", line)
-            if m and int(m.group(1), 16) // 64 * 64 in hot:
+            if m and int(m.group(1), 16) // 64 * 64 in starts:
                 off = int(m.group(1), 16)
                 print(f"  {hits.get(off, 0):5d} {off:#8x} {m.group(2)}")
 

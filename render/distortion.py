@@ -105,13 +105,13 @@ def lens_margins(cameras, device=None, *, per_camera: bool = False):
     lo = np.floor(m.min(axis=1)) - 1  # (N, 2)
     hi = np.ceil(m.max(axis=1)) + 1
     left, top = np.maximum(0, -lo[:, 0]).astype(int), np.maximum(0, -lo[:, 1]).astype(int)
-    gw = W + left + np.maximum(0, hi[:, 0] - (W - 1)).astype(int)
-    gh = H + top + np.maximum(0, hi[:, 1] - (H - 1)).astype(int)
+    right = np.maximum(0, hi[:, 0] - (W - 1)).astype(int)
+    bottom = np.maximum(0, hi[:, 1] - (H - 1)).astype(int)
     if per_camera:
-        return left, top, gw, gh
-    lo, hi = lo.min(axis=0), hi.max(axis=0)  # the batch's: the same as over every camera's border at once
-    left, top = int(max(0, -lo[0])), int(max(0, -lo[1]))
-    return left, top, W + left + int(max(0, hi[0] - (W - 1))), H + top + int(max(0, hi[1] - (H - 1)))
+        return left, top, W + left + right, H + top + bottom
+    # the batch's: the widest margin on each side (the same as over every camera's border at once)
+    left, top, right, bottom = (int(x.max()) for x in (left, top, right, bottom))
+    return left, top, W + left + right, H + top + bottom
 
 
 def widened_pinhole(cameras, device=None):

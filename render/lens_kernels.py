@@ -117,25 +117,34 @@ def lens_inverse_next32(xd: float, yd: float, dist: wp.vec4, k3: float, step: fl
     return gu - (gd * ex - gb * ey) * inv, gv - (ga * ey - gb * ex) * inv, ga, gb, gd, inv, ok
 
 
+@wp.struct
+class LensSolution:
+    """A pixel's lens solution, the next pixel's warm start: the undistorted normalized point (``u``, ``v``), the lens
+    map's Jacobian (``a``, ``b``, ``d``) there and ``inv_det`` = 1 / (a d - b²); ``ok`` False where no ray reaches
+    the pixel (and in a new struct: nothing solved yet, the next pixel solves cold)."""
+
+    u: float
+    v: float
+    a: float
+    b: float
+    d: float
+    inv_det: float
+    ok: bool
+
+
 @wp.func
-def lens_inverse_row32(xd: float, yd: float, dist: wp.vec4, k3: float, step: float, u: float, v: float, a: float,
-                       b: float, d: float, inv_det: float, ok: bool):
-    """The next point along a row, ``step`` to the right of the last: warm from the last solution
-    (:func:`lens_inverse_next32`) where it solved (``ok``), cold (:func:`lens_inverse32`) where it did not or the warm
-    guess failed. Returns (u, v, a, b, d, inv_det, ok), the state the next point starts from."""
-    su = u
-    sv = v
-    sa = a
-    sb = b
-    sd = d
-    s_inv = inv_det
-    solved = ok
-    if solved:
-        su, sv, sa, sb, sd, s_inv, solved = lens_inverse_next32(xd, yd, dist, k3, step, su, sv, sa, sb, sd, s_inv)
-    if not solved:
-        su, sv, sa, sb, sd, solved = lens_inverse32(xd, yd, dist, k3)
-        s_inv = 1.0 / (sa * sd - sb * sb)
-    return su, sv, sa, sb, sd, s_inv, solved
+def lens_inverse_row32(xd: float, yd: float, dist: wp.vec4, k3: float, step: float, last: LensSolution) -> LensSolution:
+    """The next point along a row, ``step`` to the right of ``last``: warm from it (:func:`lens_inverse_next32`)
+    where it solved, cold (:func:`lens_inverse32`) where it did not or the warm guess failed."""
+    sol = LensSolution()
+    if last.ok:
+        u, v, a, b, d, inv, ok = lens_inverse_next32(xd, yd, dist, k3, step, last.u, last.v, last.a, last.b, last.d,
+                                                     last.inv_det)
+        sol = LensSolution(u, v, a, b, d, inv, ok)
+    if not sol.ok:
+        u, v, a, b, d, ok = lens_inverse32(xd, yd, dist, k3)
+        sol = LensSolution(u, v, a, b, d, 1.0 / (a * d - b * b), ok)
+    return sol
 
 
 @wp.func

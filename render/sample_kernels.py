@@ -26,7 +26,7 @@ import threading
 import warp as wp
 
 from warpworm.kernels.common import wrow
-from warpworm.render.lens_kernels import lens_inverse_row32
+from warpworm.render.lens_kernels import LensSolution, lens_inverse_row32
 from warpworm.render.raster_math import (
     _EMPTY,
     _TRI_SCALE,
@@ -387,15 +387,7 @@ def make_resolve_samples(sub: int, lens: bool, normals: bool = False, texture_fi
         transmit = look.floor_transmit[wrow(w, look.floor_transmit.shape[0])]
         gain = cam_gain[img]
         margin = cam_margin[img]
-        # the lens solution of the pixel last solved on this thread's run, the next one's warm start: the undistorted
-        # point (u, v), the lens map's Jacobian (a, b, d) and 1 / (a d - b²) there
-        lens_ok = bool(False)
-        u = float(0.0)
-        v = float(0.0)
-        a = float(1.0)
-        b = float(0.0)
-        d = float(1.0)
-        inv_det = float(1.0)
+        sol = LensSolution()  # the lens solution of the pixel last solved on this thread's run: the next one's start
         inv_fx = 1.0 / k[0]
         inv_fy = 1.0 / k[1]
         dist = wp.vec4(0.0)
@@ -415,12 +407,12 @@ def make_resolve_samples(sub: int, lens: bool, normals: bool = False, texture_fi
                 xd = (float(x + margin[0]) - k[2]) * inv_fx
                 yd = (float(y + margin[1]) - k[3]) * inv_fy
                 # warm from the pixel to the left along a CPU thread's row; the run's first pixel solved cold
-                u, v, a, b, d, inv_det, lens_ok = lens_inverse_row32(xd, yd, dist, k3, inv_fx, u, v, a, b, d, inv_det,
-                                                                     lens_ok)
-                ok = lens_ok
-                u0 = k[0] * u + k[2]
-                v0 = k[1] * v + k[3]
-                jac = wp.vec4(d * inv_det, -b * inv_det * fxy, -b * inv_det * fyx, a * inv_det)
+                sol = lens_inverse_row32(xd, yd, dist, k3, inv_fx, sol)
+                ok = sol.ok
+                u0 = k[0] * sol.u + k[2]
+                v0 = k[1] * sol.v + k[3]
+                jac = wp.vec4(sol.d * sol.inv_det, -sol.b * sol.inv_det * fxy, -sol.b * sol.inv_det * fyx,
+                              sol.a * sol.inv_det)
             if not ok:  # no ray reaches this pixel (the host refuses such lenses; a guard, never data)
                 rgb[img, pix] = wp.vec3ub(wp.uint8(0), wp.uint8(0), wp.uint8(0))
                 depth[img, pix] = 0.0

@@ -19,8 +19,6 @@ PROBE = textwrap.dedent("""
         start_up_done()
         seen["enabled_for_command"] = gc.isenabled()
         seen["frozen"] = gc.get_freeze_count()
-        gc.collect(2)  # a collection while the command runs is a full one again
-        seen["full_after"] = len(full)
     cli._collect_from_here = spy
     sys.argv = ["warpworm"] + sys.argv[1:]
     try:
@@ -40,4 +38,3 @@ def test_the_program_starts_without_full_collections_and_collects_while_the_comm
     assert seen["full_in_start_up"] == 0  # the code before: 2 (warp's import, the generate command's)
     assert seen["enabled_for_command"] is True
     assert seen["frozen"] > 100_000  # Warp's builtins and the kernels' definitions
-    assert seen["full_after"] == 1

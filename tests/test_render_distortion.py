@@ -184,26 +184,21 @@ def test_warm_lens_inverse_matches_opencv(dist):
     # against OpenCV's iterated float64 inverse over a 256² image, float32 rounding (~4e-5 px), as the cold solve alone
     import warp as wp
 
-    from warpworm.render.lens_kernels import lens_inverse_row32
+    from warpworm.render.lens_kernels import LensSolution, lens_inverse_row32
 
     f, c, n = 200.0, 127.5, 256
 
     @wp.kernel
     def rows(dist: wp.vec4, k3: float, f: float, c: float, warm: int, out: wp.array2d(dtype=wp.vec2)):
         y = wp.tid()
-        u = float(0.0)
-        v = float(0.0)
-        a = float(1.0)
-        b = float(0.0)
-        d = float(1.0)
-        inv_det = float(1.0)
-        ok = bool(False)
+        sol = LensSolution()
         for x in range(256):
             xd = (float(x) - c) / f
             yd = (float(y) - c) / f
-            u, v, a, b, d, inv_det, ok = lens_inverse_row32(xd, yd, dist, k3, 1.0 / f, u, v, a, b, d, inv_det,
-                                                            ok and warm != 0)  # warm 0: every point cold
-            out[y, x] = wp.vec2(u, v)
+            if warm == 0:  # every point cold
+                sol.ok = False
+            sol = lens_inverse_row32(xd, yd, dist, k3, 1.0 / f, sol)
+            out[y, x] = wp.vec2(sol.u, sol.v)
 
     K = np.array([[f, 0.0, c], [0.0, f, c], [0.0, 0.0, 1.0]])
     pts = np.stack(np.meshgrid(np.arange(n), np.arange(n)), -1).reshape(-1, 1, 2).astype(np.float64)

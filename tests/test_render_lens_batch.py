@@ -5,6 +5,7 @@ and together (the batch's grid holds every camera's own), every output bit for b
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 from test_render_distortion import _scenes
 
@@ -28,10 +29,22 @@ def test_a_lens_image_is_the_same_alone_and_in_a_batch_with_a_wider_lens():
             np.testing.assert_array_equal(together[k][i], alone[k][0], err_msg=f"camera {i} {k}")
 
 
-def test_the_batch_margins_hold_every_cameras_own():
+def test_the_margins_hold_opencvs_rays_of_the_border_and_the_batch_every_cameras_own():
     _, _, cams = _scenes()
     left, top, gw, gh = lens_margins(cams, per_camera=True)
     W, H = cams.width, cams.height
+    # each camera's grid holds its border pixels' rays (OpenCV's iterated inverse, P = K) shifted by its margins with
+    # at least a pixel to spare, a widened side at most two (whole pixels: floor / ceil of the extreme ray, +1)
+    xs, ys = np.arange(W, dtype=np.float64), np.arange(H, dtype=np.float64)
+    border = np.concatenate([np.stack([xs, np.zeros(W)], 1), np.stack([xs, np.full(W, H - 1.0)], 1),
+                             np.stack([np.zeros(H), ys], 1), np.stack([np.full(H, W - 1.0), ys], 1)])
+    crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-15)
+    for i in range(len(cams)):
+        ray = cv2.undistortPoints(border[:, None], cams.K[i], cams.dist[i], None, cams.K[i], criteria=crit)[:, 0]
+        x, y = ray[:, 0] + left[i], ray[:, 1] + top[i]
+        spare = np.array([x.min(), y.min(), gw[i] - 1 - x.max(), gh[i] - 1 - y.max()])
+        widened = np.array([left[i], top[i], gw[i] - W - left[i], gh[i] - H - top[i]]) > 0
+        assert widened.any() and np.all(spare >= 1.0 - 1e-6) and np.all(spare[widened] < 2.0 + 1e-6), (i, spare)
     # the batch's grid is the union of the cameras' own: the widest margin on each side
     right, bottom = gw - W - left, gh - H - top
     assert lens_margins(cams) == (int(left.max()), int(top.max()), int(W + left.max() + right.max()),
