@@ -103,22 +103,24 @@ def with_num(job: list[str], num: int) -> list[str]:
     return [*job, "--num", str(num)]
 
 
-def alternated(trees: dict[str, str], job: list[str], rounds: int, log=print, sizes: list[int] | None = None
-               ) -> list[dict]:
+def alternated(trees: dict[str, str], job: list[str], rounds: int, log=print, sizes: list[int] | None = None,
+               extra: dict[str, list[str]] | None = None) -> list[dict]:
     """Rows of ``rounds`` rounds of every tree (name -> its Python), A B / B A alternately, after a warm-up each; with
     ``sizes``, each round runs the job at each sample count, the trees alternated within each size (A B, B A, ...:
-    no tree runs more than twice in a row, so a slow minute of a shared machine falls on both)."""
+    no tree runs more than twice in a row, so a slow minute of a shared machine falls on both). ``extra``: arguments
+    added to the job for a name (config overrides: variants of one tree, :mod:`bench_job_options`)."""
     names = list(trees)
     jobs = [with_num(job, n) for n in sizes] if sizes else [job]
+    extra = extra or {}
     for name in names:
-        run_job(trees[name], jobs[0])  # warm-up: Warp's kernel cache, the page cache
+        run_job(trees[name], [*jobs[0], *extra.get(name, [])])  # warm-up: Warp's kernel cache, the page cache
     rows = []
     turn = 0
     for r in range(rounds):
         for j in (jobs if r % 2 == 0 else jobs[::-1]):
             order, turn = (names if turn % 2 == 0 else names[::-1]), turn + 1
             for name in order:
-                row = {"tree": name, "round": r, **run_job(trees[name], j)}
+                row = {"tree": name, "round": r, **run_job(trees[name], [*j, *extra.get(name, [])])}
                 log(f"  round {r} {name} ({row['samples']} samples): cpu {row['cpu_s']:.2f} s, sim "
                     f"{row['sim_s']:.2f} s, render {row['render_s']:.2f} s, write {row['write_s']:.2f} s")
                 rows.append(row)

@@ -69,6 +69,14 @@ def _text_size(obj_file: str) -> int:
     return max(sizes)
 
 
+def _stretches(hits: collections.Counter, width: int) -> collections.Counter:
+    """Samples per ``width``-byte stretch of code (keyed by the stretch's first offset)."""
+    out = collections.Counter()
+    for off, k in hits.items():
+        out[off // width * width] += k
+    return out
+
+
 def _report(name: str, address: int, obj_file: str, ips: list[int], top: int, asm: bool) -> None:
     base = address - _entry_offset(obj_file, name)
     size = _text_size(obj_file)
@@ -77,14 +85,8 @@ def _report(name: str, address: int, obj_file: str, ips: list[int], top: int, as
     print(f"\n{name}: {n} of {len(ips)} samples ({100 * n / max(len(ips), 1):.1f} % of the process)")
     if not n:
         return
-    def stretches(width: int) -> collections.Counter:
-        out = collections.Counter()
-        for off, k in hits.items():
-            out[off // width * width] += k
-        return out
-
-    hot = stretches(64).most_common(top)
-    for width, best in ((64, hot), (1024, stretches(1024).most_common(3))):
+    hot = _stretches(hits, 64).most_common(top)
+    for width, best in ((64, hot), (1024, _stretches(hits, 1024).most_common(3))):
         print(f"  hottest {width}-byte stretches: " + ", ".join(f"{off:#x} {100 * k / n:.1f} %" for off, k in best))
     if asm:
         starts = {off for off, _ in hot}

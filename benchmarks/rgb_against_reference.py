@@ -9,7 +9,8 @@ texture filter (each sample its own ray through the lens, its own texture lookup
 A and B differ by their sampling (supersampling, the lens's resampling), the reference says which is right. Run it
 with the sensor's noise off (``randomize.sensor.noise_std=0.0``), which no render can reproduce. Prints, per image,
 the mean absolute difference in 8-bit levels of A - B, A - reference and B - reference (mean, max, and how many
-images B is the closer one); exits 2 when the datasets and the calls do not hold the same images.
+images B is the closer one); exits 2 when the datasets and the calls do not hold the same scenes (their
+segmentation, which no sampling changes, must equal the reference render's).
 """
 
 from __future__ import annotations
@@ -43,13 +44,16 @@ def main(argv=None) -> int:
     quiet_warp()
     with open(args.calls, "rb") as f:
         calls = pickle.load(f)
-    ref = np.concatenate([
-        rasterizer.Renderer(**{**settings, "supersample": args.samples, "texture_filter": False})
-        .render(scene, cameras, **kw)["rgb"] for settings, scene, cameras, kw in calls])
-    a, b = (DatasetReader(p).read("rgb") for p in (args.a, args.b))
-    if not (a.shape == b.shape == ref.shape):
-        print(f"A {a.shape}, B {b.shape} and the calls' {ref.shape} images differ: not the same job")
-        return 2
+    outs = [rasterizer.Renderer(**{**settings, "supersample": args.samples, "texture_filter": False})
+            .render(scene, cameras, **kw) for settings, scene, cameras, kw in calls]
+    ref, ref_seg = (np.concatenate([o[k] for o in outs]) for k in ("rgb", "seg"))
+    readers = [DatasetReader(p) for p in (args.a, args.b)]
+    for name, r in zip("AB", readers):
+        seg = r.read("segmentation")
+        if seg.shape != ref_seg.shape or not np.array_equal(seg, ref_seg):
+            print(f"{name}'s segmentation {seg.shape} is not the calls' {ref_seg.shape}: not the same scenes")
+            return 2
+    a, b = (r.read("rgb") for r in readers)
     ab, ar, br = _levels(a, b), _levels(a, ref), _levels(b, ref)
     for name, m in (("A - B", ab), ("A - reference", ar), ("B - reference", br)):
         print(f"{name:14s} per-image mean |difference| [levels]: mean {m.mean():.3f}, max {m.max():.3f}")

@@ -71,11 +71,11 @@ def undistort_maps(K: np.ndarray, dist: np.ndarray, width: int, height: int, dev
     return out.numpy().reshape(N, height, width, 2)
 
 
-def lens_margins(cameras, device=None, *, per_camera: bool = False):
-    """The widening a lens needs: (left, top, grid width, grid height) [px] of a pinhole image with the cameras' K
-    shifted by (left, top) that holds the ray of every distorted pixel centre of ``cameras`` (``dist`` (N, 5)), with
-    a pixel to spare: one for all the cameras, or with ``per_camera`` each camera's own (four (N,) int arrays; what
-    a camera's image may depend on, so that it does not change with the batch it is rendered in). The lens map is
+def lens_margins(cameras, device=None):
+    """The widening each camera's lens needs: (left, top, grid width, grid height) [px], four (N,) int arrays, of a
+    pinhole image with the camera's K shifted by (left, top) that holds the ray of every distorted pixel centre of
+    its image (``dist`` (N, 5)), with a pixel to spare. Each camera's own, not the batch's widest: what a camera's
+    image may depend on, so that it does not change with the batch it is rendered in. The lens map is
     one-to-one over the image (:func:`lens_covers_image`), so the extreme rays are those of the image's border: only
     its 2 (W + H) pixel centres are undistorted (float64, the Warp kernel
     :func:`warpworm.render.lens_kernels.border_rays` on ``device``, default the CPU). ValueError when a lens folds
@@ -107,29 +107,31 @@ def lens_margins(cameras, device=None, *, per_camera: bool = False):
     left, top = np.maximum(0, -lo[:, 0]).astype(int), np.maximum(0, -lo[:, 1]).astype(int)
     right = np.maximum(0, hi[:, 0] - (W - 1)).astype(int)
     bottom = np.maximum(0, hi[:, 1] - (H - 1)).astype(int)
-    if per_camera:
-        return left, top, W + left + right, H + top + bottom
-    # the batch's: the widest margin on each side (the same as over every camera's border at once)
-    left, top, right, bottom = (int(x.max()) for x in (left, top, right, bottom))
     return left, top, W + left + right, H + top + bottom
 
 
-def widened_pinhole(cameras, device=None):
-    """The pinhole cameras a distorted image is warped from (the path tracer's lens path): the same K widened by
-    :func:`lens_margins`, and where each distorted pixel centre lies in that wider image. Returns (cameras with the
-    shifted K, ``dist`` None and the wider ``width``/``height``, mx (N, H, W) float32, my (N, H, W) float32) [px]."""
+def widened_pinholes(cameras, device=None) -> list:
+    """The pinhole camera each distorted image is warped from (the path tracer's lens path): its K widened by its own
+    :func:`lens_margins`, and where each of its distorted pixel centres lies in that wider image. Returns, per camera,
+    (a one-camera :class:`Cameras` with the shifted K, ``dist`` None and its wider ``width``/``height``, mx (H, W)
+    float32, my (H, W) float32) [px]; the margins and the maps of all the cameras in one launch each."""
     H, W = int(cameras.height), int(cameras.width)
     left, top, Wp, Hp = lens_margins(cameras, device)
     maps = undistort_maps(cameras.K, np.asarray(cameras.dist, dtype=np.float64), W, H, device)  # (N, H, W, 2)
-    K = cameras.K.copy()
-    K[:, 0, 2] += left
-    K[:, 1, 2] += top
-    wide = dataclasses.replace(cameras, K=K, dist=None, width=Wp, height=Hp)
-    return wide, (maps[..., 0] + left).astype(np.float32), (maps[..., 1] + top).astype(np.float32)
+    out = []
+    for i in range(len(cameras)):  # a Cameras holds one image size: each widened image its own
+        one = cameras.take(np.array([i]))
+        K = one.K.copy()
+        K[:, 0, 2] += left[i]
+        K[:, 1, 2] += top[i]
+        wide = dataclasses.replace(one, K=K, dist=None, width=int(Wp[i]), height=int(Hp[i]))
+        mx, my = (maps[i, ..., 0] + left[i]).astype(np.float32), (maps[i, ..., 1] + top[i]).astype(np.float32)
+        out.append((wide, mx, my))
+    return out
 
 
 __all__ = ["DIST_NAMES", "distort", "draw_distortion", "lens_covers_image", "lens_margins", "undistort",
-           "undistort_maps", "widened_pinhole"]
+           "undistort_maps", "widened_pinholes"]
 
 COVER_MARGIN = 0.02
 """:func:`lens_covers_image`: how far past the farthest pixel centre (relative) the radial map must still rise."""

@@ -28,7 +28,7 @@ import numpy as np
 
 from warpworm import ids
 from warpworm.render.camera import Cameras
-from warpworm.render.distortion import widened_pinhole
+from warpworm.render.distortion import widened_pinholes
 from warpworm.render.scene import SceneBatch
 from warpworm.rng import seed_uniforms
 
@@ -242,15 +242,15 @@ def _trace(scene: SceneBatch, cameras: Cameras, spp: int, seeds: np.ndarray) -> 
 
 
 def _distorted(scene: SceneBatch, cameras: Cameras, spp: int, seeds: np.ndarray) -> np.ndarray:
-    """Images through ``cameras.dist`` as the rasterizer made them before it followed each pixel through the lens: a pinhole
-    image with the same K widened by margins that hold the ray of every distorted pixel centre, warped bilinearly
-    (``cv2.remap``) by :func:`warpworm.render.distortion.undistort_maps`. Linear (N, H, W, 3) float32."""
+    """Images through ``cameras.dist`` as the rasterizer made them before it followed each pixel through the lens: each
+    camera's pinhole image, its K widened by margins that hold the ray of every distorted pixel centre of its own
+    image (:func:`warpworm.render.distortion.widened_pinholes`: no image depends on the other cameras of the call),
+    warped bilinearly (``cv2.remap``). Linear (N, H, W, 3) float32."""
     N, H, W = len(cameras), int(cameras.height), int(cameras.width)
     out = []
-    for i in range(N):  # each camera widened by its own lens: an image must not depend on the others of its call
-        view, mx, my = widened_pinhole(cameras.take(np.array([i])))
+    for i, (view, mx, my) in enumerate(widened_pinholes(cameras)):  # each camera widened by its own lens
         pin = _trace(scene, view, spp, seeds[i:i + 1])
-        out.append(cv2.remap(pin[0], mx[0], my[0], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE))
+        out.append(cv2.remap(pin[0], mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE))
     return np.stack(out).reshape(N, H, W, 3)
 
 

@@ -322,7 +322,7 @@ class Renderer:
         lens = cameras.dist is not None and bool(np.any(np.asarray(cameras.dist) != 0))
         # each camera's own widening (its image must not depend on the batch it is in), the grids sized for the widest
         if lens and N:
-            left, top, gws, ghs = lens_margins(cameras, self.device, per_camera=True)
+            left, top, gws, ghs = lens_margins(cameras, self.device)
         else:
             left, top, gws, ghs = np.zeros(N, int), np.zeros(N, int), np.full(N, W), np.full(N, H)
         margins = np.stack([left, top, ghs], axis=1).astype(np.int32)  # (left, top, grid height) per camera [px]

@@ -139,7 +139,7 @@ def test_folded_lens_leaves_its_outer_pixels_without_a_ray():
     # k1 = -0.25 folds at radius (2/3) sqrt(4/3) = 0.7698; a camera whose corners lie at 0.8 has pixels beyond it:
     # the Warp inverse marks exactly those NaN (the rest invert to 1e-9), and the renderers' lens path refuses the
     # camera by name instead of sizing a pinhole image for rays that do not exist (it once asked for 3.35 TiB)
-    from warpworm.render.distortion import widened_pinhole
+    from warpworm.render.distortion import widened_pinholes
 
     K, lens = _square_K(0.8), np.array([[-0.25, 0.0, 0.0, 0.0, 0.0]])
     maps = undistort_maps(K, lens, 64, 64)[0]
@@ -154,7 +154,7 @@ def test_folded_lens_leaves_its_outer_pixels_without_a_ray():
     assert np.all(np.hypot(xu, yu) < np.sqrt(4.0 / 3.0))  # the near branch, before the fold
     cams = dataclasses.replace(sample_cameras(np.arange(1), np.zeros((1, 3, 3)), width=64, height=64), K=K, dist=lens)
     with pytest.raises(ValueError, match="camera 0 of 1 .* folds back inside its 64x64 image"):
-        widened_pinhole(cams)
+        widened_pinholes(cams)
 
 
 def test_lens_draws_cover_their_images():
